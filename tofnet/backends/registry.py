@@ -1,0 +1,52 @@
+"""Backends by name. Built-ins are listed here; others register or use an entry point.
+
+A new backend is one module with a ``Backend`` subclass plus either a call to
+``register_backend`` or an entry point in the ``tofnet.backends`` group naming it.
+"""
+
+from __future__ import annotations
+
+import importlib
+from importlib.metadata import entry_points
+from typing import Callable
+
+from tofnet.backends.base import Backend
+from tofnet.errors import BackendError
+
+# name -> "module:attribute"; imported on first use so that numba compiles only what runs.
+_BUILTIN = {
+    "reference": "tofnet.backends.reference:ReferenceBackend",
+}
+_registered: dict[str, Callable[[], Backend]] = {}
+
+
+def register_backend(name: str, factory: Callable[[], Backend] | str) -> None:
+    """Make a backend available as ``name``; ``factory`` is a callable or ``"module:attr"``."""
+    _registered[name] = factory if callable(factory) else _lazy(factory)
+
+
+def _lazy(target: str) -> Callable[[], Backend]:
+    def load() -> Backend:
+        module, attr = target.split(":")
+        return getattr(importlib.import_module(module), attr)()
+    return load
+
+
+def available_backends() -> list[str]:
+    """Names of every backend that can be asked for."""
+    names = dict.fromkeys(list(_BUILTIN) + list(_registered))
+    for ep in entry_points(group="tofnet.backends"):
+        names.setdefault(ep.name)
+    return list(names)
+
+
+def get_backend(name: str) -> Backend:
+    """The backend called ``name``; raises naming the available ones."""
+    if name in _registered:
+        return _registered[name]()
+    if name in _BUILTIN:
+        return _lazy(_BUILTIN[name])()
+    for ep in entry_points(group="tofnet.backends"):
+        if ep.name == name:
+            return ep.load()()
+    raise BackendError(f"unknown backend {name!r}; available: {', '.join(available_backends())}")

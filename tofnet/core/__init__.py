@@ -1,0 +1,8 @@
+"""The process-graph core: processes, ports, parameters and networks."""
+
+from tofnet.core.network import Network
+from tofnet.core.params import Param
+from tofnet.core.ports import InPort, OutPort, Payload, PortSpec
+from tofnet.core.process import Process
+
+__all__ = ["Network", "Param", "InPort", "OutPort", "Payload", "PortSpec", "Process"]

@@ -1,0 +1,121 @@
+"""The Process base class: a declaration of ports and parameters, no execution code."""
+
+from __future__ import annotations
+
+import re
+from typing import Any, ClassVar
+
+from tofnet.core.params import Param
+from tofnet.core.ports import InPort, OutPort, PortSpec
+from tofnet.errors import NetworkError
+
+_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+
+SENSOR_SIZE = Param("sensor_size", "size", None, unit="px",
+                    doc="sensor (width, height); taken from the upstream process when omitted", optional=True)
+
+
+class Process:
+    """A node of a tofnet network.
+
+    Subclasses declare ``inports``, ``outports`` and ``params`` as class attributes and
+    ``resources_per_pixel`` (what one pixel of the process needs on a neuromorphic
+    core; empty for processes that run on the host). Backends implement them.
+    """
+
+    inports: ClassVar[tuple[PortSpec, ...]] = ()
+    outports: ClassVar[tuple[PortSpec, ...]] = ()
+    params: ClassVar[tuple[Param, ...]] = ()
+    #: Per-pixel needs on a neuromorphic core, e.g. ``{"accumulators": 8, "neurons": 4}``.
+    resources_per_pixel: ClassVar[dict[str, int]] = {}
+    #: ``"core"``: runs on neuromorphic cores; ``"host"``: runs off-chip (input, velocity).
+    placement: ClassVar[str] = "core"
+
+    _registry: ClassVar[dict[str, type["Process"]]] = {}
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        clash = {s.name for s in cls.inports + cls.outports} & {p.name for p in cls.all_params()}
+        if clash:
+            raise TypeError(f"{cls.__name__}: {', '.join(sorted(clash))} is both a port and a parameter")
+        Process._registry[cls.__name__] = cls
+
+    def __init__(self, name: str | None = None, **values: Any):
+        type_name = type(self).__name__
+        self.name = name if name is not None else _default_name(type_name)
+        if not isinstance(self.name, str) or not _NAME.match(self.name):
+            raise NetworkError(f"{type_name}: name {self.name!r} must be an identifier (letters, digits, _)")
+        self._values: dict[str, Any] = {}
+        declared = {p.name: p for p in self.all_params()}
+        unknown = sorted(set(values) - set(declared))
+        if unknown:
+            raise NetworkError(f"{self.name} ({type_name}): unknown parameter(s) {', '.join(unknown)}; "
+                               f"expected {', '.join(declared)}")
+        for param in declared.values():
+            raw = values.get(param.name, param.default)
+            self._values[param.name] = param.coerce(raw, self.name)
+        self._check()
+        self.ports: dict[str, InPort | OutPort] = {}
+        for spec in self.inports:
+            self.ports[spec.name] = InPort(self, spec)
+        for spec in self.outports:
+            self.ports[spec.name] = OutPort(self, spec)
+
+    @classmethod
+    def all_params(cls) -> tuple[Param, ...]:
+        """Every parameter, the shared ``sensor_size`` first."""
+        own = tuple(p for p in cls.params if p.name != SENSOR_SIZE.name)
+        return (SENSOR_SIZE,) + own if not any(p.name == SENSOR_SIZE.name for p in cls.params) else cls.params
+
+    @classmethod
+    def type_named(cls, type_name: str) -> type["Process"]:
+        """The process class called ``type_name``; raises naming the known types."""
+        try:
+            return cls._registry[type_name]
+        except KeyError:
+            known = ", ".join(sorted(cls._registry))
+            raise NetworkError(f"unknown process type {type_name!r}; known types: {known}") from None
+
+    def _check(self) -> None:
+        """Cross-parameter checks; subclasses extend."""
+
+    def __getattr__(self, item: str) -> Any:
+        # Ports and parameters read as attributes: proc.events, proc.distance.
+        if item.startswith("_") or item in ("ports",):
+            raise AttributeError(item)
+        ports = self.__dict__.get("ports", {})
+        if item in ports:
+            return ports[item]
+        values = self.__dict__.get("_values", {})
+        if item in values:
+            return values[item]
+        raise AttributeError(f"{type(self).__name__} {self.__dict__.get('name')!r} has no port or parameter {item!r}")
+
+    @property
+    def sensor_size(self) -> tuple[int, int] | None:
+        return self._values["sensor_size"]
+
+    @sensor_size.setter
+    def sensor_size(self, size: tuple[int, int]) -> None:
+        self._values["sensor_size"] = size
+
+    @property
+    def values(self) -> dict[str, Any]:
+        """A copy of the parameter values (durations in s, lengths in m)."""
+        return dict(self._values)
+
+    def port(self, name: str) -> InPort | OutPort:
+        try:
+            return self.ports[name]
+        except KeyError:
+            raise NetworkError(f"{self.name} ({type(self).__name__}) has no port {name!r}; "
+                               f"ports: {', '.join(self.ports)}") from None
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(name={self.name!r})"
+
+
+def _default_name(type_name: str) -> str:
+    """``TimeOfTravelProcess`` -> ``time_of_travel``."""
+    base = re.sub(r"Process$", "", type_name)
+    return re.sub(r"(?<!^)(?=[A-Z])", "_", base).lower() or "process"

@@ -1,0 +1,33 @@
+"""Errors tofnet raises for bad input; the CLI prints them as one line each."""
+
+from __future__ import annotations
+
+
+class TofnetError(Exception):
+    """Base of every error caused by the user's network, spec or data."""
+
+
+class NetworkError(TofnetError):
+    """A process graph that cannot run: bad connection, shape, cycle, name."""
+
+
+class SpecError(TofnetError):
+    """A YAML network spec that does not describe a valid network."""
+
+
+class DataError(TofnetError):
+    """A recording or data file that cannot be read as expected."""
+
+
+class BudgetError(TofnetError):
+    """A network that does not fit the neuromorphic resource budget."""
+
+
+class BackendError(TofnetError):
+    """A backend that cannot run the network, or failed while running it."""
+
+
+def located(path: object, line: int | None, message: str) -> str:
+    """Format ``path:line: message`` (line omitted when unknown)."""
+    where = f"{path}:{line}" if line is not None else f"{path}"
+    return f"{where}: {message}"

@@ -1,0 +1,41 @@
+"""In-memory layouts of event streams and depth estimates.
+
+Events follow the event-camera ecosystem (tonic, aedat, Metavision): a numpy
+structured array with ``t`` (int64, microseconds), ``x`` = column u and ``y`` = row v
+(uint16, pixels) and ``p`` (uint8, 1 = ON, 0 = OFF).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+EVENT_DTYPE = np.dtype([("t", "<i8"), ("x", "<u2"), ("y", "<u2"), ("p", "u1")])
+
+#: Depth estimates: ``t`` stamp in microseconds (end of the output step), ``x``/``y``
+#: pixel, ``z`` depth in metres, ``step`` the index of the output timestep.
+DEPTH_DTYPE = np.dtype([("t", "<i8"), ("x", "<u2"), ("y", "<u2"), ("z", "<f8"), ("step", "<i8")])
+
+#: Time-of-travel spikes: the step the unit fired in, its pixel, its direction
+#: (index into ``DIRECTIONS``) and the counter value it sent (steps).
+TOT_DTYPE = np.dtype([("step", "<i8"), ("x", "<u2"), ("y", "<u2"), ("direction", "u1"), ("count", "<i8")])
+
+#: The four motion directions of a time-of-travel unit, in channel order.
+#: Each is the (du, dv) pixel offset an edge moving in that direction makes per pixel.
+DIRECTIONS = ("+u", "-u", "+v", "-v")
+DIRECTION_OFFSETS = ((1, 0), (-1, 0), (0, 1), (0, -1))
+
+
+def make_events(t_us, x, y, p) -> np.ndarray:
+    """Build an event array from four sequences (``t`` in microseconds)."""
+    t_us = np.asarray(t_us)
+    events = np.empty(t_us.shape[0], dtype=EVENT_DTYPE)
+    events["t"] = t_us
+    events["x"] = np.asarray(x)
+    events["y"] = np.asarray(y)
+    events["p"] = np.asarray(p)
+    return events
+
+
+def empty_depth() -> np.ndarray:
+    """A depth array with no estimates."""
+    return np.empty(0, dtype=DEPTH_DTYPE)

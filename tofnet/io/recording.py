@@ -1,0 +1,72 @@
+"""A recording: events plus what is known about the camera that made them."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from tofnet.events import EVENT_DTYPE
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    """Pinhole intrinsics in pixels; ``distortion`` is (k1, k2, p1, p2, k3) as in ECD ``calib.txt``."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    distortion: tuple[float, ...] = ()
+
+
+class VelocitySource(Protocol):
+    """Anything that gives the camera's translational velocity in the camera frame."""
+
+    def velocity_at(self, t: np.ndarray) -> np.ndarray:
+        """Velocity (m/s, camera frame, shape ``(n, 3)``) at times ``t`` (seconds)."""
+        ...
+
+
+@dataclass(frozen=True)
+class ConstantVelocity:
+    """A camera moving at one velocity ``(tx, ty, tz)`` m/s in the camera frame."""
+
+    velocity: tuple[float, float, float]
+
+    def velocity_at(self, t: np.ndarray) -> np.ndarray:
+        t = np.asarray(t, dtype=np.float64)
+        return np.broadcast_to(np.asarray(self.velocity, dtype=np.float64), (t.shape[0], 3)).copy()
+
+
+@dataclass
+class Recording:
+    """Events (``EVENT_DTYPE``, sorted by time) and optional calibration and ground truth.
+
+    ``trajectory`` is the ground-truth camera motion (a ``VelocitySource``, usually
+    built from ECD ``groundtruth.txt``); ``gt_depth`` the true depth of each event in
+    metres (simulated recordings), aligned with ``events``.
+    """
+
+    events: np.ndarray
+    intrinsics: Intrinsics | None = None
+    trajectory: VelocitySource | None = None
+    sensor_size: tuple[int, int] | None = None
+    gt_depth: np.ndarray | None = None
+    imu: np.ndarray | None = None
+    source: str = "<memory>"
+    notes: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if self.events.dtype != EVENT_DTYPE:
+            raise TypeError(f"{self.source}: events must have dtype {EVENT_DTYPE}, got {self.events.dtype}")
+        if self.gt_depth is not None and len(self.gt_depth) != len(self.events):
+            raise ValueError(f"{self.source}: {len(self.gt_depth)} ground-truth depths for {len(self.events)} events")
+
+    @property
+    def duration(self) -> float:
+        """Seconds from the first to the last event (0 for fewer than two)."""
+        if len(self.events) < 2:
+            return 0.0
+        return float(self.events["t"][-1] - self.events["t"][0]) * 1e-6

@@ -1,0 +1,1 @@
+"""Numba kernels shared by the backends: one implementation of each piece of arithmetic."""

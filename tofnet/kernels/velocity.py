@@ -1,0 +1,37 @@
+"""The velocity term ``A t`` of paper eq. 2 and where it is sampled (pixel or patch centre)."""
+
+from __future__ import annotations
+
+from numba import njit
+
+
+@njit(cache=True)
+def velocity_term(tx: float, ty: float, tz: float, u: float, v: float,
+                  fx: float, fy: float, cx: float, cy: float) -> tuple[float, float]:
+    """``A t`` in px*m/s at image point (u, v) for camera velocity (tx, ty, tz) m/s."""
+    return (-fx * tx + (u - cx) * tz, -fy * ty + (v - cy) * tz)
+
+
+@njit(cache=True)
+def sample_point(x: int, y: int, per_pixel: bool, patch_size: int, width: int, height: int) -> tuple[float, float]:
+    """Where ``A t`` is evaluated for pixel (x, y): the pixel, or the centre of its patch.
+
+    Patches tile the sensor from (0, 0); a ragged last patch uses its own centre.
+    """
+    if per_pixel:
+        return (float(x), float(y))
+    x0 = (x // patch_size) * patch_size
+    y0 = (y // patch_size) * patch_size
+    x1 = min(x0 + patch_size, width)
+    y1 = min(y0 + patch_size, height)
+    return ((x0 + x1 - 1) * 0.5, (y0 + y1 - 1) * 0.5)
+
+
+def update_index(step, update_every: int):
+    """Index of the velocity update a depth neuron holds in ``step`` (works on arrays).
+
+    The velocity process sends in steps 0, U, 2U, ...; a value sent in step k arrives
+    in step k+1, so the depth step ``s`` holds the update sent in the last multiple of
+    U at or before ``s - 1``. Negative for ``s = 0`` (nothing arrived yet).
+    """
+    return (step - 1) // update_every

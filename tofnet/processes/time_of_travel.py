@@ -1,0 +1,28 @@
+"""TimeOfTravelProcess: four counters per pixel measuring how long an edge took to arrive."""
+
+from __future__ import annotations
+
+from tofnet.core.params import Param
+from tofnet.core.ports import Payload, PortSpec
+from tofnet.core.process import Process
+
+
+class TimeOfTravelProcess(Process):
+    """Paper Algorithm 1: four units per pixel, one per direction (+u, -u, +v, -v).
+
+    Unit (p, D) is triggered by pixel p and facilitated by pixel ``p - distance*D``.
+    Each step, in order: (1) a trigger with the stored polarity and ``counter > 0``
+    sends ``counter`` (steps) and resets it; (2) a running counter increments, and
+    resets to 0 past ``2**counter_bits - 1`` (overflow); (3) a facilitating spike sets
+    ``counter = 1`` and stores its polarity. Facilitation in step a and a trigger in
+    step b > a send ``b - a``.
+    """
+
+    inports = (PortSpec("events", Payload.POLARITY, 1, "input spikes: trigger and facilitating"),)
+    outports = (PortSpec("counts", Payload.COUNT, 4, "counter values per direction (+u, -u, +v, -v), steps"),)
+    params = (
+        Param("distance", "int", 1, unit="px", doc="pixels between facilitating and trigger pixel", minimum=1),
+        Param("counter_bits", "int", 8, unit="bits", doc="width of the unsigned counter", minimum=1, maximum=30),
+    )
+    # 4 units x (trigger + facilitating) accumulators; 4 neurons (paper §4.1).
+    resources_per_pixel = {"accumulators": 8, "neurons": 4}

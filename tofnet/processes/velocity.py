@@ -1,0 +1,45 @@
+"""VelocityProcess: the camera's velocity term ``A t`` for the depth layer (computed off-chip)."""
+
+from __future__ import annotations
+
+from tofnet.core.params import Param
+from tofnet.core.ports import Payload, PortSpec
+from tofnet.core.process import Process
+from tofnet.errors import NetworkError
+
+SOURCES = ("groundtruth", "samples", "constant")
+
+
+class VelocityProcess(Process):
+    """Sends ``A t = (-fx*tx + (u-cx)*tz, -fy*ty + (v-cy)*tz)`` (px*m/s) every ``update_every`` steps.
+
+    The translational velocity ``t`` (m/s, camera frame) comes from ground-truth poses
+    (``R_wc^T dp/dt``), velocity samples (``t vx vy vz`` per line, camera frame, m/s)
+    or a constant. ``per="patch"`` sends one value per ``patch_size`` square taken at
+    the patch centre (the paper); ``per="pixel"`` is exact at every pixel. Intrinsics
+    come from the recording's calibration unless given as ``intrinsics: [fx, fy, cx, cy]``.
+    """
+
+    outports = (PortSpec("a_t", Payload.VELOCITY_TERM, 2, "A t per pixel, px*m/s"),)
+    params = (
+        Param("source", "str", "groundtruth", doc="where the velocity comes from", choices=SOURCES),
+        Param("velocity", "vector3", None, unit="m/s", optional=True,
+              doc="constant camera-frame velocity [tx, ty, tz] (source: constant)"),
+        Param("samples", "str", None, optional=True,
+              doc="file of 't vx vy vz' lines, seconds and m/s in the camera frame (source: samples)"),
+        Param("per", "str", "patch", doc="one A t per patch (paper) or per pixel (exact)", choices=("patch", "pixel")),
+        Param("patch_size", "int", 30, unit="px", doc="side of the square patches sharing one A t", minimum=1),
+        Param("update_every", "int", 1, unit="steps", doc="steps between two A t updates", minimum=1),
+        Param("intrinsics", "floats", None, unit="px", optional=True,
+              doc="[fx, fy, cx, cy]; from the recording's calibration when omitted"),
+    )
+    placement = "host"
+
+    def _check(self) -> None:
+        values = self._values
+        if values["source"] == "constant" and values["velocity"] is None:
+            raise NetworkError(f"{self.name}: source 'constant' needs velocity: [tx, ty, tz] in m/s")
+        if values["source"] == "samples" and values["samples"] is None:
+            raise NetworkError(f"{self.name}: source 'samples' needs samples: a file of 't vx vy vz' lines")
+        if values["intrinsics"] is not None and len(values["intrinsics"]) != 4:
+            raise NetworkError(f"{self.name}.intrinsics: expected [fx, fy, cx, cy], got {list(values['intrinsics'])}")
