@@ -1,0 +1,5 @@
+import sys
+
+from tofnet.cli import main
+
+sys.exit(main())

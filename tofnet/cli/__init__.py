@@ -1,0 +1,51 @@
+"""The ``tofnet`` command. Each subcommand is a module here with ``register(subparsers)``."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from tofnet.errors import TofnetError
+
+#: Subcommand modules, in the order ``tofnet --help`` lists them.
+SUBCOMMANDS = ("demo", "run", "simulate", "eval", "plot", "compile", "conformance")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="tofnet",
+        description="Low-latency depth from event timing: simulate, compile, run and evaluate the paper's network.")
+    from tofnet import __version__
+    parser.add_argument("--version", action="version", version=f"tofnet {__version__}")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in SUBCOMMANDS:
+        try:
+            module = importlib.import_module(f"tofnet.cli.{name}")
+        except ModuleNotFoundError as err:
+            if err.name != f"tofnet.cli.{name}":
+                raise
+            continue  # not built yet in this checkout
+        module.register(subparsers)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; user errors print one line and exit 2, never a traceback."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "handler", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.handler(args) or 0)
+    except TofnetError as err:
+        print(f"tofnet {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"tofnet {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
