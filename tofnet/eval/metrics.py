@@ -1,0 +1,219 @@
+"""Accuracy of depth estimates against per-event ground truth (paper §5, Tables 1-2).
+
+Errors are those of the paper: mean and median absolute error ``|z - z_gt|`` in metres
+and mean and median relative error ``|z - z_gt| / z_gt`` in percent, over every
+estimate with a usable ground truth. Coverage is the share of input events answered
+by an estimate. Windows split the recording by the time of the triggering input step,
+so an estimate and the event that caused it always fall in the same window.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tofnet.errors import DataError
+from tofnet.eval.match import Matches, input_steps, match_estimates
+from tofnet.units import format_seconds
+
+#: Default length of the per-window metrics, seconds.
+DEFAULT_WINDOW_S = 0.1
+
+
+def _number(value: float) -> float | None:
+    """JSON has no NaN: an undefined metric becomes ``null``."""
+    return None if value is None or not math.isfinite(value) else float(value)
+
+
+@dataclass(frozen=True)
+class ErrorStats:
+    """Error of ``n`` estimates: absolute in metres, relative in percent (NaN when ``n == 0``)."""
+
+    n: int
+    mean_abs_m: float
+    median_abs_m: float
+    mean_rel_pct: float
+    median_rel_pct: float
+
+    @classmethod
+    def of(cls, z: np.ndarray, z_gt: np.ndarray) -> "ErrorStats":
+        """Statistics of estimates ``z`` against true depths ``z_gt`` (both metres, ``z_gt > 0``)."""
+        if len(z) == 0:
+            return cls(0, math.nan, math.nan, math.nan, math.nan)
+        abs_err = np.abs(np.asarray(z, dtype=np.float64) - z_gt)
+        rel_err = abs_err / z_gt * 100.0
+        return cls(int(len(z)), float(abs_err.mean()), float(np.median(abs_err)),
+                   float(rel_err.mean()), float(np.median(rel_err)))
+
+    def to_dict(self) -> dict:
+        return {"n": self.n, "mean_abs_m": _number(self.mean_abs_m), "median_abs_m": _number(self.median_abs_m),
+                "mean_rel_pct": _number(self.mean_rel_pct), "median_rel_pct": _number(self.median_rel_pct)}
+
+
+@dataclass(frozen=True)
+class WindowStats:
+    """Metrics of one window ``[start_s, end_s)``, seconds since ``t0``."""
+
+    start_s: float
+    end_s: float
+    events_in: int
+    estimates: int
+    unmatched: int
+    coverage: float
+    errors: ErrorStats
+
+    def to_dict(self) -> dict:
+        return {"start_s": self.start_s, "end_s": self.end_s, "events_in": self.events_in,
+                "estimates": self.estimates, "unmatched": self.unmatched,
+                "coverage": _number(self.coverage), **self.errors.to_dict()}
+
+
+@dataclass
+class Evaluation:
+    """Accuracy of one run on one recording, overall and per window.
+
+    ``coverage = estimates / events_in``; ``unmatched`` estimates found no event at
+    their pixel in their input step; ``gt_invalid`` found one whose ground truth is not
+    a positive finite depth. Neither enters the errors, both are reported.
+    """
+
+    source: str
+    events_in: int
+    estimates: int
+    unmatched: int
+    gt_invalid: int
+    coverage: float
+    errors: ErrorStats
+    window_s: float
+    windows: list[WindowStats]
+    t0_us: int
+    timestep_us: int
+    latency_steps: int
+    matches: Matches | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def matched(self) -> int:
+        """Estimates that entered the error statistics."""
+        return self.errors.n
+
+    def to_dict(self) -> dict:
+        """Plain data for JSON (undefined metrics are ``None``)."""
+        return {"source": self.source, "events_in": self.events_in, "estimates": self.estimates,
+                "matched": self.matched, "unmatched": self.unmatched, "gt_invalid": self.gt_invalid,
+                "coverage": _number(self.coverage), **self.errors.to_dict(),
+                "t0_us": self.t0_us, "timestep_s": self.timestep_us * 1e-6,
+                "latency_steps": self.latency_steps, "window_s": self.window_s,
+                "windows": [w.to_dict() for w in self.windows]}
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=2, allow_nan=False)
+
+    def table(self, *, windows: bool = True) -> str:
+        """A readable text report: totals, the paper's four errors, then one row per window."""
+        dt = self.timestep_us * 1e-6
+        lines = [f"source        {self.source}",
+                 f"timing        step {format_seconds(dt)}, latency {self.latency_steps} steps "
+                 f"({format_seconds(self.latency_steps * dt)})",
+                 f"events in     {self.events_in:>10d}",
+                 f"estimates     {self.estimates:>10d}   coverage {_pct(self.coverage)}",
+                 f"matched       {self.matched:>10d}",
+                 f"unmatched     {self.unmatched:>10d}   (no event at the pixel in input step s-{self.latency_steps})",
+                 f"gt invalid    {self.gt_invalid:>10d}   (matched event without a positive finite depth)",
+                 "",
+                 f"{'':14}{'mean':>10}{'median':>10}",
+                 f"{'abs error [m]':14}{_fmt(self.errors.mean_abs_m, 3)}{_fmt(self.errors.median_abs_m, 3)}",
+                 f"{'rel error [%]':14}{_fmt(self.errors.mean_rel_pct, 2)}{_fmt(self.errors.median_rel_pct, 2)}"]
+        if windows and self.windows:
+            lines += ["", f"per window of {format_seconds(self.window_s)} (seconds since t0; "
+                          f"estimates counted at their triggering input step)",
+                      f"{'window [s]':>17} {'events':>8} {'estim.':>8} {'cover %':>8} {'matched':>8}"
+                      f" {'mean [m]':>9} {'med [m]':>9} {'mean [%]':>9} {'med [%]':>9}"]
+            for w in self.windows:
+                e = w.errors
+                lines.append(f"{w.start_s:8.3f}-{w.end_s:<8.3f} {w.events_in:8d} {w.estimates:8d}"
+                             f" {_fmt(w.coverage * 100 if math.isfinite(w.coverage) else math.nan, 2, 8)}"
+                             f" {e.n:8d}{_fmt(e.mean_abs_m, 3)}{_fmt(e.median_abs_m, 3)}"
+                             f"{_fmt(e.mean_rel_pct, 2)}{_fmt(e.median_rel_pct, 2)}")
+        return "\n".join(lines)
+
+
+def _fmt(value: float, digits: int, width: int = 10) -> str:
+    return f"{'-':>{width}}" if not math.isfinite(value) else f"{value:{width}.{digits}f}"
+
+
+def _pct(value: float) -> str:
+    return "-" if not math.isfinite(value) else f"{value * 100:.2f} %"
+
+
+def evaluate_arrays(depth: np.ndarray, events: np.ndarray, gt_depth: np.ndarray, *, t0_us: int,
+                    timestep_us: int, latency_steps: int, window_s: float = DEFAULT_WINDOW_S,
+                    source: str = "<memory>") -> Evaluation:
+    """Match ``depth`` (``DEPTH_DTYPE``) to ``events`` and their ``gt_depth`` (m) and compute metrics.
+
+    ``window_s`` is the length of the per-window metrics in seconds, windows starting
+    at ``t0_us``; 0 or less gives no windows.
+    """
+    matches = match_estimates(depth, events, gt_depth, t0_us=t0_us, timestep_us=timestep_us,
+                              latency_steps=latency_steps)
+    valid = matches.valid
+    errors = ErrorStats.of(depth["z"][valid], matches.gt[valid])
+    events_in = int(len(events))
+    coverage = len(depth) / events_in if events_in else math.nan
+    windows = _windows(depth, events, matches, t0_us, timestep_us, window_s) if window_s > 0 else []
+    return Evaluation(source=source, events_in=events_in, estimates=int(len(depth)),
+                      unmatched=matches.n_unmatched, gt_invalid=matches.n_gt_invalid, coverage=coverage,
+                      errors=errors, window_s=float(window_s), windows=windows, t0_us=int(t0_us),
+                      timestep_us=int(timestep_us), latency_steps=int(latency_steps), matches=matches)
+
+
+def evaluate(recording, depth: np.ndarray, meta: dict, *, window_s: float = DEFAULT_WINDOW_S) -> Evaluation:
+    """Metrics of ``depth`` (with its ``meta``: ``t0_us``, ``timestep_us``, ``latency_steps``) on a ``Recording``."""
+    if recording.gt_depth is None:
+        raise DataError(f"{recording.source}: no per-event ground-truth depth (events_depth.npy); "
+                        f"eval needs it, e.g. from a recording made by `tofnet simulate`")
+    missing = [key for key in ("t0_us", "timestep_us", "latency_steps") if key not in meta]
+    if missing:
+        raise DataError(f"depth file metadata lacks {', '.join(missing)}; write it with tofnet.io.depth.write_depth")
+    return evaluate_arrays(depth, recording.events, recording.gt_depth, t0_us=int(meta["t0_us"]),
+                           timestep_us=int(meta["timestep_us"]), latency_steps=int(meta["latency_steps"]),
+                           window_s=window_s, source=recording.source)
+
+
+def window_index(t_rel_us: np.ndarray, window_us: int) -> np.ndarray:
+    """Window of each time since ``t0`` (µs); negative before ``t0``."""
+    return np.asarray(t_rel_us, dtype=np.int64) // np.int64(window_us)
+
+
+def _windows(depth: np.ndarray, events: np.ndarray, matches: Matches, t0_us: int, timestep_us: int,
+             window_s: float) -> list[WindowStats]:
+    window_us = max(1, int(round(window_s * 1e6)))
+    ev_win = window_index(input_steps(events["t"], t0_us, timestep_us) * timestep_us, window_us)
+    est_win = window_index(matches.input_step * timestep_us, window_us)
+    last = max(int(ev_win.max()) if len(ev_win) else -1, int(est_win.max()) if len(est_win) else -1)
+    if last < 0:
+        return []
+    n_win = last + 1
+    # Times before t0 belong to no window; bincount needs non-negative indices.
+    events_per = np.bincount(ev_win[ev_win >= 0], minlength=n_win)
+    in_win = est_win >= 0
+    estimates_per = np.bincount(est_win[in_win], minlength=n_win)
+    unmatched_per = np.bincount(est_win[in_win & ~matches.found], minlength=n_win)
+
+    valid = matches.valid & in_win
+    z, gt, win = depth["z"][valid], matches.gt[valid], est_win[valid]
+    order = np.argsort(win, kind="stable")
+    z, gt, win = z[order], gt[order], win[order]
+    bounds = np.searchsorted(win, np.arange(n_win + 1))
+    out = []
+    for i in range(n_win):  # one iteration per window, not per estimate
+        a, b = bounds[i], bounds[i + 1]
+        n_events = int(events_per[i])
+        out.append(WindowStats(start_s=i * window_us * 1e-6, end_s=(i + 1) * window_us * 1e-6,
+                               events_in=n_events, estimates=int(estimates_per[i]),
+                               unmatched=int(unmatched_per[i]),
+                               coverage=estimates_per[i] / n_events if n_events else math.nan,
+                               errors=ErrorStats.of(z[a:b], gt[a:b])))
+    return out
