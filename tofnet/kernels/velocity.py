@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 from numba import njit
 
 
@@ -35,3 +36,14 @@ def update_index(step, update_every: int):
     U at or before ``s - 1``. Negative for ``s = 0`` (nothing arrived yet).
     """
     return (step - 1) // update_every
+
+
+@njit(cache=True)
+def sample_grid(per_pixel: bool, patch_size: int, width: int, height: int):
+    """``sample_point`` for every pixel: arrays ``u, v`` of shape (height, width)."""
+    u = np.empty((height, width), dtype=np.float64)
+    v = np.empty((height, width), dtype=np.float64)
+    for y in range(height):
+        for x in range(width):
+            u[y, x], v[y, x] = sample_point(x, y, per_pixel, patch_size, width, height)
+    return u, v
