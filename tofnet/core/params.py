@@ -77,7 +77,7 @@ def _string(value: Any, field: str) -> str:
     return value
 
 
-def _size(value: Any, field: str) -> tuple[int, int]:
+def parse_size(value: Any, field: str) -> tuple[int, int]:
     if isinstance(value, str) and "x" in value:
         value = value.split("x")
         try:
@@ -112,7 +112,7 @@ _CONVERTERS: dict[str, Callable[[Any, str], Any]] = {
     "str": _string,
     "duration": lambda v, f: seconds(v, f),
     "length": lambda v, f: metres(v, f),
-    "size": _size,
+    "size": parse_size,
     "vector3": _vector3,
     "floats": _floats,
 }

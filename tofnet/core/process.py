@@ -104,6 +104,20 @@ class Process:
         """A copy of the parameter values (durations in s, lengths in m)."""
         return dict(self._values)
 
+    def set_param(self, name: str, value: Any) -> None:
+        """Change one parameter, with the same conversion and checks as the constructor."""
+        declared = {p.name: p for p in self.all_params()}
+        if name not in declared:
+            raise NetworkError(f"{self.name} ({type(self).__name__}) has no parameter {name!r}; "
+                               f"expected {', '.join(declared)}")
+        previous = self._values[name]
+        self._values[name] = declared[name].coerce(value, self.name)
+        try:
+            self._check()
+        except NetworkError:
+            self._values[name] = previous
+            raise
+
     def port(self, name: str) -> InPort | OutPort:
         try:
             return self.ports[name]

@@ -1,0 +1,130 @@
+"""``tofnet run``: a recording in, depth events out, and a summary of what happened to every event."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from tofnet.errors import TofnetError
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("run", help="estimate depth from a recording",
+                              description="Run the depth network on an event recording (an ECD folder, "
+                                          "events.txt, or a .npy/.npz event array) and write depth events.")
+    p.add_argument("recording", help="ECD folder (events.txt, calib.txt, groundtruth.txt), events.txt, .npy or .npz")
+    add_network_options(p)
+    p.add_argument("--out", default="depth.npz", help="depth output, .npz or .csv (default: depth.npz)")
+    p.add_argument("--backend", default=None, help="backend name (default: the spec's, else 'fixed'); "
+                                                    "see 'tofnet conformance --list'")
+    p.add_argument("--record-tot", action="store_true",
+                   help="also save the time-of-travel spikes (next to --out, *_tot.npz)")
+    p.add_argument("--json", metavar="FILE", help="write the run summary as JSON")
+    p.add_argument("--quiet", action="store_true", help="no progress, summary only")
+    p.set_defaults(handler=handle)
+
+
+def add_network_options(p: argparse.ArgumentParser) -> None:
+    """Options that choose and adjust the network (shared with ``tofnet demo``)."""
+    g = p.add_argument_group("network")
+    g.add_argument("--spec", help="YAML network spec (default: the paper's network)")
+    g.add_argument("--sensor-size", metavar="WxH", help="sensor size in pixels (default: the recording's, else 240x180)")
+    g.add_argument("--timestep", help="timestep, e.g. 1ms or 0.001 (seconds)")
+    g.add_argument("--refractory", help="refractory period, e.g. 5ms; 0 disables")
+    g.add_argument("--distance", type=int, help="pixels between facilitating and trigger pixel")
+    g.add_argument("--counter-bits", type=int, help="time-of-travel counter width")
+    g.add_argument("--velocity-per", choices=("patch", "pixel"), help="A t per patch (paper) or per pixel")
+    g.add_argument("--update-every", type=int, help="steps between velocity updates")
+    g.add_argument("--velocity", metavar="TX,TY,TZ",
+                   help="constant camera velocity in m/s (camera frame) instead of the ground-truth poses")
+    g.add_argument("--patch", metavar="WxH|auto", help="core patch size for the compiler (default: the spec's or auto)")
+
+
+def build_network(args, recording_sensor_size):
+    """The network the options describe, and the compile options and backend it names."""
+    from tofnet.api import apply_overrides, load_network
+    from tofnet.core.params import parse_size  # the same WxH parsing as the spec
+
+    sensor = parse_size(args.sensor_size, "--sensor-size") if args.sensor_size else None
+    network, compile_options, spec_backend = load_network(args.spec, sensor_size=sensor or (
+        None if args.spec else recording_sensor_size))
+    apply_overrides(network, timestep=args.timestep, refractory=args.refractory, distance=args.distance,
+                    counter_bits=args.counter_bits, velocity_per=args.velocity_per,
+                    update_every=args.update_every)
+    if args.velocity:
+        from tofnet.processes import VelocityProcess
+        try:
+            value = [float(v) for v in args.velocity.split(",")]
+        except ValueError:
+            raise TofnetError(f"--velocity: expected TX,TY,TZ in m/s, got {args.velocity!r}") from None
+        for process in network.of_type(VelocityProcess):
+            process.set_param("velocity", value)
+            process.set_param("source", "constant")
+    if args.patch:
+        compile_options["patch"] = "auto" if args.patch == "auto" else parse_size(args.patch, "--patch")
+    return network, compile_options, spec_backend
+
+
+def handle(args) -> int:
+    from tofnet.api import DEFAULT_BACKEND, run
+    from tofnet.cli.progress import Progress
+    from tofnet.io import read_recording
+    from tofnet.io.depth import write_depth
+
+    started = time.perf_counter()
+    recording = read_recording(args.recording)
+    network, compile_options, spec_backend = build_network(args, recording.sensor_size)
+    backend = args.backend or spec_backend or DEFAULT_BACKEND
+    progress = None if args.quiet else Progress(f"tofnet run [{backend}]")
+    result, compiled = run(recording, network, backend=backend, compile_options=compile_options,
+                           record_tot=args.record_tot, progress=progress)
+    if progress:
+        progress.done()
+    out = Path(args.out)
+    summary = result.summary()
+    summary["recording"] = str(args.recording)
+    summary["total_time_s"] = time.perf_counter() - started
+    write_depth(out, result.depth, t0_us=result.t0_us, timestep_us=result.timestep_us,
+                latency_steps=result.latency_steps, summary=summary)
+    if args.record_tot:
+        import numpy as np
+        tot_path = out.with_name(out.stem + "_tot.npz")
+        np.savez_compressed(tot_path, **{name: result.tot[name] for name in result.tot.dtype.names})
+        summary["tot_file"] = str(tot_path)
+    print(format_summary(summary, result, out, network_width=network.sensor_size))
+    if args.json:
+        Path(args.json).write_text(json.dumps(summary, indent=2) + "\n")
+    return 0
+
+
+def format_summary(summary: dict, result, out: Path, network_width) -> str:
+    """The closing report: where every event went, and how fast."""
+    width, height = network_width
+    lines = [f"recording      {summary['recording']}  ({width}x{height} px, {summary['steps']} steps of "
+             f"{summary['timestep_s'] * 1e3:g} ms)",
+             f"backend        {summary['backend']}",
+             f"events in      {summary['events_in']:>12,}",
+             f"  accepted     {summary['accepted']:>12,}"]
+    for reason, count in summary["dropped"].items():
+        lines.append(f"  dropped      {count:>12,}  {reason.replace('_', ' ')}")
+    lines.append(f"tot spikes     {summary['tot_spikes']:>12,}")
+    lines.append(f"depth out      {summary['depth_out']:>12,}  -> {out}")
+    for reason, count in summary["rejected"].items():
+        lines.append(f"  rejected     {count:>12,}  {reason.replace('_', ' ')}")
+    if len(result.depth):
+        import numpy as np
+        z = result.depth["z"]
+        lines.append(f"depth range    {np.percentile(z, 5):.3f} .. {np.percentile(z, 95):.3f} m (5th-95th pct), "
+                     f"median {np.median(z):.3f} m")
+    rate = summary["events_in"] / summary["wall_time_s"] if summary["wall_time_s"] > 0 else float("inf")
+    lines.append(f"latency        {summary['latency_steps']} steps ({summary['latency_s'] * 1e3:g} ms)")
+    lines.append(f"wall time      {summary['wall_time_s']:.3f} s network ({rate / 1e6:.2f} M events/s), "
+                 f"{summary['total_time_s']:.3f} s in all")
+    out_of_bounds = summary["dropped"].get("out_of_bounds", 0)
+    if out_of_bounds:
+        lines.append(f"warning        {out_of_bounds:,} events lay outside the {width}x{height} sensor; "
+                     "pass --sensor-size if the recording is larger")
+    return "\n".join(lines)
