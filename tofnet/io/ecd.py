@@ -1,0 +1,117 @@
+"""Recordings in the Event Camera Dataset (ECD) folder layout, as ``slider_depth``.
+
+A folder holds ``events.txt`` (``t x y p``) and optionally ``calib.txt``,
+``groundtruth.txt`` and ``imu.txt``; tofnet adds ``sensor_size.txt`` (``width
+height``) and ``events_depth.npy`` (true depth per event, metres) for simulated
+recordings. ECD's ``images.txt`` and ``images/`` are not used.
+"""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from tofnet.errors import DataError, located
+from tofnet.io.calibration import read_calibration, write_calibration
+from tofnet.io.events import read_events_txt, write_events_txt
+from tofnet.io.groundtruth import read_groundtruth, read_table, write_groundtruth
+from tofnet.io.recording import Intrinsics, Recording
+
+EVENTS = "events.txt"
+CALIBRATION = "calib.txt"
+GROUNDTRUTH = "groundtruth.txt"
+IMU = "imu.txt"
+SENSOR_SIZE = "sensor_size.txt"
+GT_DEPTH = "events_depth.npy"
+
+
+def read_imu(path: str | Path) -> np.ndarray:
+    """ECD ``imu.txt``: ``t ax ay az gx gy gz`` (s, m/s², rad/s) as a float64 ``(n, 7)`` array."""
+    values, _ = read_table(path, ("t", "ax", "ay", "az", "gx", "gy", "gz"), "IMU sample")
+    return values
+
+
+def read_sensor_size(path: str | Path) -> tuple[int, int]:
+    """``sensor_size.txt``: one line ``width height`` in pixels."""
+    values, lines = read_table(path, ("width", "height"), "sensor size")
+    if len(values) != 1:
+        raise DataError(located(path, None, f"expected one line 'width height', found {len(values)}"))
+    width, height = values[0]
+    if width != int(width) or height != int(height) or width < 1 or height < 1:
+        raise DataError(located(path, int(lines[0]), f"expected positive whole numbers 'width height' in pixels, "
+                                                     f"got {width:g} {height:g}"))
+    return int(width), int(height)
+
+
+def read_gt_depth(path: str | Path, n_events: int) -> np.ndarray:
+    """True depth per event (float64 metres, NaN where unknown), checked against the event count."""
+    path = Path(path)
+    try:
+        depth = np.load(path, allow_pickle=False)
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as err:
+        raise DataError(located(path, None, f"not a readable .npy array ({err})")) from None
+    if not isinstance(depth, np.ndarray) or depth.dtype.kind not in "iuf" or depth.shape != (n_events,):
+        raise DataError(located(path, None, f"expected {n_events} depths (one per event, float metres), "
+                                            f"got an array of shape {getattr(depth, 'shape', '?')}"))
+    return depth.astype(np.float64)
+
+
+def attach_sidecars(recording: Recording, folder: Path, gt_depth_name: str | None = GT_DEPTH) -> Recording:
+    """Add the calibration, poses, IMU, sensor size and true depth found in ``folder``."""
+    if (folder / CALIBRATION).is_file():
+        recording.intrinsics = read_calibration(folder / CALIBRATION)
+    else:
+        recording.notes.append(f"no {CALIBRATION}: intrinsics unknown")
+    if (folder / GROUNDTRUTH).is_file():
+        recording.trajectory = read_groundtruth(folder / GROUNDTRUTH)
+    if (folder / IMU).is_file():
+        recording.imu = read_imu(folder / IMU)
+    if (folder / SENSOR_SIZE).is_file():
+        recording.sensor_size = read_sensor_size(folder / SENSOR_SIZE)
+    if gt_depth_name is not None and (folder / gt_depth_name).is_file():
+        recording.gt_depth = read_gt_depth(folder / gt_depth_name, len(recording.events))
+    return recording
+
+
+def read_ecd(folder: str | Path) -> Recording:
+    """Read an ECD recording folder (``events.txt`` required, the rest optional)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise DataError(located(folder, None, "not a folder; an ECD recording is a folder holding events.txt"))
+    if not (folder / EVENTS).is_file():
+        raise DataError(located(folder, None, f"no {EVENTS}; an ECD recording folder needs {EVENTS} "
+                                              "(lines 't x y p': seconds, column, row, polarity)"))
+    recording = Recording(events=read_events_txt(folder / EVENTS), source=str(folder))
+    return attach_sidecars(recording, folder)
+
+
+def write_ecd(folder: str | Path, events: np.ndarray, *, intrinsics: Intrinsics | None,
+              times=None, positions=None, quaternions=None,
+              sensor_size: tuple[int, int] | None = None, gt_depth: np.ndarray | None = None) -> None:
+    """Write an ECD recording folder (created if needed).
+
+    ``events.txt`` always; ``calib.txt`` when ``intrinsics`` is given;
+    ``groundtruth.txt`` when poses are given (``times`` s, ``positions`` m,
+    ``quaternions`` ``qx qy qz qw`` camera-to-world); ``sensor_size.txt`` (width,
+    height px) and ``events_depth.npy`` (metres per event) when given.
+    """
+    folder = Path(folder)
+    poses = (times, positions, quaternions)
+    if any(p is not None for p in poses) and any(p is None for p in poses):
+        raise DataError(located(folder, None, "poses need all of times, positions and quaternions"))
+    if gt_depth is not None and np.shape(gt_depth) != (len(events),):
+        raise DataError(located(folder / GT_DEPTH, None, f"expected {len(events)} depths (one per event), "
+                                                         f"got shape {np.shape(gt_depth)}"))
+    folder.mkdir(parents=True, exist_ok=True)
+    write_events_txt(folder / EVENTS, events)
+    if intrinsics is not None:
+        write_calibration(folder / CALIBRATION, intrinsics)
+    if times is not None:
+        write_groundtruth(folder / GROUNDTRUTH, times, positions, quaternions)
+    if sensor_size is not None:
+        width, height = (int(v) for v in sensor_size)
+        (folder / SENSOR_SIZE).write_text(f"{width} {height}\n", encoding="utf-8")
+    if gt_depth is not None:
+        np.save(folder / GT_DEPTH, np.asarray(gt_depth, dtype=np.float64))
