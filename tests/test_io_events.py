@@ -42,6 +42,12 @@ def test_seconds_become_microseconds_exactly_half_away_from_zero(tmp_path):
     assert events["t"].tolist() == [1468939993067417, 1468939993067417, 1468939994000000, 1500000000000000]
 
 
+def test_half_microseconds_round_away_from_zero_not_to_even(tmp_path):
+    # Also: no newline after the last line.
+    text = "-0.0000015 0 0 0\n0.0000015 1 2 1\n0.00000249 0 0 0\n0.0000025 1 2 0"
+    assert read_events_txt(_write(tmp_path, text))["t"].tolist() == [-2, 2, 2, 3]
+
+
 def test_comments_blank_lines_crlf_tabs_and_polarity_minus_one(tmp_path):
     text = "# t x y p\r\n\r\n0.5\t1\t2\t-1\r\n  0.6 3 4 1.0  \r\n"
     events = read_events_txt(_write(tmp_path, text))
