@@ -151,5 +151,5 @@ def test_evaluate_uses_the_depth_metadata():
     depth = depth_of([(2, 3, 3, 2.0)], t0_us=10_000)
     ev = evaluate(rec, depth, {"t0_us": 10_000, "timestep_us": DT, "latency_steps": 1})
     assert ev.errors.mean_abs_m == pytest.approx(2.0)  # step 2 - 1 = step 1: the 4 m event
-    with pytest.raises(DataError, match="latency_steps"):
+    with pytest.raises(DataError, match="lacks latency_steps"):
         evaluate(rec, depth, {"t0_us": 0, "timestep_us": DT})

@@ -19,6 +19,8 @@ from tofnet.errors import DataError
 from tofnet.eval.match import Matches, input_steps, match_estimates
 from tofnet.units import format_seconds
 
+#: Metadata a depth file must carry to be matched to its input events.
+TIMING_KEYS = ("t0_us", "timestep_us", "latency_steps")
 #: Default length of the per-window metrics, seconds.
 DEFAULT_WINDOW_S = 0.1
 
@@ -49,7 +51,7 @@ class ErrorStats:
                    float(rel_err.mean()), float(np.median(rel_err)))
 
     def to_dict(self) -> dict:
-        return {"n": self.n, "mean_abs_m": _number(self.mean_abs_m), "median_abs_m": _number(self.median_abs_m),
+        return {"matched": self.n, "mean_abs_m": _number(self.mean_abs_m), "median_abs_m": _number(self.median_abs_m),
                 "mean_rel_pct": _number(self.mean_rel_pct), "median_rel_pct": _number(self.median_rel_pct)}
 
 
@@ -174,12 +176,19 @@ def evaluate(recording, depth: np.ndarray, meta: dict, *, window_s: float = DEFA
     if recording.gt_depth is None:
         raise DataError(f"{recording.source}: no per-event ground-truth depth (events_depth.npy); "
                         f"eval needs it, e.g. from a recording made by `tofnet simulate`")
-    missing = [key for key in ("t0_us", "timestep_us", "latency_steps") if key not in meta]
-    if missing:
-        raise DataError(f"depth file metadata lacks {', '.join(missing)}; write it with tofnet.io.depth.write_depth")
+    meta = require_timing(meta)
     return evaluate_arrays(depth, recording.events, recording.gt_depth, t0_us=int(meta["t0_us"]),
                            timestep_us=int(meta["timestep_us"]), latency_steps=int(meta["latency_steps"]),
                            window_s=window_s, source=recording.source)
+
+
+def require_timing(meta: dict) -> dict:
+    """``meta`` if it has ``t0_us``, ``timestep_us`` and ``latency_steps``, else a ``DataError``."""
+    missing = [key for key in TIMING_KEYS if meta.get(key) is None]
+    if missing:
+        raise DataError(f"the depth file lacks {', '.join(missing)} (a .csv holds no timing); "
+                        f"evaluate the .npz written by `tofnet run`, or give --timestep and --latency-steps")
+    return meta
 
 
 def window_index(t_rel_us: np.ndarray, window_us: int) -> np.ndarray:

@@ -1,0 +1,217 @@
+"""Figures: the data they show, their labels and units, the PNGs, and ``tofnet plot``."""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tofnet.cli import main
+from tofnet.errors import DataError, TofnetError
+from tofnet.eval import evaluate
+from tofnet.eval.plots import (DPI, FIGURE_SIZES, cloud_figure, depth_map_figure, error_figure, histogram_figure,
+                               plot_all, save_figure)
+from tofnet.eval.views import (Window, back_project, depth_image, resolve_window, to_world, world_points)
+from tofnet.events import DEPTH_DTYPE, EVENT_DTYPE
+from tofnet.io import write_depth, write_ecd
+from tofnet.io.groundtruth import Trajectory
+from tofnet.io.recording import Intrinsics, Recording
+
+META = {"t0_us": 0, "timestep_us": 1000, "latency_steps": 2}
+SIZE = (40, 30)
+
+
+def scene(seed: int = 0, n: int = 4000, duration_us: int = 400_000, gt: bool = True, poses: bool = True):
+    """A small recording: three depth planes, a sideways camera, estimates for every other event."""
+    rng = np.random.default_rng(seed)
+    width, height = SIZE
+    plane = np.full((height, width), 4.0)
+    plane[5:20, 5:15] = 1.0
+    plane[10:28, 22:35] = 2.0
+    events = np.empty(n, EVENT_DTYPE)
+    events["t"] = np.sort(rng.integers(0, duration_us, n))
+    events["x"], events["y"] = rng.integers(0, width, n), rng.integers(0, height, n)
+    events["p"] = rng.integers(0, 2, n)
+    true = plane[events["y"], events["x"]]
+    idx = np.flatnonzero(rng.random(n) < 0.5)
+    depth = np.empty(len(idx), DEPTH_DTYPE)
+    depth["step"] = events["t"][idx] // 1000 + 2
+    depth["t"] = (depth["step"] + 1) * 1000
+    depth["x"], depth["y"] = events["x"][idx], events["y"][idx]
+    depth["z"] = true[idx] * np.exp(rng.normal(0, 0.1, len(idx)))
+    times = np.linspace(0, duration_us * 1e-6, 5)
+    trajectory = Trajectory(times, np.column_stack([0.5 * times, 0 * times, 0.1 * times]),
+                            np.tile([0, 0, 0, 1.0], (5, 1))) if poses else None
+    rec = Recording(events=events, intrinsics=Intrinsics(30.0, 30.0, 20.0, 15.0), trajectory=trajectory,
+                    sensor_size=SIZE, gt_depth=true if gt else None, source="scene")
+    return rec, depth
+
+
+def png_size(path: Path) -> tuple[int, int]:
+    """Width and height from the PNG header (IHDR)."""
+    data = path.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    return struct.unpack(">II", data[16:24])
+
+
+def labels(fig) -> list[str]:
+    return [text for ax in fig.axes for text in (ax.get_xlabel(), ax.get_ylabel()) if text]
+
+
+def expected_pixels(kind: str) -> tuple[int, int]:
+    w, h = FIGURE_SIZES[kind]
+    return round(w * DPI), round(h * DPI)
+
+
+def test_depth_image_takes_the_latest_or_the_median_depth_per_pixel():
+    x, y = np.array([1, 1, 1, 2]), np.array([0, 0, 0, 1])
+    z, t = np.array([3.0, 1.0, 2.0, 5.0]), np.array([5, 9, 7, 1])
+    latest = depth_image(x, y, z, t, (3, 2), "latest")
+    assert latest[0, 1] == 1.0 and latest[1, 2] == 5.0
+    assert np.isnan(latest).sum() == 4  # unmeasured pixels stay empty
+    assert depth_image(x, y, z, t, (3, 2), "median")[0, 1] == 2.0
+    assert depth_image(x[:2], y[:2], z[:2], t[:2], (3, 2), "median")[0, 1] == 2.0  # mean of the two middle
+
+
+def test_windows_from_specs():
+    span = (1_000_000, 3_000_000)
+    assert resolve_window("0.2:0.27", span, default_s=None) == Window(1_200_000, 1_270_000, 1_000_000)
+    assert resolve_window("200ms:270ms", span, default_s=None) == Window(1_200_000, 1_270_000, 1_000_000)
+    centred = resolve_window("70ms", span, default_s=None)
+    assert (centred.start_us, centred.end_us) == (1_965_000, 2_035_000)
+    assert resolve_window(None, span, default_s=0.07) == centred
+    whole = resolve_window(None, span, default_s=None)
+    assert whole.whole and "whole run" in whole.label()
+    assert "70 ms" in centred.label()
+    for bad in ("0.3:0.2", "-5ms", "soon"):
+        with pytest.raises(TofnetError):
+            resolve_window(bad, span, default_s=None)
+
+
+def test_back_projection_and_world_transform():
+    intr = Intrinsics(100.0, 50.0, 10.0, 20.0)
+    cam = back_project(np.array([110]), np.array([20]), np.array([2.0]), intr)
+    assert cam.tolist() == [[2.0, 0.0, 2.0]]  # one focal length right of centre: X = z
+    # Camera at (1, 2, 3), turned 90 degrees about y: its z axis points along world +x.
+    r = np.array([[0.0, 0, 1], [0, 1, 0], [-1, 0, 0]])
+    world = to_world(cam, np.array([[1.0, 2, 3]]), r[None])
+    assert world == pytest.approx(np.array([[3.0, 2.0, 1.0]]))
+
+
+def test_world_points_use_the_pose_at_the_given_time():
+    traj = Trajectory([0.0, 1.0], [[0, 0, 0], [1.0, 0, 0]], [[0, 0, 0, 1.0], [0, 0, 0, 1.0]])
+    depth = np.zeros(1, DEPTH_DTYPE)
+    depth["x"], depth["y"], depth["z"], depth["t"] = 20, 15, 2.0, 500_000
+    pts = world_points(depth, Intrinsics(30.0, 30.0, 20.0, 15.0), traj)
+    assert pts == pytest.approx(np.array([[0.5, 0.0, 2.0]]))
+    with pytest.raises(DataError, match="poses"):
+        world_points(depth, Intrinsics(1, 1, 0, 0), None)
+
+
+def test_depth_map_figure_shows_the_window_with_ground_truth():
+    rec, depth = scene()
+    fig = depth_map_figure(rec, depth, META, window="100ms:200ms")
+    est_ax, gt_ax = fig.axes[:2]
+    shown = np.ma.filled(est_ax.images[0].get_array(), np.nan)
+    sel = depth[(depth["t"] >= 100_000) & (depth["t"] < 200_000)]
+    assert shown.shape == (SIZE[1], SIZE[0])
+    np.testing.assert_array_equal(shown, depth_image(sel["x"], sel["y"], sel["z"], sel["t"], SIZE))
+    assert gt_ax.images  # ground-truth panel
+    assert "x [px]" in labels(fig) and "y [px]" in labels(fig)
+    assert fig.axes[-1].get_ylabel() == "depth [m]"  # the colour bar
+    assert "100 ms" in fig.get_suptitle() and "0.100" in fig.get_suptitle()
+    one = depth_map_figure(rec, depth, META, with_gt=False)
+    assert len([ax for ax in one.axes if ax.images]) == 1 and "70 ms" in one.get_suptitle()
+
+
+def test_histogram_counts_every_estimate_and_overlays_the_matched_truth():
+    rec, depth = scene()
+    fig = histogram_figure(rec, depth, META)
+    ax = fig.axes[0]
+    shown = sum(bar.get_height() for bar in ax.containers[0])  # the estimates' bars
+    beyond = int(np.count_nonzero(depth["z"] > ax.get_xlim()[1]))
+    assert shown + beyond == len(depth) and shown > 0.9 * len(depth)
+    assert ax.get_xlabel() == "depth [m]" and ax.get_ylabel().endswith(" m bin")
+    legend = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert legend == [f"estimates ({len(depth):,})", f"ground truth of the same events ({len(depth):,})"]
+    assert "whole run" in ax.get_title()
+
+
+def test_error_figure_plots_the_windowed_median_beside_the_trajectory():
+    rec, depth = scene()
+    fig = error_figure(rec, depth, META, window_s=0.1)
+    position, velocity, error = fig.axes[:3]
+    assert position.get_ylabel() == "position (world) [m]"
+    assert velocity.get_ylabel() == "velocity (camera) [m/s]"
+    assert error.get_ylabel() == "relative error [%]"
+    assert error.get_xlabel() == "time since start [s]"
+    median = next(line for line in error.get_lines() if line.get_label() == "median")
+    expected = [w.errors.median_rel_pct for w in evaluate(rec, depth, META, window_s=0.1).windows]
+    assert median.get_ydata() == pytest.approx(expected)
+    assert median.get_xdata() == pytest.approx([0.05, 0.15, 0.25, 0.35])
+    x_line = position.get_lines()[0]
+    assert x_line.get_ydata()[-1] == pytest.approx(0.5 * 0.402, abs=1e-3)  # x = 0.5 m/s * t
+
+
+def test_cloud_figure_places_points_in_3d():
+    rec, depth = scene()
+    fig = cloud_figure(rec, depth, META)
+    ax = fig.axes[0]
+    assert ax.name == "3d"
+    assert ax.get_xlabel() == "x, right [m]" and ax.get_ylabel() == "z, forward [m]" and "[m]" in ax.get_zlabel()
+    assert fig.axes[-1].get_ylabel() == "depth [m]"
+    scatter = ax.collections[0]
+    assert 0.9 * len(depth) <= len(scatter.get_offsets()) <= len(depth)
+    with pytest.raises(DataError, match="poses"):
+        cloud_figure(scene(poses=False)[0], depth, META)
+
+
+@pytest.mark.parametrize("kind, make", [("depthmap", depth_map_figure), ("histogram", histogram_figure),
+                                        ("error", error_figure), ("cloud", cloud_figure)])
+def test_each_figure_saves_a_png_of_its_size(tmp_path, kind, make):
+    rec, depth = scene()
+    path = save_figure(make(rec, depth, META), tmp_path / f"{kind}.png")
+    assert path.stat().st_size > 10_000
+    assert png_size(path) == expected_pixels(kind)
+
+
+def test_plot_all_writes_what_the_recording_supports(tmp_path):
+    rec, depth = scene()
+    paths = plot_all(rec, depth, META, tmp_path, prefix="run_")
+    assert [p.name for p in paths] == ["run_depthmap.png", "run_histogram.png", "run_error.png", "run_cloud.png"]
+    assert all(p.stat().st_size > 0 for p in paths)
+    bare, _ = scene(gt=False, poses=False)
+    assert [p.name for p in plot_all(bare, depth, META, tmp_path / "bare")] == ["depthmap.png", "histogram.png"]
+    assert png_size(tmp_path / "bare" / "depthmap.png") == expected_pixels("depthmap_single")
+
+
+def write_inputs(folder: Path, gt: bool = True) -> tuple[str, str]:
+    rec, depth = scene(n=1500, gt=gt)
+    traj = rec.trajectory
+    write_ecd(folder / "rec", rec.events, intrinsics=rec.intrinsics, sensor_size=SIZE, gt_depth=rec.gt_depth,
+              times=traj.times, positions=traj.positions, quaternions=traj.quaternions)
+    write_depth(folder / "depth.npz", depth, **META)
+    return str(folder / "rec"), str(folder / "depth.npz")
+
+
+def test_cli_plot_writes_the_files_it_prints(tmp_path, capsys):
+    rec, dep = write_inputs(tmp_path)
+    out = tmp_path / "figs" / "map.png"
+    assert main(["plot", "depthmap", rec, dep, "--out", str(out), "--window", "0.1:0.2", "--reduce", "median"]) == 0
+    assert capsys.readouterr().out.split() == [str(out)]
+    assert png_size(out) == expected_pixels("depthmap")
+    assert main(["plot", "all", rec, dep]) == 0
+    printed = capsys.readouterr().out.split()
+    assert [Path(p).name for p in printed] == ["depth_depthmap.png", "depth_histogram.png", "depth_error.png",
+                                               "depth_cloud.png"]
+    assert all(Path(p).is_file() for p in printed)
+
+
+def test_cli_plot_explains_what_a_figure_needs(tmp_path, capsys):
+    rec, dep = write_inputs(tmp_path, gt=False)
+    assert main(["plot", "error", rec, dep]) == 2
+    assert "events_depth.npy" in capsys.readouterr().err
+    assert main(["plot", "histogram", rec, dep, "--out", str(tmp_path / "h.jpg")]) == 2
+    assert "PNG" in capsys.readouterr().err

@@ -1,0 +1,100 @@
+"""``tofnet eval``: accuracy of depth estimates against the recording's per-event ground truth."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from tofnet.errors import DataError, TofnetError
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "eval", help="accuracy of depth estimates against ground truth",
+        description="Match each depth estimate to the input event that triggered it (same pixel, "
+                    "latency_steps earlier) and report the paper's errors (mean and median absolute [m] "
+                    "and relative [%]), coverage and unmatched estimates, overall and per time window. "
+                    "The recording needs per-event ground-truth depth (events_depth.npy), "
+                    "e.g. from `tofnet simulate`.")
+    p.add_argument("recording", help="the recording the depth was computed from (ECD folder or events file)")
+    p.add_argument("depth", help="depth estimates written by `tofnet run` (.npz; .csv with --timestep)")
+    p.add_argument("--window", default="100ms",
+                   help="length of the per-window metrics, e.g. 100ms or 0.5 (seconds); 0 for none (default 100ms)")
+    p.add_argument("--json", metavar="OUT", help="also write the metrics as JSON to OUT ('-' for stdout only)")
+    add_timing_options(p)
+    p.set_defaults(handler=handle)
+
+
+def add_timing_options(p: argparse.ArgumentParser) -> None:
+    """Timing for depth files that do not carry it (``.csv``); shared with ``tofnet plot``."""
+    g = p.add_argument_group("timing (only needed for depth files without it, such as .csv)")
+    g.add_argument("--timestep", help="the run's timestep, e.g. 1ms")
+    g.add_argument("--latency-steps", type=int, help="output step minus input step (2 for the paper's network)")
+
+
+def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = None,
+                latency_steps: int | None = None):
+    """Read a recording and a depth file; complete the depth timing from the options.
+
+    Returns ``(recording, depth, meta)``. The options fill what the file lacks and must
+    agree with what it has; ``t0_us`` is then recovered from the stamps
+    (``t = t0 + (step + 1) * dt``).
+    """
+    from tofnet.io import read_depth, read_recording
+    from tofnet.units import seconds
+
+    recording = read_recording(recording_path)
+    depth, meta = read_depth(depth_path)
+    meta = dict(meta)
+    given = {}
+    if timestep is not None:
+        given["timestep_us"] = int(round(seconds(timestep, "--timestep") * 1e6))
+        if given["timestep_us"] <= 0:
+            raise TofnetError(f"--timestep must be positive, got {timestep!r}")
+    if latency_steps is not None:
+        given["latency_steps"] = int(latency_steps)
+    for key, value in given.items():
+        if meta.get(key) is not None and int(meta[key]) != value:
+            raise DataError(f"{depth_path}: the file says {key} = {meta[key]}, the option says {value}")
+        meta[key] = value
+    if meta.get("t0_us") is None and meta.get("timestep_us") is not None:
+        meta["t0_us"] = _t0_from_stamps(depth, int(meta["timestep_us"]), recording, depth_path)
+    return recording, depth, meta
+
+
+def _t0_from_stamps(depth: np.ndarray, timestep_us: int, recording, depth_path: str) -> int:
+    if len(depth) == 0:
+        return int(recording.events["t"][0]) if len(recording.events) else 0
+    t0 = depth["t"] - (depth["step"] + 1) * timestep_us
+    if np.any(t0 != t0[0]):
+        raise DataError(f"{depth_path}: stamps do not fit t = t0 + (step + 1) * {timestep_us} µs; "
+                        f"is --timestep the run's timestep?")
+    return int(t0[0])
+
+
+def handle(args) -> int:
+    from tofnet.eval import evaluate
+    from tofnet.units import seconds
+
+    window_s = seconds(args.window, "--window")
+    if window_s < 0:
+        raise TofnetError(f"--window must be 0 or positive, got {args.window!r}")
+    recording, depth, meta = load_inputs(args.recording, args.depth, timestep=args.timestep,
+                                         latency_steps=args.latency_steps)
+    result = evaluate(recording, depth, meta, window_s=window_s)
+    if args.json == "-":
+        print(result.to_json())
+        return 0
+    print(result.table())
+    if args.json:
+        out = Path(args.json)
+        try:
+            out.parent.mkdir(parents=True, exist_ok=True)
+            out.write_text(result.to_json() + "\n", encoding="utf-8")
+        except OSError as err:
+            raise DataError(f"{out}: cannot write JSON: {err.strerror or err}") from None
+        print(f"wrote {out}", file=sys.stderr)
+    return 0
