@@ -1,0 +1,23 @@
+"""Synthetic event-camera sequences with ground-truth depth, in the spirit of ESIM.
+
+A scene of textured planes and boxes is ray-cast along a purely translational,
+piecewise-constant-velocity trajectory, densely enough that the image moves at most
+0.25 px between renders; each pixel emits events where its log intensity crosses its
+contrast thresholds (ESIM's method). See ``docs/simulator.md``.
+
+>>> from tofnet.sim import simulate
+>>> summary = simulate("slider", "out/slider", duration=0.2)  # doctest: +SKIP
+"""
+
+from tofnet.sim.camera import DEFAULT_INTRINSICS, DEFAULT_SENSOR_SIZE, Segment, Trajectory, constant
+from tofnet.sim.config import SimConfig
+from tofnet.sim.engine import SimResult, generate
+from tofnet.sim.errors import SimError
+from tofnet.sim.run import resolve, simulate, summarize, write_result
+from tofnet.sim.scenarios import SCENARIOS, scenario
+from tofnet.sim.scene import Box, Plane, Scene
+from tofnet.sim.texture import Texture
+
+__all__ = ["SCENARIOS", "scenario", "simulate", "generate", "resolve", "summarize", "write_result", "SimConfig",
+           "SimResult", "SimError", "Scene", "Plane", "Box", "Texture", "Trajectory", "Segment", "constant",
+           "DEFAULT_INTRINSICS", "DEFAULT_SENSOR_SIZE"]
