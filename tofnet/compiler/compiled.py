@@ -1,0 +1,267 @@
+"""The compiled network: a network, its budget and where every pixel of every layer runs."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any, Mapping
+
+import numpy as np
+
+from tofnet.compiler.budget import LOIHI2, Budget
+from tofnet.compiler.partition import (PatchOption, Rect, Traffic, auto_patch, max_pixels_per_core,
+                                       patch_per_layer, plan_layer, rects_mask, traffic_of, usage_of)
+from tofnet.core.network import Network
+from tofnet.errors import BudgetError
+
+PLACEMENTS = ("core", "host")
+
+
+@dataclass(frozen=True)
+class CoreAssignment:
+    """One neuromorphic core: the patch of one layer it holds and the input it receives.
+
+    ``index`` is global (cores numbered chip by chip); ``chip`` and ``slot`` (core within
+    the chip) locate it. Pixels ``x0 <= x < x1``, ``y0 <= y < y1``. ``usage`` is what the
+    patch uses of each per-core limit. ``halo`` lists the input pixel rectangles
+    (half-open ``(x0, y0, x1, y1)``) whose spikes the core must receive.
+    """
+
+    index: int
+    chip: int
+    slot: int
+    process: str
+    x0: int
+    y0: int
+    x1: int
+    y1: int
+    usage: dict[str, int]
+    halo: tuple[Rect, ...]
+
+    @property
+    def rect(self) -> Rect:
+        return (self.x0, self.y0, self.x1, self.y1)
+
+    @property
+    def pixels(self) -> int:
+        return (self.x1 - self.x0) * (self.y1 - self.y0)
+
+    def holds(self, x: int, y: int) -> bool:
+        """Whether pixel ``(x, y)`` of this layer lives on this core."""
+        return self.x0 <= x < self.x1 and self.y0 <= y < self.y1
+
+    def receives(self, x: int, y: int) -> bool:
+        """Whether an input spike at pixel ``(x, y)`` must reach this core."""
+        return any(x0 <= x < x1 and y0 <= y < y1 for x0, y0, x1, y1 in self.halo)
+
+    def receives_mask(self, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+        """Vectorised ``receives``: a boolean array shaped like ``xs``/``ys``."""
+        return rects_mask(self.halo, xs, ys)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"index": self.index, "chip": self.chip, "slot": self.slot, "process": self.process,
+                "x0": self.x0, "y0": self.y0, "x1": self.x1, "y1": self.y1, "usage": dict(self.usage),
+                "halo": [list(r) for r in self.halo]}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "CoreAssignment":
+        return cls(**{**data, "usage": dict(data["usage"]), "halo": tuple(tuple(r) for r in data["halo"])})
+
+
+@dataclass(frozen=True)
+class LayerMapping:
+    """One core-placed process: patch size (w, h) px, grid of patches, its cores and their use.
+
+    ``usage_max`` is the use of the fullest core (ragged edge cores use less);
+    ``limits`` the per-core limits it was checked against; ``chips`` the chips it spans.
+    """
+
+    name: str
+    type: str
+    patch: tuple[int, int]
+    grid: tuple[int, int]
+    cores: int
+    first_core: int
+    per_pixel: dict[str, int]
+    usage_max: dict[str, int]
+    limits: dict[str, int]
+    chips: tuple[int, ...]
+    automatic: bool
+
+    def to_dict(self) -> dict[str, Any]:
+        out = dict(self.__dict__)
+        out.update(patch=list(self.patch), grid=list(self.grid), chips=list(self.chips))
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "LayerMapping":
+        return cls(**{**data, "patch": tuple(data["patch"]), "grid": tuple(data["grid"]),
+                      "chips": tuple(data["chips"])})
+
+
+@dataclass(frozen=True, eq=False)
+class CompiledNetwork:
+    """A network placed on cores under a budget; what backends run.
+
+    ``layers`` in topological order, ``cores`` by global index, ``traffic`` per
+    connection into a core-placed layer, ``host`` the processes that run off-chip.
+    ``pipeline`` (the resolved paper pipeline backends read) is computed on first use.
+    """
+
+    network: Network
+    budget: Budget
+    layers: tuple[LayerMapping, ...]
+    cores: tuple[CoreAssignment, ...]
+    traffic: tuple[Traffic, ...]
+    host: tuple[str, ...]
+    patch: Any = None
+    _maps: dict = field(default_factory=dict, repr=False, compare=False)
+
+    @cached_property
+    def pipeline(self):
+        """``tofnet.compiler.pipeline.pipeline_of(network)``; raises if not the paper's graph."""
+        from tofnet.compiler.pipeline import pipeline_of
+        return pipeline_of(self.network)
+
+    @property
+    def cores_used(self) -> int:
+        return len(self.cores)
+
+    @property
+    def chips_used(self) -> int:
+        return -(-self.cores_used // self.budget.chip.cores)
+
+    def layer(self, name: str) -> LayerMapping:
+        for layer in self.layers:
+            if layer.name == name:
+                return layer
+        raise BudgetError(f"no core-placed layer {name!r}; layers: {', '.join(l.name for l in self.layers)}")
+
+    def cores_of(self, name: str) -> list[CoreAssignment]:
+        """The cores of layer ``name``, in patch order (row by row)."""
+        layer = self.layer(name)
+        return list(self.cores[layer.first_core:layer.first_core + layer.cores])
+
+    def core_map(self, name: str) -> np.ndarray:
+        """``(height, width)`` array: the global index of the core holding each pixel of ``name``."""
+        if ("core", name) not in self._maps:
+            width, height = self.network.process(name).sensor_size
+            out = np.empty((height, width), dtype=np.int32)
+            for core in self.cores_of(name):
+                out[core.y0:core.y1, core.x0:core.x1] = core.index
+            self._maps[("core", name)] = out
+        return self._maps[("core", name)]
+
+    def fanout_map(self, name: str) -> np.ndarray:
+        """``(height, width)`` array: how many cores of ``name`` an input spike at each pixel reaches."""
+        if ("fanout", name) not in self._maps:
+            width, height = self.network.process(name).sensor_size
+            out = np.zeros((height, width), dtype=np.int32)
+            ys, xs = np.mgrid[0:height, 0:width]
+            for core in self.cores_of(name):
+                out += core.receives_mask(xs, ys)
+            self._maps[("fanout", name)] = out
+        return self._maps[("fanout", name)]
+
+    def cores_receiving(self, name: str, x: int, y: int) -> list[int]:
+        """Global indices of the cores of layer ``name`` an input spike at ``(x, y)`` must reach."""
+        return [core.index for core in self.cores_of(name) if core.receives(x, y)]
+
+    def summary(self) -> dict[str, Any]:
+        """Plain-data totals (for the CLI and JSON)."""
+        return {"network": self.network.name, "sensor_size": list(self.network.sensor_size),
+                "budget": self.budget.name, "cores_used": self.cores_used, "chips_used": self.chips_used,
+                "cores_per_layer": {l.name: l.cores for l in self.layers}}
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able: the network spec, budget, layers, cores and traffic."""
+        from tofnet.io.spec import network_to_dict, patch_to_data
+        return {"format": "tofnet-compiled/1", "summary": self.summary(),
+                "network": network_to_dict(self.network, full=True), "budget": self.budget.to_dict(),
+                "patch": patch_to_data(self.patch), "host": list(self.host),
+                "layers": [l.to_dict() for l in self.layers], "cores": [c.to_dict() for c in self.cores],
+                "traffic": [t.to_dict() for t in self.traffic]}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "CompiledNetwork":
+        """Rebuild from ``to_dict()`` output (the network from its embedded spec)."""
+        from tofnet.io.spec import network_from_dict, patch_from_data
+        patch = patch_from_data(data.get("patch"))
+        return cls(network=network_from_dict(data["network"]), budget=Budget.from_dict(data["budget"]),
+                   layers=tuple(LayerMapping.from_dict(l) for l in data["layers"]),
+                   cores=tuple(CoreAssignment.from_dict(c) for c in data["cores"]),
+                   traffic=tuple(Traffic.from_dict(t) for t in data["traffic"]),
+                   host=tuple(data["host"]), patch=patch)
+
+
+def compile_network(network: Network, budget: Budget | str | Mapping = LOIHI2,
+                    patch: PatchOption = None) -> CompiledNetwork:
+    """Place ``network`` on neuromorphic cores under ``budget``.
+
+    Parameters
+    ----------
+    network
+        A validated ``Network``; processes with ``placement == "core"`` are cut into patches.
+    budget
+        A ``Budget``, a built-in budget name or a budget mapping.
+    patch
+        ``None`` or ``"auto"`` (fewest cores), ``(w, h)`` px for every layer, or
+        ``{process_name: (w, h) | "auto"}``.
+
+    Raises
+    ------
+    BudgetError
+        When a pixel, a fixed patch or the whole network does not fit, saying what is
+        over and by how much.
+    """
+    budget = budget if isinstance(budget, Budget) else Budget.from_dict(budget)
+    ordered = network.topological_order()
+    for process in ordered:
+        if process.placement not in PLACEMENTS:
+            raise BudgetError(f"{process.name} ({type(process).__name__}): placement must be 'core' or 'host', "
+                              f"got {process.placement!r}")
+    layered = [p for p in ordered if p.placement == "core"]
+    requests = patch_per_layer(patch, [p.name for p in layered])
+    limits = budget.core.limits()
+    plans = [plan_layer(p, limits, p.sensor_size, requests[p.name]) for p in layered]
+    total = sum(len(plan.rects) for plan in plans)
+    _check_chips(network, budget, plans, total)
+
+    per_chip = budget.chip.cores
+    layers, cores, by_name, index = [], [], {}, 0
+    for plan in plans:
+        process, first = plan.process, index
+        by_name[process.name] = (plan, first)
+        for rect, halo in zip(plan.rects, plan.halos):
+            pixels = (rect[2] - rect[0]) * (rect[3] - rect[1])
+            cores.append(CoreAssignment(index, index // per_chip, index % per_chip, process.name, *rect,
+                                        usage=usage_of(process, pixels), halo=tuple(halo)))
+            index += 1
+        full = usage_of(process, plan.patch[0] * plan.patch[1])
+        chips = tuple(range(first // per_chip, (index - 1) // per_chip + 1))
+        layers.append(LayerMapping(process.name, type(process).__name__, plan.patch, plan.grid, len(plan.rects),
+                                   first, usage_of(process, 1), full, {k: limits[k] for k in full}, chips,
+                                   plan.automatic))
+    host = tuple(p.name for p in ordered if p.placement == "host")
+    traffic = traffic_of(network, by_name, per_chip)
+    return CompiledNetwork(network, budget, tuple(layers), tuple(cores), tuple(traffic), host, patch)
+
+
+def _check_chips(network: Network, budget: Budget, plans: list, total: int) -> None:
+    if budget.max_cores is None or total <= budget.max_cores:
+        return
+    per_chip = budget.chip.cores
+    needed = -(-total // per_chip)
+    breakdown = " + ".join(f"{len(p.rects)} {p.process.name}" for p in plans)
+    message = (f"network {network.name!r} needs {total} cores ({breakdown}) on {budget.max_chips} chip(s) of "
+               f"{per_chip} cores: {total - budget.max_cores} over; allow max_chips: {needed}")
+    if not all(p.automatic for p in plans):
+        limits = budget.core.limits()
+        auto = 0
+        for p in plans:
+            sensor = p.process.sensor_size
+            size = auto_patch(sensor, max_pixels_per_core(p.process, limits, sensor[0] * sensor[1]))
+            auto += -(-sensor[0] // size[0]) * -(-sensor[1] // size[1])
+        if auto < total:
+            message += f" (patch: auto needs {auto} cores)"
+    raise BudgetError(message)
