@@ -57,3 +57,91 @@ def moving_edge(sensor_size: tuple[int, int], speed_px_s: float, axis: str = "u"
     b = np.tile(np.arange(across), along)
     x, y = (a, b) if axis == "u" else (b, a)
     return make_events(t, x, y, np.full(t.shape, polarity))
+
+
+def directed_edge(sensor_size: tuple[int, int], velocity_px_s: tuple[float, float], *, polarity=1,
+                  start_us: int = 0, offset_px: float = 0.0) -> np.ndarray:
+    """A straight edge whose normal is its velocity ``(vu, vv)`` px/s, in any direction.
+
+    Each pixel fires one event when the edge reaches its centre: at
+    ``start_us + (n . (x, y) - n_min + offset_px) / speed`` with ``n`` the unit normal,
+    so diagonals are covered too. ``polarity`` is 0, 1, or a callable ``(x, y) -> p``
+    array for polarity mixes. Events are sorted by time (ties: row-major pixel order).
+    """
+    width, height = sensor_size
+    vu, vv = (float(v) for v in velocity_px_s)
+    speed = float(np.hypot(vu, vv))
+    if speed == 0:
+        raise ValueError("directed_edge: the velocity must not be zero")
+    y, x = np.mgrid[0:height, 0:width]
+    along = (x * vu + y * vv) / speed
+    t = start_us + np.round((along - along.min() + offset_px) / speed * 1e6).astype(np.int64)
+    p = polarity(x, y) if callable(polarity) else np.full(x.shape, polarity)
+    order = np.argsort(t.ravel(), kind="stable")
+    return make_events(t.ravel()[order], x.ravel()[order], y.ravel()[order], np.asarray(p).ravel()[order])
+
+
+def moving_pattern(sensor_size: tuple[int, int], velocity_px_s: tuple[float, float], duration_us: int, *,
+                   kind: str = "blobs", scale_px: float = 4.0, seed: int = 0, sample_us: int = 250,
+                   start_us: int = 0) -> np.ndarray:
+    """Events of a binary texture translating across the sensor at ``velocity_px_s`` (px/s).
+
+    The texture (``"blobs"``: random discs of radius about ``scale_px``; ``"checker"``:
+    squares of side ``scale_px``) is sampled at every pixel centre every ``sample_us``;
+    a pixel whose value changed fires one event at that sample time, ON (1) when it
+    became bright. Gives edges in every orientation and both polarities.
+    """
+    width, height = sensor_size
+    rng = np.random.default_rng(seed)
+    times = np.arange(0, duration_us + 1, sample_us, dtype=np.int64)
+    vu, vv = (float(v) for v in velocity_px_s)
+    shift_u, shift_v = vu * times * 1e-6, vv * times * 1e-6
+    # the texture point seen by pixel (x, y) at time t is (x - vu t, y - vv t)
+    lo_u, lo_v = -shift_u.max() - 2, -shift_v.max() - 2
+    hi_u, hi_v = width - shift_u.min() + 2, height - shift_v.min() + 2
+    if kind == "checker":
+        def value(a, b):
+            return ((np.floor(a / scale_px) + np.floor(b / scale_px)) % 2).astype(np.int8)
+    elif kind == "blobs":
+        res = 4  # texture samples per pixel
+        gu, gv = int((hi_u - lo_u) * res) + 1, int((hi_v - lo_v) * res) + 1
+        n = max(1, int((hi_u - lo_u) * (hi_v - lo_v) / (np.pi * scale_px ** 2) * 0.6))
+        cu, cv = rng.uniform(0, gu, n), rng.uniform(0, gv, n)
+        radius = rng.uniform(0.5, 1.5, n) * scale_px * res
+        image = np.zeros((gv, gu), dtype=np.int8)
+        for u, v, r in zip(cu, cv, radius):
+            a0, a1, b0, b1 = (int(max(0, u - r)), int(min(gu, u + r + 1)), int(max(0, v - r)), int(min(gv, v + r + 1)))
+            bb, aa = np.mgrid[b0:b1, a0:a1]
+            image[b0:b1, a0:a1] ^= ((aa - u) ** 2 + (bb - v) ** 2 <= r * r).astype(np.int8)
+
+        def value(a, b):
+            return image[np.clip(((b - lo_v) * res).astype(np.int64), 0, gv - 1),
+                         np.clip(((a - lo_u) * res).astype(np.int64), 0, gu - 1)]
+    else:
+        raise ValueError(f"moving_pattern: unknown kind {kind!r}; expected 'blobs' or 'checker'")
+    y, x = np.mgrid[0:height, 0:width].astype(np.float64)
+    previous = value(x - shift_u[0], y - shift_v[0])
+    parts = []
+    for t, su, sv in zip(times[1:], shift_u[1:], shift_v[1:]):
+        current = value(x - su, y - sv)
+        ey, ex = np.nonzero(current != previous)
+        if len(ex):
+            parts.append(make_events(np.full(len(ex), start_us + t), ex, ey, current[ey, ex] > previous[ey, ex]))
+        previous = current
+    return np.concatenate(parts) if parts else np.empty(0, dtype=EVENT_DTYPE)
+
+
+def noise_events(sensor_size: tuple[int, int], rate_hz_per_px: float, duration_us: int, *, seed: int = 0,
+                 start_us: int = 0) -> np.ndarray:
+    """Uniform background activity: Poisson events at ``rate_hz_per_px`` per pixel, random polarity."""
+    width, height = sensor_size
+    rng = np.random.default_rng(seed)
+    n = rng.poisson(rate_hz_per_px * width * height * duration_us * 1e-6)
+    t = np.sort(rng.integers(start_us, start_us + duration_us, n))
+    return make_events(t, rng.integers(0, width, n), rng.integers(0, height, n), rng.integers(0, 2, n))
+
+
+def merge_events(*parts: np.ndarray) -> np.ndarray:
+    """One time-ordered event array from several (stable: ties keep argument order)."""
+    events = np.concatenate([np.asarray(p, dtype=EVENT_DTYPE) for p in parts]) if parts else np.empty(0, EVENT_DTYPE)
+    return events[np.argsort(events["t"], kind="stable")]

@@ -1,0 +1,198 @@
+"""The multiproc backend: bit-identity with ``fixed``, and failures that end cleanly and loudly.
+
+Spawning workers costs about a second, so one session serves every equality test and
+each failure test starts (and must cleanly lose) its own small one.
+"""
+
+import os
+import signal
+
+import numpy as np
+import pytest
+
+from tofnet.backends.event_driven import FixedBackend
+from tofnet.backends.multiproc import MultiprocBackend, plan_workers, routing_table
+from tofnet.compiler import compile_network
+from tofnet.errors import BackendError
+from tofnet.io.recording import Recording
+from tofnet.networks import depth_network
+from tofnet.testing import TEST_INTRINSICS, merge_events, moving_pattern, noise_events
+
+SENSOR = (24, 16)
+
+
+def network(distance=1, per="pixel", update_every=1, refractory=0):
+    return depth_network(SENSOR, input={"refractory": refractory},
+                         time_of_travel={"distance": distance},
+                         velocity={"source": "constant", "velocity": [-0.5, 0.2, 0.1], "per": per,
+                                   "patch_size": 5, "update_every": update_every})
+
+
+def texture(seed=0):
+    events = moving_pattern(SENSOR, (300, -150), 200_000, seed=seed)
+    return Recording(merge_events(events, noise_events(SENSOR, 5, 200_000, seed=seed)), intrinsics=TEST_INTRINSICS)
+
+
+def ordered(result):
+    depth = result.depth[np.lexsort((result.depth["x"], result.depth["y"], result.depth["step"]))]
+    tot = result.tot[np.lexsort((result.tot["direction"], result.tot["x"], result.tot["y"], result.tot["step"]))]
+    return depth, tot
+
+
+def assert_identical(result, expected):
+    depth, tot = ordered(expected)
+    assert result.depth.tobytes() == depth.tobytes()  # bit for bit, in (step, y, x) order
+    assert result.tot.tobytes() == tot.tobytes()
+    for field in ("events_in", "accepted", "dropped", "rejected", "tot_spikes", "steps", "t0_us"):
+        assert getattr(result, field) == getattr(expected, field), field
+
+
+@pytest.fixture(scope="module")
+def session():
+    with MultiprocBackend(workers=2, chunk_steps=40).session() as s:
+        yield s
+
+
+@pytest.mark.parametrize("options,patch", [
+    ({}, (8, 8)),
+    ({"distance": 2}, (8, 8)),
+    ({"per": "patch", "update_every": 3, "refractory": "2ms"}, (7, 5)),
+    ({}, {"time_of_travel": (8, 8), "depth": (12, 16)}),  # depth cores span two time-of-travel cores
+])
+def test_equals_the_fixed_backend_bit_for_bit(session, options, patch):
+    compiled = compile_network(network(**options), patch=patch)
+    recording = texture()
+    result = session.run(recording, compiled=compiled, record_tot=True)
+    assert len(result.depth) > 100
+    assert_identical(result, FixedBackend().run(compiled, recording, record_tot=True))
+
+
+def test_a_session_keeps_its_workers_between_runs(session):
+    pids = session.pids
+    compiled = compile_network(network(), patch=(8, 8))
+    first = session.run(texture(1), compiled=compiled)
+    second = session.run(texture(1), compiled=compiled)
+    assert session.pids == pids and len(pids) == 2
+    assert first.depth.tobytes() == second.depth.tobytes()
+
+
+def test_workers_are_spawned_not_forked(session):
+    for pid in session.pids:
+        with open(f"/proc/{pid}/cmdline", "rb") as f:
+            assert b"multiprocessing.spawn" in f.read()
+
+
+def test_the_paper_mapping_puts_48_cores_on_each_of_two_workers():
+    compiled = compile_network(depth_network((240, 180)), patch=(30, 30))  # the paper's 48 + 48 cores
+    plans = plan_workers(compiled, 2)
+    assert [len(p.cores) for p in plans] == [48, 48] and [len(p.regions) for p in plans] == [24, 24]
+    route = routing_table(plans, (240, 180))
+    tot_cores = compiled.cores_of("time_of_travel")
+    ys, xs = np.mgrid[0:180, 0:240]
+    for plan in plans:  # a worker receives exactly the union of its cores' halos
+        expected = np.zeros((180, 240), dtype=bool)
+        for core in tot_cores:
+            if core.index in plan.cores:
+                expected |= core.receives_mask(xs, ys)
+        assert np.array_equal(route[plan.index], expected)
+    assert route.sum(axis=0).max() == 2 and route.any(axis=0).all()  # halos overlap at the seam only
+
+
+def test_run_opens_and_closes_its_own_session(session):
+    before = set(_children())
+    compiled = compile_network(network(), patch=(12, 8))
+    recording = texture(2)
+    result = MultiprocBackend(workers=2).run(compiled, recording, record_tot=True)
+    assert_identical(result, FixedBackend().run(compiled, recording, record_tot=True))
+    assert result.extra["workers"] == 2 and set(_children()) == before
+
+
+# -- failures: each must raise clearly, never hang, and leave nothing behind ---------------
+
+def _children() -> list[int]:
+    """Live child processes of this one, except multiprocessing's resource tracker."""
+    me, out = os.getpid(), []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as f:
+                ppid = int(f.read().rsplit(")", 1)[1].split()[1])
+            with open(f"/proc/{entry}/cmdline", "rb") as f:
+                cmdline = f.read()
+        except OSError:
+            continue
+        if ppid == me and b"resource_tracker" not in cmdline:
+            out.append(int(entry))
+    return out
+
+
+@pytest.fixture
+def leak_check(session):
+    """Compare fds, /dev/shm and child processes before and after (``session``: the shared
+    workers and multiprocessing's resource tracker already exist, so the counts are stable)."""
+    before = (set(os.listdir("/proc/self/fd")), set(os.listdir("/dev/shm")), set(_children()))
+    pids: list[int] = []
+    yield pids
+    after = (set(os.listdir("/proc/self/fd")), set(os.listdir("/dev/shm")), set(_children()))
+    assert after[0] == before[0], "leaked file descriptors"
+    assert after[1] == before[1], "leaked shared memory"
+    assert after[2] == before[2], "orphaned processes"
+    assert pids and not any(os.path.exists(f"/proc/{pid}") for pid in pids)
+
+
+def _failing_session(pids, **options):
+    backend = MultiprocBackend(workers=2, chunk_steps=20, **options)
+    s = backend.session(compile_network(network(), patch=(8, 8)))
+    s.open()
+    pids.extend(s.pids)
+    return s
+
+
+def test_an_exception_in_a_worker_reaches_the_caller_with_its_traceback(leak_check):
+    s = _failing_session(leak_check)
+    s._inject_fault(1, "raise")
+    with pytest.raises(BackendError) as err:
+        s.run(texture())
+    message = str(err.value)
+    assert "worker 1 failed" in message and "Traceback" in message
+    assert "InjectedFault: fault injected into worker 1" in message
+    with pytest.raises(BackendError, match="failed earlier"):
+        s.run(texture())
+
+
+def test_a_worker_killed_between_runs_is_reported(leak_check):
+    s = _failing_session(leak_check)
+    os.kill(s.pids[0], signal.SIGKILL)
+    with pytest.raises(BackendError, match=r"worker 0 \(pid \d+\) .*SIGKILL"):
+        s.run(texture())
+
+
+def test_a_worker_killed_mid_run_is_reported(leak_check):
+    s = _failing_session(leak_check)
+    s._inject_fault(0, "kill")
+    with pytest.raises(BackendError, match=r"worker 0 \(pid \d+\) died while running chunk \d+: killed by signal 9"):
+        s.run(texture())
+
+
+def test_a_hung_worker_times_out(leak_check):
+    s = _failing_session(leak_check, timeout=1.0)
+    s._inject_fault(1, "hang")
+    with pytest.raises(BackendError, match=r"worker 1 .* did not answer within 1 s .*timeout"):
+        s.run(texture())
+
+
+def test_ctrl_c_in_the_parent_stops_every_worker(leak_check):
+    def interrupt(done, total):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        with _failing_session(leak_check) as s:
+            s.run(texture(), progress=interrupt)
+
+
+def test_bad_options_are_rejected():
+    with pytest.raises(BackendError, match="workers"):
+        MultiprocBackend(workers=0)
+    with pytest.raises(BackendError, match="timeout"):
+        MultiprocBackend(timeout=0)

@@ -1,0 +1,119 @@
+"""The host's end of one multiproc worker: a spawned process, a pipe, and waits that end.
+
+Every wait is bounded and also watches the process itself (its ``sentinel``), so a
+worker that dies is reported at once with its exit code or signal instead of leaving
+the host blocked on a pipe that will never deliver (the failure Lava's users hit).
+Sends go through a small thread because a large message blocks in ``send`` until the
+worker reads it; the host then only ever blocks in ``expect``, which has a timeout.
+"""
+
+from __future__ import annotations
+
+import queue
+import signal
+import threading
+from multiprocessing.connection import wait
+
+from tofnet.errors import BackendError
+
+#: Seconds a graceful stop waits for a worker to exit before terminating it.
+STOP_WAIT = 5.0
+#: Seconds to wait after SIGTERM (then SIGKILL) before giving up on a worker.
+KILL_WAIT = 5.0
+
+
+class Channel:
+    """One worker process and the host's end of its pipe."""
+
+    def __init__(self, ctx, index: int):
+        from tofnet.backends._workers import worker_main
+
+        self.index = index
+        parent, child = ctx.Pipe(duplex=True)
+        self.process = ctx.Process(target=worker_main, args=(child, index), name=f"tofnet-multiproc-{index}",
+                                   daemon=True)
+        try:
+            self.process.start()
+        finally:
+            child.close()  # only the worker holds its end now: its death closes the pipe
+        self.conn = parent
+        self._outbox: queue.SimpleQueue = queue.SimpleQueue()
+        self._send_error: BaseException | None = None
+        self._sender = threading.Thread(target=self._send_loop, name=f"tofnet-multiproc-send-{index}", daemon=True)
+        self._sender.start()
+
+    # -- talking ----------------------------------------------------------------------------
+    def send(self, message: tuple) -> None:
+        """Queue ``message`` for the worker (never blocks)."""
+        if self._send_error is not None:
+            raise self._failure("could not be sent to", f"({self._send_error})")
+        self._outbox.put(message)
+
+    def _send_loop(self) -> None:
+        while True:
+            message = self._outbox.get()
+            if message is None:
+                return
+            try:
+                self.conn.send(message)
+            except (OSError, ValueError) as err:  # the worker died or the pipe was closed
+                self._send_error = err
+                return
+
+    def expect(self, kind: str, timeout: float, doing: str, timeout_name: str = "timeout") -> tuple:
+        """The worker's next message, which must be ``kind``; ``BackendError`` on an error reply,
+        death of the worker, or no answer within ``timeout`` seconds."""
+        ready = wait([self.conn, self.process.sentinel], timeout)
+        if self.conn in ready:  # read first: a worker may report an error and then exit
+            try:
+                message = self.conn.recv()
+            except (EOFError, OSError):
+                raise self._failure("died", f"while {doing}") from None
+        elif ready:
+            raise self._failure("died", f"while {doing}")
+        else:
+            raise BackendError(f"multiproc worker {self.index} (pid {self.process.pid}) did not answer within "
+                               f"{timeout:g} s while {doing}; all workers were stopped (raise the backend's "
+                               f"{timeout_name} if the machine is just slow)")
+        if message[0] == "error":
+            raise BackendError(f"multiproc worker {self.index} failed while {doing}; its traceback:\n{message[1]}")
+        if message[0] != kind:
+            raise BackendError(f"multiproc worker {self.index} sent {message[0]!r} while {doing}, expected {kind!r}")
+        return message
+
+    def _failure(self, what: str, doing: str) -> BackendError:
+        self.process.join(0.5)  # let the exit code arrive
+        code = self.process.exitcode
+        if code is None:
+            how = "its pipe closed"
+        elif code < 0:
+            try:
+                how = f"killed by signal {-code} ({signal.Signals(-code).name})"
+            except ValueError:
+                how = f"killed by signal {-code}"
+        else:
+            how = f"exit code {code}"
+        return BackendError(f"multiproc worker {self.index} (pid {self.process.pid}) {what} {doing}: {how}; "
+                            "all workers were stopped")
+
+    # -- ending -----------------------------------------------------------------------------
+    def stop(self, graceful: bool) -> None:
+        """Ask the worker to exit (``graceful``) or terminate it; kill it if it lingers."""
+        process = self.process
+        if graceful and process.is_alive() and self._send_error is None:
+            self._outbox.put(("stop",))
+            process.join(STOP_WAIT)
+        if process.is_alive():
+            process.terminate()
+            process.join(KILL_WAIT)
+        if process.is_alive():
+            process.kill()
+            process.join(KILL_WAIT)
+
+    def release(self) -> None:
+        """Close the pipe and the process handle (their file descriptors); call after ``stop``."""
+        self._outbox.put(None)
+        self._sender.join(KILL_WAIT)  # a send in progress fails once the worker is gone
+        self.conn.close()
+        if self.process.exitcode is not None:
+            self.process.close()
