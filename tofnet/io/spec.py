@@ -71,7 +71,8 @@ class _Seq(list):
     item_lines: list = []
 
 
-def _parse_yaml(text: str, source: str) -> Any:
+def _parse_yaml(text: str, source: str, empty: str = "empty spec; expected a mapping with processes and connections"
+                ) -> Any:
     try:
         node = yaml.compose(text, Loader=yaml.SafeLoader)
     except yaml.YAMLError as err:
@@ -80,7 +81,7 @@ def _parse_yaml(text: str, source: str) -> Any:
         where = f" (column {mark.column + 1})" if mark else ""
         raise SpecError(located(source, mark.line + 1 if mark else None, f"malformed YAML: {problem}{where}")) from None
     if node is None:
-        raise SpecError(located(source, None, "empty spec; expected a mapping with processes and connections"))
+        raise SpecError(located(source, None, empty))
     return _build(node, yaml.SafeLoader(""), source)
 
 
@@ -485,7 +486,7 @@ def load_budget(path_or_name: str | Path) -> Budget:
     except OSError as err:
         raise SpecError(f"{path}: cannot read the budget ({err.strerror}); expected a YAML file or one of "
                         f"{', '.join(BUDGETS)}") from None
-    tree = _parse_yaml(text, str(path))
+    tree = _parse_yaml(text, str(path), "empty budget file; expected a mapping with core, chip, max_chips")
     reader = _Reader(tree, str(path))
     where, data = "budget", tree
     if isinstance(tree, Mapping) and "processes" in tree:
