@@ -91,6 +91,7 @@ def test_metrics_are_the_papers_errors():
     assert ev.errors.median_abs_m == pytest.approx(0.2)
     assert ev.errors.mean_rel_pct == pytest.approx(40 / 3)
     assert ev.errors.median_rel_pct == pytest.approx(10.0)
+    assert ev.errors.bias_rel_pct == pytest.approx(-10.0)  # signed: +10, -10, -20 %
     assert ev.coverage == pytest.approx(3 / 5)
     assert (ev.events_in, ev.estimates, ev.unmatched, ev.gt_invalid) == (5, 3, 0, 0)
     assert ev.windows == []

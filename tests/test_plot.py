@@ -215,3 +215,25 @@ def test_cli_plot_explains_what_a_figure_needs(tmp_path, capsys):
     assert "events_depth.npy" in capsys.readouterr().err
     assert main(["plot", "histogram", rec, dep, "--out", str(tmp_path / "h.jpg")]) == 2
     assert "PNG" in capsys.readouterr().err
+
+
+class Sliding:
+    """A trajectory with positions but no rotations, like the simulator's (camera = world axes)."""
+
+    def position_at(self, t):
+        t = np.atleast_1d(t)
+        return np.column_stack([0.5 * t, 0 * t, 0 * t])
+
+    def velocity_at(self, t):
+        return np.tile([0.5, 0.0, 0.0], (len(np.atleast_1d(t)), 1))
+
+
+def test_a_trajectory_with_positions_only_places_points_and_draws_the_path(tmp_path):
+    depth = np.zeros(1, DEPTH_DTYPE)
+    depth["x"], depth["y"], depth["z"], depth["t"] = 20, 15, 2.0, 200_000
+    assert world_points(depth, Intrinsics(30.0, 30.0, 20.0, 15.0), Sliding()) == pytest.approx(
+        np.array([[0.1, 0.0, 2.0]]))
+    rec, depth = scene()
+    rec.trajectory = Sliding()
+    assert [p.name for p in plot_all(rec, depth, META, tmp_path)] == ["depthmap.png", "histogram.png",
+                                                                      "error.png", "cloud.png"]

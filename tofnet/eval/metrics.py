@@ -32,27 +32,34 @@ def _number(value: float) -> float | None:
 
 @dataclass(frozen=True)
 class ErrorStats:
-    """Error of ``n`` estimates: absolute in metres, relative in percent (NaN when ``n == 0``)."""
+    """Error of ``n`` estimates: absolute in metres, relative in percent (NaN when ``n == 0``).
+
+    ``bias_rel_pct`` is the median *signed* relative error ``(z - z_gt) / z_gt``: not in
+    the paper, but it tells a systematic under- or overestimate from scatter.
+    """
 
     n: int
     mean_abs_m: float
     median_abs_m: float
     mean_rel_pct: float
     median_rel_pct: float
+    bias_rel_pct: float = math.nan
 
     @classmethod
     def of(cls, z: np.ndarray, z_gt: np.ndarray) -> "ErrorStats":
         """Statistics of estimates ``z`` against true depths ``z_gt`` (both metres, ``z_gt > 0``)."""
         if len(z) == 0:
-            return cls(0, math.nan, math.nan, math.nan, math.nan)
-        abs_err = np.abs(np.asarray(z, dtype=np.float64) - z_gt)
+            return cls(0, math.nan, math.nan, math.nan, math.nan, math.nan)
+        signed = np.asarray(z, dtype=np.float64) - z_gt
+        abs_err = np.abs(signed)
         rel_err = abs_err / z_gt * 100.0
         return cls(int(len(z)), float(abs_err.mean()), float(np.median(abs_err)),
-                   float(rel_err.mean()), float(np.median(rel_err)))
+                   float(rel_err.mean()), float(np.median(rel_err)), float(np.median(signed / z_gt)) * 100.0)
 
     def to_dict(self) -> dict:
         return {"matched": self.n, "mean_abs_m": _number(self.mean_abs_m), "median_abs_m": _number(self.median_abs_m),
-                "mean_rel_pct": _number(self.mean_rel_pct), "median_rel_pct": _number(self.median_rel_pct)}
+                "mean_rel_pct": _number(self.mean_rel_pct), "median_rel_pct": _number(self.median_rel_pct),
+                "bias_rel_pct": _number(self.bias_rel_pct)}
 
 
 @dataclass(frozen=True)
@@ -127,7 +134,8 @@ class Evaluation:
                  "",
                  f"{'':14}{'mean':>10}{'median':>10}",
                  f"{'abs error [m]':14}{_fmt(self.errors.mean_abs_m, 3)}{_fmt(self.errors.median_abs_m, 3)}",
-                 f"{'rel error [%]':14}{_fmt(self.errors.mean_rel_pct, 2)}{_fmt(self.errors.median_rel_pct, 2)}"]
+                 f"{'rel error [%]':14}{_fmt(self.errors.mean_rel_pct, 2)}{_fmt(self.errors.median_rel_pct, 2)}",
+                 f"{'bias [%]':14}{'':10}{_fmt(self.errors.bias_rel_pct, 2)}   (signed: (z - z_gt) / z_gt)"]
         if windows and self.windows:
             lines += ["", f"per window of {format_seconds(self.window_s)} (seconds since t0; "
                           f"estimates counted at their triggering input step)",

@@ -1,7 +1,8 @@
 """Figures of depth estimates, after the paper's Figures 1, 3, 4, 5 and 6.
 
-Every function returns a ``matplotlib.figure.Figure`` built without pyplot (no global
-state, no display needed); ``save_figure`` writes it as PNG through the Agg canvas.
+Every function returns a ``matplotlib.figure.Figure`` on an Agg canvas, built without
+pyplot: no display needed, and the caller's matplotlib backend is left alone.
+``save_figure`` writes it as PNG.
 Depths are in metres, times in seconds since the run's ``t0``.
 """
 
@@ -11,15 +12,13 @@ from pathlib import Path
 
 import matplotlib
 import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")  # figures are files; never open a window
-
-from matplotlib.figure import Figure  # noqa: E402
-
-from tofnet.errors import DataError  # noqa: E402
-from tofnet.eval.match import match_estimates  # noqa: E402
-from tofnet.eval.metrics import DEFAULT_WINDOW_S, evaluate, window_index  # noqa: E402
-from tofnet.eval.views import (Window, depth_image, depth_range, event_times_us, has_poses,  # noqa: E402
+from tofnet.errors import DataError
+from tofnet.eval.match import match_estimates
+from tofnet.eval.metrics import DEFAULT_WINDOW_S, evaluate, window_index
+from tofnet.eval.views import (Window, depth_image, depth_range, event_times_us, has_poses, poses_at,
                                resolve_window, sensor_size_of, time_span_us, world_points)
 
 #: Pixels per inch of the PNGs.
@@ -48,6 +47,12 @@ def _window(window, recording, depth, meta, default_s) -> Window:
     if isinstance(window, Window):
         return window
     return resolve_window(window, _span(recording, depth, meta), default_s=default_s)
+
+
+def _new_figure(kind: str) -> Figure:
+    fig = Figure(figsize=FIGURE_SIZES[kind], dpi=DPI, layout="constrained")
+    FigureCanvasAgg(fig)  # render with Agg, whatever backend pyplot uses
+    return fig
 
 
 def _cmap():
@@ -81,7 +86,7 @@ def depth_map_figure(recording, depth: np.ndarray, meta: dict, *, window=None, r
                        depth_image(ev["x"][keep], ev["y"][keep], recording.gt_depth[keep], ev["t"][keep], size, reduce)))
     vmin, vmax = depth_range(*(image for _, image in images))
     kind = "depthmap" if len(images) == 2 else "depthmap_single"
-    fig = Figure(figsize=FIGURE_SIZES[kind], dpi=DPI, layout="constrained")
+    fig = _new_figure(kind)
     axes = fig.subplots(1, len(images), squeeze=False)[0]
     for ax, (name, image) in zip(axes, images):
         shown = ax.imshow(image, cmap=_cmap(), vmin=vmin, vmax=vmax, interpolation="nearest", origin="upper")
@@ -113,7 +118,7 @@ def histogram_figure(recording, depth: np.ndarray, meta: dict, *, window=None, w
     top = max(float(np.percentile(values, 99.5)) * 1.05 if len(values) else 1.0, 1e-3)
     width = _nice_step(top, bins)
     edges = np.arange(0.0, top + width, width)
-    fig = Figure(figsize=FIGURE_SIZES["histogram"], dpi=DPI, layout="constrained")
+    fig = _new_figure("histogram")
     ax = fig.subplots()
     ax.hist(z, bins=edges, color="tab:blue", alpha=0.75, label=f"estimates ({len(z):,})")
     if len(gt):
@@ -132,7 +137,7 @@ def histogram_figure(recording, depth: np.ndarray, meta: dict, *, window=None, w
 def error_figure(recording, depth: np.ndarray, meta: dict, *, window_s: float = DEFAULT_WINDOW_S) -> Figure:
     """Camera motion and the windowed relative error over time (paper Fig. 3).
 
-    Top: camera position in the world (from ``pose_at``); middle: camera-frame velocity
+    Top: camera position in the world (``poses_at``); middle: camera-frame velocity
     (the quantity the network uses; error grows with motion along z); bottom: median
     relative error per ``window_s`` window with its interquartile band.
     """
@@ -141,14 +146,14 @@ def error_figure(recording, depth: np.ndarray, meta: dict, *, window_s: float = 
     start_us, end_us = _span(recording, depth, meta)
     traj = recording.trajectory
     rows = (["position"] if has_poses(traj) else []) + (["velocity"] if traj is not None else []) + ["error"]
-    fig = Figure(figsize=FIGURE_SIZES["error"], dpi=DPI, layout="constrained")
+    fig = _new_figure("error")
     axes = fig.subplots(len(rows), 1, sharex=True, squeeze=False)[:, 0]
     t_grid = np.linspace(start_us, end_us, 600)
     t_rel = (t_grid - t0_us) * 1e-6
     colours = ("tab:red", "tab:green", "tab:blue")
     for ax, row in zip(axes, rows):
         if row == "position":
-            pos, _ = traj.pose_at(t_grid * 1e-6)
+            pos, _ = poses_at(traj, t_grid * 1e-6)
             for k, name in enumerate("xyz"):
                 ax.plot(t_rel, pos[:, k], color=colours[k], label=name)
             ax.set_ylabel("position (world) [m]")
@@ -164,7 +169,7 @@ def error_figure(recording, depth: np.ndarray, meta: dict, *, window_s: float = 
             _plot_error(ax, ev, depth["z"])
         ax.grid(True, alpha=0.3)
         if row != "error":
-            ax.legend(loc="upper right", ncols=3, fontsize="small")
+            ax.legend(loc="best", ncols=3, fontsize="small")
     axes[-1].set_xlabel("time since start [s]")
     axes[-1].set_xlim(0.0, (end_us - t0_us) * 1e-6)
     e = ev.errors
@@ -214,7 +219,7 @@ def cloud_figure(recording, depth: np.ndarray, meta: dict, *, window=None,
     world = world_points(sel, recording.intrinsics, recording.trajectory, event_times_us(sel, meta))
     traj = recording.trajectory
     path_t = np.linspace(win.start_us, win.end_us, 200) * 1e-6
-    path, rotations = traj.pose_at(path_t)
+    path, rotations = poses_at(traj, path_t)
     # World -> first camera frame -> plot axes (x right, z forward, -y up).
     r0, c0 = rotations[0], path[0]
     def to_plot(p):
@@ -226,7 +231,7 @@ def cloud_figure(recording, depth: np.ndarray, meta: dict, *, window=None,
     inside = np.all((pts >= lo) & (pts <= hi), axis=1)
     pts, z = pts[inside], sel["z"][inside]
     vmin, vmax = depth_range(z)
-    fig = Figure(figsize=FIGURE_SIZES["cloud"], dpi=DPI, layout="constrained")
+    fig = _new_figure("cloud")
     ax = fig.add_subplot(projection="3d")
     shown = ax.scatter(pts[:, 0], pts[:, 1], pts[:, 2], c=z, cmap=DEPTH_CMAP, vmin=vmin, vmax=vmax,
                        s=1.5, linewidths=0, alpha=0.8, depthshade=False)

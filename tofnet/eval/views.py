@@ -142,7 +142,23 @@ def to_world(points_cam: np.ndarray, positions: np.ndarray, rotations: np.ndarra
 
 
 def has_poses(trajectory) -> bool:
-    return trajectory is not None and callable(getattr(trajectory, "pose_at", None))
+    """True when ``poses_at`` can place the camera: ``pose_at`` or ``position_at``."""
+    return trajectory is not None and any(callable(getattr(trajectory, name, None))
+                                          for name in ("pose_at", "position_at"))
+
+
+def poses_at(trajectory, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Camera centres ``(n, 3)`` m and ``R_wc`` ``(n, 3, 3)`` at times ``t_s`` (s).
+
+    Uses ``pose_at`` (ground-truth poses); a trajectory with only ``position_at`` (the
+    simulator's, whose camera never turns: camera = world axes) gets identity rotations.
+    """
+    t_s = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
+    if callable(getattr(trajectory, "pose_at", None)):
+        return trajectory.pose_at(t_s)
+    if callable(getattr(trajectory, "position_at", None)):
+        return trajectory.position_at(t_s), np.broadcast_to(np.eye(3), (len(t_s), 3, 3)).copy()
+    raise DataError("the camera trajectory has no poses (groundtruth.txt), only velocities")
 
 
 def event_times_us(depth: np.ndarray, meta: dict) -> np.ndarray:
@@ -163,5 +179,5 @@ def world_points(depth: np.ndarray, intrinsics, trajectory, t_us: np.ndarray | N
         raise DataError("the 3D view needs camera poses (groundtruth.txt) to place points in the world")
     cam = back_project(depth["x"], depth["y"], depth["z"], intrinsics)
     t = depth["t"] if t_us is None else np.asarray(t_us)
-    positions, rotations = trajectory.pose_at(t * 1e-6)
+    positions, rotations = poses_at(trajectory, t * 1e-6)
     return to_world(cam, positions, rotations)
