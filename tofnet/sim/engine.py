@@ -15,8 +15,8 @@ from tofnet.sim.dvs import DEPTH_JUMP, count_crossings, emit_crossings, threshol
 from tofnet.sim.render import Renderer, max_flow, render_times
 from tofnet.sim.scene import pack_scene
 
-#: ``progress(fraction_done, events_so_far)``, called a few times a second at most.
-Progress = Callable[[float, int], None]
+#: ``progress(renders_done, renders_total)``, called at most ten times a second.
+Progress = Callable[[int, int], None]
 
 
 @dataclass
@@ -133,9 +133,9 @@ def generate(config: SimConfig, *, seed: int = 0, progress: Progress | None = No
             pix = noise_pixel[a:b]
             noise_d[a:b] = depth0[pix] + frac * (depth1[pix] - depth0[pix])
         log0, depth0 = log1, depth1
-        if progress is not None and time.perf_counter() - last_report > 0.5:
+        if progress is not None and time.perf_counter() - last_report > 0.1:
             last_report = time.perf_counter()
-            progress((i + 1) / (times.size - 1), buf.n)
+            progress(i + 1, times.size - 1)
 
     events, gt_depth, n_contrast = _merge(buf, noise_t, noise_pixel, noise_p, noise_d, width)
     pose_times = np.arange(int(np.floor(config.duration * config.pose_rate + 1e-9)) + 1) / config.pose_rate
@@ -144,8 +144,6 @@ def generate(config: SimConfig, *, seed: int = 0, progress: Progress | None = No
     stats = {"renders": int(times.size), "max_render_step_px": float(max_step), "contrast_events": n_contrast,
              "noise_events": int(noise_t.size), "faces": len(scene.names),
              "wall_time_s": time.perf_counter() - start}
-    if progress is not None:
-        progress(1.0, int(events.size))
     return SimResult(config=config, seed=seed, events=events, gt_depth=gt_depth, pose_times=pose_times,
                      positions=traj.position_at(pose_times), quaternions=quaternions, stats=stats)
 

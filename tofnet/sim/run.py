@@ -42,7 +42,7 @@ def simulate(name_or_config: str | SimConfig, out_dir: str | Path | None, *, dur
     duration : seconds (default: the scenario's, 1 s).
     seed : textures, thresholds and noise; same seed, same events.
     sensor_size : ``(width, height)`` px; the intrinsics scale to keep the field of view.
-    progress : ``progress(fraction_done, events_so_far)`` during the simulation.
+    progress : ``progress(renders_done, renders_total)`` during the simulation.
 
     Returns
     -------
