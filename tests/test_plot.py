@@ -237,3 +237,9 @@ def test_a_trajectory_with_positions_only_places_points_and_draws_the_path(tmp_p
     rec.trajectory = Sliding()
     assert [p.name for p in plot_all(rec, depth, META, tmp_path)] == ["depthmap.png", "histogram.png",
                                                                       "error.png", "cloud.png"]
+
+
+def test_figures_of_a_run_without_estimates_still_render(tmp_path):
+    rec, depth = scene(n=500)
+    paths = plot_all(rec, depth[:0], META, tmp_path)
+    assert len(paths) == 4 and all(p.stat().st_size > 0 for p in paths)

@@ -124,12 +124,12 @@ def histogram_figure(recording, depth: np.ndarray, meta: dict, *, window=None, w
     if len(gt):
         ax.hist(gt, bins=edges, histtype="step", color="black", linewidth=1.4,
                 label=f"ground truth of the same events ({len(gt):,})")
-    beyond = int(np.count_nonzero(values > edges[-1]))
+    beyond = int(np.count_nonzero(z > edges[-1]))
     ax.set_xlim(edges[0], edges[-1])
     ax.set_xlabel("depth [m]")
     ax.set_ylabel(f"estimates per {width:g} m bin")
     ax.legend(loc="best")
-    note = f"; {beyond:,} beyond {edges[-1]:.2f} m not shown" if beyond else ""
+    note = f"; {beyond:,} estimates beyond {edges[-1]:.2f} m not shown" if beyond else ""
     ax.set_title(f"Depth histogram over {win.label()}{note}")
     return fig
 
@@ -173,8 +173,8 @@ def error_figure(recording, depth: np.ndarray, meta: dict, *, window_s: float = 
     axes[-1].set_xlabel("time since start [s]")
     axes[-1].set_xlim(0.0, (end_us - t0_us) * 1e-6)
     e = ev.errors
-    fig.suptitle(f"Relative depth error over time ({ev.matched:,} matched estimates; overall mean "
-                 f"{e.mean_rel_pct:.1f} %, median {e.median_rel_pct:.1f} %)")
+    overall = f"; overall mean {e.mean_rel_pct:.1f} %, median {e.median_rel_pct:.1f} %" if e.n else ""
+    fig.suptitle(f"Relative depth error over time ({ev.matched:,} matched estimates{overall})")
     return fig
 
 
@@ -220,12 +220,8 @@ def cloud_figure(recording, depth: np.ndarray, meta: dict, *, window=None,
     traj = recording.trajectory
     path_t = np.linspace(win.start_us, win.end_us, 200) * 1e-6
     path, rotations = poses_at(traj, path_t)
-    # World -> first camera frame -> plot axes (x right, z forward, -y up).
     r0, c0 = rotations[0], path[0]
-    def to_plot(p):
-        cam = (p - c0) @ r0
-        return np.column_stack([cam[:, 0], cam[:, 2], -cam[:, 1]])
-    pts, cam_path = to_plot(world), to_plot(path)
+    pts, cam_path = _to_view(world, r0, c0), _to_view(path, r0, c0)
     lo, hi = _limits(pts, cam_path)
     # 3D axes do not clip: points beyond the limits would be drawn outside the box.
     inside = np.all((pts >= lo) & (pts <= hi), axis=1)
@@ -239,7 +235,7 @@ def cloud_figure(recording, depth: np.ndarray, meta: dict, *, window=None,
     ax.scatter(*cam_path[0], color="black", marker="o", s=30, label="start")
     # Optical axes at a few poses show where the camera looked.
     for i in np.linspace(0, len(path) - 1, 6).astype(int):
-        axis = to_plot(path[i:i + 1] + 0.3 * rotations[i][:, 2])[0]
+        axis = _to_view(path[i:i + 1] + 0.3 * rotations[i][:, 2], r0, c0)[0]
         ax.plot(*np.column_stack([cam_path[i], axis]), color="0.3", linewidth=1)
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
@@ -255,6 +251,12 @@ def cloud_figure(recording, depth: np.ndarray, meta: dict, *, window=None,
     fig.suptitle(f"Depth estimates in 3D over {win.label()}\n({len(pts):,} points{outside}; "
                  f"axes of the first camera pose)")
     return fig
+
+
+def _to_view(points: np.ndarray, r0: np.ndarray, c0: np.ndarray) -> np.ndarray:
+    """World points (m) in the camera frame ``(r0, c0)``, as plot axes (x right, z forward, -y up)."""
+    cam = (points - c0) @ r0  # R_wc^T (p - c) for each row
+    return np.column_stack([cam[:, 0], cam[:, 2], -cam[:, 1]])
 
 
 def _limits(points: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
