@@ -145,3 +145,18 @@ def merge_events(*parts: np.ndarray) -> np.ndarray:
     """One time-ordered event array from several (stable: ties keep argument order)."""
     events = np.concatenate([np.asarray(p, dtype=EVENT_DTYPE) for p in parts]) if parts else np.empty(0, EVENT_DTYPE)
     return events[np.argsort(events["t"], kind="stable")]
+
+
+class LinearVelocity:
+    """A camera velocity (m/s, camera frame) going linearly from ``start`` to ``end`` over
+    ``duration_s`` seconds from t = 0, constant outside; a ``VelocitySource`` for
+    ``Recording(trajectory=...)`` (velocity changes over time without a pose file)."""
+
+    def __init__(self, start: tuple[float, float, float], end: tuple[float, float, float], duration_s: float):
+        self.start = np.asarray(start, dtype=np.float64)
+        self.end = np.asarray(end, dtype=np.float64)
+        self.duration_s = float(duration_s)
+
+    def velocity_at(self, t: np.ndarray) -> np.ndarray:
+        share = np.clip(np.asarray(t, dtype=np.float64) / self.duration_s, 0.0, 1.0)[:, None]
+        return self.start + share * (self.end - self.start)

@@ -1,0 +1,133 @@
+"""The conformance suite on every registered backend, and proof that it catches differences."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from tofnet.backends.base import Backend
+from tofnet.backends.reference import ReferenceBackend
+from tofnet.backends.registry import _registered, available_backends, get_backend, register_backend
+from tofnet.conformance import CASES, format_table, run_suite
+from tofnet.conformance.compare import compare
+from tofnet.conformance.runner import select_cases
+from tofnet.compiler.pipeline import pipeline_of
+
+BACKENDS = available_backends()
+#: Reference results shared by every backend's run (keyed by baseline and case).
+CACHE: dict = {}
+
+
+def _assert_all_pass(results):
+    assert results and all(r.ok for r in results), "\n" + format_table(results)
+
+
+@pytest.mark.parametrize("name", BACKENDS)
+def test_every_backend_conforms_to_the_reference(name):
+    results = run_suite(name, "reference", cache=CACHE)
+    assert len(results) == len(CASES)
+    _assert_all_pass(results)
+
+
+@pytest.mark.parametrize("name", [n for n in BACKENDS if n != "fixed" and get_backend(n).arithmetic == "fixed"
+                                  and "fixed" in BACKENDS])
+def test_integer_backends_equal_the_fixed_backend_exactly(name):
+    results = run_suite(name, "fixed", cache=CACHE)
+    assert {r.mode for r in results} == {"exact"}
+    _assert_all_pass(results)
+
+
+class ShiftedBackend(Backend):
+    """A wrapper around the reference whose depths are off by ``shift`` metres (a broken backend)."""
+
+    name = "shifted"
+    arithmetic = "float"
+
+    def __init__(self, shift=0.0, drop_first=False):
+        self.shift, self.drop_first = shift, drop_first
+
+    def run(self, compiled, recording, *, record_tot=False, progress=None):
+        result = ReferenceBackend().run(compiled, recording, record_tot=record_tot, progress=progress)
+        depth = result.depth.copy()
+        depth["z"] += self.shift
+        if self.drop_first and len(depth):
+            depth = depth[1:]
+        return dataclasses.replace(result, depth=depth, backend=self.name)
+
+
+@pytest.fixture
+def registered():
+    names = []
+
+    def register(name, factory):
+        register_backend(name, factory)
+        names.append(name)
+    yield register
+    for name in names:
+        _registered.pop(name, None)
+
+
+def test_a_backend_registered_at_runtime_runs_the_suite_by_name(registered):
+    registered("wrapped-reference", lambda: ShiftedBackend())
+    assert "wrapped-reference" in available_backends()
+    _assert_all_pass(run_suite("wrapped-reference", cases=["edge", "texture-blobs", "patch-d2"], cache=CACHE))
+
+
+def test_the_suite_reports_the_first_difference(registered):
+    registered("off-by-a-micron", lambda: ShiftedBackend(shift=1e-6))
+    registered("drops-one", lambda: ShiftedBackend(drop_first=True))
+    (shifted,) = run_suite("off-by-a-micron", cases=["edge+u"], cache=CACHE)
+    assert not shifted.ok and shifted.first.startswith("depth z at (step")
+    (dropped,) = run_suite("drops-one", cases=["edge+u"], cache=CACHE)
+    assert not dropped.ok and "only in the baseline" in dropped.first
+    assert "FAIL" in format_table([shifted, dropped]) and "2 failed" in format_table([shifted, dropped])
+
+
+def test_quantised_comparison_uses_the_count_weighted_bound():
+    case = next(c for c in CASES if c.name == "edge+u")
+    scene = case.build()
+    pipeline = pipeline_of(scene.network)
+    base = ReferenceBackend().run(scene.network, scene.recording, record_tot=True)
+    fixed = dataclasses.replace(base, extra={"frac_bits": 16})
+    count = 4  # 250 px/s at 1 ms steps: 4 steps per pixel, one axis measured
+    bound = count * 2.0 ** -17
+    near = dataclasses.replace(fixed, depth=base.depth.copy())
+    near.depth["z"] += 0.9 * bound
+    assert compare(near, base, "quantised", pipeline).ok
+    far = dataclasses.replace(fixed, depth=base.depth.copy())
+    far.depth["z"][3] += 1.1 * bound
+    assert "tolerance" in compare(far, base, "quantised", pipeline).first
+
+
+def test_case_selection_by_prefix():
+    assert [c.name for c in select_cases(["speed-8bit"])] == ["speed-8bit-254", "speed-8bit-255", "speed-8bit-256"]
+    assert len({c.name for c in CASES}) == len(CASES)
+    with pytest.raises(Exception, match="unknown conformance case"):
+        select_cases(["no-such-case"])
+
+
+def test_cli_lists_and_fails_with_exit_code_1(registered, capsys):
+    from tofnet.cli import main
+    assert main(["conformance", "--list"]) == 0
+    assert "patch-d2-thin" in capsys.readouterr().out
+    registered("off-by-a-micron", lambda: ShiftedBackend(shift=1e-6))
+    assert main(["conformance", "--backend", "off-by-a-micron", "--case", "edge+u"]) == 1
+    out = capsys.readouterr().out
+    assert "edge+u" in out and "FAIL" in out and "depth z at" in out
+    assert main(["conformance", "--backend", "reference", "--case", "speed-4bit-1"]) == 0
+
+
+def test_the_cases_exercise_what_they_are_named_for():
+    def run(name):
+        scene = next(c for c in CASES if c.name == name).build()
+        return ReferenceBackend().run(scene.network, scene.recording, record_tot=True)
+    assert run("speed-4bit-15").tot["count"].tolist() == [15] * 10
+    assert run("speed-4bit-16").tot_spikes == 0  # overflow
+    borders = run("borders")
+    assert borders.dropped["out_of_bounds"] == 4 and borders.dropped["before_t0"] == 3
+    assert run("refractory").dropped["refractory"] > 0 and run("same-step").dropped["same_step"] > 0
+    conflict = run("conflicting-directions")
+    assert conflict.rejected["no_measurement"] > 0
+    assert np.unique(conflict.tot["direction"]).tolist() == [0, 1, 2, 3]
+    depth_range = run("depth-range")
+    assert depth_range.rejected["too_near"] > 0 and depth_range.rejected["too_far"] > 0

@@ -1,0 +1,58 @@
+"""``tofnet conformance``: run the conformance cases on backends and print pass/fail per case."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "conformance", help="check that backends compute the same network",
+        description="Run the conformance cases (edges, speeds up to counter overflow, textures, noise, borders, "
+                    "core boundaries, drops, velocity updates) on a backend and a baseline and compare: exactly "
+                    "between integer backends, within the documented tolerances otherwise (docs/backends.md). "
+                    "Exits 1 when a case fails.")
+    p.add_argument("--backend", action="append", metavar="NAME",
+                   help="backend to check (repeatable; default: every registered backend)")
+    p.add_argument("--against", default=None, metavar="NAME", help="baseline backend (default: reference)")
+    p.add_argument("--case", action="append", metavar="NAME",
+                   help="run only this case, or every case starting with it (repeatable)")
+    p.add_argument("--list", action="store_true", help="list the cases and the registered backends, run nothing")
+    p.add_argument("--json", metavar="FILE", help="also write every case's outcome as JSON")
+    p.set_defaults(handler=handle)
+
+
+def handle(args) -> int:
+    from tofnet.backends.registry import available_backends, get_backend
+    from tofnet.conformance import DEFAULT_BASELINE, run_suite, select_cases
+    from tofnet.conformance.runner import format_row, header, summary_line
+
+    cases = select_cases(args.case)
+    if args.list:
+        width = max(len(c.name) for c in cases)
+        for c in cases:
+            print(f"{c.name:<{width}}  {c.doc}")
+        print()
+        for name in available_backends():
+            backend = get_backend(name)
+            print(f"backend {name:<12} arithmetic {backend.arithmetic}")
+        return 0
+    against = args.against or DEFAULT_BASELINE
+    backends = args.backend or available_backends()
+    outcomes, failed, cache = [], 0, {}
+    for name in backends:
+        print(f"== {name} vs {against}")
+        print(header())
+        results = run_suite(name, against, [c.name for c in cases], cache=cache,
+                            report=lambda r: print(format_row(r), flush=True))
+        print(summary_line(results))
+        print()
+        failed += sum(not r.ok for r in results)
+        outcomes.extend(r.to_dict() for r in results)
+    if args.json:
+        Path(args.json).write_text(json.dumps(outcomes, indent=2) + "\n")
+    if failed:
+        print(f"tofnet conformance: {failed} case(s) failed", file=sys.stderr)
+    return 1 if failed else 0

@@ -1,0 +1,234 @@
+"""The conformance cases: small named scenes built in code, each aimed at one part of the semantics.
+
+Every case builds a fresh ``Scene`` (network, recording, compiler patch option) from
+the helpers of ``tofnet.testing``. Intrinsics are ``TEST_INTRINSICS`` (f = 200 px,
+principal point at 0) unless a case says otherwise; a camera velocity ``t`` makes the
+image of a point at depth Z move by ``-f t / Z`` px/s, which is how the cases choose
+velocities that give depths inside the default 0.05-20 m range.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from tofnet.core.network import Network
+from tofnet.events import EVENT_DTYPE, make_events
+from tofnet.io.recording import Intrinsics, Recording
+from tofnet.networks import depth_network
+from tofnet.testing import (TEST_INTRINSICS, LinearVelocity, directed_edge, merge_events, moving_edge,
+                            moving_pattern, noise_events)
+
+F = TEST_INTRINSICS.fx
+
+
+@dataclass
+class Scene:
+    """What a case runs: a network, a recording, and the compiler's ``patch`` option."""
+
+    network: Network
+    recording: Recording
+    patch: Any = None
+
+
+@dataclass(frozen=True)
+class Case:
+    """A named conformance case; ``build()`` makes its scene (deterministic)."""
+
+    name: str
+    doc: str
+    build: Callable[[], Scene] = field(repr=False)
+
+
+def net(sensor: tuple[int, int], velocity=(-0.5, 0.0, 0.0), *, refractory: Any = 0, t0: Any = 0,
+        per: str = "pixel", patch_size: int = 30, update_every: int = 1, source: str = "constant",
+        **tot_and_depth: Any) -> Network:
+    """The paper's network for a case: refractory off and t0 = 0 unless given."""
+    depth = {k: tot_and_depth.pop(k) for k in ("min_depth", "max_depth") if k in tot_and_depth}
+    vel = {"source": source, "per": per, "patch_size": patch_size, "update_every": update_every}
+    if source == "constant":
+        vel["velocity"] = list(velocity)
+    return depth_network(sensor, input={"refractory": refractory, "t0": t0}, time_of_travel=tot_and_depth,
+                         depth=depth, velocity=vel)
+
+
+def camera_for(flow_px_s: tuple[float, float], depth_m: float = 1.0) -> tuple[float, float, float]:
+    """Camera velocity (m/s) that moves the image of a plane at ``depth_m`` by ``flow_px_s``."""
+    return (-flow_px_s[0] * depth_m / F, -flow_px_s[1] * depth_m / F, 0.0)
+
+
+def rec(*parts: np.ndarray, trajectory=None, intrinsics: Intrinsics = TEST_INTRINSICS) -> Recording:
+    return Recording(merge_events(*parts), intrinsics=intrinsics, trajectory=trajectory)
+
+
+CASES: list[Case] = []
+
+
+def case(name: str, doc: str):
+    """Register ``build`` as a case called ``name``."""
+    def register(build: Callable[[], Scene]) -> Callable[[], Scene]:
+        CASES.append(Case(name, doc, build))
+        return build
+    return register
+
+
+def _add(name: str, doc: str, build: Callable[[], Scene]) -> None:
+    CASES.append(Case(name, doc, build))
+
+
+# -- edges in the four directions and the diagonals ------------------------------------------
+DIRECTIONS = {"+u": (1, 0), "-u": (-1, 0), "+v": (0, 1), "-v": (0, -1),
+              "+u+v": (1, 1), "+u-v": (1, -1), "-u+v": (-1, 1), "-u-v": (-1, -1)}
+for _label, (_du, _dv) in DIRECTIONS.items():
+    def _edge(du=_du, dv=_dv) -> Scene:
+        flow = (250.0 * du, 250.0 * dv)  # 4 steps per pixel along each moving axis
+        return Scene(net((12, 10), camera_for(flow)), rec(directed_edge((12, 10), flow)))
+    _add(f"edge{_label}", f"a straight edge moving {_label} at 250 px/s per axis", _edge)
+
+# -- every counter value up to overflow, and just past it ------------------------------------
+for _count in range(1, 17):
+    def _speed(count=_count) -> Scene:
+        # 4-bit counters (max 15); Z = 200 px * 1 m/s * count * 1 ms = 0.2 m per count
+        return Scene(net((6, 2), (-1.0, 0.0, 0.0), counter_bits=4),
+                     rec(moving_edge((6, 2), 1000.0 / count)))
+    _add(f"speed-4bit-{_count}", f"an edge taking {_count} steps per pixel; 4-bit counters "
+         f"({'overflow' if _count > 15 else 'measured'})", _speed)
+for _count in (254, 255, 256):
+    def _speed8(count=_count) -> Scene:
+        return Scene(net((4, 1), (-0.05, 0.0, 0.0)), rec(moving_edge((4, 1), 1000.0 / count)))
+    _add(f"speed-8bit-{_count}", f"an edge taking {_count} steps per pixel; 8-bit counters", _speed8)
+
+
+# -- textures and noise ----------------------------------------------------------------------
+@case("texture-blobs", "random blobs moving diagonally (edges of every orientation, both polarities)")
+def _blobs() -> Scene:
+    flow = (300.0, -150.0)
+    return Scene(net((24, 16), camera_for(flow)), rec(moving_pattern((24, 16), flow, 300_000, seed=1)))
+
+
+@case("texture-checker", "a checkerboard moving -u+v, slowly (counts of 5-20 steps)")
+def _checker() -> Scene:
+    flow = (-120.0, 60.0)
+    return Scene(net((20, 14), camera_for(flow, 2.0)),
+                 rec(moving_pattern((20, 14), flow, 400_000, kind="checker", scale_px=5.0)))
+
+
+@case("noise", "an edge under uniform background activity (20 Hz per pixel), refractory 1 ms")
+def _noise() -> Scene:
+    flow = (200.0, 0.0)
+    return Scene(net((16, 12), camera_for(flow), refractory="1ms"),
+                 rec(directed_edge((16, 12), flow), noise_events((16, 12), 20.0, 120_000, seed=3)))
+
+
+# -- sensor borders, t0 and out-of-bounds events ---------------------------------------------
+@case("borders", "edges entering from all four borders, events outside the sensor and before t0")
+def _borders() -> Scene:
+    size = (10, 8)
+    parts = [directed_edge(size, flow, start_us=1000 + 40_000 * i)
+             for i, flow in enumerate([(250, 0), (-250, 0), (0, 250), (0, -250)])]
+    outside = make_events([1500, 2500, 3500, 45_000], [10, 11, 3, 10], [2, 3, 8, 9], [1, 0, 1, 1])
+    before = make_events([100, 400, 900], [0, 1, 2], [0, 0, 0], [1, 1, 1])
+    return Scene(net(size, camera_for((250, 0)), t0="1ms"), rec(*parts, outside, before))
+
+
+# -- the compiled mapping: edges crossing core boundaries ------------------------------------
+def _patch_scene(distance: int, patch: Any, size=(24, 16)) -> Scene:
+    flow = (300.0, -150.0)
+    parts = [directed_edge(size, (400 * du, 400 * dv), start_us=30_000 * i)
+             for i, (du, dv) in enumerate([(1, 0), (-1, 0), (0, 1), (0, -1)])]
+    parts.append(moving_pattern(size, flow, 200_000, seed=4, start_us=130_000))
+    return Scene(net(size, camera_for(flow), distance=distance), rec(*parts), patch)
+
+
+for _d in (1, 2):
+    _add(f"patch-d{_d}", f"edges and a texture crossing 8x8 core boundaries, distance {_d}",
+         lambda d=_d: _patch_scene(d, (8, 8)))
+    _add(f"patch-d{_d}-ragged", f"25x17 px on 8x8 cores (ragged last row/column), depth on 12x9 cores, "
+         f"distance {_d}", lambda d=_d: _patch_scene(d, {"time_of_travel": (8, 8), "depth": (12, 9)}, (25, 17)))
+_add("patch-d2-thin", "cores one pixel wide (narrower than the distance 2 halo)",
+     lambda: _patch_scene(2, (1, 5), (9, 10)))
+
+
+# -- polarity, conflicts, drops --------------------------------------------------------------
+@case("polarity-mix", "an ON edge then an OFF edge, and an edge whose rows alternate polarity")
+def _polarity() -> Scene:
+    size, flow = (12, 10), (250.0, 0.0)
+    return Scene(net(size, camera_for(flow)), rec(
+        directed_edge(size, flow, polarity=1), directed_edge(size, flow, polarity=0, start_us=20_000),
+        directed_edge(size, (0, 250), polarity=lambda x, y: (x + y) % 2, start_us=60_000)))
+
+
+@case("conflicting-directions", "edges meeting head-on (ties and smaller-count wins) and crossing at 90 deg")
+def _conflict() -> Scene:
+    size = (13, 9)
+    return Scene(net(size, camera_for((250, 250))), rec(
+        directed_edge(size, (250, 0)), directed_edge(size, (-250, 0)),
+        directed_edge(size, (0, 300), start_us=80_000), directed_edge(size, (-200, 0), start_us=80_000),
+        directed_edge(size, (330, 0), start_us=160_000), directed_edge(size, (-250, 0), start_us=160_000)))
+
+
+@case("refractory", "bursts of 3 events per pixel 300 us apart under the default 5 ms refractory period")
+def _refractory() -> Scene:
+    size, flow = (12, 8), (150.0, 0.0)
+    edge = directed_edge(size, flow)
+    bursts = [edge.copy() for _ in range(3)]
+    for i, burst in enumerate(bursts):
+        burst["t"] += 300 * i
+    again = directed_edge(size, flow, start_us=4000)  # inside the refractory period of the first
+    return Scene(net(size, camera_for(flow), refractory="5ms"), rec(*bursts, again))
+
+
+@case("same-step", "several events per pixel per step with a 100 us refractory period (same-step drops)")
+def _same_step() -> Scene:
+    size, flow = (12, 8), (200.0, 100.0)
+    parts = [directed_edge(size, flow, polarity=i % 2, start_us=150 * i) for i in range(4)]
+    return Scene(net(size, camera_for(flow), refractory="100us"), rec(*parts))
+
+
+# -- the velocity term -----------------------------------------------------------------------
+def _at_scene(per: str) -> Scene:
+    size, flow = (24, 16), (-200.0, 150.0)
+    cx, cy = 11.5, 7.5  # principal point inside the sensor: A t varies across it
+    intr = Intrinsics(F, F, cx, cy)
+    return Scene(net(size, (0.6, -0.4, 0.8), per=per, patch_size=5),
+                 rec(moving_pattern(size, flow, 250_000, seed=5), intrinsics=intr))
+
+
+_add("at-per-patch", "A t with forward motion, one value per 5x5 patch (the paper)", lambda: _at_scene("patch"))
+_add("at-per-pixel", "A t with forward motion, exact at every pixel", lambda: _at_scene("pixel"))
+
+
+@case("update-every", "velocity updates every 4 steps while the velocity ramps (ground-truth source)")
+def _update_every() -> Scene:
+    size, flow = (16, 12), (250.0, -120.0)
+    ramp = LinearVelocity(camera_for(flow, 0.5), camera_for(flow, 3.0), 0.3)
+    return Scene(net(size, source="groundtruth", update_every=4),
+                 rec(moving_pattern(size, flow, 300_000, seed=6), trajectory=ramp))
+
+
+@case("velocity-change", "the camera velocity reverses half-way, updated every step")
+def _velocity_change() -> Scene:
+    size, flow = (16, 12), (200.0, 0.0)
+    ramp = LinearVelocity(camera_for(flow), camera_for((-flow[0], 0.0)), 0.2)
+    return Scene(net(size, source="groundtruth"), rec(moving_pattern(size, flow, 200_000, seed=7), trajectory=ramp))
+
+
+@case("depth-range", "depths on both sides of tight min/max limits (0.4 m, 1.2 m)")
+def _depth_range() -> Scene:
+    size = (16, 4)
+    parts = [moving_edge(size, 1000.0 / count, start_us=60_000 * i) for i, count in enumerate((1, 2, 3, 4, 5, 6, 7))]
+    return Scene(net(size, (-1.0, 0.0, 0.0), min_depth=0.4, max_depth=1.2), rec(*parts))
+
+
+@case("empty", "no events at all")
+def _empty() -> Scene:
+    return Scene(net((4, 3)), rec(np.empty(0, dtype=EVENT_DTYPE)))
+
+
+def get_case(name: str) -> Case:
+    for c in CASES:
+        if c.name == name:
+            return c
+    raise KeyError(name)

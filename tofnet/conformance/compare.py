@@ -1,0 +1,210 @@
+"""Comparing two runs of one case: exact for integer backends, with stated tolerances otherwise.
+
+Whatever the arithmetic, the integer parts of the network must agree exactly: the
+input counts, the time-of-travel spikes and which depth neurons were reached. The
+depth values then compare by mode:
+
+``exact``  (fixed vs fixed): every estimate ``(t, x, y, z, step)`` bit for bit, every count.
+``float``  (float vs float): the same ``(t, x, y, step)`` set and counts, ``z`` within
+           ``FLOAT_RTOL`` relative.
+``quantised`` (fixed vs float): ``|z_fixed - z_float| <= (|m_x| + |m_y|) * 2**-(F+1)``
+           (docs/fixed_point.md, ``tofnet.kernels.fixed_point.depth_tolerance``), where
+           ``m_x, m_y`` are the estimate's signed counts (read off the time-of-travel
+           spikes); an estimate may be missing on one side only when its depth is within
+           that tolerance of ``min_depth`` or ``max_depth``, and the rejection counts must
+           differ by exactly those estimates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tofnet.kernels.fixed_point import DEFAULT_FRAC_BITS, depth_tolerance
+
+#: Relative tolerance on z between two float backends.
+FLOAT_RTOL = 1e-9
+#: Count fields every pair of backends must agree on exactly.
+EXACT_FIELDS = ("events_in", "accepted", "dropped", "tot_spikes", "steps", "t0_us", "timestep_us", "latency_steps")
+MODES = ("exact", "float", "quantised")
+
+
+def mode_of(arithmetic: str, baseline_arithmetic: str) -> str:
+    """``exact`` for two fixed backends, ``float`` for two float ones, else ``quantised``."""
+    if arithmetic == baseline_arithmetic:
+        return "exact" if arithmetic == "fixed" else "float"
+    return "quantised"
+
+
+@dataclass
+class Comparison:
+    """The outcome of comparing a result with its baseline: the differences found, in order."""
+
+    mode: str
+    differences: list[str] = field(default_factory=list)
+    estimates: tuple[int, int] = (0, 0)
+
+    @property
+    def ok(self) -> bool:
+        return not self.differences
+
+    @property
+    def first(self) -> str:
+        return self.differences[0] if self.differences else ""
+
+
+def sort_depth(depth: np.ndarray) -> np.ndarray:
+    """Estimates by step, then y, then x (the order every backend's output is compared in)."""
+    return depth[np.lexsort((depth["x"], depth["y"], depth["step"]))]
+
+
+def sort_tot(tot: np.ndarray) -> np.ndarray:
+    return tot[np.lexsort((tot["direction"], tot["x"], tot["y"], tot["step"]))]
+
+
+def compare(result, baseline, mode: str, pipeline) -> Comparison:
+    """Compare ``result`` with ``baseline`` (``RunResult``s of one case) in ``mode``.
+
+    ``pipeline`` gives the depth limits, counter width and sensor size.
+    """
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    out = Comparison(mode, estimates=(len(result.depth), len(baseline.depth)))
+    diff = out.differences
+    for name in EXACT_FIELDS:
+        a, b = getattr(result, name), getattr(baseline, name)
+        if a != b:
+            diff.append(f"{name}: {a} vs {b}")
+    tot = None
+    if result.tot is not None and baseline.tot is not None:
+        tot_a, tot_b = sort_tot(result.tot), sort_tot(baseline.tot)
+        tot = tot_b
+        if tot_a.tobytes() != tot_b.tobytes():
+            diff.append("tot spikes: " + _first_row_difference(tot_a, tot_b, ("step", "y", "x", "direction")))
+    a, b = sort_depth(result.depth), sort_depth(baseline.depth)
+    for name, d in (("result", a), ("baseline", b)):
+        if len(d) and np.any((np.diff(d["step"]) == 0) & (np.diff(d["y"]) == 0) & (np.diff(d["x"]) == 0)):
+            diff.append(f"{name}: two estimates for one pixel in one step")
+        stamps = result.t0_us + (d["step"] + 1) * result.timestep_us
+        if not np.array_equal(d["t"], stamps):
+            diff.append(f"{name}: depth t is not the end of its step")
+    if mode == "exact":
+        if a.tobytes() != b.tobytes():
+            diff.append("depth: " + _first_row_difference(a, b, ("step", "y", "x")))
+        if result.rejected != baseline.rejected:
+            diff.append(f"rejected: {result.rejected} vs {baseline.rejected}")
+        return out
+    only_a, only_b, za, zb, keys = _join(a, b)
+    if mode == "float":
+        if len(only_a) or len(only_b):
+            diff.append("depth: " + _missing(a, only_a, b, only_b))
+        bad = np.abs(za - zb) > FLOAT_RTOL * np.maximum(np.abs(za), np.abs(zb))
+        if bad.any():
+            i = int(np.argmax(bad))
+            diff.append(f"depth z at {_where(keys[i])}: {za[i]!r} vs {zb[i]!r} (rtol {FLOAT_RTOL:g})")
+        if result.rejected != baseline.rejected:
+            diff.append(f"rejected: {result.rejected} vs {baseline.rejected}")
+        return out
+    _compare_quantised(result, baseline, a, b, only_a, only_b, za, zb, keys, tot, pipeline, diff)
+    return out
+
+
+def _compare_quantised(result, baseline, a, b, only_a, only_b, za, zb, keys, tot, pipeline, diff) -> None:
+    fixed = result if result.extra.get("frac_bits") is not None else baseline
+    frac_bits = int(fixed.extra.get("frac_bits", DEFAULT_FRAC_BITS))
+    width, height = pipeline.sensor_size
+    lo, hi = pipeline.min_depth, pipeline.max_depth
+
+    def tolerance(rows: np.ndarray) -> np.ndarray:
+        if tot is None:  # no spikes to read the counts from: the largest counts possible
+            return np.full(len(rows), depth_tolerance(pipeline.counter_max, pipeline.counter_max, frac_bits))
+        sx, sy = signed_counts(tot, rows, width, height)
+        return depth_tolerance(sx, sy, frac_bits) + 1e-12 * np.abs(rows["z"])  # + float64 rounding of z
+
+    tol = tolerance(keys)
+    bad = np.abs(za - zb) > tol
+    if bad.any():
+        i = int(np.argmax(bad))
+        diff.append(f"depth z at {_where(keys[i])}: {za[i]!r} vs {zb[i]!r} (tolerance {tol[i]:.3g} m)")
+    shifts = {"too_near": 0, "too_far": 0}  # baseline minus result, explained by boundary estimates
+    for rows, sign, side in ((a[only_a], 1, "result"), (b[only_b], -1, "baseline")):
+        if not len(rows):
+            continue
+        t = tolerance(rows)
+        near, far = np.abs(rows["z"] - lo) <= t, np.abs(rows["z"] - hi) <= t
+        if not np.all(near | far):
+            i = int(np.argmax(~(near | far)))
+            diff.append(f"depth: {_where(rows[i])} z {rows['z'][i]:.6g} only in the {side}, "
+                        f"not within {t[i]:.3g} m of min/max depth")
+        shifts["too_near"] += sign * int(np.count_nonzero(near))
+        shifts["too_far"] += sign * int(np.count_nonzero(far & ~near))
+    ra, rb = result.rejected, baseline.rejected
+    expected = {"no_measurement": ra.get("no_measurement", 0),
+                "too_near": ra.get("too_near", 0) + shifts["too_near"],
+                "too_far": ra.get("too_far", 0) + shifts["too_far"]}
+    if {k: rb.get(k, 0) for k in expected} != expected:
+        diff.append(f"rejected: {ra} vs {rb} (boundary estimates explain {shifts})")
+
+
+def signed_counts(tot: np.ndarray, depth: np.ndarray, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """The signed axis counts ``(m_x, m_y)`` behind each estimate, from the spikes one step earlier.
+
+    Both directions fired: the smaller count wins, a tie is 0 (docs/semantics.md).
+    """
+    key_d = (depth["step"].astype(np.int64) * height + depth["y"]) * width + depth["x"]
+    key_t = ((tot["step"].astype(np.int64) + 1) * height + tot["y"]) * width + tot["x"]
+    order = np.argsort(key_d, kind="stable")
+    idx = np.searchsorted(key_d[order], key_t)
+    hit = idx < len(key_d)
+    hit[hit] = key_d[order][idx[hit]] == key_t[hit]
+    m = np.zeros((4, len(depth)), dtype=np.int64)
+    m[tot["direction"][hit].astype(np.int64), order[idx[hit]]] = tot["count"][hit]
+
+    def axis(pos, neg):
+        return np.where((pos > 0) & ((neg == 0) | (pos < neg)), pos,
+                        np.where((neg > 0) & ((pos == 0) | (neg < pos)), -neg, 0))
+    return axis(m[0], m[1]), axis(m[2], m[3])
+
+
+def _join(a: np.ndarray, b: np.ndarray):
+    """Estimates present on both sides (their z and rows) and the indices present on one only."""
+    ka = np.stack([a["step"], a["y"].astype(np.int64), a["x"].astype(np.int64)], axis=1)
+    kb = np.stack([b["step"], b["y"].astype(np.int64), b["x"].astype(np.int64)], axis=1)
+    ua = {tuple(k): i for i, k in enumerate(ka.tolist())}
+    ub = {tuple(k): i for i, k in enumerate(kb.tolist())}
+    both = [k for k in ua if k in ub]
+    ia = np.array([ua[k] for k in both], dtype=np.int64)
+    ib = np.array([ub[k] for k in both], dtype=np.int64)
+    only_a = np.array(sorted(ua[k] for k in ua if k not in ub), dtype=np.int64)
+    only_b = np.array(sorted(ub[k] for k in ub if k not in ua), dtype=np.int64)
+    return only_a, only_b, a["z"][ia], b["z"][ib], a[ia]
+
+
+def _where(row) -> str:
+    return f"(step {int(row['step'])}, x {int(row['x'])}, y {int(row['y'])})"
+
+
+def _missing(a, only_a, b, only_b) -> str:
+    first = [(tuple(int(r[k]) for k in ("step", "y", "x")), side, r)
+             for rows, side in ((a[only_a], "result"), (b[only_b], "baseline")) for r in rows[:1]]
+    key, side, row = min(first, key=lambda f: f[0])
+    return (f"{len(only_a)} estimates only in the result, {len(only_b)} only in the baseline; first "
+            f"{_where(row)} z {row['z']:.6g} only in the {side}")
+
+
+def _first_row_difference(a: np.ndarray, b: np.ndarray, key: tuple[str, ...]) -> str:
+    """Where two sorted record arrays first differ, as readable text."""
+    n = min(len(a), len(b))
+    raw = (np.dtype((np.void, a.dtype.itemsize)))
+    differ = np.nonzero(a[:n].view(raw) != b[:n].view(raw))[0] if a.dtype == b.dtype else np.arange(n)
+    if len(differ):
+        i = int(differ[0])
+        return f"{len(a)} vs {len(b)} rows; first difference at row {i}: {_row(a[i])} vs {_row(b[i])}"
+    extra, side = (a[n], "result") if len(a) > n else (b[n], "baseline")
+    return f"{len(a)} vs {len(b)} rows; row {n} only in the {side}: {_row(extra)}"
+
+
+def _row(row) -> str:
+    return "(" + ", ".join(f"{name} {row[name]!r}" if row.dtype[name].kind == "f" else f"{name} {int(row[name])}"
+                           for name in row.dtype.names) + ")"

@@ -1,0 +1,143 @@
+"""Running the conformance cases on a backend and a baseline, and the table of outcomes."""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from dataclasses import dataclass
+from typing import Callable, Iterable, Iterator
+
+from tofnet.backends.base import Backend
+from tofnet.backends.registry import get_backend
+from tofnet.conformance.cases import CASES, Case, get_case
+from tofnet.conformance.compare import compare, mode_of
+from tofnet.errors import BackendError, TofnetError
+
+DEFAULT_BASELINE = "reference"
+
+
+@dataclass
+class CaseResult:
+    """One case on one backend: ``ok``, the comparison mode, estimate counts
+    (backend, baseline) and the first difference (or error) when it failed."""
+
+    case: str
+    backend: str
+    baseline: str
+    mode: str
+    ok: bool
+    estimates: tuple[int, int]
+    first: str
+    seconds: float
+
+    def to_dict(self) -> dict:
+        return dict(self.__dict__, estimates=list(self.estimates))
+
+
+class _Runner:
+    """Runs compiled networks on one backend, through a session when the backend offers one
+    (the multiproc backend then spawns its workers once for the whole suite)."""
+
+    def __init__(self, backend: Backend, stack: contextlib.ExitStack):
+        self.backend, self.stack = backend, stack
+        self.session = None
+
+    def run(self, compiled, recording):
+        if not callable(getattr(self.backend, "session", None)):
+            return self.backend.run(compiled, recording, record_tot=True)
+        if self.session is None:
+            self.session = self.stack.enter_context(self.backend.session())
+        try:
+            return self.session.run(recording, compiled=compiled, record_tot=True)
+        except TofnetError:
+            self.session = None  # a failed session is closed; the next case opens a new one
+            raise
+
+
+def _backend(spec: str | Backend) -> Backend:
+    return get_backend(spec) if isinstance(spec, str) else spec
+
+
+def select_cases(names: Iterable[str] | None = None) -> list[Case]:
+    """The cases called ``names`` (all when None); prefix matches allowed (``speed-`` = every speed)."""
+    if names is None:
+        return list(CASES)
+    chosen = []
+    for name in names:
+        matches = [c for c in CASES if c.name == name] or [c for c in CASES if c.name.startswith(name)]
+        if not matches:
+            raise BackendError(f"unknown conformance case {name!r}; 'tofnet conformance --list' shows them")
+        chosen.extend(c for c in matches if c not in chosen)
+    return chosen
+
+
+def run_suite(backend: str | Backend, against: str | Backend = DEFAULT_BASELINE,
+              cases: Iterable[str] | None = None, *, cache: dict | None = None,
+              report: Callable[[CaseResult], None] | None = None) -> list[CaseResult]:
+    """Run every selected case on ``backend`` and on the baseline ``against`` and compare.
+
+    ``cache`` (a dict) keeps baseline results between calls, keyed by baseline and case
+    name; ``report`` is called with each case's result as soon as it is known.
+    """
+    from tofnet.compiler import compile_network
+
+    test, base = _backend(backend), _backend(against)
+    mode = mode_of(test.arithmetic, base.arithmetic)
+    results = []
+    with contextlib.ExitStack() as stack:
+        runners = {"test": _Runner(test, stack), "base": _Runner(base, stack)}
+        for case in select_cases(cases):
+            started = time.perf_counter()
+            try:
+                scene = case.build()
+                compiled = compile_network(scene.network, patch=scene.patch)
+                key = (base.name, case.name)
+                if cache is not None and key in cache:
+                    expected = cache[key]
+                else:
+                    expected = runners["base"].run(compiled, scene.recording)
+                    if cache is not None:
+                        cache[key] = expected
+                got = runners["test"].run(compiled, scene.recording)
+                comparison = compare(got, expected, mode, compiled.pipeline)
+                outcome = CaseResult(case.name, test.name, base.name, mode, comparison.ok, comparison.estimates,
+                                     comparison.first, time.perf_counter() - started)
+            except TofnetError as err:
+                outcome = CaseResult(case.name, test.name, base.name, mode, False, (0, 0),
+                                     f"error: {err}", time.perf_counter() - started)
+            results.append(outcome)
+            if report is not None:
+                report(outcome)
+    return results
+
+
+def format_row(r: CaseResult, width: int = 24) -> str:
+    estimates = f"{r.estimates[0]}/{r.estimates[1]}"
+    first = r.first.splitlines()[0] if r.first else ""
+    return f"{r.case:<{width}} {r.mode:<10} {'pass' if r.ok else 'FAIL':<5} {estimates:>11}  {first}"
+
+
+def header(width: int = 24) -> str:
+    return f"{'case':<{width}} {'mode':<10} {'':<5} {'estimates':>11}  first difference"
+
+
+def format_table(results: list[CaseResult]) -> str:
+    """The table of cases (pass/fail, estimates backend/baseline, first difference) and a total line."""
+    lines = [header()] + [format_row(r) for r in results] + [summary_line(results)]
+    return "\n".join(lines)
+
+
+def summary_line(results: list[CaseResult]) -> str:
+    failed = sum(not r.ok for r in results)
+    pair = f"{results[0].backend} vs {results[0].baseline}" if results else ""
+    seconds = sum(r.seconds for r in results)
+    return (f"{len(results)} cases: {len(results) - failed} passed, {failed} failed "
+            f"({pair}, {seconds:.1f} s)")
+
+
+def iter_cases() -> Iterator[Case]:
+    yield from CASES
+
+
+__all__ = ["CaseResult", "run_suite", "format_table", "format_row", "header", "summary_line", "select_cases",
+           "get_case", "DEFAULT_BASELINE"]
