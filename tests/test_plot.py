@@ -202,7 +202,7 @@ def test_cli_plot_writes_the_files_it_prints(tmp_path, capsys):
     assert main(["plot", "depthmap", rec, dep, "--out", str(out), "--window", "0.1:0.2", "--reduce", "median"]) == 0
     assert capsys.readouterr().out.split() == [str(out)]
     assert png_size(out) == expected_pixels("depthmap")
-    assert main(["plot", "all", rec, dep]) == 0
+    assert main(["plot", "all", rec, dep, "--no-gt", "--window", "50ms"]) == 0
     printed = capsys.readouterr().out.split()
     assert [Path(p).name for p in printed] == ["depth_depthmap.png", "depth_histogram.png", "depth_error.png",
                                                "depth_cloud.png"]
@@ -228,15 +228,19 @@ class Sliding:
         return np.tile([0.5, 0.0, 0.0], (len(np.atleast_1d(t)), 1))
 
 
-def test_a_trajectory_with_positions_only_places_points_and_draws_the_path(tmp_path):
+def test_a_trajectory_with_positions_only_places_points_and_draws_the_path():
     depth = np.zeros(1, DEPTH_DTYPE)
     depth["x"], depth["y"], depth["z"], depth["t"] = 20, 15, 2.0, 200_000
     assert world_points(depth, Intrinsics(30.0, 30.0, 20.0, 15.0), Sliding()) == pytest.approx(
         np.array([[0.1, 0.0, 2.0]]))
     rec, depth = scene()
     rec.trajectory = Sliding()
-    assert [p.name for p in plot_all(rec, depth, META, tmp_path)] == ["depthmap.png", "histogram.png",
-                                                                      "error.png", "cloud.png"]
+    position = error_figure(rec, depth, META).axes[0]
+    assert position.get_ylabel() == "position (world) [m]"
+    assert position.get_lines()[0].get_ydata()[-1] == pytest.approx(0.5 * 0.402, abs=1e-3)
+    path = next(line for line in cloud_figure(rec, depth, META).axes[0].get_lines()
+                if line.get_label() == "camera path")
+    assert path.get_data_3d()[0][-1] == pytest.approx(0.5 * 0.402, abs=1e-3)  # 0.5 m/s to the right
 
 
 def test_figures_of_a_run_without_estimates_still_render(tmp_path):
