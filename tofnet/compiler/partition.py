@@ -145,20 +145,8 @@ def tile(sensor: tuple[int, int], size: tuple[int, int]) -> list[Rect]:
 
 
 def receptive_offsets(process: Process) -> list[tuple[int, int]]:
-    """Pixel offsets ``(dx, dy)`` of the input pixels a pixel of ``process`` needs.
-
-    A process may declare them (``receptive_offsets()``); a time-of-travel pixel needs
-    its own pixel (trigger) and the pixels ``distance`` away along ±u and ±v
-    (facilitating); any other layer needs its own pixel.
-    """
-    declared = getattr(type(process), "receptive_offsets", None)
-    if callable(declared):
-        return [tuple(o) for o in declared(process)]
-    from tofnet.processes import TimeOfTravelProcess  # declarations only; no backend
-    if isinstance(process, TimeOfTravelProcess):
-        d = int(process.distance)
-        return [(0, 0), (d, 0), (-d, 0), (0, d), (0, -d)]
-    return [(0, 0)]
+    """Pixel offsets ``(dx, dy)`` of the input pixels a pixel of ``process`` needs (its declaration)."""
+    return [tuple(o) for o in process.receptive_offsets()]
 
 
 def halo_of(patch: Rect, offsets: Iterable[tuple[int, int]], sensor: tuple[int, int]) -> list[Rect]:

@@ -104,6 +104,13 @@ class Process:
         """A copy of the parameter values (durations in s, lengths in m)."""
         return dict(self._values)
 
+    def receptive_offsets(self) -> list[tuple[int, int]]:
+        """Offsets ``(du, dv)`` (px) of the input pixels one pixel of this process reads.
+
+        The compiler derives each core's halo from these. Default: its own pixel.
+        """
+        return [(0, 0)]
+
     def set_param(self, name: str, value: Any) -> None:
         """Change one parameter, with the same conversion and checks as the constructor."""
         declared = {p.name: p for p in self.all_params()}

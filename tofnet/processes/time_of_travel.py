@@ -26,3 +26,8 @@ class TimeOfTravelProcess(Process):
     )
     # 4 units x (trigger + facilitating) accumulators; 4 neurons (paper §4.1).
     resources_per_pixel = {"accumulators": 8, "neurons": 4}
+
+    def receptive_offsets(self) -> list[tuple[int, int]]:
+        """The trigger pixel and the four facilitating pixels ``distance`` away along ±u, ±v."""
+        d = self.distance
+        return [(0, 0), (d, 0), (-d, 0), (0, d), (0, -d)]
