@@ -1,6 +1,6 @@
 """The worker side of the multiproc backend: one spawned OS process holding some cores' state.
 
-A worker owns the event-driven kernel state (``tofnet.kernels.time_of_travel``) of its
+A worker owns the event-driven kernel state (``tofnet.kernels.region``) of its
 regions (a region is the pixels one time-of-travel core and one depth core share) and
 nothing else. It answers messages from the host, in order, on one pipe:
 
@@ -84,7 +84,7 @@ def _warm_up() -> None:
     The host's startup timeout covers this; chunk timeouts then measure only real work.
     """
     from tofnet.kernels.fixed_point import FixedPointFormat
-    from tofnet.kernels.time_of_travel import KernelConfig, Region, TimeOfTravelKernel
+    from tofnet.kernels.region import KernelConfig, Region, TimeOfTravelKernel
 
     config = KernelConfig((2, 1), 1e-3, 1, 8, 0.05, 20.0, 1, True, 30, (200.0, 200.0, 0.0, 0.0),
                           FixedPointFormat())
@@ -119,7 +119,7 @@ class _Worker:
         raise ValueError(f"unknown message {kind!r}")
 
     def _start(self, config, regions, halos, record_tot: bool):
-        from tofnet.kernels.time_of_travel import TimeOfTravelKernel
+        from tofnet.kernels.region import TimeOfTravelKernel
 
         self.kernels = [TimeOfTravelKernel(config, region) for region in regions]
         self.halos = list(halos)

@@ -28,7 +28,7 @@ from tofnet.events import DEPTH_DTYPE, TOT_DTYPE
 from tofnet.io.recording import Recording
 from tofnet.kernels.fixed_point import DEFAULT_FRAC_BITS, DEFAULT_PAYLOAD_BITS, FixedPointFormat
 from tofnet.kernels.input_filter import InputFilter
-from tofnet.kernels.time_of_travel import KernelConfig, Region, velocity_rows
+from tofnet.kernels.region import KernelConfig, Region, velocity_rows
 
 #: Seconds to wait for any one answer of a worker while running (a chunk, a start).
 DEFAULT_TIMEOUT = 120.0
