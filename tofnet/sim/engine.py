@@ -95,8 +95,9 @@ def generate(config: SimConfig, *, seed: int = 0, progress: Progress | None = No
     width, height = config.sensor_size
     npix = width * height
     traj = config.trajectory
-    times = np.linspace(0.0, config.duration, 9)
-    poses = traj.position_at(np.concatenate([times, traj.boundaries[traj.boundaries < config.duration]]))
+    # Positions are piecewise linear: their extremes are at segment boundaries or the ends.
+    corners = np.concatenate([[0.0, config.duration], traj.boundaries[traj.boundaries < config.duration]])
+    poses = traj.position_at(corners)
     fov = (-(k.cx + 0.5) / k.fx, (width - 0.5 - k.cx) / k.fx, -(k.cy + 0.5) / k.fy, (height - 0.5 - k.cy) / k.fy)
     scene = pack_scene(config.scene, focal=max(k.fx, k.fy), camera_box=(poses.min(axis=0), poses.max(axis=0)),
                        fov=fov, seed=seed)
