@@ -14,7 +14,8 @@ def _percent(used: int, limit: int) -> str:
 
 
 def _chips(chips: tuple[int, ...]) -> str:
-    return str(chips[0]) if len(chips) == 1 else f"{chips[0]}-{chips[-1]}"
+    # Chip indices the layer occupies, e.g. "#0" or "#0-#2".
+    return f"#{chips[0]}" if len(chips) == 1 else f"#{chips[0]}-#{chips[-1]}"
 
 
 def _plural(n: int, word: str) -> str:
@@ -24,7 +25,7 @@ def _plural(n: int, word: str) -> str:
 def mapping_table(compiled: CompiledNetwork) -> list[str]:
     """Rows: layer, type, patch (w x h px), grid, cores, use of each per-core limit, chips."""
     resources = list(dict.fromkeys(k for layer in compiled.layers for k in layer.limits))
-    header = ["layer", "type", "patch", "grid", "cores"] + [f"{r}/core" for r in resources] + ["chips"]
+    header = ["layer", "type", "patch", "grid", "cores"] + [f"{r}/core" for r in resources] + ["on chip"]
     rows = []
     for layer in compiled.layers:
         patch = f"{layer.patch[0]}x{layer.patch[1]}" + (" auto" if layer.automatic else "")
