@@ -93,8 +93,12 @@ class Channel:
                 how = f"killed by signal {-code}"
         else:
             how = f"exit code {code}"
+        hint = ""
+        if doing.endswith("starting") and code == 1:  # the usual cause: spawn re-imports an unguarded script
+            hint = ("; its error is on stderr. A script that runs the multiproc backend must start from "
+                    "'if __name__ == \"__main__\":' (workers are spawned and import the main module)")
         return BackendError(f"multiproc worker {self.index} (pid {self.process.pid}) {what} {doing}: {how}; "
-                            "all workers were stopped")
+                            f"all workers were stopped{hint}")
 
     # -- ending -----------------------------------------------------------------------------
     def stop(self, graceful: bool) -> None:

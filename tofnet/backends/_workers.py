@@ -8,9 +8,9 @@ nothing else. It answers messages from the host, in order, on one pipe:
 host -> worker                     worker -> host
 =================================  ==============================================
 (on start)                         ("ready", pid)
-("start", config, regions,        ("started",)
+("start", config, t0_us, regions, ("started",)
  halos, record_tot)
-("chunk", seq, steps, x, y, p,     ("chunk", seq, step, x, y, z, z_raw, tot)
+("chunk", seq, steps, x, y, p,     ("chunk", seq, depth, tot)
  velocity, first_update)
 ("finish",)                        ("finished", rejected[3], tot_spikes)
 ("fault", kind)                    (nothing; test hook, see ``_FAULTS``)
@@ -118,10 +118,10 @@ class _Worker:
             return None
         raise ValueError(f"unknown message {kind!r}")
 
-    def _start(self, config, regions, halos, record_tot: bool):
+    def _start(self, config, t0_us: int, regions, halos, record_tot: bool):
         from tofnet.kernels.region import TimeOfTravelKernel
 
-        self.kernels = [TimeOfTravelKernel(config, region) for region in regions]
+        self.kernels = [TimeOfTravelKernel(config, region, t0_us) for region in regions]
         self.halos = list(halos)
         self.record_tot = bool(record_tot)
         return ("started",)
@@ -139,12 +139,9 @@ class _Worker:
                 continue
             parts.append(kernel.process(steps[sel], xs[sel], ys[sel], ps[sel], velocity, first_update,
                                         record_tot=self.record_tot))
-        cat = (lambda name: np.concatenate([getattr(o, name) for o in parts])) if parts else (
-            lambda name: np.empty(0, np.float64 if name == "z" else np.int64))
-        tot = None
-        if self.record_tot:
-            tot = np.concatenate([o.tot for o in parts]) if parts else None
-        return ("chunk", seq, cat("step"), cat("x"), cat("y"), cat("z"), cat("z_raw"), tot)
+        depth = np.concatenate([o.depth for o in parts]) if parts else None
+        tot = np.concatenate([o.tot for o in parts]) if parts and self.record_tot else None
+        return ("chunk", seq, depth, tot)
 
     def _finish(self):
         rejected = np.zeros(3, dtype=np.int64)

@@ -254,7 +254,7 @@ class MultiprocSession:
 
         timeout = backend.timeout
         for plan in plans:
-            self._channels[plan.index].send(("start", config, plan.regions, plan.halos, record_tot))
+            self._channels[plan.index].send(("start", config, t0_us, plan.regions, plan.halos, record_tot))
         for plan in plans:
             self._channels[plan.index].expect("started", timeout, "starting a run")
 
@@ -294,7 +294,7 @@ class MultiprocSession:
             progress(total, total)
         fmt = backend.format
         return RunResult(
-            backend=backend.name, depth=_depth(depth_parts, t0_us, pipeline.timestep_us),
+            backend=backend.name, depth=_depth(depth_parts),
             events_in=flt.events_in, accepted=flt.accepted, dropped=flt.dropped,
             rejected={reason: int(c) for reason, c in zip(REJECT_REASONS, rejected)},
             tot_spikes=tot_spikes, steps=(int(steps[-1]) if n else -1) + 1 + pipeline.latency_steps,
@@ -308,19 +308,17 @@ class MultiprocSession:
             reply = self._channels[index].expect("chunk", self.backend.timeout, f"running chunk {seq}")
             if reply[1] != seq:
                 raise BackendError(f"multiproc worker {index} answered chunk {reply[1]} when chunk {seq} was due")
-            depth_parts.append(reply[2:7])
-            if reply[7] is not None:
-                tot_parts.append(reply[7])
+            if reply[2] is not None:
+                depth_parts.append(reply[2])
+            if reply[3] is not None:
+                tot_parts.append(reply[3])
 
 
-def _depth(parts: list, t0_us: int, timestep_us: int) -> np.ndarray:
+def _depth(parts: list) -> np.ndarray:
     """Estimates of every worker as one ``DEPTH_DTYPE`` array sorted by step, then y, then x."""
     if not parts:
         return np.empty(0, DEPTH_DTYPE)
-    step, x, y, z, _raw = (np.concatenate(column) for column in zip(*parts))
-    depth = np.empty(len(step), dtype=DEPTH_DTYPE)
-    depth["t"] = t0_us + (step + 1) * timestep_us  # end of the output step
-    depth["x"], depth["y"], depth["z"], depth["step"] = x, y, z, step
+    depth = np.concatenate(parts)
     return depth[np.lexsort((depth["x"], depth["y"], depth["step"]))]
 
 
