@@ -83,6 +83,18 @@ def test_the_suite_reports_the_first_difference(registered):
     assert "FAIL" in format_table([shifted, dropped]) and "2 failed" in format_table([shifted, dropped])
 
 
+class CrashingBackend(ShiftedBackend):
+    def run(self, compiled, recording, **options):
+        raise IndexError("a bug in the backend")
+
+
+def test_a_crashing_backend_fails_its_cases_and_the_suite_goes_on(registered):
+    registered("crashing", CrashingBackend)
+    results = run_suite("crashing", cases=["edge+u", "edge-u"], cache=CACHE)
+    assert [r.ok for r in results] == [False, False]
+    assert results[0].first == "error: IndexError: a bug in the backend"
+
+
 def test_quantised_comparison_uses_the_count_weighted_bound():
     case = next(c for c in CASES if c.name == "edge+u")
     scene = case.build()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import contextlib
 import time
 from dataclasses import dataclass
-from typing import Callable, Iterable, Iterator
+from typing import Callable, Iterable
 
 from tofnet.backends.base import Backend
 from tofnet.backends.registry import get_backend
@@ -49,7 +49,7 @@ class _Runner:
             self.session = self.stack.enter_context(self.backend.session())
         try:
             return self.session.run(recording, compiled=compiled, record_tot=True)
-        except TofnetError:
+        except Exception:
             self.session = None  # a failed session is closed; the next case opens a new one
             raise
 
@@ -102,9 +102,10 @@ def run_suite(backend: str | Backend, against: str | Backend = DEFAULT_BASELINE,
                 comparison = compare(got, expected, mode, compiled.pipeline)
                 outcome = CaseResult(case.name, test.name, base.name, mode, comparison.ok, comparison.estimates,
                                      comparison.first, time.perf_counter() - started)
-            except TofnetError as err:
+            except Exception as err:  # a backend's bug is a failed case, not the end of the suite
+                what = str(err) if isinstance(err, TofnetError) else f"{type(err).__name__}: {err}"
                 outcome = CaseResult(case.name, test.name, base.name, mode, False, (0, 0),
-                                     f"error: {err}", time.perf_counter() - started)
+                                     f"error: {what}", time.perf_counter() - started)
             results.append(outcome)
             if report is not None:
                 report(outcome)
@@ -133,10 +134,6 @@ def summary_line(results: list[CaseResult]) -> str:
     seconds = sum(r.seconds for r in results)
     return (f"{len(results)} cases: {len(results) - failed} passed, {failed} failed "
             f"({pair}, {seconds:.1f} s)")
-
-
-def iter_cases() -> Iterator[Case]:
-    yield from CASES
 
 
 __all__ = ["CaseResult", "run_suite", "format_table", "format_row", "header", "summary_line", "select_cases",
