@@ -148,8 +148,11 @@ class MultiprocBackend(Backend):
 
     def run(self, compiled, recording: Recording, *, record_tot: bool = False,
             progress: ProgressCallback | None = None) -> RunResult:
+        started = time.perf_counter()
         with self.session(compiled) as session:
-            return session.run(recording, record_tot=record_tot, progress=progress)
+            result = session.run(recording, record_tot=record_tot, progress=progress)
+        result.wall_time = time.perf_counter() - started  # this run paid for starting the workers too
+        return result
 
 
 class MultiprocSession:
