@@ -89,8 +89,9 @@ class Stream:
             # Keep each call's velocity table small even when the spikes are sparse in time.
             first = (int(steps[lo]) + 1) // update_every
             hi = int(np.searchsorted(steps, (first + MAX_VELOCITY_ROWS) * update_every - 1, side="left"))
+            hi = max(hi, lo + 1)  # only when the steps are unsorted, which the kernel refuses
             last = (int(steps[hi - 1]) + 1) // update_every
-            table = self._velocity(first, last - first + 1)
+            table = self._velocity(first, max(last - first + 1, 1))
             out = self.kernel.process(steps[lo:hi], xs[lo:hi], ys[lo:hi], ps[lo:hi], table, first,
                                       record_tot=self.record_tot)
             parts.append(out.depth)

@@ -14,7 +14,8 @@ import numpy as np
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, TOT_DTYPE
 from tofnet.kernels.fixed_point import FixedPointFormat
-from tofnet.kernels.time_of_travel import BASE, CURRENT, IDLE, PENDING_FULL, REBASE_AFTER, UNSORTED, process_spikes
+from tofnet.kernels.time_of_travel import (BASE, CURRENT, IDLE, NO_VELOCITY, PENDING_FULL, REBASE_AFTER, UNSORTED,
+                                          process_spikes)
 from tofnet.kernels.velocity import sample_grid
 
 
@@ -171,10 +172,6 @@ class TimeOfTravelKernel:
         ys = np.ascontiguousarray(ys, dtype=np.int64)
         ps = np.ascontiguousarray(ps, dtype=np.uint8)
         velocity_table = np.ascontiguousarray(velocity_table, dtype=np.float64)
-        first, count = velocity_rows(steps, cfg.update_every)
-        if count and (first < first_update or first + count > first_update + len(velocity_table)):
-            raise BackendError(f"velocity table holds updates [{first_update}, {first_update + len(velocity_table)}); "
-                               f"these spikes need [{first}, {first + count})")
         n = len(steps)
         if n > len(self._out):  # reused across calls, grown geometrically
             size = max(n, 2 * len(self._out))
@@ -187,6 +184,10 @@ class TimeOfTravelKernel:
             self._su, self._sv, velocity_table, first_update, cfg.update_every, *cfg.intrinsics,
             *self._arith, self.t0_us, cfg.timestep_us, self._out, self._raw, self.rejected,
             record_tot, self._tot)
+        if status == NO_VELOCITY:
+            first, count = velocity_rows(steps, cfg.update_every)
+            raise BackendError(f"velocity table holds updates [{first_update}, {first_update + len(velocity_table)}); "
+                               f"these spikes need [{first}, {first + count})")
         if status == UNSORTED:
             raise BackendError("input spikes are not sorted by step (events must be in time order and "
                                "each packet must follow the previous one)")

@@ -39,7 +39,7 @@ IDLE = -(1 << 31)
 #: Rebase when ``now - base`` exceeds this, keeping ``key`` below 2**31.
 REBASE_AFTER = (1 << 30) - 4
 # Kernel status codes.
-OK, UNSORTED, PENDING_FULL = 0, 1, 2
+OK, UNSORTED, PENDING_FULL, NO_VELOCITY = 0, 1, 2, 3
 # Cursor slots: buffered facilitations, current input step, stamp base.
 N_PEND, CURRENT, BASE = 0, 1, 2
 
@@ -104,6 +104,9 @@ def process_spikes(steps, xs, ys, ps, stamp, cursor, pend_x, pend_y, pend_p,
         if steps[i] < previous:
             return 0, 0, 0, UNSORTED
         previous = steps[i]
+    if n and ((steps[0] + 1) // update_every < first_update or
+              (steps[n - 1] + 1) // update_every - first_update >= velocity.shape[0]):
+        return 0, 0, 0, NO_VELOCITY
     n_pend, current, base = cursor[N_PEND], cursor[CURRENT], cursor[BASE]
     d = distance
     pad_x, pad_y = 2 * d - x0, 2 * d - y0
