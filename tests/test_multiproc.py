@@ -188,10 +188,25 @@ def test_a_worker_killed_mid_run_is_reported(leak_check):
 
 
 def test_a_hung_worker_times_out(leak_check):
-    s = _failing_session(leak_check, timeout=1.0)
+    s = _failing_session(leak_check, timeout=2.0)
     s._inject_fault(1, "hang")
-    with pytest.raises(BackendError, match=r"worker 1 .* did not answer within 1 s .*timeout"):
+    with pytest.raises(BackendError, match=r"worker 1 .* did not answer within 2 s .*timeout"):
         s.run(texture())
+
+
+def test_workers_that_do_not_start_in_time_are_reported(leak_check, monkeypatch):
+    from tofnet.backends import _channel
+    start = _channel.Channel.__init__
+
+    def start_and_note_pid(self, ctx, index):
+        start(self, ctx, index)
+        leak_check.append(self.process.pid)
+    monkeypatch.setattr(_channel.Channel, "__init__", start_and_note_pid)
+    s = MultiprocBackend(workers=2, start_timeout=0.01).session()
+    with pytest.raises(BackendError, match=r"worker 0 .* did not answer within 0.01 s while starting.*start_timeout"):
+        with s:
+            pass
+    assert len(leak_check) == 2 and s.pids == []
 
 
 def test_ctrl_c_in_the_parent_stops_every_worker(leak_check):

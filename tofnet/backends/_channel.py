@@ -34,6 +34,9 @@ class Channel:
                                    daemon=True)
         try:
             self.process.start()
+        except BaseException:
+            parent.close()
+            raise
         finally:
             child.close()  # only the worker holds its end now: its death closes the pipe
         self.conn = parent
@@ -60,9 +63,11 @@ class Channel:
                 self._send_error = err
                 return
 
-    def expect(self, kind: str, timeout: float, doing: str, timeout_name: str = "timeout") -> tuple:
+    def expect(self, kind: str, timeout: float, doing: str, timeout_name: str = "timeout",
+               limit: float | None = None) -> tuple:
         """The worker's next message, which must be ``kind``; ``BackendError`` on an error reply,
-        death of the worker, or no answer within ``timeout`` seconds."""
+        death of the worker, or no answer within ``timeout`` seconds (``limit``: the configured
+        value to name in the error, when ``timeout`` is what remains of it)."""
         ready = wait([self.conn, self.process.sentinel], timeout)
         if self.conn in ready:  # read first: a worker may report an error and then exit
             try:
@@ -73,7 +78,7 @@ class Channel:
             raise self._failure("died", f"while {doing}")
         else:
             raise BackendError(f"multiproc worker {self.index} (pid {self.process.pid}) did not answer within "
-                               f"{timeout:g} s while {doing}; all workers were stopped (raise the backend's "
+                               f"{timeout if limit is None else limit:g} s while {doing}; all workers were stopped (raise the backend's "
                                f"{timeout_name} if the machine is just slow)")
         if message[0] == "error":
             raise BackendError(f"multiproc worker {self.index} failed while {doing}; its traceback:\n{message[1]}")

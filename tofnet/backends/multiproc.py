@@ -195,7 +195,7 @@ class MultiprocSession:
             deadline = time.monotonic() + self.backend.start_timeout
             for channel in self._channels:
                 channel.expect("ready", max(0.0, deadline - time.monotonic()), "starting",
-                               timeout_name="start_timeout")
+                               timeout_name="start_timeout", limit=self.backend.start_timeout)
         except BaseException:
             self.close(graceful=False)
             raise
