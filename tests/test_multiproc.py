@@ -88,6 +88,16 @@ def test_a_session_keeps_its_workers_between_runs(session):
     assert first.depth.tobytes() == second.depth.tobytes()
 
 
+def test_a_bad_recording_is_reported_without_losing_the_workers(session):
+    from tofnet.errors import DataError
+    pids = session.pids
+    compiled = compile_network(network(), patch=(8, 8))
+    uncalibrated = Recording(texture().events)  # no intrinsics: the velocity process cannot work
+    with pytest.raises(DataError, match="calib"):
+        session.run(uncalibrated, compiled=compiled)
+    assert session.pids == pids and len(session.run(texture(), compiled=compiled).depth) > 0
+
+
 def test_workers_are_spawned_not_forked(session):
     for pid in session.pids:
         with open(f"/proc/{pid}/cmdline", "rb") as f:

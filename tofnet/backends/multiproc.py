@@ -127,7 +127,7 @@ class MultiprocBackend(Backend):
     def __init__(self, workers: int | None = None, *, timeout: float = DEFAULT_TIMEOUT,
                  start_timeout: float = DEFAULT_START_TIMEOUT, chunk_steps: int = DEFAULT_CHUNK_STEPS,
                  frac_bits: int = DEFAULT_FRAC_BITS, payload_bits: int = DEFAULT_PAYLOAD_BITS):
-        workers = os.cpu_count() or 1 if workers is None else workers
+        workers = (os.cpu_count() or 1) if workers is None else workers
         for label, value in (("workers", workers), ("chunk_steps", chunk_steps)):
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise BackendError(f"multiproc: {label} must be a positive whole number, got {value!r}")
@@ -228,26 +228,29 @@ class MultiprocSession:
     def run(self, recording: Recording, *, compiled=None, record_tot: bool = False,
             progress: ProgressCallback | None = None) -> RunResult:
         """Run ``compiled`` (default: the session's) on ``recording``; results sorted by step, y, x."""
+        if self._state == "failed":
+            raise BackendError("multiproc session failed earlier (a worker's error, death or timeout, or an "
+                               "interrupt) and its workers were stopped; open a new session")
         if self._state != "open":
-            raise BackendError(f"multiproc session is {self._state}"
-                               + ("; a worker failed earlier, open a new session" if self._state == "failed" else ""))
+            raise BackendError(f"multiproc session is {self._state}; use it inside 'with backend.session(...)'")
         if compiled is None and self.compiled is None:
             raise BackendError("multiproc session: no network; pass compiled= to session() or run()")
         compiled = self.compiled if compiled is None else compiled_of(compiled)
+        started = time.perf_counter()
+        # Checks of the user's input come first: a bad recording must not cost the workers.
+        pipeline = as_pipeline(compiled)
+        config = KernelConfig.from_pipeline(pipeline, intrinsics_of(pipeline, recording), self.backend.format)
+        config.check()
+        source = velocity_source_of(pipeline, recording)
         try:
-            return self._run(compiled, recording, record_tot, progress)
+            return self._run(compiled, pipeline, config, source, recording, record_tot, progress, started)
         except BaseException:
             self._state = "failed"
             self.close(graceful=False)
             raise
 
-    def _run(self, compiled, recording, record_tot, progress) -> RunResult:
-        started = time.perf_counter()
+    def _run(self, compiled, pipeline, config, source, recording, record_tot, progress, started) -> RunResult:
         backend = self.backend
-        pipeline = as_pipeline(compiled)
-        config = KernelConfig.from_pipeline(pipeline, intrinsics_of(pipeline, recording), backend.format)
-        config.check()  # a clear error before any worker is involved
-        source = velocity_source_of(pipeline, recording)
         t0_us = start_time_us(pipeline, recording)
         plans = plan_workers(compiled, len(self._channels))
         route = routing_table(plans, pipeline.sensor_size)
