@@ -74,7 +74,7 @@ def test_a_full_240x180_scene_equals_the_fixed_backend_bit_for_bit(session):
     recording = generate(scenario("slider", 0.3), seed=0).to_recording()  # ~520k events, textured
     compiled = compile_network(depth_network((240, 180)), patch=(30, 30))  # the paper's 48 + 48 cores
     result = session.run(recording, compiled=compiled, record_tot=True)
-    assert len(recording.events) > 300_000 and len(result.depth) > 100_000
+    assert len(recording.events) > 300_000 and len(result.depth) > 20_000
     assert result.extra["workers"] == 2
     assert_identical(result, FixedBackend().run(compiled, recording, record_tot=True))
 
