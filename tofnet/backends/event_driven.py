@@ -9,6 +9,7 @@ from the estimates ``run`` collects).
 from __future__ import annotations
 
 import time
+from typing import Callable
 
 import numpy as np
 
@@ -19,12 +20,15 @@ from tofnet.events import DEPTH_DTYPE, EVENT_DTYPE, TOT_DTYPE
 from tofnet.io.recording import Intrinsics, Recording, VelocitySource
 from tofnet.kernels.fixed_point import DEFAULT_FRAC_BITS, DEFAULT_PAYLOAD_BITS, FixedPointFormat
 from tofnet.kernels.input_filter import InputFilter
-from tofnet.kernels.region import KernelConfig, TimeOfTravelKernel
+from tofnet.kernels.region import KernelConfig, KernelOutput, TimeOfTravelKernel
 
 #: Events per packet in ``run`` (bounded memory; ~0.1 s of a busy 240x180 recording).
 DEFAULT_PACKET_EVENTS = 1 << 17
 #: Largest velocity table computed for one kernel call; sparser packets are split.
 MAX_VELOCITY_ROWS = 1 << 16
+#: Initial size of ``run``'s result buffer in estimates (at most one per event); 4M x 40 B
+#: of address space, resident only where written.
+RESULT_CAPACITY = 1 << 22
 
 
 class Stream:
@@ -70,19 +74,34 @@ class Stream:
 
     def feed(self, events: np.ndarray) -> np.ndarray:
         """Depth estimates (``DEPTH_DTYPE``) produced by ``events`` (``EVENT_DTYPE``, time-ordered)."""
+        parts, tots = [], []
+
+        def keep(out) -> None:  # the kernel's views are overwritten by its next call
+            parts.append(out.depth.copy())
+            if self.record_tot:
+                tots.append(out.tot.copy())
+
+        self.feed_into(events, keep)
+        if self.record_tot:
+            self.tot = tots[0] if len(tots) == 1 else np.concatenate(tots) if tots else np.empty(0, TOT_DTYPE)
+        return parts[0] if len(parts) == 1 else np.concatenate(parts) if parts else np.empty(0, DEPTH_DTYPE)
+
+    def feed_into(self, events: np.ndarray, emit: Callable[[KernelOutput], None]) -> None:
+        """Like ``feed``, but hand each kernel call's output to ``emit`` as views valid during the call.
+
+        Spares a copy when the caller stores the estimates somewhere anyway (``run`` does).
+        """
         if self._closed:
             raise BackendError("stream is closed")
         if events.dtype != EVENT_DTYPE:
             raise BackendError(f"events must have dtype {EVENT_DTYPE}, got {events.dtype}")
         self._events_in += len(events)
         if len(events) == 0:
-            self.tot = np.empty(0, TOT_DTYPE) if self.record_tot else None
-            return np.empty(0, DEPTH_DTYPE)
+            return
         if self._filter is None:
             self._filter = self._open_filter(events)
             self.kernel.t0_us = self.t0_us
         steps, xs, ys, ps = self._filter.feed(events)
-        parts, tots = [], []
         update_every = self.pipeline.update_every
         lo = 0
         while lo < len(steps):
@@ -92,17 +111,11 @@ class Stream:
             hi = max(hi, lo + 1)  # only when the steps are unsorted, which the kernel refuses
             last = (int(steps[hi - 1]) + 1) // update_every
             table = self._velocity(first, max(last - first + 1, 1))
-            out = self.kernel.process(steps[lo:hi], xs[lo:hi], ys[lo:hi], ps[lo:hi], table, first,
-                                      record_tot=self.record_tot)
-            parts.append(out.depth)
-            if self.record_tot:
-                tots.append(out.tot)
+            emit(self.kernel.process(steps[lo:hi], xs[lo:hi], ys[lo:hi], ps[lo:hi], table, first,
+                                     record_tot=self.record_tot, copy=False))
             lo = hi
         if len(steps):
             self._last_step = int(steps[-1])
-        if self.record_tot:
-            self.tot = tots[0] if len(tots) == 1 else np.concatenate(tots) if tots else np.empty(0, TOT_DTYPE)
-        return parts[0] if len(parts) == 1 else np.concatenate(parts) if parts else np.empty(0, DEPTH_DTYPE)
 
     def close(self) -> RunResult:
         """The counts so far (``depth`` is empty: ``feed`` returned the estimates)."""
@@ -151,19 +164,45 @@ class EventDrivenBackend(Backend):
                                   t0_us=start_time_us(pipeline, recording), record_tot=record_tot)
         events = recording.events
         total = len(events)
-        depth, tots = [], []
-        for lo in range(0, total, self.packet_events):
-            depth.append(stream.feed(events[lo:lo + self.packet_events]))
+        depth = _Collector(DEPTH_DTYPE, min(total, RESULT_CAPACITY))
+        tot = _Collector(TOT_DTYPE, 0)
+
+        def emit(out) -> None:
+            depth.add(out.depth)
             if record_tot:
-                tots.append(stream.tot)
+                tot.add(out.tot)
+
+        for lo in range(0, total, self.packet_events):
+            stream.feed_into(events[lo:lo + self.packet_events], emit)
             if progress is not None:
                 progress(min(lo + self.packet_events, total), total)
         result = stream.close()
-        result.depth = np.concatenate(depth) if depth else np.empty(0, DEPTH_DTYPE)
+        result.depth = depth.array()
         if record_tot:
-            result.tot = np.concatenate(tots) if tots else np.empty(0, TOT_DTYPE)
+            result.tot = tot.array()
         result.wall_time = time.perf_counter() - started
         return result
+
+
+class _Collector:
+    """Appends record arrays into one buffer that grows geometrically (one copy per record)."""
+
+    def __init__(self, dtype: np.dtype, capacity: int):
+        self._buffer = np.empty(capacity, dtype)
+        self._size = 0
+
+    def add(self, part: np.ndarray) -> None:
+        end = self._size + len(part)
+        if end > len(self._buffer):
+            grown = np.empty(max(end, 2 * len(self._buffer)), self._buffer.dtype)
+            grown[:self._size] = self._buffer[:self._size]
+            self._buffer = grown
+        self._buffer[self._size:end] = part
+        self._size = end
+
+    def array(self) -> np.ndarray:
+        """The records so far. A view: pages of the buffer never written are never resident."""
+        return self._buffer[:self._size]
 
 
 class FloatBackend(EventDrivenBackend):

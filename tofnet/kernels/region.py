@@ -144,9 +144,20 @@ class TimeOfTravelKernel:
         self._rebase_after = REBASE_AFTER
         self.rejected = np.zeros(3, dtype=np.int64)  # REJECT_REASONS order
         self.tot_spikes = 0
+        # Where A t is evaluated: one point per pixel, or one per patch shared by its pixels.
         su, sv = sample_grid(config.per_pixel, config.patch_size, width, height)
-        self._su = np.ascontiguousarray(su[r.y0:r.y1, r.x0:r.x1])
-        self._sv = np.ascontiguousarray(sv[r.y0:r.y1, r.x0:r.x1])
+        uv = np.stack([su[r.y0:r.y1, r.x0:r.x1].ravel(), sv[r.y0:r.y1, r.x0:r.x1].ravel()], axis=1)
+        if config.per_pixel:
+            self._points, index = uv, np.arange(h * w)
+        else:
+            ys, xs = np.divmod(np.arange(h * w), w)
+            patch = ((ys + r.y0) // config.patch_size) * width + (xs + r.x0) // config.patch_size
+            _, first, index = np.unique(patch, return_index=True, return_inverse=True)
+            self._points = uv[first]
+        self._points = np.ascontiguousarray(self._points)
+        self._samples = index.reshape(h, w).astype(np.int64)
+        n_points = len(self._points)
+        self._cache = (np.full(n_points, -1, np.int64), np.zeros((n_points, 2)), np.zeros((n_points, 2), np.int64))
         fmt = config.fixed
         self._arith = (fmt is not None, config.seconds_per_count, config.min_depth, config.max_depth,
                        fmt.frac_bits if fmt else 0, fmt.payload_bits if fmt else 32,
@@ -155,14 +166,17 @@ class TimeOfTravelKernel:
         self._broken = False
 
     def process(self, steps: np.ndarray, xs: np.ndarray, ys: np.ndarray, ps: np.ndarray,
-                velocity_table: np.ndarray, first_update: int, *, record_tot: bool = False) -> KernelOutput:
+                velocity_table: np.ndarray, first_update: int, *, record_tot: bool = False,
+                copy: bool = True) -> KernelOutput:
         """Run accepted input spikes (input step, x, y, polarity) through the region.
 
         Spikes must be sorted by step and continue the previous call's; at most one per
         pixel and step (what ``InputFilter.feed`` returns). Spikes from anywhere on the
         sensor are accepted; those that neither trigger nor facilitate here are ignored.
         ``velocity_table[j - first_update]`` is the camera velocity (m/s, camera frame) of
-        update ``j`` and must cover ``velocity_rows(steps, update_every)``.
+        update ``j`` and must cover ``velocity_rows(steps, update_every)``; the same update
+        must get the same row in every call (``A t`` is cached per update). ``copy=False``
+        returns views of internal buffers, valid until the next call.
         """
         if self._broken:
             raise BackendError("kernel state is invalid after an earlier error; start a new one")
@@ -181,7 +195,7 @@ class TimeOfTravelKernel:
         n_out, n_tot, n_spikes, status = process_spikes(
             steps, xs, ys, ps, self._stamp.reshape(-1), self._cursor, *self._pend,
             r.x0, r.y0, r.x1, r.y1, cfg.distance, (1 << cfg.counter_bits) - 1, self._rebase_after,
-            self._su, self._sv, velocity_table, first_update, cfg.update_every, *cfg.intrinsics,
+            self._samples, self._points, *self._cache, velocity_table, first_update, cfg.update_every, *cfg.intrinsics,
             *self._arith, self.t0_us, cfg.timestep_us, self._out, self._raw, self.rejected,
             record_tot, self._tot)
         if status == NO_VELOCITY:
@@ -196,8 +210,10 @@ class TimeOfTravelKernel:
             raise BackendError("more than one input spike for one pixel in one step "
                                "(feed the spikes InputFilter accepted)")
         self.tot_spikes += n_spikes
-        return KernelOutput(self._out[:n_out].copy(), self._raw[:n_out].copy(),
-                            self._tot[:n_tot].copy() if record_tot else None, n_spikes)
+        depth, raw, tot = self._out[:n_out], self._raw[:n_out], self._tot[:n_tot] if record_tot else None
+        if copy:
+            depth, raw, tot = depth.copy(), raw.copy(), tot.copy() if tot is not None else None
+        return KernelOutput(depth, raw, tot, n_spikes)
 
     def unit_state(self) -> tuple[np.ndarray, np.ndarray]:
         """Per unit of the region (``[H, W, 4]``): step of its last facilitation (-1: idle) and polarity.

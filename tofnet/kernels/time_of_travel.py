@@ -89,10 +89,15 @@ def _rebase(stamp, base, new_base, counter_max):
 @njit(cache=True)
 def process_spikes(steps, xs, ys, ps, stamp, cursor, pend_x, pend_y, pend_p,
                    x0, y0, x1, y1, distance, counter_max, rebase_after,
-                   su, sv, velocity, first_update, update_every, fx, fy, cx, cy,
+                   samples, points, cache_j, cache_at, cache_w, velocity, first_update, update_every,
+                   fx, fy, cx, cy,
                    fixed, seconds_per_count, min_depth, max_depth, frac_bits, payload_bits, min_raw, max_raw,
                    t0_us, timestep_us, out, out_raw, rejected, record_tot, tot):
     """Run sorted accepted spikes through a region; returns (n_depth, n_tot, n_spikes, status).
+
+    ``samples[pixel]`` indexes ``points`` (where ``A t`` is evaluated); pixels of one patch
+    share an index, so ``A t`` and ``W`` are computed once per velocity update ``j`` and
+    cached (``cache_j`` the update each cache entry holds, ``cache_at`` / ``cache_w``).
 
     Depth estimates go to ``out`` (``DEPTH_DTYPE``) and their fixed-point values to
     ``out_raw``; the time-of-travel spikes to ``tot`` (``TOT_DTYPE``) when ``record_tot``;
@@ -135,7 +140,8 @@ def process_spikes(steps, xs, ys, ps, stamp, cursor, pend_x, pend_y, pend_p,
         key_now = (now - base) << 1
         # The depth neurons of this step's spikes run in step k+2 and hold velocity update (k+1) // U
         # (hoisted: an int64 division per spike costs more than the rest of the depth neuron).
-        row = (k + 1) // update_every - first_update
+        update = (k + 1) // update_every
+        row = update - first_update
         tx, ty, tz = velocity[row, 0], velocity[row, 1], velocity[row, 2]
         stamp_us = t0_us + (k + 3) * timestep_us  # end of depth step k+2
         # 1. Triggers (inline: a helper taking arrays costs refcount atomics per call).
@@ -166,16 +172,21 @@ def process_spikes(steps, xs, ys, ps, stamp, cursor, pend_x, pend_y, pend_p,
             # 2. The pixel's depth neuron, one step later.
             sx = signed_axis_count(m[0], m[1])
             sy = signed_axis_count(m[2], m[3])
-            at_x, at_y = velocity_term(tx, ty, tz, su[y - y0, x - x0], sv[y - y0, x - x0], fx, fy, cx, cy)
+            sample = samples[y - y0, x - x0]
+            if cache_j[sample] != update:  # first depth neuron of this patch (or pixel) under this update
+                at_x, at_y = velocity_term(tx, ty, tz, points[sample, 0], points[sample, 1], fx, fy, cx, cy)
+                cache_at[sample, 0], cache_at[sample, 1] = at_x, at_y
+                if fixed:  # W = A t * dt / distance, quantised once on the host (docs/fixed_point.md)
+                    cache_w[sample, 0] = quantize(at_x * seconds_per_count, frac_bits, payload_bits)
+                    cache_w[sample, 1] = quantize(at_y * seconds_per_count, frac_bits, payload_bits)
+                cache_j[sample] = update
             if fixed:
-                w_x = quantize(at_x * seconds_per_count, frac_bits, payload_bits)
-                w_y = quantize(at_y * seconds_per_count, frac_bits, payload_bits)
-                raw = fixed_depth(sx, sy, w_x, w_y, payload_bits)
+                raw = fixed_depth(sx, sy, cache_w[sample, 0], cache_w[sample, 1], payload_bits)
                 reason = classify(sx != 0 or sy != 0, raw, min_raw, max_raw)
                 z = raw * lsb
             else:
                 raw = 0
-                z = float_depth(sx, sy, at_x, at_y, seconds_per_count)
+                z = float_depth(sx, sy, cache_at[sample, 0], cache_at[sample, 1], seconds_per_count)
                 reason = classify(sx != 0 or sy != 0, z, min_depth, max_depth)
             if reason == EMITTED:
                 record = out[n_out]
