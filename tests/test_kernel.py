@@ -142,7 +142,7 @@ def canonical(depth):
     return np.sort(depth, order=["step", "y", "x"])
 
 
-@pytest.mark.parametrize("distance", [1, 2])
+@pytest.mark.parametrize("distance", [1, 2, 6])  # 6: the halo is wider than a tile
 def test_regions_tiling_the_sensor_equal_the_full_sensor(distance):
     rng = np.random.default_rng(distance)
     sensor = (23, 17)
