@@ -4,8 +4,9 @@
 
 Random events at 240x180, uniformly spread over time at 1 M events/s, 1 ms steps,
 refractory 5 ms unless given (random pixels fire every 43 ms on average, so 5 ms keeps
-~90 % of the events: a harder load than the longer default). Prints wall time and events/s of ``run``
-(input filter + kernel + output assembly) as CPU time, best of 5, after a warm-up run that compiles.
+~90 % of the events: a harder load than the longer default). Prints the CPU time and
+events/s of ``run`` (input filter + kernel + output assembly), best of 5 after a warm-up
+run that compiles; CPU time, because wall time on a shared machine measures the neighbours.
 """
 
 from __future__ import annotations
@@ -45,8 +46,8 @@ def main() -> None:
         cpu.append(time.process_time() - started)
     best = min(cpu)
     print(f"{backend.name}: {n} events in {best:.3f} s CPU = {n / best / 1e6:.1f} M events/s "
-          f"(best of 5; refractory {refractory}, accepted {result.accepted}, tot spikes {result.tot_spikes}, depth {len(result.depth)}, "
-          f"rejected {result.rejected})")
+          f"(best of 5; refractory {refractory}, accepted {result.accepted}, tot spikes {result.tot_spikes}, "
+          f"depth {len(result.depth)}, rejected {result.rejected})")
 
 
 if __name__ == "__main__":

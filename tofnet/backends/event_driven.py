@@ -1,6 +1,6 @@
 """The event-driven backends: ``fixed`` (bit-exact integers) and ``float``, one shared kernel.
 
-Both run the whole sensor as one region of ``tofnet.kernels.time_of_travel`` and differ
+Both run the whole sensor as one region of ``tofnet.kernels.region`` and differ
 only in the depth arithmetic (docs/fixed_point.md). Work is proportional to events;
 a run is a stream fed in packets, so memory does not grow with the recording (apart
 from the estimates ``run`` collects).
@@ -26,7 +26,7 @@ from tofnet.kernels.region import KernelConfig, KernelOutput, TimeOfTravelKernel
 DEFAULT_PACKET_EVENTS = 1 << 17
 #: Largest velocity table computed for one kernel call; sparser packets are split.
 MAX_VELOCITY_ROWS = 1 << 16
-#: Initial size of ``run``'s result buffer in estimates (at most one per event); 4M x 40 B
+#: Initial size of ``run``'s result buffer in estimates (at most one per event); 4M x 28 B
 #: of address space, resident only where written.
 RESULT_CAPACITY = 1 << 22
 

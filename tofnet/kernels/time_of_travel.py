@@ -198,7 +198,8 @@ def process_spikes(steps, xs, ys, ps, stamp, cursor, pend_x, pend_y, pend_p,
         # 3. Facilitations, after every trigger of the step.
         if j < n:  # step k ends inside this call
             if n_pend > 0:
-                _facilitate(stamp, pend_x, pend_y, pend_p, 0, n_pend, key_now, hx0, hy0, hx1, hy1, pad_x, pad_y, row_len, d)
+                _facilitate(stamp, pend_x, pend_y, pend_p, 0, n_pend, key_now,
+                            hx0, hy0, hx1, hy1, pad_x, pad_y, row_len, d)
                 n_pend = 0
             _facilitate(stamp, xs, ys, ps, i, j, key_now, hx0, hy0, hx1, hy1, pad_x, pad_y, row_len, d)
         else:  # step k may continue in the next call
