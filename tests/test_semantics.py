@@ -3,16 +3,17 @@
 import numpy as np
 import pytest
 
-from tofnet.backends.registry import available_backends
-from tofnet.events import DIRECTIONS
+import contextlib
+
+from tofnet.backends.registry import available_backends, get_backend
+from tofnet.conformance import BackendRunner
+from tofnet.events import DIRECTIONS, make_events
 from tofnet.io.recording import Recording
+from tofnet.kernels.fixed_point import depth_tolerance
 from tofnet.networks import depth_network
-from tofnet.backends.registry import get_backend
-from tofnet.testing import TEST_INTRINSICS, moving_edge, run_steps
+from tofnet.testing import TEST_INTRINSICS, moving_edge, run_network, run_steps
 
 PLUS_U, MINUS_U, PLUS_V, MINUS_V = range(4)
-BACKENDS = [name for name in available_backends() if name != "multiproc"] + (
-    ["multiproc"] if "multiproc" in available_backends() else [])
 
 
 def spikes_of(result, x, y, direction):
@@ -21,9 +22,19 @@ def spikes_of(result, x, y, direction):
     return list(zip(tot["step"][sel].tolist(), tot["count"][sel].tolist()))
 
 
-@pytest.fixture(params=BACKENDS)
+@pytest.fixture(scope="module", params=available_backends())
 def backend(request):
-    return request.param
+    """Every registered backend, through one session per module (multiproc spawns once)."""
+    with contextlib.ExitStack() as stack:
+        yield BackendRunner(get_backend(request.param), stack)
+
+
+def approx_depth(expected, backend, *counts):
+    """``expected`` metres within the backend's arithmetic: exact for float, the documented
+    quantisation bound (docs/fixed_point.md) for fixed point; ``counts`` are m_x, m_y."""
+    if backend.arithmetic == "fixed":
+        return pytest.approx(expected, rel=0, abs=float(depth_tolerance(*counts)))
+    return pytest.approx(expected, rel=1e-12)
 
 
 def test_facilitation_then_trigger_sends_the_step_difference(backend):
@@ -76,7 +87,7 @@ def test_distance_two_facilitates_from_two_pixels_back(backend):
     result = run_steps([(1, 0, 0, 1), (2, 1, 0, 1), (5, 2, 0, 1)], (3, 1), backend=backend, distance=2)
     assert spikes_of(result, 2, 0, PLUS_U) == [(6, 4)]
     # depth uses td = m * dt / distance: A t_x = -200 * -0.5 = 100 px m/s -> Z = 100 * 4e-3 / 2
-    assert result.depth["z"][result.depth["x"] == 2] == pytest.approx([0.2])
+    assert result.depth["z"][result.depth["x"] == 2] == approx_depth([0.2], backend, 4, 0)
 
 
 def test_opposite_directions_keep_the_smaller_count(backend):
@@ -84,7 +95,7 @@ def test_opposite_directions_keep_the_smaller_count(backend):
     result = run_steps([(5, 2, 0, 1), (7, 0, 0, 1), (10, 1, 0, 1)], (3, 1), backend=backend)
     assert sorted(spikes_of(result, 1, 0, PLUS_U) + spikes_of(result, 1, 0, MINUS_U)) == [(11, 3), (11, 5)]
     z = result.depth["z"][result.depth["x"] == 1]
-    assert z == pytest.approx([100 * 3e-3])  # +u wins: positive td with count 3
+    assert z == approx_depth([100 * 3e-3], backend, 3, 0)  # +u wins: positive td with count 3
 
 
 def test_a_tie_between_opposite_directions_measures_nothing(backend):
@@ -106,9 +117,9 @@ def test_sign_of_td_in_each_direction_gives_a_positive_depth(backend, axis, spee
     events = moving_edge(sensor, speed, axis)
     net = depth_network(sensor, input={"refractory": 0},
                         velocity={"source": "constant", "velocity": list(velocity), "per": "pixel"})
-    result = get_backend(backend).run(net, Recording(events, intrinsics=TEST_INTRINSICS))
+    result = run_network(net, Recording(events, intrinsics=TEST_INTRINSICS), backend=backend)
     assert len(result.depth) == 11 * 12
-    assert result.depth["z"] == pytest.approx(1.0)
+    assert result.depth["z"] == approx_depth(1.0, backend, 20, 0)
 
 
 def test_depth_outside_the_range_is_rejected_and_counted(backend):
@@ -131,9 +142,8 @@ def test_every_input_event_is_accounted_for(backend):
     # out of bounds, same step, refractory
     net = depth_network((4, 1), input={"refractory": "3ms", "t0": 0},
                         velocity={"source": "constant", "velocity": [-0.5, 0, 0]})
-    from tofnet.events import make_events
     events = make_events([100, 200, 300, 1500, 3200, 3300, 5000], [0, 0, 9, 0, 0, 1, 0], [0] * 7, [1] * 7)
-    result = get_backend(backend).run(net, Recording(events, intrinsics=TEST_INTRINSICS))
+    result = run_network(net, Recording(events, intrinsics=TEST_INTRINSICS), backend=backend)
     assert result.dropped == {"out_of_bounds": 1, "before_t0": 0, "refractory": 3, "same_step": 0}
     assert result.accepted == 3 and result.events_in == 7
 
@@ -141,9 +151,8 @@ def test_every_input_event_is_accounted_for(backend):
 def test_same_step_drop_when_refractory_is_shorter_than_a_step(backend):
     net = depth_network((4, 1), input={"refractory": "100us", "t0": 0},
                         velocity={"source": "constant", "velocity": [-0.5, 0, 0]})
-    from tofnet.events import make_events
     events = make_events([100, 150, 400, 900, 1000], [0] * 5, [0] * 5, [1, 1, 0, 1, 1])
-    result = get_backend(backend).run(net, Recording(events, intrinsics=TEST_INTRINSICS))
+    result = run_network(net, Recording(events, intrinsics=TEST_INTRINSICS), backend=backend)
     assert result.dropped["refractory"] == 1 and result.dropped["same_step"] == 2
     assert result.accepted == 2
 

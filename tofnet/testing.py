@@ -26,19 +26,29 @@ def step_events(spikes: Iterable[tuple[int, int, int, int]], timestep_us: int = 
 
 
 def run_steps(spikes: Iterable[tuple[int, int, int, int]], sensor_size: tuple[int, int], *,
-              backend: str = "reference", velocity=(-0.5, 0.0, 0.0), per: str = "pixel",
+              backend="reference", velocity=(-0.5, 0.0, 0.0), per: str = "pixel",
               intrinsics: Intrinsics = TEST_INTRINSICS, record_tot: bool = True, **tot_params) -> RunResult:
     """Run the paper's network on hand-placed spikes with the refractory filter off and t0 = 0.
 
-    ``tot_params`` go to the time-of-travel process (``distance``, ``counter_bits``);
-    ``min_depth``/``max_depth`` to the depth process.
+    ``backend`` is a name or anything with ``run(compiled, recording, record_tot=...)``
+    (e.g. a ``tofnet.conformance.BackendRunner``). ``tot_params`` go to the
+    time-of-travel process (``distance``, ``counter_bits``); ``min_depth``/``max_depth``
+    to the depth process.
     """
     depth_params = {k: tot_params.pop(k) for k in ("min_depth", "max_depth") if k in tot_params}
     net = depth_network(sensor_size, input={"refractory": 0, "t0": 0},
                         time_of_travel=tot_params, depth=depth_params,
                         velocity={"source": "constant", "velocity": list(velocity), "per": per})
     recording = Recording(step_events(spikes), intrinsics=intrinsics, sensor_size=sensor_size)
-    return get_backend(backend).run(net, recording, record_tot=record_tot)
+    return run_network(net, recording, backend=backend, record_tot=record_tot)
+
+
+def run_network(network, recording: Recording, *, backend="reference", record_tot: bool = False) -> RunResult:
+    """Compile ``network`` (automatic patches) and run it on ``backend`` (a name or a runner)."""
+    from tofnet.compiler import compile_network
+
+    runner = get_backend(backend) if isinstance(backend, str) else backend
+    return runner.run(compile_network(network), recording, record_tot=record_tot)
 
 
 def moving_edge(sensor_size: tuple[int, int], speed_px_s: float, axis: str = "u", *, polarity: int = 1,

@@ -16,6 +16,9 @@ from tofnet.errors import BackendError
 # name -> "module:attribute"; imported on first use so that numba compiles only what runs.
 _BUILTIN = {
     "reference": "tofnet.backends.reference:ReferenceBackend",
+    "float": "tofnet.backends.event_driven:FloatBackend",
+    "fixed": "tofnet.backends.event_driven:FixedBackend",
+    "multiproc": "tofnet.backends.multiproc:MultiprocBackend",
 }
 _registered: dict[str, Callable[[], Backend]] = {}
 

@@ -9,7 +9,7 @@ or ``tofnet conformance --backend multiproc --against fixed``.
 
 from tofnet.conformance.cases import CASES, Case, Scene, get_case
 from tofnet.conformance.compare import Comparison, compare, mode_of
-from tofnet.conformance.runner import DEFAULT_BASELINE, CaseResult, format_table, run_suite, select_cases
+from tofnet.conformance.runner import DEFAULT_BASELINE, BackendRunner, CaseResult, format_table, run_suite, select_cases
 
-__all__ = ["CASES", "Case", "Scene", "get_case", "Comparison", "compare", "mode_of", "DEFAULT_BASELINE",
+__all__ = ["CASES", "Case", "Scene", "get_case", "Comparison", "compare", "mode_of", "DEFAULT_BASELINE", "BackendRunner",
            "CaseResult", "format_table", "run_suite", "select_cases"]

@@ -34,7 +34,7 @@ class CaseResult:
         return dict(self.__dict__, estimates=list(self.estimates))
 
 
-class _Runner:
+class BackendRunner:
     """Runs compiled networks on one backend, through a session when the backend offers one
     (the multiproc backend then spawns its workers once for the whole suite)."""
 
@@ -42,13 +42,17 @@ class _Runner:
         self.backend, self.stack = backend, stack
         self.session = None
 
-    def run(self, compiled, recording):
+    @property
+    def arithmetic(self) -> str:
+        return self.backend.arithmetic
+
+    def run(self, compiled, recording, *, record_tot: bool = True):
         if not callable(getattr(self.backend, "session", None)):
-            return self.backend.run(compiled, recording, record_tot=True)
+            return self.backend.run(compiled, recording, record_tot=record_tot)
         if self.session is None:
             self.session = self.stack.enter_context(self.backend.session())
         try:
-            return self.session.run(recording, compiled=compiled, record_tot=True)
+            return self.session.run(recording, compiled=compiled, record_tot=record_tot)
         except Exception:
             self.session = None  # a failed session is closed; the next case opens a new one
             raise
@@ -85,7 +89,7 @@ def run_suite(backend: str | Backend, against: str | Backend = DEFAULT_BASELINE,
     mode = mode_of(test.arithmetic, base.arithmetic)
     results = []
     with contextlib.ExitStack() as stack:
-        runners = {"test": _Runner(test, stack), "base": _Runner(base, stack)}
+        runners = {"test": BackendRunner(test, stack), "base": BackendRunner(base, stack)}
         for case in select_cases(cases):
             started = time.perf_counter()
             try:
