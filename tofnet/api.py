@@ -18,18 +18,18 @@ DEFAULT_BACKEND = "fixed"
 def load_network(spec: str | Path | None = None, *, sensor_size: tuple[int, int] | None = None):
     """The network of a YAML spec (or the paper's default) and the spec's compile/backend settings.
 
-    Returns ``(network, compile_options, backend_name_or_None)``. ``sensor_size``
-    overrides the spec's (or the default 240x180).
+    Returns ``(network, compile_options, backend_name_or_None, backend_options)``.
+    ``sensor_size`` overrides the spec's (or the default 240x180).
     """
     if spec is None:
         network = depth_network(sensor_size or (240, 180))
-        return network, {}, None
+        return network, {}, None, {}
     from tofnet.io.spec import load_spec
     loaded = load_spec(spec)
     network = loaded.network
     if sensor_size is not None and network.sensor_size != tuple(sensor_size):
         resize(network, sensor_size)
-    return network, dict(loaded.compile or {}), loaded.backend
+    return network, dict(loaded.compile or {}), loaded.backend, dict(loaded.backend_options or {})
 
 
 def resize(network: Network, sensor_size: tuple[int, int]) -> None:
@@ -67,7 +67,7 @@ def apply_overrides(network: Network, **values: Any) -> None:
 
 
 def run(recording: Recording, network: Network | None = None, *, backend: str = DEFAULT_BACKEND,
-        compile_options: dict | None = None, record_tot: bool = False,
+        backend_options: dict | None = None, compile_options: dict | None = None, record_tot: bool = False,
         progress: ProgressCallback | None = None) -> tuple[RunResult, Any]:
     """Compile ``network`` (default: the paper's, sized to the recording) and run it on ``recording``.
 
@@ -79,5 +79,5 @@ def run(recording: Recording, network: Network | None = None, *, backend: str = 
     if network is None:
         network = depth_network(recording.sensor_size or (240, 180))
     compiled = compile_network(network, **(compile_options or {}))
-    result = get_backend(backend).run(compiled, recording, record_tot=record_tot, progress=progress)
+    result = get_backend(backend, **(backend_options or {})).run(compiled, recording, record_tot=record_tot, progress=progress)
     return result, compiled

@@ -23,15 +23,16 @@ _BUILTIN = {
 _registered: dict[str, Callable[[], Backend]] = {}
 
 
-def register_backend(name: str, factory: Callable[[], Backend] | str) -> None:
-    """Make a backend available as ``name``; ``factory`` is a callable or ``"module:attr"``."""
+def register_backend(name: str, factory: Callable[..., Backend] | str) -> None:
+    """Make a backend available as ``name``; ``factory`` (a callable or ``"module:attr"``)
+    is called with the backend's options as keywords."""
     _registered[name] = factory if callable(factory) else _lazy(factory)
 
 
-def _lazy(target: str) -> Callable[[], Backend]:
-    def load() -> Backend:
+def _lazy(target: str) -> Callable[..., Backend]:
+    def load(**options) -> Backend:
         module, attr = target.split(":")
-        return getattr(importlib.import_module(module), attr)()
+        return getattr(importlib.import_module(module), attr)(**options)
     return load
 
 
@@ -43,13 +44,20 @@ def available_backends() -> list[str]:
     return list(names)
 
 
-def get_backend(name: str) -> Backend:
-    """The backend called ``name``; raises naming the available ones."""
+def get_backend(name: str, **options) -> Backend:
+    """The backend called ``name``, built with ``options`` (e.g. ``workers=4``); raises naming
+    the available ones, or the options the backend does not take."""
     if name in _registered:
-        return _registered[name]()
-    if name in _BUILTIN:
-        return _lazy(_BUILTIN[name])()
-    for ep in entry_points(group="tofnet.backends"):
-        if ep.name == name:
-            return ep.load()()
+        factory = _registered[name]
+    elif name in _BUILTIN:
+        factory = _lazy(_BUILTIN[name])
+    else:
+        factory = next((ep.load() for ep in entry_points(group="tofnet.backends") if ep.name == name), None)
+    if factory is not None:
+        try:
+            return factory(**options)
+        except TypeError as err:
+            if not options:
+                raise
+            raise BackendError(f"backend {name!r} does not take the options {sorted(options)}: {err}") from None
     raise BackendError(f"unknown backend {name!r}; available: {', '.join(available_backends())}")

@@ -49,8 +49,8 @@ def build_network(args, recording_sensor_size):
     from tofnet.core.params import parse_size  # the same WxH parsing as the spec
 
     sensor = parse_size(args.sensor_size, "--sensor-size") if args.sensor_size else None
-    network, compile_options, spec_backend = load_network(args.spec, sensor_size=sensor or (
-        None if args.spec else recording_sensor_size))
+    network, compile_options, spec_backend, backend_options = load_network(
+        args.spec, sensor_size=sensor or (None if args.spec else recording_sensor_size))
     apply_overrides(network, timestep=args.timestep, refractory=args.refractory, distance=args.distance,
                     counter_bits=args.counter_bits, velocity_per=args.velocity_per,
                     update_every=args.update_every)
@@ -65,7 +65,7 @@ def build_network(args, recording_sensor_size):
             process.set_param("source", "constant")
     if args.patch:
         compile_options["patch"] = "auto" if args.patch == "auto" else parse_size(args.patch, "--patch")
-    return network, compile_options, spec_backend
+    return network, compile_options, spec_backend, backend_options
 
 
 def handle(args) -> int:
@@ -76,10 +76,13 @@ def handle(args) -> int:
 
     started = time.perf_counter()
     recording = read_recording(args.recording)
-    network, compile_options, spec_backend = build_network(args, recording.sensor_size)
+    network, compile_options, spec_backend, backend_options = build_network(args, recording.sensor_size)
     backend = args.backend or spec_backend or DEFAULT_BACKEND
+    if args.backend and args.backend != spec_backend:
+        backend_options = {}  # the spec's options belong to the spec's backend
     progress = None if args.quiet else Progress(f"tofnet run [{backend}]")
-    result, compiled = run(recording, network, backend=backend, compile_options=compile_options,
+    result, compiled = run(recording, network, backend=backend, backend_options=backend_options,
+                           compile_options=compile_options,
                            record_tot=args.record_tot, progress=progress)
     if progress:
         progress.done()

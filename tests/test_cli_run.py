@@ -1,0 +1,122 @@
+"""`tofnet run` end to end on ECD folders, its summary, its outputs and its one-line errors."""
+
+import json
+
+import numpy as np
+import pytest
+
+from tofnet.cli import main
+from tofnet.io import read_depth
+from tofnet.io.ecd import write_ecd
+from tofnet.io.recording import Intrinsics
+from tofnet.kernels.fixed_point import depth_tolerance
+from tofnet.testing import moving_edge
+
+SENSOR = (240, 180)
+INTRINSICS = Intrinsics(200.0, 200.0, 119.5, 89.5)
+DEPTH_M, SPEED_M_S = 2.0, 0.5  # the edge's depth; the camera slides along +x
+
+
+def straight_edge_recording(folder, *, duration_s=1.0):
+    """A vertical edge at DEPTH_M seen by a camera sliding along +x: it moves at -f*v/Z px/s."""
+    flow = -INTRINSICS.fx * SPEED_M_S / DEPTH_M  # -50 px/s: 20 steps of 1 ms per pixel
+    events = moving_edge(SENSOR, flow, "u")
+    events = events[events["t"] <= duration_s * 1e6]
+    times = np.linspace(0, duration_s + 0.1, 101)
+    positions = np.stack([SPEED_M_S * times, np.zeros_like(times), np.zeros_like(times)], axis=1)
+    quaternions = np.tile([0.0, 0.0, 0.0, 1.0], (len(times), 1))
+    write_ecd(folder, events, intrinsics=INTRINSICS, times=times, positions=positions,
+              quaternions=quaternions, sensor_size=SENSOR)
+    return events
+
+
+@pytest.fixture(scope="module")
+def edge_folder(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("edge")
+    straight_edge_recording(folder)
+    return folder
+
+
+@pytest.mark.parametrize("backend", ["fixed", "reference"])
+def test_a_straight_edge_comes_out_at_its_depth(edge_folder, tmp_path, capsys, backend):
+    out = tmp_path / "depth.npz"
+    assert main(["run", str(edge_folder), "--out", str(out), "--backend", backend, "--quiet"]) == 0
+    depth, meta = read_depth(out)
+    width, height = SENSOR
+    events = width * height
+    # every column but the first (no facilitating neighbour) and the last ones cut by the 1 s crop
+    assert len(depth) >= (50 - 1) * height
+    assert np.all(np.abs(depth["z"] - DEPTH_M) <= depth_tolerance(20, 0) + 1e-12)
+    assert meta["latency_steps"] == 2 and meta["timestep_us"] == 1000
+    printed = capsys.readouterr().out
+    assert f"backend        {backend}" in printed
+    assert "events in" in printed and "depth out" in printed and "wall time" in printed
+    assert meta["summary"]["events_in"] <= events
+
+
+def test_summary_accounts_for_every_event_and_writes_json(edge_folder, tmp_path):
+    out, summary_file = tmp_path / "depth.csv", tmp_path / "run.json"
+    assert main(["run", str(edge_folder), "--out", str(out), "--json", str(summary_file), "--quiet"]) == 0
+    summary = json.loads(summary_file.read_text())
+    assert summary["events_in"] == summary["accepted"] + sum(summary["dropped"].values())
+    assert out.read_text().splitlines()[0] == "t,x,y,z,step"
+    assert len(out.read_text().splitlines()) == summary["depth_out"] + 1
+
+
+def test_spec_and_overrides_are_applied(edge_folder, tmp_path, capsys):
+    out = tmp_path / "depth.npz"
+    assert main(["run", str(edge_folder), "--spec", "examples/paper_distance2.yaml", "--out", str(out),
+                 "--quiet"]) == 0
+    depth, _ = read_depth(out)
+    # distance 2: the counter spans two pixels (40 steps), td = 40 ms / 2 px
+    assert np.all(np.abs(depth["z"] - DEPTH_M) <= depth_tolerance(40, 0) + 1e-12)
+    # a constant velocity twice as fast as the truth halves nothing but doubles the depth
+    assert main(["run", str(edge_folder), "--out", str(out), "--velocity", "1.0,0,0", "--quiet"]) == 0
+    depth, _ = read_depth(out)
+    assert np.median(depth["z"]) == pytest.approx(2 * DEPTH_M, rel=1e-3)
+
+
+def test_pixels_outside_the_sensor_are_counted_and_reported(edge_folder, tmp_path, capsys):
+    out = tmp_path / "depth.npz"
+    # the edge starts at column 239 and moves left: columns 200..239 lie outside a 200 px wide sensor
+    assert main(["run", str(edge_folder), "--sensor-size", "200x180", "--out", str(out), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "outside the 200x180 sensor" in printed
+    _, meta = read_depth(out)
+    assert meta["summary"]["dropped"]["out_of_bounds"] == 40 * 180
+
+
+def one_line_error(capsys, argv):
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+    return err
+
+
+def test_bad_input_gets_one_line_naming_the_problem(edge_folder, tmp_path, capsys):
+    assert "no/such/folder" in one_line_error(capsys, ["run", "no/such/folder"])
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / "events.txt").write_text("0.001 1 2 1\n0.002 3 x 1\n")
+    err = one_line_error(capsys, ["run", str(bad)])
+    assert "events.txt:2" in err
+    (bad / "events.txt").write_text("0.002 1 2 1\n0.001 3 4 1\n")
+    assert "events.txt:2" in one_line_error(capsys, ["run", str(bad)])
+    (bad / "events.txt").write_text("")
+    assert "no events" in one_line_error(capsys, ["run", str(bad)])
+    (bad / "events.txt").write_text("0.001 1 2 1\n0.002 2 2 1\n")
+    assert "calib.txt" in one_line_error(capsys, ["run", str(bad), "--velocity", "0.5,0,0"])
+    assert "available" in one_line_error(capsys, ["run", str(edge_folder), "--backend", "gpu"])
+    assert "input.timestep" in one_line_error(capsys, ["run", str(edge_folder), "--timestep", "soon"])
+
+
+def test_nan_in_the_poses_is_an_error_naming_the_line(edge_folder, tmp_path, capsys):
+    folder = tmp_path / "nan"
+    straight_edge_recording(folder, duration_s=0.2)
+    lines = (folder / "groundtruth.txt").read_text().splitlines()
+    number = next(i for i, line in enumerate(lines) if not line.startswith("#")) + 3
+    fields = lines[number - 1].split()
+    fields[1] = "nan"
+    lines[number - 1] = " ".join(fields)
+    (folder / "groundtruth.txt").write_text("\n".join(lines) + "\n")
+    assert f"groundtruth.txt:{number}" in one_line_error(capsys, ["run", str(folder)])
