@@ -9,15 +9,40 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import importlib
+from typing import TYPE_CHECKING
+
 from tofnet.errors import DataError, located
-from tofnet.io.calibration import read_calibration, write_calibration
-from tofnet.io.depth import read_depth, write_depth
-from tofnet.io.ecd import attach_sidecars, read_ecd, read_imu, write_ecd
-from tofnet.io.events import (events_from_columns, read_events_npy, read_events_txt, write_events_npy,
-                              write_events_txt)
-from tofnet.io.groundtruth import (Trajectory, VelocitySamples, read_groundtruth, read_velocity_samples,
-                                   write_groundtruth, write_velocity_samples)
 from tofnet.io.recording import ConstantVelocity, Intrinsics, Recording, VelocitySource
+
+# Readers load on first use: ``tofnet.io.spec`` (and ``tofnet compile``) should not pay
+# for compiling the numba event parser.
+_LAZY = {
+    "read_calibration": "calibration", "write_calibration": "calibration",
+    "read_depth": "depth", "write_depth": "depth",
+    "attach_sidecars": "ecd", "read_ecd": "ecd", "read_imu": "ecd", "write_ecd": "ecd",
+    "events_from_columns": "events", "read_events_npy": "events", "read_events_txt": "events",
+    "write_events_npy": "events", "write_events_txt": "events",
+    "Trajectory": "groundtruth", "VelocitySamples": "groundtruth", "read_groundtruth": "groundtruth",
+    "read_velocity_samples": "groundtruth", "write_groundtruth": "groundtruth",
+    "write_velocity_samples": "groundtruth",
+}
+
+if TYPE_CHECKING:
+    from tofnet.io.calibration import read_calibration, write_calibration  # noqa: F401
+    from tofnet.io.depth import read_depth, write_depth  # noqa: F401
+    from tofnet.io.ecd import attach_sidecars, read_ecd, read_imu, write_ecd  # noqa: F401
+    from tofnet.io.events import (events_from_columns, read_events_npy, read_events_txt,  # noqa: F401
+                                  write_events_npy, write_events_txt)
+    from tofnet.io.groundtruth import (Trajectory, VelocitySamples, read_groundtruth,  # noqa: F401
+                                       read_velocity_samples, write_groundtruth, write_velocity_samples)
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        return getattr(importlib.import_module(f"tofnet.io.{_LAZY[name]}"), name)
+    raise AttributeError(f"module 'tofnet.io' has no attribute {name!r}")
+
 
 #: File suffixes ``read_recording`` accepts besides a folder.
 EVENT_SUFFIXES = (".txt", ".npy", ".npz")
@@ -31,6 +56,9 @@ def read_recording(path: str | Path, sensor_size: tuple[int, int] | None = None)
     event. ``sensor_size`` (width, height px), when given, overrides ``sensor_size.txt``.
     Raises ``DataError`` for a missing path, an unknown format or no events.
     """
+    from tofnet.io.ecd import attach_sidecars, read_ecd
+    from tofnet.io.events import read_events_npy, read_events_txt
+
     path = Path(path)
     if not path.exists():
         raise DataError(located(path, None, "no such file or folder; expected an ECD folder or an events "
