@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 from tofnet.errors import DataError, located
-from tofnet.io.groundtruth import read_text
+from tofnet.io.groundtruth import finite_number, read_text
 from tofnet.io.recording import Intrinsics
 
 _NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
@@ -30,15 +29,7 @@ def read_calibration(path: str | Path) -> Intrinsics:
     if len(fields) not in (4, 9):
         raise DataError(located(path, number, f"expected 4 numbers 'fx fy cx cy' or 9 'fx fy cx cy k1 k2 p1 p2 k3', "
                                               f"found {len(fields)}"))
-    values = []
-    for name, field in zip(_NAMES, fields):
-        try:
-            value = float(field)
-        except ValueError:
-            raise DataError(located(path, number, f"'{name}': expected a number, got {field!r}")) from None
-        if not math.isfinite(value):
-            raise DataError(located(path, number, f"'{name}': expected a finite number, got {field!r}"))
-        values.append(value)
+    values = [finite_number(path, number, f"'{name}'", field) for name, field in zip(_NAMES, fields)]
     for name, value in zip(("fx", "fy"), values[:2]):
         if value <= 0:
             raise DataError(located(path, number, f"'{name}': focal length must be positive (pixels), got {value:g}"))

@@ -62,19 +62,21 @@ def read_table(path: str | Path, names: tuple[str, ...], what: str) -> tuple[np.
         if len(fields) != len(names):
             raise DataError(located(path, number, f"expected {len(names)} columns '{expected}' per {what}, "
                                                   f"found {len(fields)}: {_clip(stripped)!r}"))
-        row = []
-        for name, field in zip(names, fields):
-            try:
-                value = float(field)
-            except ValueError:
-                raise DataError(located(path, number, f"column '{name}': expected a number, got {field!r}")) from None
-            if not math.isfinite(value):
-                raise DataError(located(path, number, f"column '{name}': expected a finite number, got {field!r}"))
-            row.append(value)
-        rows.append(row)
+        rows.append([finite_number(path, number, f"column '{name}'", field) for name, field in zip(names, fields)])
         lines.append(number)
     values = np.asarray(rows, dtype=np.float64).reshape(len(rows), len(names))
     return values, np.asarray(lines, dtype=np.int64)
+
+
+def finite_number(path: object, line: int, what: str, field: str) -> float:
+    """``field`` as a float, or a ``DataError`` naming the file, line and ``what`` (NaN and inf refused)."""
+    try:
+        value = float(field)
+    except ValueError:
+        raise DataError(located(path, line, f"{what}: expected a number, got {field!r}")) from None
+    if not math.isfinite(value):
+        raise DataError(located(path, line, f"{what}: expected a finite number, got {field!r}"))
+    return value
 
 
 def _clip(text: str, width: int = 80) -> str:
