@@ -9,26 +9,24 @@ from the estimates ``run`` collects).
 from __future__ import annotations
 
 import time
-from typing import Callable
 
 import numpy as np
 
 from tofnet.backends.base import DROP_REASONS, REJECT_REASONS, Backend, ProgressCallback, RunResult
 from tofnet.backends.runtime import as_pipeline, intrinsics_of, start_time_us, velocity_source_of, velocity_table
-from tofnet.errors import BackendError
+from tofnet.errors import BackendError, DataError
 from tofnet.events import DEPTH_DTYPE, EVENT_DTYPE, TOT_DTYPE
 from tofnet.io.recording import Intrinsics, Recording, VelocitySource
 from tofnet.kernels.fixed_point import DEFAULT_FRAC_BITS, DEFAULT_PAYLOAD_BITS, FixedPointFormat
-from tofnet.kernels.input_filter import InputFilter
-from tofnet.kernels.region import KernelConfig, KernelOutput, TimeOfTravelKernel
+from tofnet.kernels.region import KernelConfig, KernelOutput, TimeOfTravelKernel, copy_records
 
 #: Events per packet in ``run`` (bounded memory; ~0.1 s of a busy 240x180 recording).
 DEFAULT_PACKET_EVENTS = 1 << 17
-#: Largest velocity table computed for one kernel call; sparser packets are split.
-MAX_VELOCITY_ROWS = 1 << 16
 #: Initial size of ``run``'s result buffer in estimates (at most one per event); 4M x 28 B
 #: of address space, resident only where written.
 RESULT_CAPACITY = 1 << 22
+#: Velocity updates computed ahead of the stream, so that a packet rarely pays for them.
+VELOCITY_LOOKAHEAD = 1024
 
 
 class Stream:
@@ -36,99 +34,80 @@ class Stream:
 
     Packets may be split anywhere (even inside a timestep); the estimates equal those
     of one run over the concatenated events. ``t0_us`` None: the first event fed.
+    Memory is fixed by the sensor and the largest packet, whatever the recording's length.
     """
 
     def __init__(self, backend: str, config: KernelConfig, pipeline, velocity_source: VelocitySource,
                  t0_us: int | None, record_tot: bool = False):
         self.backend = backend
         self.pipeline = pipeline
-        self.kernel = TimeOfTravelKernel(config)
+        self.kernel = TimeOfTravelKernel(config, t0_us=t0_us or 0)
         self.velocity_source = velocity_source
         self.t0_us = t0_us
         self.record_tot = record_tot
         #: Time-of-travel spikes of the latest ``feed`` (``TOT_DTYPE``) when ``record_tot``.
         self.tot: np.ndarray | None = None
-        self._filter: InputFilter | None = None
-        self._last_step = -1
         self._events_in = 0
-        self._table: tuple[int, np.ndarray] | None = None
+        self._table: tuple[int, np.ndarray] = (0, np.zeros((0, 3)))
         self._started = time.perf_counter()
         self._closed = False
 
-    def _open_filter(self, events: np.ndarray) -> InputFilter:
+    def _rows(self, first: int, count: int) -> tuple[np.ndarray, int]:
+        """Velocity updates ``first .. first+count-1`` (``VelocityRows``): the cached table when it
+        covers them, else a new one computed ``VELOCITY_LOOKAHEAD`` updates ahead."""
+        start, table = self._table
+        if start <= first and first + count <= start + len(table):
+            return table, start
         p = self.pipeline
-        if self.t0_us is None:
-            self.t0_us = int(events["t"][0])
-        return InputFilter(p.sensor_size, self.t0_us, p.timestep_us, p.refractory_us, p.refractory_per_polarity)
-
-    def _velocity(self, first: int, count: int) -> np.ndarray:
-        """Rows ``first .. first+count-1`` of the velocity table, reusing the last one when it covers them."""
-        if self._table is not None:
-            start, table = self._table
-            if start <= first and first + count <= start + len(table):
-                return table[first - start:first - start + count]
-        p = self.pipeline
-        table = velocity_table(self.velocity_source, self.t0_us, p.timestep_us, p.update_every, count, first)
+        try:
+            table = velocity_table(self.velocity_source, self.t0_us, p.timestep_us, p.update_every,
+                                   max(count, VELOCITY_LOOKAHEAD), first)
+        except (BackendError, DataError):  # e.g. not finite beyond the rows asked for: compute only those
+            table = velocity_table(self.velocity_source, self.t0_us, p.timestep_us, p.update_every, count, first)
         self._table = (first, table)
-        return table
+        return table, first
 
-    def feed(self, events: np.ndarray) -> np.ndarray:
-        """Depth estimates (``DEPTH_DTYPE``) produced by ``events`` (``EVENT_DTYPE``, time-ordered)."""
-        parts, tots = [], []
-
-        def keep(out) -> None:  # the kernel's views are overwritten by its next call
-            parts.append(out.depth.copy())
-            if self.record_tot:
-                tots.append(out.tot.copy())
-
-        self.feed_into(events, keep)
-        if self.record_tot:
-            self.tot = tots[0] if len(tots) == 1 else np.concatenate(tots) if tots else np.empty(0, TOT_DTYPE)
-        return parts[0] if len(parts) == 1 else np.concatenate(parts) if parts else np.empty(0, DEPTH_DTYPE)
-
-    def feed_into(self, events: np.ndarray, emit: Callable[[KernelOutput], None]) -> None:
-        """Like ``feed``, but hand each kernel call's output to ``emit`` as views valid during the call.
-
-        Spares a copy when the caller stores the estimates somewhere anyway (``run`` does).
-        """
+    def _process(self, events: np.ndarray, into: np.ndarray | None, offset: int) -> KernelOutput | None:
         if self._closed:
             raise BackendError("stream is closed")
         if events.dtype != EVENT_DTYPE:
             raise BackendError(f"events must have dtype {EVENT_DTYPE}, got {events.dtype}")
         self._events_in += len(events)
         if len(events) == 0:
-            return
-        if self._filter is None:
-            self._filter = self._open_filter(events)
-            self.kernel.t0_us = self.t0_us
-        steps, xs, ys, ps = self._filter.feed(events)
-        update_every = self.pipeline.update_every
-        lo = 0
-        while lo < len(steps):
-            # Keep each call's velocity table small even when the spikes are sparse in time.
-            first = (int(steps[lo]) + 1) // update_every
-            hi = int(np.searchsorted(steps, (first + MAX_VELOCITY_ROWS) * update_every - 1, side="left"))
-            hi = max(hi, lo + 1)  # only when the steps are unsorted, which the kernel refuses
-            last = (int(steps[hi - 1]) + 1) // update_every
-            table = self._velocity(first, max(last - first + 1, 1))
-            emit(self.kernel.process(steps[lo:hi], xs[lo:hi], ys[lo:hi], ps[lo:hi], table, first,
-                                     record_tot=self.record_tot, copy=False))
-            lo = hi
-        if len(steps):
-            self._last_step = int(steps[-1])
+            return None
+        if self.t0_us is None:
+            self.t0_us = self.kernel.t0_us = int(events["t"][0])
+        return self.kernel.process_events(events, self._rows, record_tot=self.record_tot, into=into,
+                                          offset=offset, copy=False)
+
+    def feed(self, events: np.ndarray) -> np.ndarray:
+        """Depth estimates (``DEPTH_DTYPE``) produced by ``events`` (``EVENT_DTYPE``, time-ordered)."""
+        out = self._process(events, None, 0)
+        if out is None:
+            self.tot = np.empty(0, TOT_DTYPE) if self.record_tot else None
+            return np.empty(0, DEPTH_DTYPE)
+        self.tot = copy_records(out.tot) if self.record_tot else None
+        return copy_records(out.depth)
+
+    def feed_into(self, events: np.ndarray, into: np.ndarray, offset: int) -> KernelOutput | None:
+        """Like ``feed``, but write the estimates to ``into[offset:]`` (room for ``len(events)``).
+
+        Returns the kernel's output (``depth`` a view of ``into``; ``tot`` valid until the next
+        call, no ``z_raw``), None for an empty packet. Spares a copy when the caller collects the estimates.
+        """
+        return self._process(events, into, offset)
 
     def close(self) -> RunResult:
         """The counts so far (``depth`` is empty: ``feed`` returned the estimates)."""
         self._closed = True
-        flt = self._filter
-        fmt = self.kernel.config.fixed
+        kernel = self.kernel
+        fmt = kernel.config.fixed
         return RunResult(
             backend=self.backend, depth=np.empty(0, DEPTH_DTYPE), events_in=self._events_in,
-            accepted=flt.accepted if flt else 0,
-            dropped=flt.dropped if flt else {reason: 0 for reason in DROP_REASONS},
-            rejected={reason: int(c) for reason, c in zip(REJECT_REASONS, self.kernel.rejected)},
-            tot_spikes=self.kernel.tot_spikes,
-            steps=self._last_step + 1 + self.pipeline.latency_steps,
+            accepted=kernel.accepted, dropped={reason: int(c) for reason, c in zip(DROP_REASONS, kernel.drops)},
+            rejected={reason: int(c) for reason, c in zip(REJECT_REASONS, kernel.rejected)},
+            tot_spikes=kernel.tot_spikes,
+            steps=kernel.current_step + 1 + self.pipeline.latency_steps,
             t0_us=self.t0_us if self.t0_us is not None else 0, timestep_us=self.pipeline.timestep_us,
             latency_steps=self.pipeline.latency_steps, wall_time=time.perf_counter() - self._started,
             extra={"frac_bits": fmt.frac_bits, "payload_bits": fmt.payload_bits} if fmt else {},
@@ -166,14 +145,14 @@ class EventDrivenBackend(Backend):
         total = len(events)
         depth = _Collector(DEPTH_DTYPE, min(total, RESULT_CAPACITY))
         tot = _Collector(TOT_DTYPE, 0)
-
-        def emit(out) -> None:
-            depth.add(out.depth)
-            if record_tot:
-                tot.add(out.tot)
-
         for lo in range(0, total, self.packet_events):
-            stream.feed_into(events[lo:lo + self.packet_events], emit)
+            packet = events[lo:lo + self.packet_events]
+            buffer, offset = depth.reserve(len(packet))
+            out = stream.feed_into(packet, buffer, offset)  # the kernel writes the estimates in place
+            if out is not None:
+                depth.commit(len(out.depth))
+                if record_tot:
+                    tot.add(out.tot)
             if progress is not None:
                 progress(min(lo + self.packet_events, total), total)
         result = stream.close()
@@ -191,14 +170,24 @@ class _Collector:
         self._buffer = np.empty(capacity, dtype)
         self._size = 0
 
-    def add(self, part: np.ndarray) -> None:
-        end = self._size + len(part)
+    def reserve(self, n: int) -> tuple[np.ndarray, int]:
+        """``(buffer, offset)`` with room for ``n`` records at ``offset``; ``commit`` how many were written."""
+        end = self._size + n
         if end > len(self._buffer):
             grown = np.empty(max(end, 2 * len(self._buffer)), self._buffer.dtype)
-            grown[:self._size] = self._buffer[:self._size]
+            raw = np.dtype((np.void, grown.dtype.itemsize))
+            grown[:self._size].view(raw)[:] = self._buffer[:self._size].view(raw)
             self._buffer = grown
-        self._buffer[self._size:end] = part
-        self._size = end
+        return self._buffer, self._size
+
+    def commit(self, n: int) -> None:
+        self._size += n
+
+    def add(self, part: np.ndarray) -> None:
+        buffer, offset = self.reserve(len(part))
+        raw = np.dtype((np.void, part.dtype.itemsize))  # packed records copy field by field, bytes do not
+        buffer[offset:offset + len(part)].view(raw)[:] = part.view(raw)
+        self.commit(len(part))
 
     def array(self) -> np.ndarray:
         """The records so far. A view: pages of the buffer never written are never resident."""

@@ -1,4 +1,15 @@
-"""The input process: refractory filter, one event per pixel per step, counted drops."""
+"""The input process: refractory filter, one event per pixel per step, counted drops.
+
+The per-event rule (``admit``) is shared: ``InputFilter`` runs it on its own arrays for
+the reference and multiproc backends, and the fused kernel of the ``fixed`` and
+``float`` backends (``tofnet.kernels.time_of_travel``) runs it on words of its
+per-pixel records, in the same pass as the time-of-travel units.
+
+Per pixel the filter keeps the time (µs) of the last accepted event of each channel
+(one channel, or one per polarity) and of the last accepted event of any polarity
+(the same word when there is one channel). The step of that last event is not stored:
+"already accepted in this step" is ``step_start <= latest < step_end``.
+"""
 
 from __future__ import annotations
 
@@ -7,76 +18,104 @@ from numba import njit
 
 from tofnet.backends.base import DROP_REASONS
 
-# Indices into the drop counter array, in DROP_REASONS order.
-OUT_OF_BOUNDS, BEFORE_T0, REFRACTORY, SAME_STEP = range(4)
+# Indices into the drop counter array, in DROP_REASONS order; ACCEPTED follows them, so a
+# counter array of 5 slots takes ``counts[admit(...)] += 1`` without a branch.
+OUT_OF_BOUNDS, BEFORE_T0, REFRACTORY, SAME_STEP, ACCEPTED = range(5)
 assert DROP_REASONS == ("out_of_bounds", "before_t0", "refractory", "same_step")
 
-_NEVER = np.int64(-(1 << 62))  # "no event yet": far enough back that any refractory has passed
+NEVER = -(1 << 62)  # "no event yet" (µs): far enough back that any refractory period has passed
+
+
+@njit(cache=True, inline="always")
+def admit(last, word: int, latest: int, t: int, step_start: int, step_end: int, refractory_us: int) -> int:
+    """Refractory and same-step rules for one event at time ``t`` µs of step ``[step_start, step_end)``.
+
+    ``last[word]`` is the last accepted time of the event's channel, ``last[latest]`` that of
+    the pixel (any polarity). Returns REFRACTORY, SAME_STEP or ACCEPTED (then both are ``t``).
+    """
+    if t - last[word] < refractory_us:
+        return REFRACTORY
+    if step_start <= last[latest] < step_end:
+        return SAME_STEP
+    last[word] = t
+    last[latest] = t
+    return ACCEPTED
 
 
 @njit(cache=True)
-def _filter(t, x, y, p, width, height, t0_us, timestep_us, refractory_us, per_polarity,
-            last_t, last_step, out_step, out_x, out_y, out_p, drops):
+def filter_events(t, x, y, p, width, height, t0_us, timestep_us, refractory_us, per_polarity,
+                  last, pad, row, stride, offset, out_step, out_x, out_y, out_p, counts):
+    """Accepted events of one packet as (input step, x, y, polarity) spikes; returns how many.
+
+    The filter word of pixel ``(x, y)`` and channel ``c`` is
+    ``last[((y + pad) * row + x + pad) * stride + offset + c]``; the pixel's latest word
+    is channel 0 with one channel, else word ``offset + 2``. ``counts`` (5 slots)
+    counts drops by reason and the accepted events. Any time order is handled.
+    """
+    latest_word = offset + 2 if per_polarity else offset
+    step, step_start, step_end = np.int64(0), np.int64(1), np.int64(0)  # empty: the first event computes its step
     n_out = 0
     for i in range(t.shape[0]):
-        xi = np.int64(x[i])
-        yi = np.int64(y[i])
+        xi, yi, ti = np.int64(x[i]), np.int64(y[i]), t[i]
         if xi >= width or yi >= height:
-            drops[OUT_OF_BOUNDS] += 1
+            counts[OUT_OF_BOUNDS] += 1
             continue
-        ti = t[i]
         if ti < t0_us:
-            drops[BEFORE_T0] += 1
+            counts[BEFORE_T0] += 1
             continue
-        channel = np.int64(p[i]) if per_polarity else 0
-        if ti - last_t[yi, xi, channel] < refractory_us:
-            drops[REFRACTORY] += 1
-            continue
-        step = (ti - t0_us) // timestep_us
-        if last_step[yi, xi] == step:
-            drops[SAME_STEP] += 1
-            continue
-        last_t[yi, xi, channel] = ti
-        last_step[yi, xi] = step
-        out_step[n_out] = step
-        out_x[n_out] = xi
-        out_y[n_out] = yi
-        out_p[n_out] = p[i]
-        n_out += 1
+        if ti >= step_end or ti < step_start:  # a division only when the step changes
+            step = (ti - t0_us) // timestep_us
+            step_start = t0_us + step * timestep_us
+            step_end = step_start + timestep_us
+        polarity = 1 if p[i] != 0 else 0
+        base = ((yi + pad) * row + xi + pad) * stride
+        word = base + offset + (polarity if per_polarity else 0)
+        reason = admit(last, word, base + latest_word, ti, step_start, step_end, refractory_us)
+        counts[reason] += 1
+        if reason == ACCEPTED:
+            out_step[n_out] = step
+            out_x[n_out], out_y[n_out], out_p[n_out] = xi, yi, polarity
+            n_out += 1
     return n_out
 
 
 class InputFilter:
     """Streaming input process: feed time-ordered event packets, get accepted spikes.
 
-    State is one timestamp and one step per pixel (and polarity, when the refractory
-    period is per polarity), so memory does not grow with the recording.
+    State is one timestamp per pixel (three with a refractory period per polarity), so
+    memory does not grow with the recording.
     """
 
     def __init__(self, sensor_size: tuple[int, int], t0_us: int, timestep_us: int, refractory_us: int,
                  per_polarity: bool = False):
         width, height = sensor_size
-        self.width, self.height = width, height
+        self.width, self.height = int(width), int(height)
         self.t0_us, self.timestep_us, self.refractory_us = int(t0_us), int(timestep_us), int(refractory_us)
         self.per_polarity = bool(per_polarity)
-        self._last_t = np.full((height, width, 2), _NEVER, dtype=np.int64)
-        self._last_step = np.full((height, width), -1, dtype=np.int64)
-        self.drops = np.zeros(len(DROP_REASONS), dtype=np.int64)
+        self._stride = 3 if self.per_polarity else 1
+        self._last = np.full(self.width * self.height * self._stride, NEVER, dtype=np.int64)
+        self._counts = np.zeros(5, dtype=np.int64)
         self.events_in = 0
-        self.accepted = 0
+
+    @property
+    def drops(self) -> np.ndarray:
+        """Drop counts in DROP_REASONS order (a view)."""
+        return self._counts[:ACCEPTED]
+
+    @property
+    def accepted(self) -> int:
+        return int(self._counts[ACCEPTED])
 
     def feed(self, events: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Accepted spikes of ``events``: (input step, x, y, polarity) arrays."""
         n = len(events)
-        out_step = np.empty(n, dtype=np.int64)
-        out_x = np.empty(n, dtype=np.int64)
-        out_y = np.empty(n, dtype=np.int64)
+        out_step, out_x, out_y = np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64)
         out_p = np.empty(n, dtype=np.uint8)
-        count = _filter(events["t"], events["x"], events["y"], events["p"], self.width, self.height,
-                        self.t0_us, self.timestep_us, self.refractory_us, self.per_polarity,
-                        self._last_t, self._last_step, out_step, out_x, out_y, out_p, self.drops)
+        count = filter_events(events["t"], events["x"], events["y"], events["p"], self.width, self.height,
+                              self.t0_us, self.timestep_us, self.refractory_us, self.per_polarity,
+                              self._last, 0, self.width, self._stride, 0, out_step, out_x, out_y, out_p,
+                              self._counts)
         self.events_in += n
-        self.accepted += count
         return out_step[:count], out_x[:count], out_y[:count], out_p[:count]
 
     @property

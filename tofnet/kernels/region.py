@@ -8,14 +8,15 @@ backends run one region covering the sensor; a multi-core backend runs one
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable, Iterator
 
 import numpy as np
 
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, TOT_DTYPE
 from tofnet.kernels.fixed_point import FixedPointFormat
-from tofnet.kernels.time_of_travel import (BASE, CURRENT, IDLE, NO_VELOCITY, PENDING_FULL, REBASE_AFTER, UNSORTED,
-                                          process_spikes)
+from tofnet.kernels import time_of_travel as tt
+from tofnet.kernels.input_filter import ACCEPTED, NEVER, filter_events
 from tofnet.kernels.velocity import sample_grid
 
 
@@ -52,7 +53,8 @@ class KernelConfig:
     """Everything the kernel needs besides spikes and velocities (plain data, picklable).
 
     ``timestep`` seconds, depths metres, ``intrinsics`` (fx, fy, cx, cy) pixels;
-    ``fixed`` the fixed-point format, or None for float64 arithmetic.
+    ``fixed`` the fixed-point format, or None for float64 arithmetic; the input filter's
+    ``refractory_us`` (µs) and ``refractory_per_polarity`` for ``process_events``.
     """
 
     sensor_size: tuple[int, int]
@@ -66,6 +68,8 @@ class KernelConfig:
     patch_size: int
     intrinsics: tuple[float, float, float, float]
     fixed: FixedPointFormat | None = None
+    refractory_us: int = 0
+    refractory_per_polarity: bool = False
 
     @classmethod
     def from_pipeline(cls, pipeline, intrinsics, fixed: FixedPointFormat | None = None) -> "KernelConfig":
@@ -73,7 +77,8 @@ class KernelConfig:
         return cls(tuple(pipeline.sensor_size), pipeline.timestep, pipeline.distance, pipeline.counter_bits,
                    pipeline.min_depth, pipeline.max_depth, pipeline.update_every,
                    pipeline.velocity_per == "pixel", pipeline.velocity_patch_size,
-                   (intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy), fixed)
+                   (intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy), fixed,
+                   pipeline.refractory_us, pipeline.refractory_per_polarity)
 
     @property
     def timestep_us(self) -> int:
@@ -99,14 +104,28 @@ class KernelOutput:
 
     ``depth`` (``DEPTH_DTYPE``): step ``s``, stamp ``t0 + (s+1)*dt`` µs, pixel, ``z`` metres,
     in the order of the spikes that triggered them; ``z_raw`` their fixed-point values
-    (units of ``2**-F`` m; 0 in float arithmetic). ``tot`` the time-of-travel spikes
-    (``TOT_DTYPE``) when asked for; ``tot_spikes`` how many units sent.
+    (units of ``2**-F`` m; 0 in float arithmetic; empty when written ``into`` a caller's
+    buffer). ``tot`` the time-of-travel spikes (``TOT_DTYPE``) when asked for;
+    ``tot_spikes`` how many units sent.
     """
 
     depth: np.ndarray
     z_raw: np.ndarray
     tot: np.ndarray | None
     tot_spikes: int
+
+
+#: Velocity rows for the kernel: ``rows(first_update, n_updates)`` returns ``(table, table_first)``,
+#: a table whose row ``i`` is update ``table_first + i`` (m/s, camera frame), covering the rows asked for.
+VelocityRows = Callable[[int, int], tuple[np.ndarray, int]]
+#: Largest velocity table one kernel call asks for; sparser input is split.
+MAX_VELOCITY_ROWS = 1 << 16
+
+
+def copy_records(records: np.ndarray) -> np.ndarray:
+    """A copy of a contiguous structured array, moved as raw bytes (numpy copies packed records
+    field by field: ~15x slower for a few thousand estimates)."""
+    return records.view(np.dtype((np.void, records.dtype.itemsize))).copy().view(records.dtype)
 
 
 def velocity_rows(steps: np.ndarray, update_every: int) -> tuple[int, int]:
@@ -121,49 +140,143 @@ def velocity_rows(steps: np.ndarray, update_every: int) -> tuple[int, int]:
     return first, (int(steps[-1]) + 1) // update_every - first + 1
 
 
-class TimeOfTravelKernel:
-    """Units and depth neurons of one region, fed accepted input spikes packet by packet.
+def _sample_tables(config: KernelConfig, r: Region) -> tuple[np.ndarray, np.ndarray]:
+    """``samples`` (row and column tables: sample of pixel (x, y) is ``samples[0, y-y0] + samples[1, x-x0]``)
+    and ``points`` (where ``A t`` is evaluated, one per sample: the pixel, or its patch centre)."""
+    (h, w), (width, height) = r.shape, config.sensor_size
+    su, sv = sample_grid(config.per_pixel, config.patch_size, width, height)
+    ys, xs = np.arange(r.y0, r.y1), np.arange(r.x0, r.x1)
+    if config.per_pixel:
+        rows, cols = (ys - r.y0) * w, xs - r.x0
+        py, px = ys, xs
+    else:  # patches tile the sensor from (0, 0); the region overlaps a rectangle of them
+        py, px = ys // config.patch_size, xs // config.patch_size
+        rows, cols = (py - py[0]) * (px[-1] - px[0] + 1), px - px[0]
+        # one pixel of each patch, in sample order: the first of the region inside it
+        ys = ys[np.r_[0, np.flatnonzero(np.diff(py)) + 1]]
+        xs = xs[np.r_[0, np.flatnonzero(np.diff(px)) + 1]]
+    samples = np.zeros((2, max(h, w)), dtype=np.int64)
+    samples[0, :h], samples[1, :w] = rows, cols
+    points = np.stack([su[ys[:, None], xs[None, :]].ravel(), sv[ys[:, None], xs[None, :]].ravel()], axis=1)
+    return samples, np.ascontiguousarray(points)
 
-    Memory is fixed by the region (one int32 per unit, a buffer of one step's spikes and
-    output buffers as large as the largest packet); it does not grow with the recording.
+
+class TimeOfTravelKernel:
+    """Units and depth neurons of one region, fed accepted spikes or raw events packet by packet.
+
+    Memory is fixed by the region (one record of 32 B, 64 B with a refractory period per
+    polarity, per pixel; a buffer of one step's facilitations) plus output buffers as
+    large as the largest packet; it does not grow with the recording.
     """
 
     def __init__(self, config: KernelConfig, region: Region | None = None, t0_us: int = 0):
         config.check()
-        self.t0_us = int(t0_us)  # start of input step 0, for the depth stamps
         self.config = config
         self.region = region if region is not None else Region.full(config.sensor_size)
         r, (width, height) = self.region, config.sensor_size
         if not (0 <= r.x0 < r.x1 <= width and 0 <= r.y0 < r.y1 <= height):
             raise BackendError(f"region {r} is not a non-empty part of the {width}x{height} sensor")
         (h, w), d = r.shape, config.distance
-        self._stamp = np.full((h + 4 * d, w + 4 * d, 4), IDLE, dtype=np.int32)
-        halo = (w + 2 * d) * (h + 2 * d)  # at most one spike per pixel and step
-        self._pend = (np.zeros(halo, np.int64), np.zeros(halo, np.int64), np.zeros(halo, np.uint8))
-        self._cursor = np.array([0, -1, 0], dtype=np.int64)  # buffered, current step, stamp base
-        self._rebase_after = REBASE_AFTER
-        self.rejected = np.zeros(3, dtype=np.int64)  # REJECT_REASONS order
-        self.tot_spikes = 0
-        # Where A t is evaluated: one point per pixel, or one per patch shared by its pixels.
-        su, sv = sample_grid(config.per_pixel, config.patch_size, width, height)
-        uv = np.stack([su[r.y0:r.y1, r.x0:r.x1].ravel(), sv[r.y0:r.y1, r.x0:r.x1].ravel()], axis=1)
-        if config.per_pixel:
-            self._points, index = uv, np.arange(h * w)
-        else:
-            ys, xs = np.divmod(np.arange(h * w), w)
-            patch = ((ys + r.y0) // config.patch_size) * width + (xs + r.x0) // config.patch_size
-            _, first, index = np.unique(patch, return_index=True, return_inverse=True)
-            self._points = uv[first]
-        self._points = np.ascontiguousarray(self._points)
-        self._samples = index.reshape(h, w).astype(np.int64)
+        stride = tt.WORDS_PER_POLARITY if config.refractory_per_polarity else tt.WORDS
+        self._rec = np.full((h + 4 * d) * (w + 4 * d) * stride, NEVER, dtype=np.int64)
+        self._stamp = self._rec.view(np.int32)
+        self._stamp.reshape(-1, 2 * stride)[:, :4] = tt.IDLE
+        self._pend = np.zeros((w + 2 * d) * (h + 2 * d), np.int64)  # at most one spike per pixel and step
+        self._cursor = np.zeros(tt.N_CURSOR, dtype=np.int64)
+        self._cursor[[tt.CURRENT, tt.T_HI]] = -1, NEVER
+        self._counts = np.zeros(tt.N_COUNTS, dtype=np.int64)
+        self.rejected = self._counts[tt.REJECTED:tt.REJECTED + 3]  # REJECT_REASONS order (a view)
+        fmt = config.fixed
+        ip = np.zeros(tt.N_IP, dtype=np.int64)
+        ip[[tt.X0, tt.Y0, tt.X1, tt.Y1, tt.DISTANCE, tt.COUNTER_MAX, tt.REBASE_AT, tt.UPDATE_EVERY]] = (
+            r.x0, r.y0, r.x1, r.y1, d, (1 << config.counter_bits) - 1, tt.REBASE_AFTER, config.update_every)
+        if fmt is not None:
+            ip[[tt.FIXED, tt.FRAC_BITS, tt.PAYLOAD_BITS, tt.MIN_RAW, tt.MAX_RAW]] = (
+                1, fmt.frac_bits, fmt.payload_bits, fmt.quantize(config.min_depth), fmt.quantize(config.max_depth))
+        ip[[tt.T0, tt.DT, tt.REFRACTORY, tt.PER_POLARITY, tt.WIDTH, tt.HEIGHT, tt.STRIDE, tt.ROW]] = (
+            t0_us, config.timestep_us, config.refractory_us, config.refractory_per_polarity, width, height,
+            stride, w + 4 * d)
+        self._ip = ip
+        self._fp = np.array([*config.intrinsics, config.seconds_per_count, config.min_depth, config.max_depth])
+        self._samples, self._points = _sample_tables(config, r)
         n_points = len(self._points)
         self._cache = (np.full(n_points, -1, np.int64), np.zeros((n_points, 2)), np.zeros((n_points, 2), np.int64))
-        fmt = config.fixed
-        self._arith = (fmt is not None, config.seconds_per_count, config.min_depth, config.max_depth,
-                       fmt.frac_bits if fmt else 0, fmt.payload_bits if fmt else 32,
-                       fmt.quantize(config.min_depth) if fmt else 0, fmt.quantize(config.max_depth) if fmt else 0)
         self._out, self._raw, self._tot = np.empty(0, DEPTH_DTYPE), np.empty(0, np.int64), np.empty(0, TOT_DTYPE)
         self._broken = False
+        # Scalars and empty arrays the per-packet path needs, looked up once.
+        self._t0, self._dt, self._u = int(t0_us), config.timestep_us, config.update_every
+        self._span_us = (MAX_VELOCITY_ROWS - 2) * config.update_every * config.timestep_us
+        self._full = self.region == Region.full(config.sensor_size)
+        self._no_raw, self._no_velocity = np.empty(0, np.int64), np.zeros((0, 3))
+        self._state = (self._rec, self._stamp, self._pend, self._cursor, self._counts, self._ip, self._fp,
+                       self._samples, self._points, *self._cache)
+
+    @property
+    def t0_us(self) -> int:
+        """Start of input step 0 (µs): the depth stamps and the input filter's steps count from it."""
+        return self._t0
+
+    @t0_us.setter
+    def t0_us(self, value: int) -> None:
+        self._t0 = self._ip[tt.T0] = int(value)
+
+    @property
+    def _rebase_after(self) -> int:
+        return int(self._ip[tt.REBASE_AT])
+
+    @_rebase_after.setter
+    def _rebase_after(self, steps: int) -> None:  # tests rebase often
+        self._ip[tt.REBASE_AT] = steps
+
+    @property
+    def tot_spikes(self) -> int:
+        """Time-of-travel spikes sent so far."""
+        return int(self._counts[tt.TOT_SPIKES])
+
+    @property
+    def accepted(self) -> int:
+        """Events ``process_events`` accepted so far."""
+        return int(self._counts[ACCEPTED])
+
+    @property
+    def drops(self) -> np.ndarray:
+        """Events ``process_events`` dropped so far, in DROP_REASONS order (a view)."""
+        return self._counts[:ACCEPTED]
+
+    def _reserve(self, n_out: int, n_spikes: int) -> None:
+        """Room for ``n_out`` estimates and the time-of-travel spikes of ``n_spikes`` input spikes."""
+        if n_out > len(self._out):  # reused across calls, grown geometrically
+            size = max(n_out, 2 * len(self._out))
+            self._out, self._raw = np.empty(size, DEPTH_DTYPE), np.empty(size, np.int64)
+        if 4 * n_spikes > len(self._tot):
+            self._tot = np.empty(max(4 * n_spikes, 2 * len(self._tot)), TOT_DTYPE)
+
+    def _call(self, ts, xs, ys, ps, filtering: bool, table: np.ndarray, first_update: int,
+              out: np.ndarray, raw: np.ndarray, n_out: int, record_tot: bool, n_tot: int) -> tuple[int, int, int]:
+        return tt.process(ts, xs, ys, ps, filtering, *self._state, table, first_update, out, raw, n_out, record_tot,
+                          self._tot, n_tot)
+
+    def _raise_for(self, status: int, table: np.ndarray, first_update: int) -> None:
+        if status == tt.NO_VELOCITY:
+            first, last = ((int(self._cursor[slot]) + 1) // self._u for slot in (tt.NEED_FIRST, tt.NEED_LAST))
+            raise BackendError(f"velocity table holds updates [{first_update}, {first_update + len(table)}); "
+                               f"these spikes need [{first}, {last + 1})")
+        if status == tt.UNSORTED:
+            raise BackendError("input spikes are not sorted by step (events must be in time order and "
+                               "each packet must follow the previous one)")
+        if status == tt.PENDING_FULL:
+            self._broken = True
+            raise BackendError("more than one input spike for one pixel in one step "
+                               "(feed the spikes InputFilter accepted)")
+
+    def _output(self, out: np.ndarray, raw: np.ndarray, lo: int, hi: int, n_tot: int, record_tot: bool,
+                spikes_before: int, copy: bool) -> KernelOutput:
+        depth, z_raw = out[lo:hi], raw[lo:hi] if len(raw) else raw
+        tot = self._tot[:n_tot] if record_tot else None
+        if copy:
+            depth, z_raw = copy_records(depth), z_raw.copy()
+            tot = copy_records(tot) if record_tot else None
+        return KernelOutput(depth, z_raw, tot, int(self._counts[tt.TOT_SPIKES]) - spikes_before)
 
     def process(self, steps: np.ndarray, xs: np.ndarray, ys: np.ndarray, ps: np.ndarray,
                 velocity_table: np.ndarray, first_update: int, *, record_tot: bool = False,
@@ -180,40 +293,112 @@ class TimeOfTravelKernel:
         """
         if self._broken:
             raise BackendError("kernel state is invalid after an earlier error; start a new one")
-        cfg, r = self.config, self.region
+        spikes_before = self.tot_spikes
         steps = np.ascontiguousarray(steps, dtype=np.int64)
         xs = np.ascontiguousarray(xs, dtype=np.int64)
         ys = np.ascontiguousarray(ys, dtype=np.int64)
         ps = np.ascontiguousarray(ps, dtype=np.uint8)
-        velocity_table = np.ascontiguousarray(velocity_table, dtype=np.float64)
-        n = len(steps)
-        if n > len(self._out):  # reused across calls, grown geometrically
-            size = max(n, 2 * len(self._out))
-            self._out, self._raw = np.empty(size, DEPTH_DTYPE), np.empty(size, np.int64)
-        if record_tot and 4 * n > len(self._tot):
-            self._tot = np.empty(max(4 * n, 2 * len(self._tot)), TOT_DTYPE)
-        n_out, n_tot, n_spikes, status = process_spikes(
-            steps, xs, ys, ps, self._stamp.reshape(-1), self._cursor, *self._pend,
-            r.x0, r.y0, r.x1, r.y1, cfg.distance, (1 << cfg.counter_bits) - 1, self._rebase_after,
-            self._samples, self._points, *self._cache, velocity_table, first_update, cfg.update_every, *cfg.intrinsics,
-            *self._arith, self.t0_us, cfg.timestep_us, self._out, self._raw, self.rejected,
-            record_tot, self._tot)
-        if status == NO_VELOCITY:
-            first, count = velocity_rows(steps, cfg.update_every)
-            raise BackendError(f"velocity table holds updates [{first_update}, {first_update + len(velocity_table)}); "
-                               f"these spikes need [{first}, {first + count})")
-        if status == UNSORTED:
-            raise BackendError("input spikes are not sorted by step (events must be in time order and "
-                               "each packet must follow the previous one)")
-        if status == PENDING_FULL:
-            self._broken = True
-            raise BackendError("more than one input spike for one pixel in one step "
-                               "(feed the spikes InputFilter accepted)")
-        self.tot_spikes += n_spikes
-        depth, raw, tot = self._out[:n_out], self._raw[:n_out], self._tot[:n_tot] if record_tot else None
-        if copy:
-            depth, raw, tot = depth.copy(), raw.copy(), tot.copy() if tot is not None else None
-        return KernelOutput(depth, raw, tot, n_spikes)
+        table = np.ascontiguousarray(velocity_table, dtype=np.float64)
+        self._reserve(len(steps), len(steps) if record_tot else 0)
+        n_out, n_tot, status = self._call(steps, xs, ys, ps, False, table, first_update, self._out, self._raw, 0,
+                                          record_tot, 0)
+        self._raise_for(status, table, first_update)
+        return self._output(self._out, self._raw, 0, n_out, n_tot, record_tot, spikes_before, copy)
+
+    def process_events(self, events: np.ndarray, velocity: VelocityRows, *, record_tot: bool = False,
+                       copy: bool = True, into: np.ndarray | None = None, offset: int = 0) -> KernelOutput:
+        """Run raw events (``EVENT_DTYPE``) through the input filter and the region, in one pass.
+
+        The region must be the whole sensor; the filter's state (refractory period, one
+        event per pixel and step, drop counts: ``drops``, ``accepted``) lives in the kernel.
+        Events in time order take the fused path; a packet out of order is filtered first
+        and then run as spikes, exactly as ``InputFilter.feed`` + ``process`` would (so it
+        is refused when accepted spikes go back in time). ``velocity`` supplies velocity
+        rows (``VelocityRows``). Estimates go to ``into[offset:]`` when given (capacity
+        ``offset + len(events)``; no ``z_raw``), else to an internal buffer.
+        """
+        if self._broken or not self._full:
+            raise BackendError("kernel state is invalid after an earlier error; start a new one" if self._broken else
+                               "process_events runs the input filter: the region must be the whole sensor")
+        spikes_before, n = self._counts[tt.TOT_SPIKES], len(events)
+        if into is None:
+            if n > len(self._out) or (record_tot and 4 * n > len(self._tot)):
+                self._reserve(n, n if record_tot else 0)
+            out, raw, offset = self._out, self._raw, 0
+        elif len(into) < offset + n:
+            raise BackendError(f"output buffer holds {len(into)} estimates, {offset + n} may be written")
+        else:
+            self._reserve(0, n if record_tot else 0)
+            out, raw = into, self._no_raw
+        t = events["t"]
+        if n == 0 or int(t[-1]) - int(t[0]) < self._span_us:  # one velocity table is enough (the usual case)
+            n_out, n_tot = self._events(events, t, velocity, out, raw, offset, record_tot, 0)
+        else:
+            n_out, n_tot = offset, 0
+            for lo, hi in self._pieces(t):
+                piece = events[lo:hi]
+                n_out, n_tot = self._events(piece, piece["t"], velocity, out, raw, n_out, record_tot, n_tot)
+        return self._output(out, raw, offset, n_out, n_tot, record_tot, int(spikes_before), copy)
+
+    def _updates(self, first_step: int, last_step: int) -> tuple[int, int]:
+        """``(first_update, n_updates)`` the depth neurons of input steps ``first_step .. last_step`` hold."""
+        first = (first_step + 1) // self._u
+        return first, max((last_step + 1) // self._u - first + 1, 1)
+
+    def _pieces(self, t: np.ndarray) -> Iterator[tuple[int, int]]:
+        """Split time-ordered events so that no piece needs more than ``MAX_VELOCITY_ROWS`` velocity rows."""
+        t0, dt, u, lo, n = self._t0, self._dt, self._u, 0, len(t)
+        while lo < n:
+            first = ((max(int(t[lo]), t0) - t0) // dt + 1) // u
+            cut = t0 + ((first + MAX_VELOCITY_ROWS) * u - 1) * dt  # first time whose update is first + MAX
+            hi = n if int(t[n - 1]) < cut else max(int(np.searchsorted(t[lo:], cut)) + lo, lo + 1)
+            yield lo, hi
+            lo = hi
+
+    def _events(self, events, t, velocity: VelocityRows, out, raw, n_out: int, record_tot: bool,
+                n_tot: int) -> tuple[int, int]:
+        """One piece of ``process_events``; returns the output positions after it."""
+        t0, dt = self._t0, self._dt
+        last = int(t[-1]) if len(t) else t0 - 1
+        if last >= t0:  # rows for every event from the first to the last (exact when in order)
+            table, first = velocity(*self._updates((max(int(t[0]), t0) - t0) // dt, (last - t0) // dt))
+        else:
+            table, first = self._no_velocity, 0
+        args = (t, events["x"], events["y"], events["p"], True)
+        n_out2, n_tot2, status = self._call(*args, table, first, out, raw, n_out, record_tot, n_tot)
+        if status == tt.OK:
+            return n_out2, n_tot2
+        if status == tt.NO_VELOCITY:  # events out of time order outside the sensor: ask for what is needed
+            table, first = velocity(*self._updates(int(self._cursor[tt.NEED_FIRST]), int(self._cursor[tt.NEED_LAST])))
+            n_out2, n_tot2, status = self._call(*args, table, first, out, raw, n_out, record_tot, n_tot)
+        if status == tt.UNSORTED:
+            return self._events_unsorted(events, velocity, out, raw, n_out, record_tot, n_tot)
+        self._raise_for(status, table, first)
+        return n_out2, n_tot2
+
+    def _events_unsorted(self, events, velocity: VelocityRows, out, raw, n_out: int, record_tot: bool,
+                         n_tot: int) -> tuple[int, int]:
+        """Events out of time order: the input filter first, then the spikes it accepted (the unfused path)."""
+        cfg, d, ip, n = self.config, self.config.distance, self._ip, len(events)
+        t, x, y = events["t"], events["x"], events["y"]
+        steps, xs, ys, ps = np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.uint8)
+        count = filter_events(t, x, y, events["p"], *cfg.sensor_size, self.t0_us, cfg.timestep_us, cfg.refractory_us,
+                              cfg.refractory_per_polarity, self._rec, 2 * d, int(ip[tt.ROW]), int(ip[tt.STRIDE]),
+                              tt.FILTER_WORD, steps, xs, ys, ps, self._counts)
+        candidates = t[(x < cfg.sensor_size[0]) & (y < cfg.sensor_size[1]) & (t >= self.t0_us)]
+        if len(candidates):  # later packets in time order must not go back before these
+            self._cursor[tt.T_HI] = max(int(self._cursor[tt.T_HI]), int(candidates.max()))
+        lo = 0
+        while lo < count:  # keep each call's velocity table small even when the spikes are sparse in time
+            first = (int(steps[lo]) + 1) // cfg.update_every
+            hi = int(np.searchsorted(steps[:count], (first + MAX_VELOCITY_ROWS) * cfg.update_every - 1, side="left"))
+            hi = max(hi, lo + 1)  # only when the steps are unsorted, which the kernel refuses
+            table, table_first = velocity(*self._updates(int(steps[lo]), int(steps[hi - 1])))
+            n_out, n_tot, status = self._call(steps[lo:hi], xs[lo:hi], ys[lo:hi], ps[lo:hi], False, table,
+                                              table_first, out, raw, n_out, record_tot, n_tot)
+            self._raise_for(status, table, table_first)
+            lo = hi
+        return n_out, n_tot
 
     def unit_state(self) -> tuple[np.ndarray, np.ndarray]:
         """Per unit of the region (``[H, W, 4]``): step of its last facilitation (-1: idle) and polarity.
@@ -222,12 +407,13 @@ class TimeOfTravelKernel:
         """
         d = self.config.distance
         h, w = self.region.shape
-        stamp = self._stamp[2 * d:2 * d + h, 2 * d:2 * d + w].astype(np.int64)
-        idle = stamp == IDLE
-        step = np.where(idle, -1, (stamp >> 1) + self._cursor[BASE])
+        stamps = self._stamp.reshape(h + 4 * d, w + 4 * d, -1)[2 * d:2 * d + h, 2 * d:2 * d + w, :4]
+        stamp = stamps.astype(np.int64)
+        idle = stamp == tt.IDLE
+        step = np.where(idle, -1, (stamp >> 1) + self._cursor[tt.BASE])
         return step, np.where(idle, 0, stamp & 1).astype(np.int8)
 
     @property
     def current_step(self) -> int:
         """Input step of the latest spike processed (-1 before the first)."""
-        return int(self._cursor[CURRENT])
+        return int(self._cursor[tt.CURRENT])

@@ -10,202 +10,316 @@ events, not to pixels x steps. An accepted input spike of input step ``k``
   (pixel inside the region or its halo),
 - and the counters that fired reach the pixel's depth neuron in step ``k+2``.
 
-All triggers of a step are resolved before any facilitation of that step. A step is
-processed as a run of spikes: triggers, then facilitations. The last step of a call may
-continue in the next call, so its facilitations wait in a buffer that is part of the
-state; packets may therefore be split anywhere, even inside a step.
+``process`` takes either accepted spikes (input step, x, y, polarity), or raw events
+(t µs, x, y, polarity) that it runs through the input filter (``input_filter.admit``)
+in the same pass ("fused": one read of each event, no intermediate arrays).
 
-State layout (chosen for speed: random pixels make this cache-bound). One int32
-``stamp`` per unit, ``((a - base) << 1) | polarity``, in an array ``[H + 4d, W + 4d, 4]``
-(region padded by ``2*distance`` so facilitation writes need no bounds checks; padding
-units never trigger). ``base`` moves forward ("rebase") before the stamps could
-overflow int32, about every 2**30 steps (12 days at 1 ms). For a trigger of polarity
-``p`` the difference ``key - stamp`` with ``key = ((now - base) << 1) | p`` is
-``2*(now - a)`` when the polarities match and odd otherwise, so one subtraction tests
-both. Idle units hold ``IDLE``, whose difference exceeds any counter maximum.
+All triggers of a step are resolved before any facilitation of that step: a spike
+triggers at once and its facilitations wait in ``pend`` until a spike of a later step
+arrives (in this call or a later one), so packets may be split anywhere.
+
+State layout (docs/performance.md has the measurements behind it). One record of
+``stride`` int64 words per pixel of the region padded by ``2*distance`` (facilitation
+writes need no bounds checks; padding units never trigger): words 0-1 hold the four
+units' int32 stamps ``((a - base) << 1) | polarity`` (channel order +u, -u, +v, -v),
+words 2.. the input filter's last-event times, so the filter and the triggers of an
+event touch one cache line. ``base`` moves forward ("rebase") before the stamps could
+overflow int32, about every 2**30 steps. For a trigger of polarity ``p`` the
+difference ``key - stamp`` with ``key = ((now - base) << 1) | p`` is ``2*(now - a)``
+when the polarities match and odd otherwise, so one subtraction tests both. Idle units
+hold ``IDLE``, whose difference exceeds any counter maximum.
+
+The per-event path has no data-dependent branches after the filter (random input
+makes them mispredict): unit firing, axis counts and the depth outcome are computed
+with integer masks, and every triggered pixel writes an output record that only
+counts when emitted. State lines of the event ``PREFETCH`` places ahead are prefetched.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
-from tofnet.kernels.depth import EMITTED, classify, float_depth, signed_axis_count
+from tofnet.kernels.depth import float_depth
 from tofnet.kernels.fixed_point import fixed_depth, quantize
+from tofnet.kernels.input_filter import ACCEPTED, BEFORE_T0, OUT_OF_BOUNDS, admit
 from tofnet.kernels.velocity import velocity_term
 
 #: Stamp of an idle unit (never facilitated, sent since, or overflowed at a rebase).
 IDLE = -(1 << 31)
 #: Rebase when ``now - base`` exceeds this, keeping ``key`` below 2**31.
 REBASE_AFTER = (1 << 30) - 4
-# Kernel status codes.
+#: int64 words per pixel record: 4 stamps + filter time (32 B), or + 3 filter times (64 B).
+WORDS, WORDS_PER_POLARITY = 4, 8
+FILTER_WORD = 2
+#: Events (or pending facilitations) between a prefetch and its use.
+PREFETCH = 12
+# Status codes.
 OK, UNSORTED, PENDING_FULL, NO_VELOCITY = 0, 1, 2, 3
-# Cursor slots: buffered facilitations, current input step, stamp base.
-N_PEND, CURRENT, BASE = 0, 1, 2
+# Cursor slots: buffered facilitations, current input step, stamp base, latest event time
+# seen by the fused path, and the step range a call needs velocities for (NO_VELOCITY).
+N_PEND, CURRENT, BASE, T_HI, NEED_FIRST, NEED_LAST = range(6)
+N_CURSOR = 6
+# Count slots: input_filter's drop reasons and ACCEPTED (0-4), depth outcomes (5-9:
+# REJECT_REASONS, emitted, no unit fired), time-of-travel spikes.
+REJECTED, EMITTED, INACTIVE, TOT_SPIKES, N_COUNTS = 5, 8, 9, 10, 11
+# Integer parameters (``ip``).
+(X0, Y0, X1, Y1, DISTANCE, COUNTER_MAX, REBASE_AT, UPDATE_EVERY, FIXED, FRAC_BITS, PAYLOAD_BITS, MIN_RAW,
+ MAX_RAW, T0, DT, REFRACTORY, PER_POLARITY, WIDTH, HEIGHT, STRIDE, ROW, N_IP) = range(22)
+# Float parameters (``fp``).
+FX, FY, CX, CY, SECONDS_PER_COUNT, MIN_DEPTH, MAX_DEPTH, N_FP = range(8)
+
+_BIG = 1 << 40  # above any counter value
+
+
+@intrinsic
+def prefetch(typingctx, array, index):
+    """Hint the CPU to fetch ``array[index]`` for writing (``llvm.prefetch``; no bounds check)."""
+    if not isinstance(array, types.Array):
+        return None
+
+    def codegen(context, builder, signature, args):
+        array_type = signature.args[0]
+        view = context.make_array(array_type)(context, builder, args[0])
+        pointer = cgutils.get_item_pointer(context, builder, array_type, view, [args[1]], wraparound=False)
+        byte_pointer = ir.IntType(8).as_pointer()
+        i32 = ir.IntType(32)
+        fn = cgutils.get_or_insert_function(
+            builder.module, ir.FunctionType(ir.VoidType(), [byte_pointer, i32, i32, i32]), "llvm.prefetch.p0i8")
+        # write, keep in all cache levels, data
+        builder.call(fn, [builder.bitcast(pointer, byte_pointer), i32(1), i32(3), i32(1)])
+        return context.get_dummy_value()
+
+    return types.void(array, index), codegen
+
+
+@njit(cache=True, inline="always")
+def _unit(stamp, u, key, max_diff):
+    """Trigger unit ``stamp[u]``: (counter it sends or 0, 1 if it fired); a unit that fires goes idle."""
+    s = stamp[u]
+    diff = key - np.int64(s)  # 2*(now - a) with the same polarity, odd otherwise
+    fired = np.int64(np.uint64(diff - 2) <= np.uint64(max_diff - 2)) & ~diff & 1
+    stamp[u] = np.int32(IDLE) if fired else s
+    return (diff >> 1) & -fired, fired
 
 
 @njit(cache=True)
-def _facilitate(stamp, xs, ys, ps, lo, hi, key_base, hx0, hy0, hx1, hy1, pad_x, pad_y, row, d):
-    """Facilitate, from spikes ``lo .. hi-1``, units ``(x + d*D, D)`` with stamp ``key_base | polarity``."""
-    du, dv = np.uint64(4 * d), np.uint64(row * d)
-    for e in range(lo, hi):
-        x, y = xs[e], ys[e]
-        if hx0 <= x < hx1 and hy0 <= y < hy1:
-            key = np.int32(key_base | (1 if ps[e] != 0 else 0))
-            unit = np.uint64((y + pad_y) * row + (x + pad_x) * 4)  # unsigned: no wraparound checks
-            stamp[unit + du] = key  # +u: the pixel an edge moving +u reaches next
-            stamp[unit - du + np.uint64(1)] = key  # -u
-            stamp[unit + dv + np.uint64(2)] = key  # +v
-            stamp[unit - dv + np.uint64(3)] = key  # -v
+def axis_count(m_positive: int, m_negative: int) -> int:
+    """``depth.signed_axis_count`` without branches: the smaller of two counts (0 = none), signed; a tie is 0."""
+    a = m_positive if m_positive > 0 else _BIG
+    b = m_negative if m_negative > 0 else _BIG
+    return np.int64(a < b) * m_positive - np.int64(b < a) * m_negative
 
 
 @njit(cache=True)
-def _buffer(xs, ys, ps, lo, hi, pend_x, pend_y, pend_p, n_pend, hx0, hy0, hx1, hy1):
-    """Append the spikes of an unfinished step that facilitate the region; -1 when full."""
-    for e in range(lo, hi):
-        x, y = xs[e], ys[e]
-        if hx0 <= x < hx1 and hy0 <= y < hy1:
-            if n_pend == pend_x.shape[0]:  # more than one spike per pixel in a step
-                return -1
-            pend_x[n_pend], pend_y[n_pend], pend_p[n_pend] = x, y, ps[e]
-            n_pend += 1
-    return n_pend
+def outcome(fired: int, measured: bool, z, min_depth, max_depth) -> int:
+    """``depth.classify`` without branches, as a count slot offset: REJECT_REASONS index,
+    3 emitted, 4 no unit fired (the depth neuron received nothing)."""
+    near = np.int64(z <= min_depth)
+    far = np.int64(z >= max_depth) & (1 - near)
+    slot = np.int64(measured) * (3 - 2 * near - far)
+    return slot if fired else 4
 
 
 @njit(cache=True)
-def _rebase(stamp, base, new_base, counter_max):
+def _flush(stamp, pend, n_pend, key_base, su, sv):
+    """Apply buffered facilitations ``(stamp index << 1) | polarity`` of one step (key ``key_base``)."""
+    one, two, three = np.uint64(1), np.uint64(2), np.uint64(3)
+    for q in range(n_pend):
+        if q + PREFETCH < n_pend:
+            w = np.uint64(pend[q + PREFETCH] >> 1)
+            prefetch(stamp, w + su)
+            prefetch(stamp, w - su)
+            prefetch(stamp, w + sv)
+            prefetch(stamp, w - sv)
+        v = pend[q]
+        key = np.int32(key_base | (v & 1))
+        u = np.uint64(v >> 1)
+        stamp[u + su] = key  # +u: the pixel an edge moving +u reaches next
+        stamp[u - su + one] = key  # -u
+        stamp[u + sv + two] = key  # +v
+        stamp[u - sv + three] = key  # -v
+
+
+@njit(cache=True)
+def _rebase(stamp, stride, base, new_base, counter_max):
     """Re-express stamps relative to ``new_base``; units too old to ever fire become idle."""
     shift = (new_base - base) << 1
-    for i in range(stamp.shape[0]):
-        s = stamp[i]
-        if s != IDLE:
-            v = np.int64(s) - shift
-            if -(v >> 1) > counter_max:  # age at new_base: past the counter maximum
-                stamp[i] = IDLE
-            else:
-                stamp[i] = v
+    for r in range(0, stamp.shape[0], 2 * stride):
+        for c in range(4):
+            s = stamp[r + c]
+            if s != IDLE:
+                v = np.int64(s) - shift
+                stamp[r + c] = IDLE if -(v >> 1) > counter_max else v  # past the counter maximum at new_base
 
 
 @njit(cache=True)
-def process_spikes(steps, xs, ys, ps, stamp, cursor, pend_x, pend_y, pend_p,
-                   x0, y0, x1, y1, distance, counter_max, rebase_after,
-                   samples, points, cache_j, cache_at, cache_w, velocity, first_update, update_every,
-                   fx, fy, cx, cy,
-                   fixed, seconds_per_count, min_depth, max_depth, frac_bits, payload_bits, min_raw, max_raw,
-                   t0_us, timestep_us, out, out_raw, rejected, record_tot, tot):
-    """Run sorted accepted spikes through a region; returns (n_depth, n_tot, n_spikes, status).
+def _check(ts, xs, ys, filtering, cursor, ip, n_rows, first_update):
+    """Refuse input out of order or beyond the velocity table before any state changes; returns a status."""
+    n = ts.shape[0]
+    found = False
+    lo = hi = np.int64(0)
+    if filtering:  # events: the ones the filter may accept must be in time order (also after earlier calls)
+        t_hi, t0, width, height = cursor[T_HI], ip[T0], ip[WIDTH], ip[HEIGHT]
+        for i in range(n):
+            if xs[i] < width and ys[i] < height and ts[i] >= t0:
+                if ts[i] < t_hi:
+                    return UNSORTED
+                if not found:
+                    lo, found = ts[i], True
+                t_hi = ts[i]
+        lo, hi = (lo - t0) // ip[DT], (t_hi - t0) // ip[DT]
+    else:  # spikes: sorted by step, continuing the previous call's
+        previous = max(cursor[CURRENT], 0)
+        for i in range(n):
+            if ts[i] < previous:
+                return UNSORTED
+            previous = ts[i]
+        if n:
+            lo, hi, found = ts[0], ts[n - 1], True
+    u = ip[UPDATE_EVERY]
+    if found and ((lo + 1) // u < first_update or (hi + 1) // u - first_update >= n_rows):
+        cursor[NEED_FIRST], cursor[NEED_LAST] = lo, hi
+        return NO_VELOCITY
+    return OK
 
-    ``samples[pixel]`` indexes ``points`` (where ``A t`` is evaluated); pixels of one patch
-    share an index, so ``A t`` and ``W`` are computed once per velocity update ``j`` and
-    cached (``cache_j`` the update each cache entry holds, ``cache_at`` / ``cache_w``).
 
-    Depth estimates go to ``out`` (``DEPTH_DTYPE``) and their fixed-point values to
-    ``out_raw``; the time-of-travel spikes to ``tot`` (``TOT_DTYPE``) when ``record_tot``;
-    ``rejected`` counts by reason.
+@njit(cache=True)
+def process(ts, xs, ys, ps, filtering, rec, stamp, pend, cursor, counts, ip, fp,
+            samples, points, cache_j, cache_at, cache_w, velocity, first_update,
+            out, out_raw, n_out, record_tot, tot, n_tot):
+    """Run a packet through the region; returns ``(n_out, n_tot, status)``.
+
+    ``filtering``: ``ts`` are event times (µs) and the input filter runs first (full-sensor
+    region only); else ``ts`` are input steps of accepted spikes. Depth estimates are
+    written to ``out[n_out:]`` (``DEPTH_DTYPE``, capacity ``n_out + len(ts)``) and their
+    fixed-point values to ``out_raw`` unless it is empty; time-of-travel spikes to ``tot``
+    (from ``n_tot`` on) when ``record_tot``. ``samples[0, y - y0] + samples[1, x - x0]`` indexes ``points``
+    (where ``A t`` is evaluated); ``A t`` and ``W`` are cached per sample and velocity
+    update (``cache_j``). ``velocity[j - first_update]`` is the velocity of update ``j``.
     """
-    n = steps.shape[0]
-    previous = max(cursor[CURRENT], 0)
-    for i in range(n):  # check first, so that bad input leaves the state untouched
-        if steps[i] < previous:
-            return 0, 0, 0, UNSORTED
-        previous = steps[i]
-    if n and ((steps[0] + 1) // update_every < first_update or
-              (steps[n - 1] + 1) // update_every - first_update >= velocity.shape[0]):
-        return 0, 0, 0, NO_VELOCITY
-    n_pend, current, base = cursor[N_PEND], cursor[CURRENT], cursor[BASE]
-    d = distance
-    pad_x, pad_y = 2 * d - x0, 2 * d - y0
-    row_len = 4 * (x1 - x0 + 4 * d)  # stamps per padded row
-    hx0, hy0, hx1, hy1 = x0 - d, y0 - d, x1 + d, y1 + d
-    max_diff = 2 * counter_max
+    status = _check(ts, xs, ys, filtering, cursor, ip, velocity.shape[0], first_update)
+    if status != OK:
+        return n_out, n_tot, status
+    n = ts.shape[0]
+    x0, y0, x1, y1, d = ip[X0], ip[Y0], ip[X1], ip[Y1], ip[DISTANCE]
+    t0, dt, refractory, width, height = ip[T0], ip[DT], ip[REFRACTORY], ip[WIDTH], ip[HEIGHT]
+    stride, row, update_every = ip[STRIDE], ip[ROW], ip[UPDATE_EVERY]
+    per_polarity, fixed = ip[PER_POLARITY] != 0, ip[FIXED] != 0
+    frac_bits, payload_bits = ip[FRAC_BITS], ip[PAYLOAD_BITS]
+    fx, fy, cx, cy, seconds_per_count = fp[FX], fp[FY], fp[CX], fp[CY], fp[SECONDS_PER_COUNT]
     lsb = 1.0 / (1 << frac_bits)
-    n_out = n_tot = n_spikes = 0
-    m = np.zeros(4, dtype=np.int64)  # what the four units of a pixel send
-    i = 0
-    while i < n:
-        k = steps[i]
-        j = i + 1
-        while j < n and steps[j] == k:
-            j += 1
-        if k != current:
-            if n_pend > 0:  # the buffered part of step `current` is complete
-                _facilitate(stamp, pend_x, pend_y, pend_p, 0, n_pend, (current + 1 - base) << 1,
-                            hx0, hy0, hx1, hy1, pad_x, pad_y, row_len, d)
-                n_pend = 0
-            current = k
-            if k + 1 - base > rebase_after:
-                _rebase(stamp, base, k + 1, counter_max)
-                base = k + 1
-        now = k + 1
-        key_now = (now - base) << 1
-        # The depth neurons of this step's spikes run in step k+2 and hold velocity update (k+1) // U
-        # (hoisted: an int64 division per spike costs more than the rest of the depth neuron).
-        update = (k + 1) // update_every
-        row = update - first_update
-        tx, ty, tz = velocity[row, 0], velocity[row, 1], velocity[row, 2]
-        stamp_us = t0_us + (k + 3) * timestep_us  # end of depth step k+2
-        # 1. Triggers (inline: a helper taking arrays costs refcount atomics per call).
-        for e in range(i, j):
-            x, y = xs[e], ys[e]
-            if not (x0 <= x < x1 and y0 <= y < y1):
+    max_diff = 2 * ip[COUNTER_MAX]
+    latest = FILTER_WORD + 2 if per_polarity else FILTER_WORD
+    hx0, hy0, hx1, hy1 = x0 - d, y0 - d, x1 + d, y1 + d
+    pad_x, pad_y = 2 * d - x0, 2 * d - y0
+    su, sv = np.uint64(2 * stride * d), np.uint64(2 * stride * row * d)  # stamp offsets of the neighbours
+    keep_raw = out_raw.shape[0] > 0
+    n_pend, current, base = cursor[N_PEND], cursor[CURRENT], cursor[BASE]
+    step, step_start, step_end = np.int64(0), np.int64(0), np.int64(-(1 << 62))  # filter's step
+    hoisted = np.int64(-(1 << 62))  # the step whose key, velocity and stamp are below
+    key_now = update = stamp_us = np.int64(0)
+    tx = ty = tz = 0.0
+    for i in range(n):
+        if i + PREFETCH < n:
+            xq, yq = np.int64(xs[i + PREFETCH]), np.int64(ys[i + PREFETCH])
+            if hx0 <= xq < hx1 and hy0 <= yq < hy1:
+                prefetch(rec, ((yq + pad_y) * row + xq + pad_x) * stride)
+        x, y = np.int64(xs[i]), np.int64(ys[i])
+        polarity = 1 if ps[i] != 0 else 0
+        r = ((y + pad_y) * row + x + pad_x) * stride  # the pixel's record (valid inside the halo)
+        if filtering:
+            t = ts[i]
+            if x >= width or y >= height:
+                counts[OUT_OF_BOUNDS] += 1
                 continue
-            key = key_now | (1 if ps[e] != 0 else 0)
-            unit = np.uint64((y + pad_y) * row_len + (x + pad_x) * 4)
-            fired = 0
-            for c in range(4):
-                diff = key - stamp[unit + np.uint64(c)]  # 2*(now - a) if same polarity, odd otherwise
-                if 2 <= diff <= max_diff and (diff & 1) == 0:
-                    stamp[unit + np.uint64(c)] = IDLE  # idle until facilitated again
-                    m[c] = diff >> 1
-                    fired += 1
-                else:  # idle, overflowed, or the other polarity (that counter keeps running)
-                    m[c] = 0
-            if fired == 0:
+            if t < t0:
+                counts[BEFORE_T0] += 1
                 continue
-            n_spikes += fired
-            if record_tot:
-                for c in range(4):
-                    if m[c] > 0:
-                        record = tot[n_tot]
-                        record.step, record.x, record.y, record.direction, record.count = now, x, y, c, m[c]
+            if t >= step_end:  # events are in time order (checked): a division per step, not per event
+                step = (t - t0) // dt
+                step_start = t0 + step * dt
+                step_end = step_start + dt
+            reason = admit(rec, r + FILTER_WORD + (polarity if per_polarity else 0), r + latest,
+                           t, step_start, step_end, refractory)
+            counts[reason] += 1
+            if reason != ACCEPTED:
+                continue
+            k = step
+        else:
+            k = ts[i]
+        if k != hoisted:
+            if k != current:  # the facilitations of step `current` are complete
+                if n_pend > 0:
+                    _flush(stamp, pend, n_pend, (current + 1 - base) << 1, su, sv)
+                    n_pend = 0
+                current = k
+                if k + 1 - base > ip[REBASE_AT]:
+                    _rebase(stamp, stride, base, k + 1, ip[COUNTER_MAX])
+                    base = k + 1
+            hoisted = k
+            key_now = (k + 1 - base) << 1
+            # Depth neurons of step k+2 hold update (k+1) // U (docs/semantics.md).
+            update = (k + 1) // update_every
+            j = update - first_update
+            tx, ty, tz = velocity[j, 0], velocity[j, 1], velocity[j, 2]
+            stamp_us = t0 + (k + 3) * dt  # end of depth step k+2
+        if not (hx0 <= x < hx1 and hy0 <= y < hy1):
+            continue  # neither triggers nor facilitates here
+        u = np.uint64(2 * r)  # stamp of unit 0
+        if x0 <= x < x1 and y0 <= y < y1:
+            # 1. Triggers, in step k+1.
+            key = key_now | polarity
+            m0, f0 = _unit(stamp, u, key, max_diff)
+            m1, f1 = _unit(stamp, u + np.uint64(1), key, max_diff)
+            m2, f2 = _unit(stamp, u + np.uint64(2), key, max_diff)
+            m3, f3 = _unit(stamp, u + np.uint64(3), key, max_diff)
+            fired = f0 + f1 + f2 + f3
+            counts[TOT_SPIKES] += fired
+            if record_tot and fired:
+                for c, m in enumerate((m0, m1, m2, m3)):
+                    if m > 0:
+                        spike = tot[n_tot]
+                        spike.step, spike.x, spike.y, spike.direction, spike.count = k + 1, x, y, c, m
                         n_tot += 1
-            # 2. The pixel's depth neuron, one step later.
-            sx = signed_axis_count(m[0], m[1])
-            sy = signed_axis_count(m[2], m[3])
-            sample = samples[y - y0, x - x0]
+            # 2. The pixel's depth neuron, in step k+2.
+            sx, sy = axis_count(m0, m1), axis_count(m2, m3)
+            sample = samples[0, y - y0] + samples[1, x - x0]
             if cache_j[sample] != update:  # first depth neuron of this patch (or pixel) under this update
                 at_x, at_y = velocity_term(tx, ty, tz, points[sample, 0], points[sample, 1], fx, fy, cx, cy)
                 cache_at[sample, 0], cache_at[sample, 1] = at_x, at_y
-                if fixed:  # W = A t * dt / distance, quantised once on the host (docs/fixed_point.md)
+                if fixed:  # W = A t * dt / distance, quantised once (docs/fixed_point.md)
                     cache_w[sample, 0] = quantize(at_x * seconds_per_count, frac_bits, payload_bits)
                     cache_w[sample, 1] = quantize(at_y * seconds_per_count, frac_bits, payload_bits)
                 cache_j[sample] = update
+            measured = (sx | sy) != 0
             if fixed:
                 raw = fixed_depth(sx, sy, cache_w[sample, 0], cache_w[sample, 1], payload_bits)
-                reason = classify(sx != 0 or sy != 0, raw, min_raw, max_raw)
+                slot = outcome(fired, measured, raw, ip[MIN_RAW], ip[MAX_RAW])
                 z = raw * lsb
             else:
                 raw = 0
                 z = float_depth(sx, sy, cache_at[sample, 0], cache_at[sample, 1], seconds_per_count)
-                reason = classify(sx != 0 or sy != 0, z, min_depth, max_depth)
-            if reason == EMITTED:
-                record = out[n_out]
-                record.t, record.x, record.y, record.z, record.step = stamp_us, x, y, z, k + 2
+                slot = outcome(fired, measured, z, fp[MIN_DEPTH], fp[MAX_DEPTH])
+            counts[REJECTED + slot] += 1
+            estimate = out[n_out]  # written always, kept when emitted
+            estimate.t, estimate.x, estimate.y, estimate.z, estimate.step = stamp_us, x, y, z, k + 2
+            if keep_raw:
                 out_raw[n_out] = raw
-                n_out += 1
-            else:
-                rejected[reason] += 1
-        # 3. Facilitations, after every trigger of the step.
-        if j < n:  # step k ends inside this call
-            if n_pend > 0:
-                _facilitate(stamp, pend_x, pend_y, pend_p, 0, n_pend, key_now,
-                            hx0, hy0, hx1, hy1, pad_x, pad_y, row_len, d)
-                n_pend = 0
-            _facilitate(stamp, xs, ys, ps, i, j, key_now, hx0, hy0, hx1, hy1, pad_x, pad_y, row_len, d)
-        else:  # step k may continue in the next call
-            n_pend = _buffer(xs, ys, ps, i, j, pend_x, pend_y, pend_p, n_pend, hx0, hy0, hx1, hy1)
-            if n_pend < 0:
-                return n_out, n_tot, n_spikes, PENDING_FULL
-        i = j
+            n_out += slot == EMITTED - REJECTED
+        # 3. Facilitations, applied when step k is complete.
+        if n_pend == pend.shape[0]:  # more than one spike per pixel in a step
+            cursor[N_PEND], cursor[CURRENT], cursor[BASE] = n_pend, current, base
+            return n_out, n_tot, PENDING_FULL
+        pend[n_pend] = (np.int64(u) << 1) | polarity
+        n_pend += 1
     cursor[N_PEND], cursor[CURRENT], cursor[BASE] = n_pend, current, base
-    return n_out, n_tot, n_spikes, OK
+    if filtering:
+        for i in range(n - 1, -1, -1):  # the latest event the filter could accept: later calls must not go back
+            if xs[i] < width and ys[i] < height and ts[i] >= t0:
+                cursor[T_HI] = ts[i]
+                break
+    return n_out, n_tot, OK
