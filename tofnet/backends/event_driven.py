@@ -67,27 +67,27 @@ class Stream:
         self._table = (first, table)
         return table, first
 
-    def _process(self, events: np.ndarray, into: np.ndarray | None, offset: int) -> KernelOutput | None:
+    def _start(self, events: np.ndarray) -> bool:
+        """Checks and counting common to both feeds; False for an empty packet."""
         if self._closed:
             raise BackendError("stream is closed")
         if events.dtype != EVENT_DTYPE:
             raise BackendError(f"events must have dtype {EVENT_DTYPE}, got {events.dtype}")
-        self._events_in += len(events)
-        if len(events) == 0:
-            return None
-        if self.t0_us is None:
+        n = len(events)
+        self._events_in += n
+        if n and self.t0_us is None:
             self.t0_us = self.kernel.t0_us = int(events["t"][0])
-        return self.kernel.process_events(events, self._rows, record_tot=self.record_tot, into=into,
-                                          offset=offset, copy=False)
+        return n > 0
 
     def feed(self, events: np.ndarray) -> np.ndarray:
         """Depth estimates (``DEPTH_DTYPE``) produced by ``events`` (``EVENT_DTYPE``, time-ordered)."""
-        out = self._process(events, None, 0)
-        if out is None:
+        if not self._start(events):
             self.tot = np.empty(0, TOT_DTYPE) if self.record_tot else None
             return np.empty(0, DEPTH_DTYPE)
-        self.tot = copy_records(out.tot) if self.record_tot else None
-        return copy_records(out.depth)
+        end, n_tot = self.kernel.run_events(events, self._rows, None, None, 0, self.record_tot)
+        out, _, tot = self.kernel.buffers()
+        self.tot = copy_records(tot[:n_tot]) if self.record_tot else None
+        return copy_records(out[:end])
 
     def feed_into(self, events: np.ndarray, into: np.ndarray, offset: int) -> KernelOutput | None:
         """Like ``feed``, but write the estimates to ``into[offset:]`` (room for ``len(events)``).
@@ -95,7 +95,10 @@ class Stream:
         Returns the kernel's output (``depth`` a view of ``into``; ``tot`` valid until the next
         call, no ``z_raw``), None for an empty packet. Spares a copy when the caller collects the estimates.
         """
-        return self._process(events, into, offset)
+        if not self._start(events):
+            return None
+        return self.kernel.process_events(events, self._rows, record_tot=self.record_tot, into=into, offset=offset,
+                                          copy=False)
 
     def close(self) -> RunResult:
         """The counts so far (``depth`` is empty: ``feed`` returned the estimates)."""

@@ -317,28 +317,48 @@ class TimeOfTravelKernel:
         rows (``VelocityRows``). Estimates go to ``into[offset:]`` when given (capacity
         ``offset + len(events)``; no ``z_raw``), else to an internal buffer.
         """
+        spikes_before = int(self._counts[tt.TOT_SPIKES])
+        if into is not None and len(into) < offset + len(events):
+            raise BackendError(f"output buffer holds {len(into)} estimates, {offset + len(events)} may be written")
+        raw = None if into is None else self._no_raw
+        end, n_tot = self.run_events(events, velocity, into, raw, 0 if into is None else offset, record_tot)
+        if into is None:
+            return self._output(self._out, self._raw, 0, end, n_tot, record_tot, spikes_before, copy)
+        return self._output(into, raw, offset, end, n_tot, record_tot, spikes_before, copy)
+
+    def run_events(self, events: np.ndarray, velocity: VelocityRows, out: np.ndarray | None, raw: np.ndarray | None,
+                   offset: int, record_tot: bool) -> tuple[int, int]:
+        """``process_events`` without the ``KernelOutput`` (the per-packet path of a stream).
+
+        ``out``/``raw`` None: the internal buffers (``buffers()``). Returns the end of the
+        estimates in ``out`` and how many time-of-travel spikes ``buffers()[2]`` holds.
+        """
         if self._broken or not self._full:
             raise BackendError("kernel state is invalid after an earlier error; start a new one" if self._broken else
                                "process_events runs the input filter: the region must be the whole sensor")
-        spikes_before, n = self._counts[tt.TOT_SPIKES], len(events)
-        if into is None:
+        n = len(events)
+        if out is None:
             if n > len(self._out) or (record_tot and 4 * n > len(self._tot)):
                 self._reserve(n, n if record_tot else 0)
-            out, raw, offset = self._out, self._raw, 0
-        elif len(into) < offset + n:
-            raise BackendError(f"output buffer holds {len(into)} estimates, {offset + n} may be written")
-        else:
-            self._reserve(0, n if record_tot else 0)
-            out, raw = into, self._no_raw
+            out, raw = self._out, self._raw
+        elif record_tot and 4 * n > len(self._tot):
+            self._reserve(0, n)
+        if n == 0:
+            return offset, 0
         t = events["t"]
-        if n == 0 or int(t[-1]) - int(t[0]) < self._span_us:  # one velocity table is enough (the usual case)
-            n_out, n_tot = self._events(events, t, velocity, out, raw, offset, record_tot, 0)
-        else:
-            n_out, n_tot = offset, 0
-            for lo, hi in self._pieces(t):
-                piece = events[lo:hi]
-                n_out, n_tot = self._events(piece, piece["t"], velocity, out, raw, n_out, record_tot, n_tot)
-        return self._output(out, raw, offset, n_out, n_tot, record_tot, int(spikes_before), copy)
+        first, last = int(t[0]), int(t[-1])
+        if last - first < self._span_us:  # one velocity table is enough (the usual case)
+            return self._events(events, t, first, last, velocity, out, raw, offset, record_tot, 0)
+        n_out, n_tot = offset, 0
+        for lo, hi in self._pieces(t):
+            piece = events[lo:hi]
+            n_out, n_tot = self._events(piece, piece["t"], int(piece["t"][0]), int(piece["t"][-1]), velocity, out,
+                                        raw, n_out, record_tot, n_tot)
+        return n_out, n_tot
+
+    def buffers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The internal output buffers: estimates, their fixed-point values, time-of-travel spikes."""
+        return self._out, self._raw, self._tot
 
     def _updates(self, first_step: int, last_step: int) -> tuple[int, int]:
         """``(first_update, n_updates)`` the depth neurons of input steps ``first_step .. last_step`` hold."""
@@ -355,22 +375,22 @@ class TimeOfTravelKernel:
             yield lo, hi
             lo = hi
 
-    def _events(self, events, t, velocity: VelocityRows, out, raw, n_out: int, record_tot: bool,
-                n_tot: int) -> tuple[int, int]:
-        """One piece of ``process_events``; returns the output positions after it."""
-        t0, dt = self._t0, self._dt
-        last = int(t[-1]) if len(t) else t0 - 1
-        if last >= t0:  # rows for every event from the first to the last (exact when in order)
-            table, first = velocity(*self._updates((max(int(t[0]), t0) - t0) // dt, (last - t0) // dt))
+    def _events(self, events, t, first_t: int, last_t: int, velocity: VelocityRows, out, raw, n_out: int,
+                record_tot: bool, n_tot: int) -> tuple[int, int]:
+        """One piece of ``run_events`` (``first_t``, ``last_t``: its first and last event times)."""
+        t0 = self._t0
+        if last_t >= t0:  # rows for every event from the first to the last (exact when in order)
+            table, first = velocity(*self._updates((max(first_t, t0) - t0) // self._dt, (last_t - t0) // self._dt))
         else:
             table, first = self._no_velocity, 0
-        args = (t, events["x"], events["y"], events["p"], True)
-        n_out2, n_tot2, status = self._call(*args, table, first, out, raw, n_out, record_tot, n_tot)
+        xs, ys, ps = events["x"], events["y"], events["p"]
+        n_out2, n_tot2, status = tt.process(t, xs, ys, ps, True, *self._state, table, first, out, raw, n_out,
+                                            record_tot, self._tot, n_tot)
         if status == tt.OK:
             return n_out2, n_tot2
         if status == tt.NO_VELOCITY:  # events out of time order outside the sensor: ask for what is needed
             table, first = velocity(*self._updates(int(self._cursor[tt.NEED_FIRST]), int(self._cursor[tt.NEED_LAST])))
-            n_out2, n_tot2, status = self._call(*args, table, first, out, raw, n_out, record_tot, n_tot)
+            n_out2, n_tot2, status = self._call(t, xs, ys, ps, True, table, first, out, raw, n_out, record_tot, n_tot)
         if status == tt.UNSORTED:
             return self._events_unsorted(events, velocity, out, raw, n_out, record_tot, n_tot)
         self._raise_for(status, table, first)
