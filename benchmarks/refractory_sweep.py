@@ -82,8 +82,14 @@ def main(argv: list[str] | None = None) -> int:
                         fmt(max(results[n, v]["mean_rel_pct"] - best_mean[n] for n in realistic)),
                         fmt(max(abs(m["bias_pct"]) for m in ms)), fmt(np.mean([m["coverage_pct"] for m in ms]))])
     best = min(values, key=lambda v: objective[v])
-    medians_header = ["refractory ms"] + [f"{n}" for n in names]
-    medians_rows = [[v] + [fmt(results[n, v]["median_rel_pct"]) for n in names] for v in values]
+    matrix_header = ["refractory ms"] + list(names)
+    matrices = {}
+    for key, label, signed in (("median_rel_pct", "Median relative error, %", False),
+                               ("mean_rel_pct", "Mean relative error, %", False),
+                               ("bias_pct", "Bias (median signed relative error), %", True),
+                               ("coverage_pct", "Coverage (estimates per input event), %", False)):
+        matrices[label] = [[v] + [f"{results[n, v][key]:+.1f}" if signed else fmt(results[n, v][key])
+                                  for n in names] for v in values]
 
     title = (f"Refractory sweep: {args.duration:g} s per scenario, seed {args.seed}, {size[0]}x{size[1]}, 1 ms steps, "
              f"8-bit counters, backend {backend}{', per polarity' if args.per_polarity else ''}; "
@@ -97,14 +103,17 @@ def main(argv: list[str] | None = None) -> int:
     print(text_table(summary_header, summary))
     print(f"lowest (medians+means)/2: {best} ms")
     print()
-    print("Median relative error, %")
-    print(text_table(medians_header, medians_rows))
-    print()
-    print(markdown_table(header, rows))
-    print()
+    for label, rows_ in matrices.items():
+        print(label)
+        print(text_table(matrix_header, rows_))
+        print()
     print(markdown_table(summary_header, summary))
     print()
-    print(markdown_table(medians_header, medians_rows))
+    for label, rows_ in matrices.items():
+        print(f"{label}:\n")
+        print(markdown_table(matrix_header, rows_))
+        print()
+    print(markdown_table(header, rows))
     print()
     cmd = "python benchmarks/refractory_sweep.py"
     for flag, value, default in (("--values", args.values, VALUES_MS), ("--scenarios", args.scenarios,
