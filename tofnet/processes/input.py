@@ -6,9 +6,16 @@ from tofnet.core.params import Param
 from tofnet.core.ports import Payload, PortSpec
 from tofnet.core.process import Process
 
-#: Default refractory period, seconds. Chosen from the refractory sweep in
-#: ``benchmarks/refractory_sweep.py`` on the built-in scenarios; see docs/semantics.md.
-DEFAULT_REFRACTORY = "5ms"
+#: Default refractory period. An edge makes each pixel it crosses fire a burst of
+#: events (a 1-2 px edge takes 1-2 pixel crossings to pass); a refractory period
+#: shorter than the time the image takes to move about one pixel lets the units pair
+#: events inside bursts, so times come out short and depths too near; a longer one
+#: drops the next edge (coverage, over-estimates). 60 ms had the lowest average of
+#: mean and median relative error over the eight built-in scenarios with realistic
+#: pixels (``benchmarks/refractory_sweep.py``; 50-75 ms are within 2 points), and is
+#: the pixel-crossing time at the paper's depths (~6 m at 0.55 m/s). Near or fast
+#: scenes want less (fast_slider: 5-10 ms). See docs/accuracy.md.
+DEFAULT_REFRACTORY = "60ms"
 
 
 class InputProcess(Process):
