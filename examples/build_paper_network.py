@@ -20,7 +20,7 @@ HERE = Path(__file__).resolve().parent
 
 def by_hand() -> Network:
     """input -> time_of_travel -> depth <- velocity, port by port."""
-    inp = InputProcess(name="input", sensor_size=(240, 180), timestep="1ms", refractory="5ms")
+    inp = InputProcess(name="input", sensor_size=(240, 180), timestep="1ms", refractory="60ms")
     tot = TimeOfTravelProcess(name="time_of_travel", distance=1, counter_bits=8)
     depth = DepthProcess(name="depth", min_depth=0.05, max_depth=20.0)
     velocity = VelocityProcess(name="velocity", source="groundtruth", per="patch", patch_size=30, update_every=1)

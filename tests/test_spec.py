@@ -18,7 +18,7 @@ from tofnet.processes import DepthProcess, InputProcess, TimeOfTravelProcess, Ve
 PAPER = """\
 name: paper
 processes:
-  input:          {type: InputProcess, sensor_size: [240, 180], timestep: 1ms, refractory: 5ms}
+  input:          {type: InputProcess, sensor_size: [240, 180], timestep: 1ms, refractory: 60ms}
   time_of_travel: {type: TimeOfTravelProcess, distance: 1, counter_bits: 8}
   depth:          {type: DepthProcess, min_depth: 0.05, max_depth: 20}
   velocity:       {type: VelocityProcess, source: groundtruth, per: patch, patch_size: 30}

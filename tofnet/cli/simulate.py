@@ -27,15 +27,16 @@ def register(subparsers) -> None:
 
 
 def handle(args) -> int:
-    from tofnet.sim import SCENARIOS, simulate
+    from tofnet.sim import built_in_scenarios, simulate
 
+    scenarios = built_in_scenarios()
     if args.list:
         print(list_scenarios())
         return 0
     if not args.scenario or not args.out_dir:
-        raise TofnetError(f"expected SCENARIO and OUT_DIR; scenarios: {', '.join(SCENARIOS)}")
-    if args.scenario not in SCENARIOS:
-        raise TofnetError(f"unknown scenario {args.scenario!r}; expected one of {', '.join(SCENARIOS)}")
+        raise TofnetError(f"expected SCENARIO and OUT_DIR; scenarios: {', '.join(scenarios)}")
+    if args.scenario not in scenarios:
+        raise TofnetError(f"unknown scenario {args.scenario!r}; expected one of {', '.join(scenarios)}")
     sensor = None
     if args.sensor_size:
         from tofnet.core.params import parse_size
@@ -56,13 +57,13 @@ def handle(args) -> int:
 
 def list_scenarios() -> str:
     """One line per scenario: name, speed, what it does."""
-    from tofnet.sim import SCENARIOS
+    from tofnet.sim import built_in_scenarios
 
     lines = []
-    for name, make in SCENARIOS.items():
+    for name, make in built_in_scenarios().items():
         config = make(1.0)
         speed = max((sum(v * v for v in s.velocity) ** 0.5 for s in config.trajectory.segments), default=0.0)
-        lines.append(f"{name:12s} {speed:4.2f} m/s  {config.description}")
+        lines.append(f"{name:14s} {speed:4.2f} m/s  {config.description}")
     return "\n".join(lines)
 
 

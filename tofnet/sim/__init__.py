@@ -14,10 +14,10 @@ from tofnet.sim.config import SimConfig
 from tofnet.sim.engine import SimResult, generate
 from tofnet.sim.errors import SimError
 from tofnet.sim.run import resolve, simulate, summarize, write_result
-from tofnet.sim.scenarios import SCENARIOS, scenario
+from tofnet.sim.scenarios import ROOM_SCENARIOS, SCENARIOS, built_in_scenarios, scenario
 from tofnet.sim.scene import Box, Plane, Scene
 from tofnet.sim.texture import Texture
 
-__all__ = ["SCENARIOS", "scenario", "simulate", "generate", "resolve", "summarize", "write_result", "SimConfig",
+__all__ = ["SCENARIOS", "ROOM_SCENARIOS", "built_in_scenarios", "scenario", "simulate", "generate", "resolve", "summarize", "write_result", "SimConfig",
            "SimResult", "SimError", "Scene", "Plane", "Box", "Texture", "Trajectory", "Segment", "constant",
            "DEFAULT_INTRINSICS", "DEFAULT_SENSOR_SIZE"]

@@ -201,9 +201,14 @@ ROOM_SCENARIOS: dict[str, Callable[[float], SimConfig]] = {
 }
 
 
+def built_in_scenarios() -> dict[str, Callable[[float], SimConfig]]:
+    """Every built-in scenario by name: ``SCENARIOS`` (desk, 0.3-3.5 m) then ``ROOM_SCENARIOS`` (2.5-10 m)."""
+    return {**SCENARIOS, **ROOM_SCENARIOS}
+
+
 def scenario(name: str, duration: float | None = None) -> SimConfig:
     """The config of a built-in scenario (``SCENARIOS`` or ``ROOM_SCENARIOS``); a ``SimError`` lists the names."""
-    known = {**SCENARIOS, **ROOM_SCENARIOS}
+    known = built_in_scenarios()
     if name not in known:
         raise SimError(f"scenario: unknown name {name!r}; expected one of {', '.join(known)}")
     if duration is not None and not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
