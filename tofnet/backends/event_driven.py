@@ -84,10 +84,10 @@ class Stream:
         if not self._start(events):
             self.tot = np.empty(0, TOT_DTYPE) if self.record_tot else None
             return np.empty(0, DEPTH_DTYPE)
-        end, n_tot = self.kernel.run_events(events, self._rows, None, None, 0, self.record_tot)
-        out, _, tot = self.kernel.buffers()
-        self.tot = copy_records(tot[:n_tot]) if self.record_tot else None
-        return copy_records(out[:end])
+        into = np.empty(len(events), DEPTH_DTYPE)  # the kernel writes the caller's array: no copy
+        end, n_tot = self.kernel.run_events(events, self._rows, into, 0, self.record_tot)
+        self.tot = copy_records(self.kernel.buffers()[2][:n_tot]) if self.record_tot else None
+        return into[:end]
 
     def feed_into(self, events: np.ndarray, into: np.ndarray, offset: int) -> KernelOutput | None:
         """Like ``feed``, but write the estimates to ``into[offset:]`` (room for ``len(events)``).

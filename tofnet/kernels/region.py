@@ -140,9 +140,9 @@ def velocity_rows(steps: np.ndarray, update_every: int) -> tuple[int, int]:
     return first, (int(steps[-1]) + 1) // update_every - first + 1
 
 
-def _sample_tables(config: KernelConfig, r: Region) -> tuple[np.ndarray, np.ndarray]:
-    """``samples`` (row and column tables: sample of pixel (x, y) is ``samples[0, y-y0] + samples[1, x-x0]``)
-    and ``points`` (where ``A t`` is evaluated, one per sample: the pixel, or its patch centre)."""
+def _sample_tables(config: KernelConfig, r: Region) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``rows``, ``cols`` (the sample of pixel (x, y) is ``rows[y-y0] + cols[x-x0]``) and ``points``
+    (where ``A t`` is evaluated, one per sample: the pixel, or its patch centre)."""
     (h, w), (width, height) = r.shape, config.sensor_size
     su, sv = sample_grid(config.per_pixel, config.patch_size, width, height)
     ys, xs = np.arange(r.y0, r.y1), np.arange(r.x0, r.x1)
@@ -155,10 +155,8 @@ def _sample_tables(config: KernelConfig, r: Region) -> tuple[np.ndarray, np.ndar
         # one pixel of each patch, in sample order: the first of the region inside it
         ys = ys[np.r_[0, np.flatnonzero(np.diff(py)) + 1]]
         xs = xs[np.r_[0, np.flatnonzero(np.diff(px)) + 1]]
-    samples = np.zeros((2, max(h, w)), dtype=np.int64)
-    samples[0, :h], samples[1, :w] = rows, cols
     points = np.stack([su[ys[:, None], xs[None, :]].ravel(), sv[ys[:, None], xs[None, :]].ravel()], axis=1)
-    return samples, np.ascontiguousarray(points)
+    return rows, cols, points
 
 
 class TimeOfTravelKernel:
@@ -178,29 +176,39 @@ class TimeOfTravelKernel:
             raise BackendError(f"region {r} is not a non-empty part of the {width}x{height} sensor")
         (h, w), d = r.shape, config.distance
         stride = tt.WORDS_PER_POLARITY if config.refractory_per_polarity else tt.WORDS
-        self._rec = np.full((h + 4 * d) * (w + 4 * d) * stride, NEVER, dtype=np.int64)
-        self._stamp = self._rec.view(np.int32)
-        self._stamp.reshape(-1, 2 * stride)[:, :4] = tt.IDLE
-        self._pend = np.zeros((w + 2 * d) * (h + 2 * d), np.int64)  # at most one spike per pixel and step
-        self._cursor = np.zeros(tt.N_CURSOR, dtype=np.int64)
-        self._cursor[[tt.CURRENT, tt.T_HI]] = -1, NEVER
-        self._counts = np.zeros(tt.N_COUNTS, dtype=np.int64)
-        self.rejected = self._counts[tt.REJECTED:tt.REJECTED + 3]  # REJECT_REASONS order (a view)
-        fmt = config.fixed
-        ip = np.zeros(tt.N_IP, dtype=np.int64)
+        rows, cols, points = _sample_tables(config, r)
+        n_samples, rec_size = len(points), (h + 4 * d) * (w + 4 * d) * stride
+        sizes = {tt.AT_CURSOR: tt.N_CURSOR, tt.AT_COUNTS: tt.N_COUNTS, tt.AT_ROWS: h, tt.AT_COLS: w,
+                 tt.AT_CACHE_J: n_samples, tt.AT_CACHE_W: 2 * n_samples,
+                 tt.AT_PEND: (w + 2 * d) * (h + 2 * d)}  # at most one spike per pixel and step
+        at = {slot: tt.N_IP + sum(list(sizes.values())[:i]) for i, slot in enumerate(sizes)}
+        self._ints = ints = np.zeros(at[tt.AT_PEND] + sizes[tt.AT_PEND] + rec_size + 8, dtype=np.int64)
+        start = at[tt.AT_PEND] + sizes[tt.AT_PEND]
+        start += (-(ints.ctypes.data + 8 * start) % 64) // 8  # records on cache-line boundaries
+        ip = ints[:tt.N_IP]
+        for slot, offset in at.items():
+            ip[slot] = offset
+        ip[[tt.N_SAMPLES, tt.PEND_SIZE, tt.AT_REC, tt.REC_SIZE]] = n_samples, sizes[tt.AT_PEND], start, rec_size
         ip[[tt.X0, tt.Y0, tt.X1, tt.Y1, tt.DISTANCE, tt.COUNTER_MAX, tt.REBASE_AT, tt.UPDATE_EVERY]] = (
             r.x0, r.y0, r.x1, r.y1, d, (1 << config.counter_bits) - 1, tt.REBASE_AFTER, config.update_every)
+        fmt = config.fixed
         if fmt is not None:
             ip[[tt.FIXED, tt.FRAC_BITS, tt.PAYLOAD_BITS, tt.MIN_RAW, tt.MAX_RAW]] = (
                 1, fmt.frac_bits, fmt.payload_bits, fmt.quantize(config.min_depth), fmt.quantize(config.max_depth))
-        ip[[tt.T0, tt.DT, tt.REFRACTORY, tt.PER_POLARITY, tt.WIDTH, tt.HEIGHT, tt.STRIDE, tt.ROW]] = (
+        ip[[tt.T0, tt.DT, tt.REFRACTORY_US, tt.PER_POLARITY, tt.WIDTH, tt.HEIGHT, tt.STRIDE, tt.ROW]] = (
             t0_us, config.timestep_us, config.refractory_us, config.refractory_per_polarity, width, height,
             stride, w + 4 * d)
-        self._ip = ip
-        self._fp = np.array([*config.intrinsics, config.seconds_per_count, config.min_depth, config.max_depth])
-        self._samples, self._points = _sample_tables(config, r)
-        n_points = len(self._points)
-        self._cache = (np.full(n_points, -1, np.int64), np.zeros((n_points, 2)), np.zeros((n_points, 2), np.int64))
+        self._floats = np.concatenate([[*config.intrinsics, config.seconds_per_count, config.min_depth,
+                                        config.max_depth], points.ravel(), np.zeros(2 * n_samples)])
+        (self._ip, self._cursor, self._counts, self._rows, self._cols, cache_j, _, self._pend, self._rec,
+         *_) = tt.views(self._ints, self._floats)
+        self._rows[:], self._cols[:] = rows, cols
+        cache_j[:] = -1  # no velocity update cached yet
+        self._cursor[[tt.CURRENT, tt.T_HI]] = -1, NEVER
+        self._rec[:] = NEVER
+        self._stamp = self._rec.view(np.int32)
+        self._stamp.reshape(-1, 2 * stride)[:, :4] = tt.IDLE
+        self.rejected = self._counts[tt.REJECTED:tt.REJECTED + 3]  # REJECT_REASONS order (a view)
         self._out, self._raw, self._tot = np.empty(0, DEPTH_DTYPE), np.empty(0, np.int64), np.empty(0, TOT_DTYPE)
         self._broken = False
         # Scalars and empty arrays the per-packet path needs, looked up once.
@@ -208,8 +216,6 @@ class TimeOfTravelKernel:
         self._span_us = (MAX_VELOCITY_ROWS - 2) * config.update_every * config.timestep_us
         self._full = self.region == Region.full(config.sensor_size)
         self._no_raw, self._no_velocity = np.empty(0, np.int64), np.zeros((0, 3))
-        self._state = (self._rec, self._stamp, self._pend, self._cursor, self._counts, self._ip, self._fp,
-                       self._samples, self._points, *self._cache)
 
     @property
     def t0_us(self) -> int:
@@ -253,8 +259,8 @@ class TimeOfTravelKernel:
 
     def _call(self, ts, xs, ys, ps, filtering: bool, table: np.ndarray, first_update: int,
               out: np.ndarray, raw: np.ndarray, n_out: int, record_tot: bool, n_tot: int) -> tuple[int, int, int]:
-        return tt.process(ts, xs, ys, ps, filtering, *self._state, table, first_update, out, raw, n_out, record_tot,
-                          self._tot, n_tot)
+        return tt.process(ts, xs, ys, ps, filtering, self._ints, self._floats, table, first_update, out, raw, n_out,
+                          record_tot, self._tot, n_tot)
 
     def _raise_for(self, status: int, table: np.ndarray, first_update: int) -> None:
         if status == tt.NO_VELOCITY:
@@ -318,31 +324,32 @@ class TimeOfTravelKernel:
         ``offset + len(events)``; no ``z_raw``), else to an internal buffer.
         """
         spikes_before = int(self._counts[tt.TOT_SPIKES])
-        if into is not None and len(into) < offset + len(events):
-            raise BackendError(f"output buffer holds {len(into)} estimates, {offset + len(events)} may be written")
-        raw = None if into is None else self._no_raw
-        end, n_tot = self.run_events(events, velocity, into, raw, 0 if into is None else offset, record_tot)
+        end, n_tot = self.run_events(events, velocity, into, offset, record_tot)
         if into is None:
             return self._output(self._out, self._raw, 0, end, n_tot, record_tot, spikes_before, copy)
-        return self._output(into, raw, offset, end, n_tot, record_tot, spikes_before, copy)
+        return self._output(into, self._no_raw, offset, end, n_tot, record_tot, spikes_before, copy)
 
-    def run_events(self, events: np.ndarray, velocity: VelocityRows, out: np.ndarray | None, raw: np.ndarray | None,
-                   offset: int, record_tot: bool) -> tuple[int, int]:
+    def run_events(self, events: np.ndarray, velocity: VelocityRows, into: np.ndarray | None = None,
+                   offset: int = 0, record_tot: bool = False) -> tuple[int, int]:
         """``process_events`` without the ``KernelOutput`` (the per-packet path of a stream).
 
-        ``out``/``raw`` None: the internal buffers (``buffers()``). Returns the end of the
-        estimates in ``out`` and how many time-of-travel spikes ``buffers()[2]`` holds.
+        Returns the end of the estimates in ``into`` (from ``offset``), or in ``buffers()[0]``
+        (from 0) when ``into`` is None, and how many time-of-travel spikes ``buffers()[2]`` holds.
         """
         if self._broken or not self._full:
             raise BackendError("kernel state is invalid after an earlier error; start a new one" if self._broken else
                                "process_events runs the input filter: the region must be the whole sensor")
         n = len(events)
-        if out is None:
+        if into is None:
             if n > len(self._out) or (record_tot and 4 * n > len(self._tot)):
                 self._reserve(n, n if record_tot else 0)
-            out, raw = self._out, self._raw
-        elif record_tot and 4 * n > len(self._tot):
-            self._reserve(0, n)
+            out, raw, offset = self._out, self._raw, 0
+        else:
+            if len(into) < offset + n:
+                raise BackendError(f"output buffer holds {len(into)} estimates, {offset + n} may be written")
+            if record_tot and 4 * n > len(self._tot):
+                self._reserve(0, n)
+            out, raw = into, self._no_raw
         if n == 0:
             return offset, 0
         t = events["t"]
@@ -383,14 +390,15 @@ class TimeOfTravelKernel:
             table, first = velocity(*self._updates((max(first_t, t0) - t0) // self._dt, (last_t - t0) // self._dt))
         else:
             table, first = self._no_velocity, 0
-        xs, ys, ps = events["x"], events["y"], events["p"]
-        n_out2, n_tot2, status = tt.process(t, xs, ys, ps, True, *self._state, table, first, out, raw, n_out,
-                                            record_tot, self._tot, n_tot)
+        state = self._ints, self._floats
+        n_out2, n_tot2, status = tt.process_events(events, *state, table, first, out, raw, n_out, record_tot,
+                                                   self._tot, n_tot)
         if status == tt.OK:
             return n_out2, n_tot2
         if status == tt.NO_VELOCITY:  # events out of time order outside the sensor: ask for what is needed
             table, first = velocity(*self._updates(int(self._cursor[tt.NEED_FIRST]), int(self._cursor[tt.NEED_LAST])))
-            n_out2, n_tot2, status = self._call(t, xs, ys, ps, True, table, first, out, raw, n_out, record_tot, n_tot)
+            n_out2, n_tot2, status = tt.process_events(events, *state, table, first, out, raw, n_out, record_tot,
+                                                       self._tot, n_tot)
         if status == tt.UNSORTED:
             return self._events_unsorted(events, velocity, out, raw, n_out, record_tot, n_tot)
         self._raise_for(status, table, first)

@@ -66,10 +66,14 @@ N_CURSOR = 6
 # Count slots: input_filter's drop reasons and ACCEPTED (0-4), depth outcomes (5-9:
 # REJECT_REASONS, emitted, no unit fired), time-of-travel spikes.
 REJECTED, EMITTED, INACTIVE, TOT_SPIKES, N_COUNTS = 5, 8, 9, 10, 11
-# Integer parameters (``ip``).
+# The state travels in two arrays (each array argument costs ~0.1 µs per call): ``ints``
+# holds the integer parameters ``ip`` (these slots), then at the offsets they give the
+# cursor, the counts, the sample tables, the caches, the facilitation buffer and the
+# pixel records; ``floats`` holds the float parameters, the sample points and ``A t``.
 (X0, Y0, X1, Y1, DISTANCE, COUNTER_MAX, REBASE_AT, UPDATE_EVERY, FIXED, FRAC_BITS, PAYLOAD_BITS, MIN_RAW,
- MAX_RAW, T0, DT, REFRACTORY, PER_POLARITY, WIDTH, HEIGHT, STRIDE, ROW, N_IP) = range(22)
-# Float parameters (``fp``).
+ MAX_RAW, T0, DT, REFRACTORY_US, PER_POLARITY, WIDTH, HEIGHT, STRIDE, ROW, N_SAMPLES,
+ AT_CURSOR, AT_COUNTS, AT_ROWS, AT_COLS, AT_CACHE_J, AT_CACHE_W, AT_PEND, PEND_SIZE, AT_REC, REC_SIZE, N_IP) = range(33)
+# Float slots, then the points (x, y per sample) and the cached ``A t`` (x, y per sample).
 FX, FY, CX, CY, SECONDS_PER_COUNT, MIN_DEPTH, MAX_DEPTH, N_FP = range(8)
 
 _BIG = 1 << 40  # above any counter value
@@ -188,25 +192,47 @@ def _check(ts, xs, ys, filtering, cursor, ip, n_rows, first_update):
 
 
 @njit(cache=True)
-def process(ts, xs, ys, ps, filtering, rec, stamp, pend, cursor, counts, ip, fp,
-            samples, points, cache_j, cache_at, cache_w, velocity, first_update,
-            out, out_raw, n_out, record_tot, tot, n_tot):
+def views(ints, floats):
+    """The parts of the packed state (see the layout above), as views."""
+    ip = ints[:N_IP]
+    n_samples = ip[N_SAMPLES]
+    rec = ints[ip[AT_REC]:ip[AT_REC] + ip[REC_SIZE]]
+    return (ip, ints[ip[AT_CURSOR]:ip[AT_CURSOR] + N_CURSOR], ints[ip[AT_COUNTS]:ip[AT_COUNTS] + N_COUNTS],
+            ints[ip[AT_ROWS]:ip[AT_COLS]], ints[ip[AT_COLS]:ip[AT_CACHE_J]],
+            ints[ip[AT_CACHE_J]:ip[AT_CACHE_J] + n_samples], ints[ip[AT_CACHE_W]:ip[AT_CACHE_W] + 2 * n_samples],
+            ints[ip[AT_PEND]:ip[AT_PEND] + ip[PEND_SIZE]], rec,
+            floats[:N_FP], floats[N_FP:N_FP + 2 * n_samples], floats[N_FP + 2 * n_samples:N_FP + 4 * n_samples])
+
+
+@njit(cache=True)
+def process_events(events, ints, floats, velocity, first_update, out, out_raw, n_out, record_tot, tot, n_tot):
+    """Raw events (``EVENT_DTYPE``) through the input filter and the region (``process``)."""
+    return process(events["t"], events["x"], events["y"], events["p"], True, ints, floats, velocity, first_update,
+                   out, out_raw, n_out, record_tot, tot, n_tot)
+
+
+@njit(cache=True)
+def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out, out_raw, n_out, record_tot, tot,
+            n_tot):
     """Run a packet through the region; returns ``(n_out, n_tot, status)``.
 
     ``filtering``: ``ts`` are event times (µs) and the input filter runs first (full-sensor
     region only); else ``ts`` are input steps of accepted spikes. Depth estimates are
     written to ``out[n_out:]`` (``DEPTH_DTYPE``, capacity ``n_out + len(ts)``) and their
     fixed-point values to ``out_raw`` unless it is empty; time-of-travel spikes to ``tot``
-    (from ``n_tot`` on) when ``record_tot``. ``samples[0, y - y0] + samples[1, x - x0]`` indexes ``points``
-    (where ``A t`` is evaluated); ``A t`` and ``W`` are cached per sample and velocity
-    update (``cache_j``). ``velocity[j - first_update]`` is the velocity of update ``j``.
+    (from ``n_tot`` on) when ``record_tot``. The sample of pixel (x, y) is
+    ``rows[y - y0] + cols[x - x0]``: an index into the points (where ``A t`` is evaluated);
+    ``A t`` and ``W`` are cached per sample and velocity update (``cache_j``).
+    ``velocity[j - first_update]`` is the velocity of update ``j``.
     """
+    ip, cursor, counts, rows, cols, cache_j, cache_w, pend, rec, fp, points, cache_at = views(ints, floats)
+    stamp = rec.view(np.int32)
     status = _check(ts, xs, ys, filtering, cursor, ip, velocity.shape[0], first_update)
     if status != OK:
         return n_out, n_tot, status
     n = ts.shape[0]
     x0, y0, x1, y1, d = ip[X0], ip[Y0], ip[X1], ip[Y1], ip[DISTANCE]
-    t0, dt, refractory, width, height = ip[T0], ip[DT], ip[REFRACTORY], ip[WIDTH], ip[HEIGHT]
+    t0, dt, refractory, width, height = ip[T0], ip[DT], ip[REFRACTORY_US], ip[WIDTH], ip[HEIGHT]
     stride, row, update_every = ip[STRIDE], ip[ROW], ip[UPDATE_EVERY]
     per_polarity, fixed = ip[PER_POLARITY] != 0, ip[FIXED] != 0
     frac_bits, payload_bits = ip[FRAC_BITS], ip[PAYLOAD_BITS]
@@ -287,22 +313,22 @@ def process(ts, xs, ys, ps, filtering, rec, stamp, pend, cursor, counts, ip, fp,
                         n_tot += 1
             # 2. The pixel's depth neuron, in step k+2.
             sx, sy = axis_count(m0, m1), axis_count(m2, m3)
-            sample = samples[0, y - y0] + samples[1, x - x0]
+            sample = rows[y - y0] + cols[x - x0]
             if cache_j[sample] != update:  # first depth neuron of this patch (or pixel) under this update
-                at_x, at_y = velocity_term(tx, ty, tz, points[sample, 0], points[sample, 1], fx, fy, cx, cy)
-                cache_at[sample, 0], cache_at[sample, 1] = at_x, at_y
+                at_x, at_y = velocity_term(tx, ty, tz, points[2 * sample], points[2 * sample + 1], fx, fy, cx, cy)
+                cache_at[2 * sample], cache_at[2 * sample + 1] = at_x, at_y
                 if fixed:  # W = A t * dt / distance, quantised once (docs/fixed_point.md)
-                    cache_w[sample, 0] = quantize(at_x * seconds_per_count, frac_bits, payload_bits)
-                    cache_w[sample, 1] = quantize(at_y * seconds_per_count, frac_bits, payload_bits)
+                    cache_w[2 * sample] = quantize(at_x * seconds_per_count, frac_bits, payload_bits)
+                    cache_w[2 * sample + 1] = quantize(at_y * seconds_per_count, frac_bits, payload_bits)
                 cache_j[sample] = update
             measured = (sx | sy) != 0
             if fixed:
-                raw = fixed_depth(sx, sy, cache_w[sample, 0], cache_w[sample, 1], payload_bits)
+                raw = fixed_depth(sx, sy, cache_w[2 * sample], cache_w[2 * sample + 1], payload_bits)
                 slot = outcome(fired, measured, raw, ip[MIN_RAW], ip[MAX_RAW])
                 z = raw * lsb
             else:
                 raw = 0
-                z = float_depth(sx, sy, cache_at[sample, 0], cache_at[sample, 1], seconds_per_count)
+                z = float_depth(sx, sy, cache_at[2 * sample], cache_at[2 * sample + 1], seconds_per_count)
                 slot = outcome(fired, measured, z, fp[MIN_DEPTH], fp[MAX_DEPTH])
             counts[REJECTED + slot] += 1
             estimate = out[n_out]  # written always, kept when emitted
