@@ -128,7 +128,7 @@ def outcome(fired: int, measured: bool, z, min_depth, max_depth) -> int:
     return slot if fired else 4
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # a call in the event loop makes the loop 30 % slower (docs/performance.md)
 def _flush(stamp, pend, n_pend, key_base, su, sv):
     """Apply buffered facilitations ``(stamp index << 1) | polarity`` of one step (key ``key_base``)."""
     one, two, three = np.uint64(1), np.uint64(2), np.uint64(3)
