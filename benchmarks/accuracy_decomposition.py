@@ -66,8 +66,8 @@ def _seed(seed):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def _emit_per_event(l0, l1, d0, d1, ref, c_on, c_off, t0, t1, width, depth_jump, out_t, out_x, out_y, out_p, out_d,
-                    n, mean_on, mean_off, sigma):  # pragma: no cover - numba
+def _emit_per_event(l0, l1, d0, d1, ref, c_on, c_off, t0, t1, width, depth_jump, nearer_at_jumps, out_t, out_x,
+                    out_y, out_p, out_d, n, mean_on, mean_off, sigma):  # pragma: no cover - numba
     """``tofnet.sim.dvs.emit_crossings`` with ``c_on``/``c_off`` as each pixel's *current* thresholds,
     redrawn from ``N(mean, sigma)`` (clipped to mean +- 4 sigma) after each event of that polarity."""
     span = t1 - t0
@@ -91,7 +91,10 @@ def _emit_per_event(l0, l1, d0, d1, ref, c_on, c_off, t0, t1, width, depth_jump,
             out_x[n] = i % width
             out_y[n] = i // width
             out_p[n] = 1 if up else 0
-            out_d[n] = (za if frac < 0.5 else zb) if jump else za + frac * (zb - za)
+            if jump:
+                out_d[n] = min(za, zb) if nearer_at_jumps else (za if frac < 0.5 else zb)
+            else:
+                out_d[n] = za + frac * (zb - za)
             n += 1
             r = level
             mean = mean_on if up else mean_off
@@ -141,56 +144,6 @@ def per_event_noise(config: SimConfig, sigma: float, seed: int):
         yield
     finally:
         sim_engine.emit_crossings, sim_engine.count_crossings = saved
-
-
-@njit(cache=True)
-def _emit_nearer_at_jumps(l0, l1, d0, d1, ref, c_on, c_off, t0, t1, width, depth_jump, out_t, out_x, out_y, out_p,
-                          out_d, n):  # pragma: no cover - numba
-    """``tofnet.sim.dvs.emit_crossings`` (same events), but an event at a depth jump (an occluding contour
-    crossed the pixel) gets the depth of the nearer surface instead of that of the render nearer in time."""
-    span = t1 - t0
-    for i in range(l0.shape[0]):
-        a = l0[i]
-        b = l1[i]
-        if b > a:
-            c = c_on[i]
-            pol = 1
-            d = b - ref[i]
-        elif b < a:
-            c = -c_off[i]
-            pol = 0
-            d = ref[i] - b
-        else:
-            continue
-        if d < abs(c):
-            continue
-        m = int(d / abs(c))
-        za = d0[i]
-        zb = d1[i]
-        jump = abs(zb - za) > depth_jump * min(za, zb)
-        r = ref[i]
-        for j in range(1, m + 1):
-            level = r + j * c
-            frac = min(max((level - a) / (b - a), 0.0), 1.0)
-            out_t[n] = np.int64(np.floor(t0 + frac * span + 0.5))
-            out_x[n] = i % width
-            out_y[n] = i // width
-            out_p[n] = pol
-            out_d[n] = min(za, zb) if jump else za + frac * (zb - za)
-            n += 1
-        ref[i] = r + m * c
-    return n
-
-
-@contextlib.contextmanager
-def nearer_at_jumps():
-    """Inside: ``generate`` labels events at occluding contours with the nearer surface's depth."""
-    saved = sim_engine.emit_crossings
-    sim_engine.emit_crossings = _emit_nearer_at_jumps
-    try:
-        yield
-    finally:
-        sim_engine.emit_crossings = saved
 
 
 def recording(config: SimConfig, cache: Path | None, seed: int = 0, per_event_sigma: float = 0.0):
@@ -259,9 +212,8 @@ def section_attribution(args) -> None:
     for name in ("slider", "all_axes", "room_slider", "room_all_axes"):
         config = scenario_config(name, args.long)
         rec = recording_for(config, args.seed, args.cache)
-        nearer_config = config.replace(name=f"{name}-gt-nearer-at-jumps")
-        with nearer_at_jumps():
-            nearer = recording_for(nearer_config, args.seed, args.cache)
+        nearer_config = config.replace(name=f"{name}-gt-nearer-at-jumps", occlusion_depth="nearer_surface")
+        nearer = recording_for(nearer_config, args.seed, args.cache)
         assert np.array_equal(rec.events, nearer.events)
         relabelled = 100 * np.count_nonzero(rec.gt_depth != nearer.gt_depth) / len(rec.events)
         r = run_network(rec, backend=args.backend, refractory=args.refractory)

@@ -129,7 +129,7 @@ def test_several_crossings_between_two_renders_are_spread_in_time():
     n = count_crossings(l0, l1, ref, c, c)
     assert n == 3 + 2  # 0.65 -> 3 ON, -0.45 -> 2 OFF, 0.1 -> none
     out = [np.zeros(8, dtype=dt) for dt in (np.int64, np.uint16, np.uint16, np.uint8, np.float32)]
-    assert emit_crossings(l0, l1, d0, d1, ref, c, c, 1000.0, 2000.0, 3, 0.05, *out, 0) == n
+    assert emit_crossings(l0, l1, d0, d1, ref, c, c, 1000.0, 2000.0, 3, 0.05, False, *out, 0) == n
     t, x, _, p, d = (o[:n] for o in out)
     np.testing.assert_array_equal(x, [0, 0, 0, 1, 1])
     np.testing.assert_array_equal(p, [1, 1, 1, 0, 0])
@@ -164,3 +164,14 @@ def test_bad_parameters_name_the_field():
         Trajectory((0, 0, 0), (Segment(-1.0, (0, 0, 0)),))
     with pytest.raises(TofnetError, match="slider"):
         scenario("sliderr")
+
+
+def test_occluding_contours_can_be_labelled_with_the_nearer_surface():
+    config = scenario("slider", 0.05).replace(sensor_size=(60, 45))
+    in_time = generate(config)
+    nearer = generate(config.replace(occlusion_depth="nearer_surface"))
+    assert np.array_equal(in_time.events, nearer.events)
+    relabelled = in_time.gt_depth != nearer.gt_depth
+    assert relabelled.any() and np.all(nearer.gt_depth[relabelled] < in_time.gt_depth[relabelled])
+    with pytest.raises(SimError, match="occlusion_depth: expected one of"):
+        config.replace(occlusion_depth="farther")

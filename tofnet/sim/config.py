@@ -12,6 +12,9 @@ from tofnet.sim.errors import SimError
 from tofnet.sim.scene import Scene
 
 
+OCCLUSION_DEPTHS = ("nearest_in_time", "nearer_surface")
+
+
 @dataclass(frozen=True)
 class SimConfig:
     """A simulation, ready to run with ``tofnet.sim.generate`` or ``tofnet.sim.simulate``.
@@ -27,6 +30,9 @@ class SimConfig:
     noise_rate : background-activity events per pixel per second (0 = none).
     pose_rate : ground-truth poses per second written to ``groundtruth.txt``.
     max_step_px : largest image motion between two renders, pixels.
+    occlusion_depth : true depth of an event where an occluding contour crossed the pixel
+        between two renders: ``"nearest_in_time"`` (the render nearer to the event) or
+        ``"nearer_surface"`` (the occluding surface, whose motion made the event).
     description : one line for ``--list`` and the docs.
     """
 
@@ -42,6 +48,7 @@ class SimConfig:
     noise_rate: float = 0.0
     pose_rate: float = 1000.0
     max_step_px: float = 0.25
+    occlusion_depth: str = "nearest_in_time"
     description: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
@@ -54,6 +61,9 @@ class SimConfig:
         for key, value in {"contrast_sigma": self.contrast_sigma, "noise_rate": self.noise_rate}.items():
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise SimError(f"{key}: expected a number >= 0, got {value!r}")
+        if self.occlusion_depth not in OCCLUSION_DEPTHS:
+            raise SimError(f"occlusion_depth: expected one of {', '.join(OCCLUSION_DEPTHS)}, "
+                           f"got {self.occlusion_depth!r}")
         if not (self.intrinsics.fx > 0 and self.intrinsics.fy > 0):
             raise SimError(f"intrinsics: expected positive focal lengths in pixels, got {self.intrinsics!r}")
 

@@ -44,13 +44,14 @@ def count_crossings(l0, l1, ref, c_on, c_off):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def emit_crossings(l0, l1, d0, d1, ref, c_on, c_off, t0, t1, width, depth_jump,
+def emit_crossings(l0, l1, d0, d1, ref, c_on, c_off, t0, t1, width, depth_jump, nearer_at_jumps,
                    out_t, out_x, out_y, out_p, out_d, n):  # pragma: no cover - numba
     """Write the events of the interval ``[t0, t1]`` (µs) from index ``n``; return the new count.
 
     ``out_t`` gets integer microseconds (rounded), ``out_d`` the depth at the event
     time: linear between ``d0`` and ``d1``, or the nearer render's if the depth jumped
-    by more than ``depth_jump`` (relative). ``ref`` is updated in place.
+    by more than ``depth_jump`` (relative) — or, with ``nearer_at_jumps``, the nearer of
+    the two. ``ref`` is updated in place.
     """
     span = t1 - t0
     for i in range(l0.shape[0]):
@@ -81,7 +82,9 @@ def emit_crossings(l0, l1, d0, d1, ref, c_on, c_off, t0, t1, width, depth_jump,
             out_x[n] = i % width
             out_y[n] = i // width
             out_p[n] = pol
-            if jump:
+            if jump and nearer_at_jumps:
+                out_d[n] = min(za, zb)
+            elif jump:
                 out_d[n] = za if frac < 0.5 else zb
             else:
                 out_d[n] = za + frac * (zb - za)

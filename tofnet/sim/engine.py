@@ -127,7 +127,7 @@ def generate(config: SimConfig, *, seed: int = 0, progress: Progress | None = No
         max_step = max(max_step, step)
         buf.reserve(count_crossings(log0, log1, ref, c_on, c_off))
         buf.n = emit_crossings(log0, log1, depth0, depth1, ref, c_on, c_off, times[i] * 1e6, times[i + 1] * 1e6,
-                               width, DEPTH_JUMP, buf.t, buf.x, buf.y, buf.p, buf.d, buf.n)
+                               width, DEPTH_JUMP, config.occlusion_depth == "nearer_surface", buf.t, buf.x, buf.y, buf.p, buf.d, buf.n)
         a, b = noise_cut[i], noise_cut[i + 1]
         if b > a:
             frac = (noise_t[a:b] - times[i]) / span
