@@ -1,0 +1,94 @@
+"""Streams of the event-driven backends: bounded memory, owned results, any packet split."""
+
+import tracemalloc
+
+import numpy as np
+import pytest
+
+from tofnet.backends.event_driven import FixedBackend, FloatBackend
+from tofnet.errors import BackendError
+from tofnet.events import make_events
+from tofnet.io.recording import ConstantVelocity, Intrinsics, Recording
+from tofnet.networks import depth_network
+
+SENSOR = (48, 36)
+INTRINSICS = Intrinsics(200.0, 200.0, 23.5, 17.5)
+VELOCITY = (-0.4, 0.2, 0.3)
+
+
+def recording(duration_us, rate_per_us=0.5, seed=0):
+    rng = np.random.default_rng(seed)
+    n = int(duration_us * rate_per_us)
+    t = np.sort(rng.integers(0, duration_us, n))
+    return Recording(make_events(t, rng.integers(0, SENSOR[0], n), rng.integers(0, SENSOR[1], n),
+                                 rng.integers(0, 2, n)), intrinsics=INTRINSICS)
+
+
+def network():
+    return depth_network(SENSOR, input={"refractory": "3ms"},
+                         velocity={"source": "constant", "velocity": list(VELOCITY)})
+
+
+def open_stream(backend=FixedBackend, record_tot=False, t0_us=0):
+    return backend().open_stream(network(), intrinsics=INTRINSICS, velocity_source=ConstantVelocity(VELOCITY),
+                                 t0_us=t0_us, record_tot=record_tot)
+
+
+def packets_of(events, step_us=1000):
+    bounds = np.searchsorted(events["t"], np.arange(0, int(events["t"][-1]) + step_us + 1, step_us))
+    return [events[lo:hi] for lo, hi in zip(bounds[:-1], bounds[1:])]
+
+
+def peak_while_streaming(packets):
+    stream = open_stream()
+    tracemalloc.start()
+    for packet in packets:
+        stream.feed(packet)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return peak
+
+
+def test_a_streams_memory_does_not_grow_with_the_recording():
+    packets = packets_of(recording(4_000_000).events)  # 4 s of 1 ms packets
+    peak_while_streaming(packets[:10])  # loads the compiled kernel outside the measurement
+    short, long = peak_while_streaming(packets[:200]), peak_while_streaming(packets)
+    assert long < short + 64 * 1024, (short, long)  # the velocity look-ahead table is ~24 kB
+
+
+@pytest.mark.parametrize("backend", [FixedBackend, FloatBackend])
+def test_every_feed_returns_estimates_a_later_feed_leaves_alone(backend):
+    events = recording(300_000).events
+    stream = open_stream(backend, record_tot=True)
+    kept, copies, tots = [], [], []
+    for packet in packets_of(events):
+        depth = stream.feed(packet)
+        kept.append(depth)
+        copies.append(depth.copy())
+        tots.append((stream.tot, stream.tot.copy()))
+    assert sum(len(d) for d in kept) > 1000
+    assert all(np.array_equal(a, b) for a, b in zip(kept, copies))
+    assert all(np.array_equal(a, b) for a, b in tots)
+
+
+def test_single_event_packets_equal_one_run():
+    rec = recording(60_000, seed=3)
+    whole = FixedBackend().run(network(), rec, record_tot=True)
+    stream = open_stream(record_tot=True, t0_us=None)  # the first event, as run
+    depth, tot = [], []
+    for i in range(len(rec.events)):
+        depth.append(stream.feed(rec.events[i:i + 1]))
+        tot.append(stream.tot)
+    closed = stream.close()
+    assert len(whole.depth) > 100
+    assert np.array_equal(np.concatenate(depth), whole.depth) and np.array_equal(np.concatenate(tot), whole.tot)
+    assert (closed.accepted, closed.dropped, closed.rejected, closed.steps) == \
+        (whole.accepted, whole.dropped, whole.rejected, whole.steps)
+
+
+def test_a_packet_going_back_in_time_is_refused():
+    events = recording(20_000, seed=4).events
+    stream = open_stream()
+    stream.feed(events[len(events) // 2:])
+    with pytest.raises(BackendError, match="not sorted"):
+        stream.feed(events[:len(events) // 2])
