@@ -11,8 +11,10 @@ events, not to pixels x steps. An accepted input spike of input step ``k``
 - and the counters that fired reach the pixel's depth neuron in step ``k+2``.
 
 ``process`` takes either accepted spikes (input step, x, y, polarity), or raw events
-(t µs, x, y, polarity) that it runs through the input filter (``input_filter.admit``)
-in the same pass ("fused": one read of each event, no intermediate arrays).
+(t µs, x, y, polarity; ``process_events``) that it runs through the input filter
+(``input_filter.admit``) in the same pass ("fused": one read of each event, no
+intermediate arrays). Events must then be in time order; a packet that is not is
+refused before any state changes (``UNSORTED``) and ``region`` runs it unfused.
 
 All triggers of a step are resolved before any facilitation of that step: a spike
 triggers at once and its facilitations wait in ``pend`` until a spike of a later step
@@ -32,7 +34,9 @@ hold ``IDLE``, whose difference exceeds any counter maximum.
 The per-event path has no data-dependent branches after the filter (random input
 makes them mispredict): unit firing, axis counts and the depth outcome are computed
 with integer masks, and every triggered pixel writes an output record that only
-counts when emitted. State lines of the event ``PREFETCH`` places ahead are prefetched.
+counts when emitted. The record of the event ``PREFETCH`` places ahead, and the lines
+a buffered facilitation writes, are prefetched (they pay off once the records outgrow
+L2; they cost nothing measurable below).
 """
 
 from __future__ import annotations
