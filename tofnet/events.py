@@ -34,8 +34,3 @@ def make_events(t_us, x, y, p) -> np.ndarray:
     events["y"] = np.asarray(y)
     events["p"] = np.asarray(p)
     return events
-
-
-def empty_depth() -> np.ndarray:
-    """A depth array with no estimates."""
-    return np.empty(0, dtype=DEPTH_DTYPE)

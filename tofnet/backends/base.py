@@ -8,7 +8,6 @@ from typing import Callable
 
 import numpy as np
 
-from tofnet.events import DEPTH_DTYPE
 
 #: Reasons the input process drops an event, in report order.
 DROP_REASONS = ("out_of_bounds", "before_t0", "refractory", "same_step")
@@ -83,7 +82,3 @@ class Backend(ABC):
     def run(self, compiled, recording, *, record_tot: bool = False,
             progress: ProgressCallback | None = None) -> RunResult:
         """Run ``compiled`` (a ``CompiledNetwork``) on ``recording`` (a ``Recording``)."""
-
-
-def depth_array(size: int) -> np.ndarray:
-    return np.empty(size, dtype=DEPTH_DTYPE)

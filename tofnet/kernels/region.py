@@ -143,7 +143,7 @@ def velocity_rows(steps: np.ndarray, update_every: int) -> tuple[int, int]:
 def _sample_tables(config: KernelConfig, r: Region) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``rows``, ``cols`` (the sample of pixel (x, y) is ``rows[y-y0] + cols[x-x0]``) and ``points``
     (where ``A t`` is evaluated, one per sample: the pixel, or its patch centre)."""
-    (h, w), (width, height) = r.shape, config.sensor_size
+    (_, w), (width, height) = r.shape, config.sensor_size
     su, sv = sample_grid(config.per_pixel, config.patch_size, width, height)
     ys, xs = np.arange(r.y0, r.y1), np.arange(r.x0, r.x1)
     if config.per_pixel:
