@@ -242,14 +242,8 @@ def test_compiled_network_round_trips_through_json():
     assert again.to_dict() == compiled.to_dict()
     assert again.cores == compiled.cores and again.layers == compiled.layers and again.budget == compiled.budget
     assert again.network.process("time_of_travel").distance == 2
-    assert again.pipeline.distance == 2 and again.pipeline.sensor_size == (100, 70)
+    assert again.network.process("time_of_travel").sensor_size == (100, 70)
     assert data["summary"]["cores_used"] == compiled.cores_used
-
-
-def test_pipeline_is_what_backends_read():
-    from tofnet.compiler.pipeline import pipeline_of
-    net = paper()
-    assert compile_network(net).pipeline == pipeline_of(net)
 
 
 def test_host_processes_take_no_cores():

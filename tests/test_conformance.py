@@ -11,7 +11,6 @@ from tofnet.backends.registry import _registered, available_backends, get_backen
 from tofnet.conformance import CASES, format_table, run_suite
 from tofnet.conformance.compare import compare
 from tofnet.conformance.runner import select_cases
-from tofnet.compiler.pipeline import pipeline_of
 
 BACKENDS = available_backends()
 #: Reference results shared by every backend's run (keyed by baseline and case).
@@ -46,13 +45,14 @@ class ShiftedBackend(Backend):
     def __init__(self, shift=0.0, drop_first=False):
         self.shift, self.drop_first = shift, drop_first
 
-    def run(self, compiled, recording, *, record_tot=False, progress=None):
-        result = ReferenceBackend().run(compiled, recording, record_tot=record_tot, progress=progress)
+    def run(self, compiled, recording, *, record_tot=False, probes=(), progress=None):
+        result = ReferenceBackend().run(compiled, recording, record_tot=record_tot, probes=probes, progress=progress)
         depth = result.depth.copy()
         depth["z"] += self.shift
         if self.drop_first and len(depth):
             depth = depth[1:]
-        return dataclasses.replace(result, depth=depth, backend=self.name)
+        return dataclasses.replace(result, outputs={**result.outputs, result.depth_output: depth},
+                                   backend=self.name)
 
 
 @pytest.fixture
@@ -98,17 +98,18 @@ def test_a_crashing_backend_fails_its_cases_and_the_suite_goes_on(registered):
 def test_quantised_comparison_uses_the_count_weighted_bound():
     case = next(c for c in CASES if c.name == "edge+u")
     scene = case.build()
-    pipeline = pipeline_of(scene.network)
     base = ReferenceBackend().run(scene.network, scene.recording, record_tot=True)
     fixed = dataclasses.replace(base, extra={"frac_bits": 16})
     count = 4  # 250 px/s at 1 ms steps: 4 steps per pixel, one axis measured
     bound = count * 2.0 ** -17
-    near = dataclasses.replace(fixed, depth=base.depth.copy())
+    near = dataclasses.replace(fixed, outputs=dict(base.outputs))
+    near.depth = base.depth.copy()
     near.depth["z"] += 0.9 * bound
-    assert compare(near, base, "quantised", pipeline).ok
-    far = dataclasses.replace(fixed, depth=base.depth.copy())
+    assert compare(near, base, "quantised", scene.network).ok
+    far = dataclasses.replace(fixed, outputs=dict(base.outputs))
+    far.depth = base.depth.copy()
     far.depth["z"][3] += 1.1 * bound
-    assert "tolerance" in compare(far, base, "quantised", pipeline).first
+    assert "tolerance" in compare(far, base, "quantised", scene.network).first
 
 
 def test_case_selection_by_prefix():

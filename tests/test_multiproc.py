@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from tofnet.backends.event_driven import FixedBackend
-from tofnet.backends.multiproc import MultiprocBackend, plan_workers, routing_table
+from tofnet.backends.multiproc import MultiprocBackend
+from tofnet.backends.remote import plan_workers, routing_table
 from tofnet.compiler import compile_network
 from tofnet.errors import BackendError
 from tofnet.io.recording import Recording
@@ -107,8 +108,10 @@ def test_workers_are_spawned_not_forked(session):
 def test_the_paper_mapping_puts_48_cores_on_each_of_two_workers():
     compiled = compile_network(depth_network((240, 180)), patch=(30, 30))  # the paper's 48 + 48 cores
     plans = plan_workers(compiled, 2)
-    assert [len(p.cores) for p in plans] == [48, 48] and [len(p.regions) for p in plans] == [24, 24]
-    route = routing_table(plans, (240, 180))
+    assert [len(p.cores) for p in plans] == [48, 48]
+    for plan in plans:  # each worker holds half of each layer
+        assert sum(compiled.cores[c].process == "time_of_travel" for c in plan.cores) == 24
+    route = routing_table(compiled, plans, "time_of_travel")
     tot_cores = compiled.cores_of("time_of_travel")
     ys, xs = np.mgrid[0:180, 0:240]
     for plan in plans:  # a worker receives exactly the union of its cores' halos

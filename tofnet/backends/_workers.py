@@ -1,25 +1,25 @@
-"""The worker side of the multiproc backend: one spawned OS process holding some cores' state.
+"""The worker side of the multiproc backend: one spawned OS process holding some cores' models.
 
-A worker owns the event-driven kernel state (``tofnet.kernels.region``) of its
-regions (a region is the pixels one time-of-travel core and one depth core share) and
-nothing else. It answers messages from the host, in order, on one pipe:
+A worker owns model instances (one per compiled core it runs, see
+``tofnet.backends.remote``) and nothing else. It answers messages from the host, in
+order, on one pipe:
 
 =================================  ==============================================
 host -> worker                     worker -> host
 =================================  ==============================================
 (on start)                         ("ready", pid)
-("start", config, t0_us, regions, ("started",)
- halos, record_tot)
-("chunk", seq, steps, x, y, p,     ("chunk", seq, depth, tot)
- velocity, first_update)
-("finish",)                        ("finished", rejected[3], tot_spikes)
+("build", specs)                   ("built",)
+("run", items, first, end)         ("run", [(key, outputs), ...])
+("counts", keys)                   ("counts", [counts of each key])
+("finish",)                        ("finished",)
 ("fault", kind)                    (nothing; test hook, see ``_FAULTS``)
 ("stop",) or end of file           (exits)
 =================================  ==============================================
 
-Any exception while handling a message is answered with ``("error", traceback_text)``;
-the host turns it into a ``BackendError`` and shuts every worker down. The module keeps
-its imports light so that a spawned interpreter starts fast.
+``items`` pairs each model key with its inputs for steps ``[first, end)``. Any
+exception while handling a message is answered with ``("error", traceback_text)``; the
+host turns it into a ``BackendError`` and shuts every worker down. The module keeps its
+imports light so that a spawned interpreter starts fast.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ import traceback
 
 import numpy as np
 
-#: Test hooks armed with ``("fault", kind)``; each fires when the next chunk arrives.
+#: Test hooks armed with ``("fault", kind)``; each fires when the next ``run`` arrives.
 _FAULTS = ("raise", "kill", "hang")
 
 
@@ -79,78 +79,51 @@ def _reply_error(conn, index: int) -> None:
 
 
 def _warm_up() -> None:
-    """Import the kernel and compile it (or load numba's cache) before reporting ready.
-
-    The host's startup timeout covers this; chunk timeouts then measure only real work.
-    """
+    """Import the built-in core models' kernels and compile them (or load numba's cache) before
+    reporting ready: the host's start-up timeout covers this; run timeouts measure real work."""
+    from tofnet.events import TOT_DTYPE
     from tofnet.kernels.fixed_point import FixedPointFormat
-    from tofnet.kernels.region import KernelConfig, Region, TimeOfTravelKernel
+    from tofnet.kernels.region import KernelConfig, TimeOfTravelKernel
 
-    config = KernelConfig((2, 1), 1e-3, 1, 8, 0.05, 20.0, 1, True, 30, (200.0, 200.0, 0.0, 0.0),
-                          FixedPointFormat())
-    kernel = TimeOfTravelKernel(config, Region(0, 2, 0, 1))
-    kernel.process(np.array([0, 3]), np.array([0, 1]), np.array([0, 0]), np.array([1, 1]),
-                   np.array([[-0.5, 0.0, 0.0]] * 8), 0, record_tot=True)
+    units = TimeOfTravelKernel(KernelConfig((2, 1), 1e-3, 1, 8, 0.05, 20.0, 1, True, 30, (1.0, 1.0, 0.0, 0.0),
+                                            emit_depth=False))
+    out = units.process(np.array([0, 3]), np.array([0, 1]), np.array([0, 0]), np.array([1, 1]), np.zeros((0, 3)), 0,
+                        record_tot=True)
+    depth = TimeOfTravelKernel(KernelConfig((2, 1), 1e-3, 1, 1, 0.05, 20.0, 1, True, 30, (200.0, 200.0, 0.0, 0.0),
+                                            FixedPointFormat()))
+    velocity = np.zeros(1, dtype=[("step", "<i8"), ("tx", "<f8"), ("ty", "<f8"), ("tz", "<f8")])
+    depth.process_counts(out.tot if len(out.tot) else np.empty(0, TOT_DTYPE), velocity)
 
 
 class _Worker:
-    """The state of one worker between messages: one kernel per region of the current run."""
+    """The state of one worker between messages: the model instances of the current run."""
 
     def __init__(self, index: int):
         self.index = index
-        self.kernels: list = []
-        self.halos: list = []
-        self.record_tot = False
+        self.models: dict = {}
         self.fault: str | None = None
 
     def handle(self, message: tuple):
         kind = message[0]
-        if kind == "start":
-            return self._start(*message[1:])
-        if kind == "chunk":
-            return self._chunk(*message[1:])
+        if kind == "build":
+            self.models = {spec.key: spec.build() for spec in message[1]}
+            return ("built",)
+        if kind == "run":
+            if self.fault is not None:
+                self._fire_fault()
+            _, items, first, end = message
+            return ("run", [(key, self.models[key].run(first, end, inputs)) for key, inputs in items])
+        if kind == "counts":
+            return ("counts", [self.models[key].counts() for key in message[1]])
         if kind == "finish":
-            return self._finish()
+            self.models = {}
+            return ("finished",)
         if kind == "fault":
             if message[1] not in _FAULTS:
                 raise ValueError(f"unknown fault {message[1]!r}; expected one of {_FAULTS}")
             self.fault = message[1]
             return None
         raise ValueError(f"unknown message {kind!r}")
-
-    def _start(self, config, t0_us: int, regions, halos, record_tot: bool):
-        from tofnet.kernels.region import TimeOfTravelKernel
-
-        self.kernels = [TimeOfTravelKernel(config, region, t0_us) for region in regions]
-        self.halos = list(halos)
-        self.record_tot = bool(record_tot)
-        return ("started",)
-
-    def _chunk(self, seq: int, steps, xs, ys, ps, velocity, first_update: int):
-        if self.fault is not None:
-            self._fire_fault()
-        from tofnet.compiler.partition import rects_mask
-
-        parts = []
-        for kernel, halo in zip(self.kernels, self.halos):
-            # Only the spikes the compiled mapping routes to this region's core (its halo).
-            sel = rects_mask(halo, xs, ys)
-            if not sel.any():
-                continue
-            parts.append(kernel.process(steps[sel], xs[sel], ys[sel], ps[sel], velocity, first_update,
-                                        record_tot=self.record_tot))
-        depth = np.concatenate([o.depth for o in parts]) if parts else None
-        tot = np.concatenate([o.tot for o in parts]) if parts and self.record_tot else None
-        return ("chunk", seq, depth, tot)
-
-    def _finish(self):
-        rejected = np.zeros(3, dtype=np.int64)
-        tot_spikes = 0
-        for kernel in self.kernels:
-            rejected += kernel.rejected
-            tot_spikes += kernel.tot_spikes
-        self.kernels = []
-        return ("finished", rejected, tot_spikes)
 
     def _fire_fault(self) -> None:
         fault, self.fault = self.fault, None

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Iterable
 
 import numpy as np
 
+from tofnet.errors import BackendError
+from tofnet.events import DEPTH_DTYPE
 
 #: Reasons the input process drops an event, in report order.
 DROP_REASONS = ("out_of_bounds", "before_t0", "refractory", "same_step")
@@ -20,27 +22,103 @@ ProgressCallback = Callable[[int, int], None]
 
 @dataclass
 class RunResult:
-    """Depth estimates and the counts that account for every input event.
+    """The output of every sink (and probed) port and the counts that account for every event.
 
-    ``depth`` is a ``DEPTH_DTYPE`` array; ``tot`` the time-of-travel spikes
-    (``TOT_DTYPE``) when requested. ``events_in == accepted + sum(dropped.values())``.
-    ``rejected`` counts depth neurons that received counters but emitted nothing.
+    ``outputs["process.port"]`` holds the records the port sent, in the canonical order
+    (step, then y, then x); ``payloads`` names each one's payload. ``counts[process]`` is
+    what each process counted (input: ``events_in``, ``accepted`` and a count per drop
+    reason; time of travel: ``spikes``; depth: each reject reason and ``emitted``).
+    ``latency[output]`` is the steps from an input event to that output (one per connection
+    on the longest path). For the paper's network the properties below read as before:
+    ``depth``, ``events_in == accepted + sum(dropped.values())``, ``rejected``, ``tot``.
     """
 
     backend: str
-    depth: np.ndarray
-    events_in: int
-    accepted: int
-    dropped: dict[str, int]
-    rejected: dict[str, int]
-    tot_spikes: int
+    outputs: dict[str, np.ndarray]
+    counts: dict[str, dict[str, int]]
     steps: int
     t0_us: int
     timestep_us: int
-    latency_steps: int
+    latency: dict[str, int]
+    payloads: dict[str, str] = field(default_factory=dict)
     wall_time: float = 0.0
-    tot: np.ndarray | None = None
     extra: dict = field(default_factory=dict)
+
+    # -- the paper network's view -------------------------------------------------------------
+    def _named(self, payload: str) -> list[str]:
+        return [name for name, kind in self.payloads.items() if kind == payload]
+
+    @property
+    def depth_outputs(self) -> list[str]:
+        """Names of the outputs that carry depth estimates (``DEPTH_DTYPE``)."""
+        return self._named("depth")
+
+    @property
+    def depth_output(self) -> str:
+        names = self.depth_outputs
+        if len(names) != 1:
+            what = ", ".join(names) if names else "none"
+            raise BackendError(f"the network has {len(names)} depth outputs ({what}); "
+                               "read result.outputs[name] instead of result.depth")
+        return names[0]
+
+    @property
+    def depth(self) -> np.ndarray:
+        """The estimates of the network's one depth output (``DEPTH_DTYPE``)."""
+        if not self.depth_outputs:
+            return np.empty(0, DEPTH_DTYPE)
+        return self.outputs[self.depth_output]
+
+    @depth.setter
+    def depth(self, value: np.ndarray) -> None:
+        self.outputs[self.depth_output] = value
+
+    def _processes_counting(self, key: str) -> list[dict[str, int]]:
+        return [c for c in self.counts.values() if key in c]
+
+    @property
+    def events_in(self) -> int:
+        """Events the network was given (each input process sees every event)."""
+        found = self._processes_counting("events_in")
+        return found[0]["events_in"] if found else 0
+
+    @property
+    def accepted(self) -> int:
+        return sum(c["accepted"] for c in self._processes_counting("events_in"))
+
+    @property
+    def dropped(self) -> dict[str, int]:
+        """Drops by reason, summed over the input processes."""
+        out = dict.fromkeys(DROP_REASONS, 0)
+        for c in self._processes_counting("events_in"):
+            for reason in DROP_REASONS:
+                out[reason] += c.get(reason, 0)
+        return out
+
+    @property
+    def rejected(self) -> dict[str, int]:
+        """Rejections by reason of the process behind the depth output."""
+        if not self.depth_outputs:
+            return dict.fromkeys(REJECT_REASONS, 0)
+        c = self.counts.get(self.depth_output.split(".")[0], {})
+        return {reason: c.get(reason, 0) for reason in REJECT_REASONS}
+
+    @property
+    def tot_spikes(self) -> int:
+        """Time-of-travel spikes sent, summed over the processes that count ``spikes``."""
+        return sum(c["spikes"] for c in self._processes_counting("spikes"))
+
+    @property
+    def tot(self) -> np.ndarray | None:
+        """The probed time-of-travel spikes (``TOT_DTYPE``), when exactly one counts port was probed."""
+        names = self._named("count")
+        return self.outputs[names[0]] if len(names) == 1 else None
+
+    @property
+    def latency_steps(self) -> int:
+        if self.depth_outputs:
+            return self.latency[self.depth_output]
+        return max(self.latency.values(), default=0)
 
     @property
     def latency_seconds(self) -> float:
@@ -48,23 +126,20 @@ class RunResult:
 
     def summary(self) -> dict:
         """Plain-data summary (for JSON and the CLI)."""
-        return {
-            "backend": self.backend,
-            "events_in": self.events_in,
-            "accepted": self.accepted,
-            "dropped": dict(self.dropped),
-            "tot_spikes": self.tot_spikes,
-            "depth_out": int(len(self.depth)),
-            "rejected": dict(self.rejected),
-            "steps": self.steps,
-            "timestep_s": self.timestep_us * 1e-6,
-            "latency_steps": self.latency_steps,
-            "latency_s": self.latency_seconds,
-            "wall_time_s": self.wall_time,
-        }
+        out = {"backend": self.backend, "events_in": self.events_in, "accepted": self.accepted,
+               "dropped": self.dropped, "tot_spikes": self.tot_spikes}
+        if len(self.depth_outputs) == 1:
+            out["depth_out"] = int(len(self.depth))
+            out["rejected"] = self.rejected
+        out.update({
+            "outputs": {name: int(len(records)) for name, records in self.outputs.items()},
+            "counts": {name: dict(c) for name, c in self.counts.items()},
+            "steps": self.steps, "timestep_s": self.timestep_us * 1e-6, "latency_steps": self.latency_steps,
+            "latency_s": self.latency_seconds, "wall_time_s": self.wall_time})
+        return out
 
 
-def empty_counts(reasons: tuple[str, ...]) -> dict[str, int]:
+def empty_counts(reasons: Iterable[str]) -> dict[str, int]:
     return {reason: 0 for reason in reasons}
 
 
@@ -72,13 +147,19 @@ class Backend(ABC):
     """Executes a compiled network on a recording.
 
     ``arithmetic`` is ``"float"`` or ``"fixed"``; integer backends must agree bit for
-    bit, float ones within the tolerance stated in docs/fixed_point.md.
+    bit, float ones within the tolerance stated in docs/fixed_point.md. ``family`` names
+    the process models it runs (``tofnet.models.registry``).
     """
 
     name: str = ""
     arithmetic: str = "float"
+    family: str = "float"
 
     @abstractmethod
-    def run(self, compiled, recording, *, record_tot: bool = False,
+    def run(self, compiled, recording, *, probes: Iterable[str] = (), record_tot: bool = False,
             progress: ProgressCallback | None = None) -> RunResult:
-        """Run ``compiled`` (a ``CompiledNetwork``) on ``recording`` (a ``Recording``)."""
+        """Run ``compiled`` (a ``CompiledNetwork`` or ``Network``) on ``recording`` (a ``Recording``).
+
+        ``probes`` names output ports (``"process.port"``) to record besides the sinks;
+        ``record_tot`` probes every time-of-travel counter port.
+        """

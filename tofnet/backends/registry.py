@@ -61,3 +61,14 @@ def get_backend(name: str, **options) -> Backend:
                 raise
             raise BackendError(f"backend {name!r} does not take the options {sorted(options)}: {err}") from None
     raise BackendError(f"unknown backend {name!r}; available: {', '.join(available_backends())}")
+
+
+def backends_by_family() -> dict[str, list[str]]:
+    """The built-in backends of each model family (for error messages)."""
+    out: dict[str, list[str]] = {}
+    for name, target in _BUILTIN.items():
+        module, attr = target.split(":")
+        family = getattr(getattr(importlib.import_module(module), attr), "family", None)
+        if family:
+            out.setdefault(family, []).append(name)
+    return out

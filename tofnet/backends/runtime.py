@@ -1,55 +1,85 @@
-"""Binding a pipeline to a recording: start time, intrinsics and the velocity table."""
+"""Binding a network to a recording: the clock, start time, intrinsics and camera velocity."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from tofnet.compiler.pipeline import PipelineParams, pipeline_of
-from tofnet.errors import BackendError, DataError
+from tofnet.core.network import Network
+from tofnet.errors import BackendError, DataError, NetworkError
 from tofnet.io.recording import ConstantVelocity, Intrinsics, Recording, VelocitySource
 
-
-def as_pipeline(compiled) -> PipelineParams:
-    """The pipeline of a ``CompiledNetwork``, a ``Network`` or a ``PipelineParams``."""
-    if isinstance(compiled, PipelineParams):
-        return compiled
-    pipeline = getattr(compiled, "pipeline", None)
-    if isinstance(pipeline, PipelineParams):
-        return pipeline
-    return pipeline_of(compiled)
+#: The network's timestep when no process declares one (seconds).
+DEFAULT_TIMESTEP = 1e-3
 
 
-def start_time_us(pipeline: PipelineParams, recording: Recording) -> int:
-    """``t0`` in microseconds: the input process's ``t0``, else the first event's time."""
-    if pipeline.t0 is not None:
-        return int(round(pipeline.t0 * 1e6))
+@dataclass(frozen=True)
+class Clock:
+    """The network's timestep (µs) and start of step 0 (µs; None: the first event's time)."""
+
+    timestep_us: int
+    t0_us: int | None
+
+
+def clock_of(network: Network) -> Clock:
+    """The one timestep (and ``t0``) every process that declares one agrees on.
+
+    A network runs on one clock (Loihi's global timestep): processes with a ``timestep``
+    or ``t0`` parameter must give the same value; none gives 1 ms and the first event.
+    """
+    def agreed(name: str):
+        found = {p.name: p.values[name] for p in network.processes if name in p.values}
+        values = set(found.values())
+        if len(values) > 1:
+            listing = ", ".join(f"{k}.{name} = {v!r}" for k, v in found.items())
+            raise NetworkError(f"network {network.name!r}: processes disagree on {name} ({listing}); "
+                               "a network runs on one clock")
+        return next(iter(values)) if values else None, next(iter(found), None)
+
+    timestep, owner = agreed("timestep")
+    timestep = DEFAULT_TIMESTEP if timestep is None else timestep
+    timestep_us = timestep * 1e6
+    if abs(timestep_us - round(timestep_us)) > 1e-6 or round(timestep_us) < 1:
+        raise NetworkError(f"{owner or network.name}.timestep: must be a whole number of microseconds, "
+                           f"got {timestep!r} s")
+    t0, _ = agreed("t0")
+    return Clock(int(round(timestep_us)), None if t0 is None else int(round(t0 * 1e6)))
+
+
+def start_time_us(t0_us: int | None, recording: Recording) -> int:
+    """``t0`` in microseconds: the network's ``t0``, else the first event's time (0 without events)."""
+    if t0_us is not None:
+        return t0_us
     if len(recording.events) == 0:
         return 0
     return int(recording.events["t"][0])
 
 
-def intrinsics_of(pipeline: PipelineParams, recording: Recording) -> Intrinsics:
-    """Intrinsics from the velocity process when given, else from the recording's calibration."""
-    if pipeline.intrinsics is not None:
-        fx, fy, cx, cy = pipeline.intrinsics
+def intrinsics_of(given, recording: Recording | None, who: str) -> Intrinsics:
+    """Intrinsics ``given`` by a process (``[fx, fy, cx, cy]``), else the recording's calibration."""
+    if given is not None:
+        fx, fy, cx, cy = given
         return Intrinsics(fx, fy, cx, cy)
-    if recording.intrinsics is None:
-        raise DataError(f"{recording.source}: no camera calibration (calib.txt); the velocity process "
-                        f"'{pipeline.names[3]}' needs fx, fy, cx, cy: add calib.txt or set intrinsics: [fx, fy, cx, cy]")
+    if recording is None or recording.intrinsics is None:
+        source = recording.source if recording is not None else "the stream"
+        raise DataError(f"{source}: no camera calibration (calib.txt); the process '{who}' needs fx, fy, cx, cy: "
+                        "add calib.txt or set intrinsics: [fx, fy, cx, cy]")
     return recording.intrinsics
 
 
-def velocity_source_of(pipeline: PipelineParams, recording: Recording) -> VelocitySource:
-    """The camera velocity the velocity process reads, per its ``source`` parameter."""
-    name = pipeline.names[3]
-    if pipeline.velocity_source == "constant":
-        return ConstantVelocity(pipeline.velocity_constant)
-    if pipeline.velocity_source == "samples":
+def velocity_source_of(source: str, constant, samples: str | None, recording: Recording | None,
+                       who: str) -> VelocitySource:
+    """The camera velocity a velocity process reads: ``constant``, ``samples`` (a file) or ``groundtruth``."""
+    if source == "constant":
+        return ConstantVelocity(tuple(constant))
+    if source == "samples":
         from tofnet.io.groundtruth import read_velocity_samples
-        return read_velocity_samples(pipeline.velocity_samples)
-    if recording.trajectory is None:
-        raise DataError(f"{recording.source}: no ground-truth poses (groundtruth.txt), but velocity process "
-                        f"'{name}' has source: groundtruth; add the poses or use source: constant/samples")
+        return read_velocity_samples(samples)
+    if recording is None or recording.trajectory is None:
+        where = recording.source if recording is not None else "the stream"
+        raise DataError(f"{where}: no ground-truth poses (groundtruth.txt), but velocity process "
+                        f"'{who}' has source: groundtruth; add the poses or use source: constant/samples")
     return recording.trajectory
 
 

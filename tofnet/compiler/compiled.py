@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import cached_property
 from typing import Any, Mapping
 
 import numpy as np
@@ -12,7 +11,7 @@ from tofnet.compiler.budget import LOIHI2, Budget
 from tofnet.compiler.partition import (PatchOption, Rect, Traffic, auto_patch, max_pixels_per_core,
                                        patch_per_layer, plan_layer, rects_mask, traffic_of, usage_of)
 from tofnet.core.network import Network
-from tofnet.errors import BudgetError
+from tofnet.errors import BackendError, BudgetError
 
 PLACEMENTS = ("core", "host")
 
@@ -105,7 +104,6 @@ class CompiledNetwork:
 
     ``layers`` in topological order, ``cores`` by global index, ``traffic`` per
     connection into a core-placed layer, ``host`` the processes that run off-chip.
-    ``pipeline`` (the resolved paper pipeline backends read) is computed on first use.
     """
 
     network: Network
@@ -116,12 +114,6 @@ class CompiledNetwork:
     host: tuple[str, ...]
     patch: Any = None
     _maps: dict = field(default_factory=dict, repr=False, compare=False)
-
-    @cached_property
-    def pipeline(self):
-        """``tofnet.compiler.pipeline.pipeline_of(network)``; raises if not the paper's graph."""
-        from tofnet.compiler.pipeline import pipeline_of
-        return pipeline_of(self.network)
 
     @property
     def cores_used(self) -> int:
@@ -192,6 +184,15 @@ class CompiledNetwork:
                    cores=tuple(CoreAssignment.from_dict(c) for c in data["cores"]),
                    traffic=tuple(Traffic.from_dict(t) for t in data["traffic"]),
                    host=tuple(data["host"]), patch=patch)
+
+
+def network_of(compiled) -> Network:
+    """The network of a ``CompiledNetwork``, or a ``Network`` itself."""
+    if isinstance(compiled, CompiledNetwork):
+        return compiled.network
+    if isinstance(compiled, Network):
+        return compiled
+    raise BackendError(f"expected a CompiledNetwork or a Network, got {type(compiled).__name__}")
 
 
 def compile_network(network: Network, budget: Budget | str | Mapping = LOIHI2,

@@ -1,18 +1,22 @@
 """Comparing two runs of one case: exact for integer backends, with stated tolerances otherwise.
 
-Whatever the arithmetic, the integer parts of the network must agree exactly: the
-input counts, the time-of-travel spikes and which depth neurons were reached. The
-depth values then compare by mode:
+Whatever the arithmetic, the integer parts of a network must agree exactly: every
+process's counts (apart from the rejections below), every output that is not a depth,
+and which depth neurons were reached. Depth outputs then compare by mode:
 
-``exact``  (fixed vs fixed): every estimate ``(t, x, y, z, step)`` bit for bit, every count.
+``exact``  (fixed vs fixed): every record of every output bit for bit, every count.
 ``float``  (float vs float): the same ``(t, x, y, step)`` set and counts, ``z`` within
-           ``FLOAT_RTOL`` relative.
+           ``FLOAT_RTOL`` relative; float fields of other outputs likewise.
 ``quantised`` (fixed vs float): ``|z_fixed - z_float| <= (|m_x| + |m_y|) * 2**-(F+1)``
            (docs/fixed_point.md, ``tofnet.kernels.fixed_point.depth_tolerance``), where
-           ``m_x, m_y`` are the estimate's signed counts (read off the time-of-travel
-           spikes); an estimate may be missing on one side only when its depth is within
-           that tolerance of ``min_depth`` or ``max_depth``, and the rejection counts must
-           differ by exactly those estimates.
+           ``m_x, m_y`` are the estimate's signed counts (read off the probed spikes of the
+           time-of-travel process feeding it; the largest counts when not probed); an
+           estimate may be missing on one side only when its depth is within that
+           tolerance of its process's ``min_depth`` or ``max_depth``, and that process's
+           rejection counts must differ by exactly those estimates.
+
+Outputs are compared in the canonical order (step, then y, then x), which every
+backend produces.
 """
 
 from __future__ import annotations
@@ -20,13 +24,15 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.lib.recfunctions import repack_fields
 
+from tofnet.core.network import Network
 from tofnet.kernels.fixed_point import DEFAULT_FRAC_BITS, depth_tolerance
 
-#: Relative tolerance on z between two float backends.
+#: Relative tolerance on float fields between two float backends.
 FLOAT_RTOL = 1e-9
-#: Count fields every pair of backends must agree on exactly.
-EXACT_FIELDS = ("events_in", "accepted", "dropped", "tot_spikes", "steps", "t0_us", "timestep_us", "latency_steps")
+#: Run facts every pair of backends must agree on exactly.
+EXACT_FIELDS = ("steps", "t0_us", "timestep_us")
 MODES = ("exact", "float", "quantised")
 
 
@@ -55,7 +61,7 @@ class Comparison:
 
 
 def sort_depth(depth: np.ndarray) -> np.ndarray:
-    """Estimates by step, then y, then x (the order every backend's output is compared in)."""
+    """Estimates by step, then y, then x (the canonical order)."""
     return depth[np.lexsort((depth["x"], depth["y"], depth["step"]))]
 
 
@@ -63,62 +69,109 @@ def sort_tot(tot: np.ndarray) -> np.ndarray:
     return tot[np.lexsort((tot["direction"], tot["x"], tot["y"], tot["step"]))]
 
 
-def compare(result, baseline, mode: str, pipeline) -> Comparison:
-    """Compare ``result`` with ``baseline`` (``RunResult``s of one case) in ``mode``.
-
-    ``pipeline`` gives the depth limits, counter width and sensor size.
-    """
+def compare(result, baseline, mode: str, network: Network) -> Comparison:
+    """Compare ``result`` with ``baseline`` (``RunResult``s of one case on ``network``) in ``mode``."""
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
-    out = Comparison(mode, estimates=(len(result.depth), len(baseline.depth)))
+    depth_names = [n for n in baseline.outputs if baseline.payloads.get(n) == "depth"]
+    out = Comparison(mode, estimates=(sum(len(result.outputs.get(n, ())) for n in depth_names),
+                                      sum(len(baseline.outputs[n]) for n in depth_names)))
     diff = out.differences
     for name in EXACT_FIELDS:
         a, b = getattr(result, name), getattr(baseline, name)
         if a != b:
             diff.append(f"{name}: {a} vs {b}")
-    tot = None
-    if result.tot is not None and baseline.tot is not None:
-        tot_a, tot_b = sort_tot(result.tot), sort_tot(baseline.tot)
-        tot = tot_b
-        if tot_a.tobytes() != tot_b.tobytes():
-            diff.append("tot spikes: " + _first_row_difference(tot_a, tot_b, ("step", "y", "x", "direction")))
-    a, b = sort_depth(result.depth), sort_depth(baseline.depth)
-    for name, d in (("result", a), ("baseline", b)):
+    if set(result.outputs) != set(baseline.outputs):
+        diff.append(f"outputs: {sorted(result.outputs)} vs {sorted(baseline.outputs)}")
+    shifts: dict[str, dict[str, int]] = {}
+    for name in sorted(set(result.outputs) & set(baseline.outputs)):
+        a, b = result.outputs[name], baseline.outputs[name]
+        if baseline.payloads.get(name) == "depth":
+            _compare_depth(name, a, b, mode, result, baseline, network, diff, shifts)
+        else:
+            _compare_records(name, a, b, mode, diff)
+    _compare_counts(result.counts, baseline.counts, shifts, diff)
+    return out
+
+
+def _compare_counts(ra: dict, rb: dict, shifts: dict, diff: list[str]) -> None:
+    if set(ra) != set(rb):
+        diff.append(f"counts of processes {sorted(ra)} vs {sorted(rb)}")
+        return
+    for process in ra:
+        a, b = dict(ra[process]), dict(rb[process])
+        for reason, delta in shifts.get(process, {}).items():  # boundary estimates explain these
+            a[reason] = a.get(reason, 0) + delta
+            if reason in ("too_near", "too_far"):
+                a["emitted"] = a.get("emitted", 0) - delta
+        if a != b:
+            explained = f" (boundary estimates explain {shifts[process]})" if process in shifts else ""
+            diff.append(f"counts of {process}: {ra[process]} vs {rb[process]}{explained}")
+
+
+def _compare_records(name: str, a: np.ndarray, b: np.ndarray, mode: str, diff: list[str]) -> None:
+    if a.dtype != b.dtype:
+        diff.append(f"{name}: record layouts differ ({a.dtype} vs {b.dtype})")
+        return
+    floats = [f for f in a.dtype.names if a.dtype[f].kind == "f"]
+    if mode == "exact" or not floats:
+        if a.tobytes() != b.tobytes():
+            diff.append(f"{name}: " + _first_row_difference(a, b, ()))
+        return
+    ints = [f for f in a.dtype.names if f not in floats]
+    if len(a) != len(b) or any(not np.array_equal(a[f], b[f]) for f in ints):
+        diff.append(f"{name}: " + _first_row_difference(repack_fields(a[ints]), repack_fields(b[ints]), ()))
+        return
+    for f in floats:
+        bad = ~np.isclose(a[f], b[f], rtol=FLOAT_RTOL, atol=0.0, equal_nan=True)
+        if bad.any():
+            i = int(np.argmax(bad))
+            diff.append(f"{name}: {f} at row {i}: {a[f][i]!r} vs {b[f][i]!r} (rtol {FLOAT_RTOL:g})")
+            return
+
+
+def _counts_feeding(network: Network, depth_process: str, outputs: dict):
+    """The probed counter spikes feeding a depth process and their largest value (``counter_max``)."""
+    process = network.process(depth_process)
+    port = process.ports.get("counts")
+    source = getattr(port, "source", None)
+    if source is None:
+        return None, None
+    bits = source.process.values.get("counter_bits")
+    return outputs.get(source.qualified_name), (None if bits is None else (1 << int(bits)) - 1)
+
+
+def _compare_depth(name, a, b, mode, result, baseline, network, diff, shifts) -> None:
+    for label, d, res in (("result", a, result), ("baseline", b, baseline)):
         if len(d) and np.any((np.diff(d["step"]) == 0) & (np.diff(d["y"]) == 0) & (np.diff(d["x"]) == 0)):
-            diff.append(f"{name}: two estimates for one pixel in one step")
-        stamps = result.t0_us + (d["step"] + 1) * result.timestep_us
-        if not np.array_equal(d["t"], stamps):
-            diff.append(f"{name}: depth t is not the end of its step")
+            diff.append(f"{name}: {label}: two estimates for one pixel in one step")
+        if not np.array_equal(d["t"], res.t0_us + (d["step"] + 1) * res.timestep_us):
+            diff.append(f"{name}: {label}: depth t is not the end of its step")
     if mode == "exact":
         if a.tobytes() != b.tobytes():
-            diff.append("depth: " + _first_row_difference(a, b, ("step", "y", "x")))
-        if result.rejected != baseline.rejected:
-            diff.append(f"rejected: {result.rejected} vs {baseline.rejected}")
-        return out
+            diff.append(f"{name}: " + _first_row_difference(a, b, ("step", "y", "x")))
+        return
     only_a, only_b, za, zb, keys = _join(a, b)
     if mode == "float":
         if len(only_a) or len(only_b):
-            diff.append("depth: " + _missing(a, only_a, b, only_b))
+            diff.append(f"{name}: " + _missing(a, only_a, b, only_b))
         bad = np.abs(za - zb) > FLOAT_RTOL * np.maximum(np.abs(za), np.abs(zb))
         if bad.any():
             i = int(np.argmax(bad))
             diff.append(f"depth z at {_where(keys[i])}: {za[i]!r} vs {zb[i]!r} (rtol {FLOAT_RTOL:g})")
-        if result.rejected != baseline.rejected:
-            diff.append(f"rejected: {result.rejected} vs {baseline.rejected}")
-        return out
-    _compare_quantised(result, baseline, a, b, only_a, only_b, za, zb, keys, tot, pipeline, diff)
-    return out
-
-
-def _compare_quantised(result, baseline, a, b, only_a, only_b, za, zb, keys, tot, pipeline, diff) -> None:
+        return
     fixed = result if result.extra.get("frac_bits") is not None else baseline
     frac_bits = int(fixed.extra.get("frac_bits", DEFAULT_FRAC_BITS))
-    width, height = pipeline.sensor_size
-    lo, hi = pipeline.min_depth, pipeline.max_depth
+    process_name = name.split(".")[0]
+    process = network.process(process_name)
+    width, height = process.sensor_size
+    lo, hi = process.values.get("min_depth", -np.inf), process.values.get("max_depth", np.inf)
+    tot, counter_max = _counts_feeding(network, process_name, baseline.outputs)
 
     def tolerance(rows: np.ndarray) -> np.ndarray:
         if tot is None:  # no spikes to read the counts from: the largest counts possible
-            return np.full(len(rows), depth_tolerance(pipeline.counter_max, pipeline.counter_max, frac_bits))
+            biggest = counter_max if counter_max is not None else 1 << 30
+            return np.full(len(rows), depth_tolerance(biggest, biggest, frac_bits))
         sx, sy = signed_counts(tot, rows, width, height)
         return depth_tolerance(sx, sy, frac_bits) + 1e-12 * np.abs(rows["z"])  # + float64 rounding of z
 
@@ -127,7 +180,7 @@ def _compare_quantised(result, baseline, a, b, only_a, only_b, za, zb, keys, tot
     if bad.any():
         i = int(np.argmax(bad))
         diff.append(f"depth z at {_where(keys[i])}: {za[i]!r} vs {zb[i]!r} (tolerance {tol[i]:.3g} m)")
-    shifts = {"too_near": 0, "too_far": 0}  # baseline minus result, explained by boundary estimates
+    shift = {"too_near": 0, "too_far": 0}  # result's counts + shift == baseline's
     for rows, sign, side in ((a[only_a], 1, "result"), (b[only_b], -1, "baseline")):
         if not len(rows):
             continue
@@ -138,14 +191,10 @@ def _compare_quantised(result, baseline, a, b, only_a, only_b, za, zb, keys, tot
             i = int(np.argmax(~(near | far)))
             diff.append(f"depth: {_where(rows[i])} z {rows['z'][i]:.6g} only in the {side}, "
                         f"not within {t[i]:.3g} m of min/max depth")
-        shifts["too_near"] += sign * int(np.count_nonzero(near))
-        shifts["too_far"] += sign * int(np.count_nonzero(far & ~near))
-    ra, rb = result.rejected, baseline.rejected
-    expected = {"no_measurement": ra.get("no_measurement", 0),
-                "too_near": ra.get("too_near", 0) + shifts["too_near"],
-                "too_far": ra.get("too_far", 0) + shifts["too_far"]}
-    if {k: rb.get(k, 0) for k in expected} != expected:
-        diff.append(f"rejected: {ra} vs {rb} (boundary estimates explain {shifts})")
+        shift["too_near"] += sign * int(np.count_nonzero(near))
+        shift["too_far"] += sign * int(np.count_nonzero(far & ~near))
+    if any(shift.values()):
+        shifts[process_name] = shift
 
 
 def signed_counts(tot: np.ndarray, depth: np.ndarray, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:

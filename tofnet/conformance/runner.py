@@ -103,7 +103,7 @@ def run_suite(backend: str | Backend, against: str | Backend = DEFAULT_BASELINE,
                     if cache is not None:
                         cache[key] = expected
                 got = runners["test"].run(compiled, scene.recording)
-                comparison = compare(got, expected, mode, compiled.pipeline)
+                comparison = compare(got, expected, mode, compiled.network)
                 outcome = CaseResult(case.name, test.name, base.name, mode, comparison.ok, comparison.estimates,
                                      comparison.first, time.perf_counter() - started)
             except Exception as err:  # a backend's bug is a failed case, not the end of the suite

@@ -39,9 +39,11 @@ class Network:
                                                "whose process is not in the network")
                         self.graph.add_edge(process.name, target.process.name,
                                             source_port=port.name, target_port=target.name)
-                elif port.source is not None and port.source.process.name not in self.graph:
-                    raise NetworkError(f"{port.qualified_name} is connected from {port.source.qualified_name}, "
-                                       "whose process is not in the network")
+                else:
+                    for source in port.sources:
+                        if source.process.name not in self.graph:
+                            raise NetworkError(f"{port.qualified_name} is connected from {source.qualified_name}, "
+                                               "whose process is not in the network")
         self.validate()
 
     @property
@@ -86,18 +88,19 @@ class Network:
         # size that disagrees with its source is a shape mismatch.
         for process in self.topological_order():
             for port in process.ports.values():
-                if not isinstance(port, InPort) or port.source is None:
+                if not isinstance(port, InPort):
                     continue
-                upstream = port.source.process.sensor_size
-                if upstream is None:
-                    continue
-                if process.sensor_size is None:
-                    process.sensor_size = upstream
-                elif process.sensor_size != upstream:
-                    w, h = upstream
-                    raise NetworkError(f"shape mismatch: {port.qualified_name} is {process.sensor_size[0]}x"
-                                       f"{process.sensor_size[1]} px but its source {port.source.qualified_name} "
-                                       f"is {w}x{h} px")
+                for source in port.sources:
+                    upstream = source.process.sensor_size
+                    if upstream is None:
+                        continue
+                    if process.sensor_size is None:
+                        process.sensor_size = upstream
+                    elif process.sensor_size != upstream:
+                        w, h = upstream
+                        raise NetworkError(f"shape mismatch: {port.qualified_name} is {process.sensor_size[0]}x"
+                                           f"{process.sensor_size[1]} px but its source {source.qualified_name} "
+                                           f"is {w}x{h} px")
         for process in self.processes:
             # A source without a size (e.g. the velocity process) takes its target's.
             if process.sensor_size is None:

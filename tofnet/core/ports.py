@@ -3,33 +3,96 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import Enum
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, ClassVar
+
+import numpy as np
 
 from tofnet.errors import NetworkError
+from tofnet.events import DEPTH_DTYPE, TOT_DTYPE
 
 if TYPE_CHECKING:
     from tofnet.core.process import Process
 
+#: Fields every record of a port carries: the step it was sent in, and for spikes its pixel.
+STEP_FIELD = ("step", "<i8")
+PIXEL_FIELDS = (("x", "<u2"), ("y", "<u2"))
 
-class Payload(str, Enum):
-    """What a graded spike on a port carries."""
 
-    POLARITY = "polarity"  # input events: 1 = ON, 0 = OFF
-    COUNT = "count"  # time-of-travel counters, steps
-    VELOCITY_TERM = "velocity_term"  # A t, px*m/s
-    DEPTH = "depth"  # metres
+@dataclass(frozen=True)
+class Payload:
+    """What a port carries, and how one message is laid out in memory.
+
+    ``kind == "spikes"``: graded spikes of single pixels; a record has ``step`` (the step it
+    was sent in), ``x``, ``y`` (pixels) and the payload's own fields. ``kind == "field"``: a
+    value defined over the whole image, sent now and then as one record of coefficients
+    (``step`` and the fields); how the value at a pixel follows from them is the payload's
+    documented meaning (e.g. ``velocity_term``). Two ports connect when their payload names
+    match. Users define their own: ``Payload("gain", (("g", "<f8"),), doc="...")``.
+    """
+
+    name: str
+    fields: tuple[tuple[str, str], ...] = ()
+    doc: str = ""
+    kind: str = "spikes"
+    #: Full record dtype when it is not ``step, x, y`` + fields (the built-in depth layout).
+    layout: tuple[tuple[str, str], ...] | None = None
+
+    POLARITY: ClassVar["Payload"]
+    COUNT: ClassVar["Payload"]
+    VELOCITY_TERM: ClassVar["Payload"]
+    DEPTH: ClassVar["Payload"]
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("spikes", "field"):
+            raise NetworkError(f"payload {self.name!r}: kind must be 'spikes' or 'field', got {self.kind!r}")
+        names = self.dtype.names
+        needed = ("step", "x", "y") if self.kind == "spikes" else ("step",)
+        missing = [n for n in needed if n not in names]
+        if missing:
+            raise NetworkError(f"payload {self.name!r}: its records lack {', '.join(missing)}")
+
+    @property
+    def value(self) -> str:
+        """The payload's name (what errors and docs print)."""
+        return self.name
+
+    @property
+    def dtype(self) -> np.dtype:
+        """The record layout of one spike (or field update) on a port of this payload."""
+        if self.layout is not None:
+            return np.dtype(list(self.layout))
+        base = [STEP_FIELD] + (list(PIXEL_FIELDS) if self.kind == "spikes" else [])
+        return np.dtype(base + list(self.fields))
+
+    def empty(self) -> np.ndarray:
+        return np.empty(0, dtype=self.dtype)
+
+
+def _layout(dtype: np.dtype) -> tuple[tuple[str, str], ...]:
+    return tuple((name, dtype.fields[name][0].str) for name in dtype.names)
+
+
+Payload.POLARITY = Payload("polarity", (("p", "u1"),), "one spike per active pixel: 1 = ON, 0 = OFF")
+Payload.COUNT = Payload("count", doc="time-of-travel counters: direction (0-3: +u, -u, +v, -v), count in steps",
+                        layout=_layout(TOT_DTYPE))
+Payload.VELOCITY_TERM = Payload(
+    "velocity_term", (("tx", "<f8"), ("ty", "<f8"), ("tz", "<f8")),
+    "A t (px*m/s): each update carries the camera velocity t (m/s, camera frame); the value at a pixel is "
+    "A(u, v) t evaluated where the sender's sampling says (per pixel or at patch centres)", kind="field")
+Payload.DEPTH = Payload("depth", doc="depth estimates: z metres, t = end of the step in µs", layout=_layout(DEPTH_DTYPE))
 
 
 @dataclass(frozen=True)
 class PortSpec:
-    """Declaration of a port: its name, payload and channels per pixel."""
+    """Declaration of a port: name, payload, channels per pixel, and for inputs whether it
+    must be connected (``required``) and whether several outputs may feed it (``fan_in``)."""
 
     name: str
     payload: Payload
     channels: int = 1
     doc: str = ""
     required: bool = True
+    fan_in: bool = False
 
 
 class Port:
@@ -56,7 +119,7 @@ class Port:
         return (self.spec.channels, size[1], size[0])
 
     def __repr__(self) -> str:
-        return f"<{type(self).__name__} {self.qualified_name} {self.spec.payload.value}>"
+        return f"<{type(self).__name__} {self.qualified_name} {self.spec.payload.name}>"
 
 
 class OutPort(Port):
@@ -73,22 +136,29 @@ class OutPort(Port):
                                "connect an output port to an input port")
         if not isinstance(target, InPort):
             raise NetworkError(f"{self.qualified_name}.connect: expected an input port, got {target!r}")
-        if target.source is not None:
-            raise NetworkError(f"{target.qualified_name} is already connected to {target.source.qualified_name}; "
-                               "an input port takes one source")
-        if target.spec.payload != self.spec.payload:
-            raise NetworkError(f"cannot connect {self.qualified_name} ({self.spec.payload.value}) to "
-                               f"{target.qualified_name}, which expects {target.spec.payload.value}")
-        target.source = self
+        if self in target.sources:
+            raise NetworkError(f"{self.qualified_name} is already connected to {target.qualified_name}")
+        if target.sources and not target.spec.fan_in:
+            raise NetworkError(f"{target.qualified_name} is already connected to {target.sources[0].qualified_name}; "
+                               "this input port takes one source")
+        if target.spec.payload.name != self.spec.payload.name:
+            raise NetworkError(f"cannot connect {self.qualified_name} ({self.spec.payload.name}) to "
+                               f"{target.qualified_name}, which expects {target.spec.payload.name}")
+        target.sources.append(self)
         self.targets.append(target)
 
 
 class InPort(Port):
-    """Receives spikes from exactly one output port."""
+    """Receives spikes from one output port (several when its spec allows ``fan_in``)."""
 
     def __init__(self, process: "Process", spec: PortSpec):
         super().__init__(process, spec)
-        self.source: OutPort | None = None
+        self.sources: list[OutPort] = []
+
+    @property
+    def source(self) -> OutPort | None:
+        """The (first) output feeding this port, None when unconnected."""
+        return self.sources[0] if self.sources else None
 
     def connect(self, target: "Port") -> None:
         raise NetworkError(f"cannot connect from input {self.qualified_name}: connect an output port to it "

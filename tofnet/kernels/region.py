@@ -16,7 +16,8 @@ from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, TOT_DTYPE
 from tofnet.kernels.fixed_point import FixedPointFormat
 from tofnet.kernels import time_of_travel as tt
-from tofnet.kernels.input_filter import ACCEPTED, NEVER, filter_events
+from tofnet.kernels.input_filter import ACCEPTED, NEVER
+from tofnet.kernels.order import sort_steps_by_pixel
 from tofnet.kernels.velocity import sample_grid
 
 
@@ -54,7 +55,8 @@ class KernelConfig:
 
     ``timestep`` seconds, depths metres, ``intrinsics`` (fx, fy, cx, cy) pixels;
     ``fixed`` the fixed-point format, or None for float64 arithmetic; the input filter's
-    ``refractory_us`` (µs) and ``refractory_per_polarity`` for ``process_events``.
+    ``refractory_us`` (µs) and ``refractory_per_polarity`` for ``process_events``;
+    ``emit_depth`` False runs the time-of-travel units alone (no velocity needed).
     """
 
     sensor_size: tuple[int, int]
@@ -70,6 +72,7 @@ class KernelConfig:
     fixed: FixedPointFormat | None = None
     refractory_us: int = 0
     refractory_per_polarity: bool = False
+    emit_depth: bool = True
 
     @classmethod
     def from_pipeline(cls, pipeline, intrinsics, fixed: FixedPointFormat | None = None) -> "KernelConfig":
@@ -189,6 +192,7 @@ class TimeOfTravelKernel:
         for slot, offset in at.items():
             ip[slot] = offset
         ip[[tt.N_SAMPLES, tt.PEND_SIZE, tt.AT_REC, tt.REC_SIZE]] = n_samples, sizes[tt.AT_PEND], start, rec_size
+        ip[tt.EMIT_DEPTH] = int(config.emit_depth)
         ip[[tt.X0, tt.Y0, tt.X1, tt.Y1, tt.DISTANCE, tt.COUNTER_MAX, tt.REBASE_AT, tt.UPDATE_EVERY]] = (
             r.x0, r.y0, r.x1, r.y1, d, (1 << config.counter_bits) - 1, tt.REBASE_AFTER, config.update_every)
         fmt = config.fixed
@@ -216,6 +220,8 @@ class TimeOfTravelKernel:
         self._span_us = (MAX_VELOCITY_ROWS - 2) * config.update_every * config.timestep_us
         self._full = self.region == Region.full(config.sensor_size)
         self._no_raw, self._no_velocity = np.empty(0, np.int64), np.zeros((0, 3))
+        self._held_velocity = np.zeros(4)
+        self._scratch, self._row_start = np.empty(0, DEPTH_DTYPE), np.zeros(config.sensor_size[1] + 1, np.int64)  # depth layer alone: the velocity update its neurons hold
 
     @property
     def t0_us(self) -> int:
@@ -309,6 +315,7 @@ class TimeOfTravelKernel:
         n_out, n_tot, status = self._call(steps, xs, ys, ps, False, table, first_update, self._out, self._raw, 0,
                                           record_tot, 0)
         self._raise_for(status, table, first_update)
+        self._order(self._out, self._raw, 0, n_out)
         return self._output(self._out, self._raw, 0, n_out, n_tot, record_tot, spikes_before, copy)
 
     def process_events(self, events: np.ndarray, velocity: VelocityRows, *, record_tot: bool = False,
@@ -317,9 +324,8 @@ class TimeOfTravelKernel:
 
         The region must be the whole sensor; the filter's state (refractory period, one
         event per pixel and step, drop counts: ``drops``, ``accepted``) lives in the kernel.
-        Events in time order take the fused path; a packet out of order is filtered first
-        and then run as spikes, exactly as ``InputFilter.feed`` + ``process`` would (so it
-        is refused when accepted spikes go back in time). ``velocity`` supplies velocity
+        Events the filter may accept must be in time order, also across calls; a packet
+        that is not is refused before any state changes. ``velocity`` supplies velocity
         rows (``VelocityRows``). Estimates go to ``into[offset:]`` when given (capacity
         ``offset + len(events)``; no ``z_raw``), else to an internal buffer.
         """
@@ -355,13 +361,27 @@ class TimeOfTravelKernel:
         t = events["t"]
         first, last = int(t[0]), int(t[-1])
         if last - first < self._span_us:  # one velocity table is enough (the usual case)
-            return self._events(events, t, first, last, velocity, out, raw, offset, record_tot, 0)
-        n_out, n_tot = offset, 0
-        for lo, hi in self._pieces(t):
-            piece = events[lo:hi]
-            n_out, n_tot = self._events(piece, piece["t"], int(piece["t"][0]), int(piece["t"][-1]), velocity, out,
-                                        raw, n_out, record_tot, n_tot)
+            n_out, n_tot = self._events(events, t, first, last, velocity, out, raw, offset, record_tot, 0)
+        else:
+            n_out, n_tot = offset, 0
+            for lo, hi in self._pieces(t):
+                piece = events[lo:hi]
+                n_out, n_tot = self._events(piece, piece["t"], int(piece["t"][0]), int(piece["t"][-1]), velocity,
+                                            out, raw, n_out, record_tot, n_tot)
+        self._order(out, raw, offset, n_out)
         return n_out, n_tot
+
+    def _order(self, out: np.ndarray, raw: np.ndarray, lo: int, hi: int) -> None:
+        """Put the estimates ``out[lo:hi]`` of each step in pixel order (the canonical order)."""
+        if hi - lo < 2:
+            return
+        if len(raw):  # keep z_raw with its estimate: sort positions, then both arrays
+            order = np.lexsort((out["x"][lo:hi], out["y"][lo:hi], out["step"][lo:hi]))
+            out[lo:hi], raw[lo:hi] = out[lo:hi][order], raw[lo:hi][order]
+            return
+        if len(self._scratch) < hi - lo:
+            self._scratch = np.empty(max(hi - lo, 2 * len(self._scratch)), DEPTH_DTYPE)
+        sort_steps_by_pixel(out, lo, hi, self.config.sensor_size[1], self._scratch, self._row_start)
 
     def buffers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The internal output buffers: estimates, their fixed-point values, time-of-travel spikes."""
@@ -399,34 +419,38 @@ class TimeOfTravelKernel:
             table, first = velocity(*self._updates(int(self._cursor[tt.NEED_FIRST]), int(self._cursor[tt.NEED_LAST])))
             n_out2, n_tot2, status = tt.process_events(events, *state, table, first, out, raw, n_out, record_tot,
                                                        self._tot, n_tot)
-        if status == tt.UNSORTED:
-            return self._events_unsorted(events, velocity, out, raw, n_out, record_tot, n_tot)
         self._raise_for(status, table, first)
         return n_out2, n_tot2
 
-    def _events_unsorted(self, events, velocity: VelocityRows, out, raw, n_out: int, record_tot: bool,
-                         n_tot: int) -> tuple[int, int]:
-        """Events out of time order: the input filter first, then the spikes it accepted (the unfused path)."""
-        cfg, d, ip, n = self.config, self.config.distance, self._ip, len(events)
-        t, x, y = events["t"], events["x"], events["y"]
-        steps, xs, ys, ps = np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.uint8)
-        count = filter_events(t, x, y, events["p"], *cfg.sensor_size, self.t0_us, cfg.timestep_us, cfg.refractory_us,
-                              cfg.refractory_per_polarity, self._rec, 2 * d, int(ip[tt.ROW]), int(ip[tt.STRIDE]),
-                              tt.FILTER_WORD, steps, xs, ys, ps, self._counts)
-        candidates = t[(x < cfg.sensor_size[0]) & (y < cfg.sensor_size[1]) & (t >= self.t0_us)]
-        if len(candidates):  # later packets in time order must not go back before these
-            self._cursor[tt.T_HI] = max(int(self._cursor[tt.T_HI]), int(candidates.max()))
-        lo = 0
-        while lo < count:  # keep each call's velocity table small even when the spikes are sparse in time
-            first = (int(steps[lo]) + 1) // cfg.update_every
-            hi = int(np.searchsorted(steps[:count], (first + MAX_VELOCITY_ROWS) * cfg.update_every - 1, side="left"))
-            hi = max(hi, lo + 1)  # only when the steps are unsorted, which the kernel refuses
-            table, table_first = velocity(*self._updates(int(steps[lo]), int(steps[hi - 1])))
-            n_out, n_tot, status = self._call(steps[lo:hi], xs[lo:hi], ys[lo:hi], ps[lo:hi], False, table,
-                                              table_first, out, raw, n_out, record_tot, n_tot)
-            self._raise_for(status, table, table_first)
-            lo = hi
-        return n_out, n_tot
+    def process_counts(self, counts: np.ndarray, velocity: np.ndarray) -> np.ndarray:
+        """Depth estimates (``DEPTH_DTYPE``, a copy) of counter spikes, the depth layer alone.
+
+        ``counts`` (``TOT_DTYPE``) sorted by step with each pixel's spikes of a step together;
+        ``velocity`` the ``velocity_term`` updates (``step``, ``tx``, ``ty``, ``tz``) sent over
+        the same steps, sorted by step. See ``depth_counts.depth_from_counts``.
+        """
+        from tofnet.kernels.depth_counts import depth_from_counts
+
+        if self._broken:
+            raise BackendError("kernel state is invalid after an earlier error; start a new one")
+        n = len(counts)
+        self._reserve(n, 0)
+        v_t = np.empty((len(velocity), 3))
+        if len(velocity):
+            v_t[:, 0], v_t[:, 1], v_t[:, 2] = velocity["tx"], velocity["ty"], velocity["tz"]
+        n_out, status = depth_from_counts(
+            np.ascontiguousarray(counts["step"]), np.ascontiguousarray(counts["x"]),
+            np.ascontiguousarray(counts["y"]), np.ascontiguousarray(counts["direction"]),
+            np.ascontiguousarray(counts["count"]), np.ascontiguousarray(velocity["step"]), v_t,
+            self._held_velocity, self._ints, self._floats, self._out, self._raw, 0)
+        if status:
+            raise BackendError("counter spikes are not sorted by step")
+        return copy_records(self._out[:n_out])
+
+    @property
+    def outcomes(self) -> np.ndarray:
+        """Depth neurons reached so far by outcome: REJECT_REASONS, then emitted (a view)."""
+        return self._counts[tt.REJECTED:tt.REJECTED + 4]
 
     def unit_state(self) -> tuple[np.ndarray, np.ndarray]:
         """Per unit of the region (``[H, W, 4]``): step of its last facilitation (-1: idle) and polarity.

@@ -75,8 +75,8 @@ REJECTED, EMITTED, INACTIVE, TOT_SPIKES, N_COUNTS = 5, 8, 9, 10, 11
 # cursor, the counts, the sample tables, the caches, the facilitation buffer and the
 # pixel records; ``floats`` holds the float parameters, the sample points and ``A t``.
 (X0, Y0, X1, Y1, DISTANCE, COUNTER_MAX, REBASE_AT, UPDATE_EVERY, FIXED, FRAC_BITS, PAYLOAD_BITS, MIN_RAW,
- MAX_RAW, T0, DT, REFRACTORY_US, PER_POLARITY, WIDTH, HEIGHT, STRIDE, ROW, N_SAMPLES,
- AT_CURSOR, AT_COUNTS, AT_ROWS, AT_COLS, AT_CACHE_J, AT_CACHE_W, AT_PEND, PEND_SIZE, AT_REC, REC_SIZE, N_IP) = range(33)
+ MAX_RAW, T0, DT, REFRACTORY_US, PER_POLARITY, WIDTH, HEIGHT, STRIDE, ROW, N_SAMPLES, EMIT_DEPTH,
+ AT_CURSOR, AT_COUNTS, AT_ROWS, AT_COLS, AT_CACHE_J, AT_CACHE_W, AT_PEND, PEND_SIZE, AT_REC, REC_SIZE, N_IP) = range(34)
 # Float slots, then the points (x, y per sample) and the cached ``A t`` (x, y per sample).
 FX, FY, CX, CY, SECONDS_PER_COUNT, MIN_DEPTH, MAX_DEPTH, N_FP = range(8)
 
@@ -130,6 +130,53 @@ def outcome(fired: int, measured: bool, z, min_depth, max_depth) -> int:
     far = np.int64(z >= max_depth) & (1 - near)
     slot = np.int64(measured) * (3 - 2 * near - far)
     return slot if fired else 4
+
+
+@njit(cache=True, inline="always")
+def depth_params(ip, fp, out_raw):
+    """The depth neuron's constants, read once per call (``depth_neuron``'s ``params``)."""
+    fixed = ip[FIXED] != 0
+    frac_bits = ip[FRAC_BITS]
+    return (fixed, frac_bits, ip[PAYLOAD_BITS], 1.0 / (1 << frac_bits), ip[MIN_RAW], ip[MAX_RAW],
+            fp[MIN_DEPTH], fp[MAX_DEPTH], fp[FX], fp[FY], fp[CX], fp[CY], fp[SECONDS_PER_COUNT],
+            out_raw.shape[0] > 0)
+
+
+@njit(cache=True, inline="always")
+def depth_neuron(m0, m1, m2, m3, fired, sample, update, tx, ty, tz, step, stamp_us, x, y, params, counts,
+                 cache_j, cache_w, cache_at, points, out, out_raw, n_out):
+    """The depth neuron of pixel (x, y) in ``step`` given its four counters (paper eq. 8).
+
+    ``sample`` indexes where ``A t`` is evaluated; ``A t`` (and ``W`` in fixed point) is cached
+    per sample and velocity ``update`` (any id that changes when the velocity does). Counts the
+    outcome; writes the estimate to ``out[n_out]`` and returns ``n_out`` + 1 when it is emitted.
+    Shared by the fused kernel and the depth-only kernel (``depth_from_counts``).
+    """
+    (fixed, frac_bits, payload_bits, lsb, min_raw, max_raw, min_depth, max_depth, fx, fy, cx, cy,
+     seconds_per_count, keep_raw) = params
+    sx, sy = axis_count(m0, m1), axis_count(m2, m3)
+    if cache_j[sample] != update:  # first depth neuron of this patch (or pixel) under this update
+        at_x, at_y = velocity_term(tx, ty, tz, points[2 * sample], points[2 * sample + 1], fx, fy, cx, cy)
+        cache_at[2 * sample], cache_at[2 * sample + 1] = at_x, at_y
+        if fixed:  # W = A t * dt / distance, quantised once (docs/fixed_point.md)
+            cache_w[2 * sample] = quantize(at_x * seconds_per_count, frac_bits, payload_bits)
+            cache_w[2 * sample + 1] = quantize(at_y * seconds_per_count, frac_bits, payload_bits)
+        cache_j[sample] = update
+    measured = (sx | sy) != 0
+    if fixed:
+        raw = fixed_depth(sx, sy, cache_w[2 * sample], cache_w[2 * sample + 1], payload_bits)
+        slot = outcome(fired, measured, raw, min_raw, max_raw)
+        z = raw * lsb
+    else:
+        raw = 0
+        z = float_depth(sx, sy, cache_at[2 * sample], cache_at[2 * sample + 1], seconds_per_count)
+        slot = outcome(fired, measured, z, min_depth, max_depth)
+    counts[REJECTED + slot] += 1
+    estimate = out[n_out]  # written always, kept when emitted
+    estimate.t, estimate.x, estimate.y, estimate.z, estimate.step = stamp_us, x, y, z, step
+    if keep_raw:
+        out_raw[n_out] = raw
+    return n_out + (slot == EMITTED - REJECTED)
 
 
 @njit(cache=True, inline="always")  # a call in the event loop makes the loop 30 % slower (docs/performance.md)
@@ -189,7 +236,7 @@ def _check(ts, xs, ys, filtering, cursor, ip, n_rows, first_update):
         if n:
             lo, hi, found = ts[0], ts[n - 1], True
     u = ip[UPDATE_EVERY]
-    if found and ((lo + 1) // u < first_update or (hi + 1) // u - first_update >= n_rows):
+    if found and ip[EMIT_DEPTH] != 0 and ((lo + 1) // u < first_update or (hi + 1) // u - first_update >= n_rows):
         cursor[NEED_FIRST], cursor[NEED_LAST] = lo, hi
         return NO_VELOCITY
     return OK
@@ -238,16 +285,14 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
     x0, y0, x1, y1, d = ip[X0], ip[Y0], ip[X1], ip[Y1], ip[DISTANCE]
     t0, dt, refractory, width, height = ip[T0], ip[DT], ip[REFRACTORY_US], ip[WIDTH], ip[HEIGHT]
     stride, row, update_every = ip[STRIDE], ip[ROW], ip[UPDATE_EVERY]
-    per_polarity, fixed = ip[PER_POLARITY] != 0, ip[FIXED] != 0
-    frac_bits, payload_bits = ip[FRAC_BITS], ip[PAYLOAD_BITS]
-    fx, fy, cx, cy, seconds_per_count = fp[FX], fp[FY], fp[CX], fp[CY], fp[SECONDS_PER_COUNT]
-    lsb = 1.0 / (1 << frac_bits)
+    per_polarity = ip[PER_POLARITY] != 0
+    params = depth_params(ip, fp, out_raw)
     max_diff = 2 * ip[COUNTER_MAX]
     latest = FILTER_WORD + 2 if per_polarity else FILTER_WORD
     hx0, hy0, hx1, hy1 = x0 - d, y0 - d, x1 + d, y1 + d
     pad_x, pad_y = 2 * d - x0, 2 * d - y0
     su, sv = np.uint64(2 * stride * d), np.uint64(2 * stride * row * d)  # stamp offsets of the neighbours
-    keep_raw = out_raw.shape[0] > 0
+    emit_depth = ip[EMIT_DEPTH] != 0
     n_pend, current, base = cursor[N_PEND], cursor[CURRENT], cursor[BASE]
     step, step_start, step_end = np.int64(0), np.int64(0), np.int64(-(1 << 62))  # filter's step
     hoisted = np.int64(-(1 << 62))  # the step whose key, velocity and stamp are below
@@ -293,10 +338,11 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
             hoisted = k
             key_now = (k + 1 - base) << 1
             # Depth neurons of step k+2 hold update (k+1) // U (docs/semantics.md).
-            update = (k + 1) // update_every
-            j = update - first_update
-            tx, ty, tz = velocity[j, 0], velocity[j, 1], velocity[j, 2]
-            stamp_us = t0 + (k + 3) * dt  # end of depth step k+2
+            if emit_depth:
+                update = (k + 1) // update_every
+                j = update - first_update
+                tx, ty, tz = velocity[j, 0], velocity[j, 1], velocity[j, 2]
+                stamp_us = t0 + (k + 3) * dt  # end of depth step k+2
         if not (hx0 <= x < hx1 and hy0 <= y < hy1):
             continue  # neither triggers nor facilitates here
         u = np.uint64(2 * r)  # stamp of unit 0
@@ -316,30 +362,10 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
                         spike.step, spike.x, spike.y, spike.direction, spike.count = k + 1, x, y, c, m
                         n_tot += 1
             # 2. The pixel's depth neuron, in step k+2.
-            sx, sy = axis_count(m0, m1), axis_count(m2, m3)
-            sample = rows[y - y0] + cols[x - x0]
-            if cache_j[sample] != update:  # first depth neuron of this patch (or pixel) under this update
-                at_x, at_y = velocity_term(tx, ty, tz, points[2 * sample], points[2 * sample + 1], fx, fy, cx, cy)
-                cache_at[2 * sample], cache_at[2 * sample + 1] = at_x, at_y
-                if fixed:  # W = A t * dt / distance, quantised once (docs/fixed_point.md)
-                    cache_w[2 * sample] = quantize(at_x * seconds_per_count, frac_bits, payload_bits)
-                    cache_w[2 * sample + 1] = quantize(at_y * seconds_per_count, frac_bits, payload_bits)
-                cache_j[sample] = update
-            measured = (sx | sy) != 0
-            if fixed:
-                raw = fixed_depth(sx, sy, cache_w[2 * sample], cache_w[2 * sample + 1], payload_bits)
-                slot = outcome(fired, measured, raw, ip[MIN_RAW], ip[MAX_RAW])
-                z = raw * lsb
-            else:
-                raw = 0
-                z = float_depth(sx, sy, cache_at[2 * sample], cache_at[2 * sample + 1], seconds_per_count)
-                slot = outcome(fired, measured, z, fp[MIN_DEPTH], fp[MAX_DEPTH])
-            counts[REJECTED + slot] += 1
-            estimate = out[n_out]  # written always, kept when emitted
-            estimate.t, estimate.x, estimate.y, estimate.z, estimate.step = stamp_us, x, y, z, k + 2
-            if keep_raw:
-                out_raw[n_out] = raw
-            n_out += slot == EMITTED - REJECTED
+            if emit_depth:
+                n_out = depth_neuron(m0, m1, m2, m3, fired, rows[y - y0] + cols[x - x0], update, tx, ty, tz,
+                                     k + 2, stamp_us, x, y, params, counts, cache_j, cache_w, cache_at, points,
+                                     out, out_raw, n_out)
         # 3. Facilitations, applied when step k is complete.
         if n_pend == pend.shape[0]:  # more than one spike per pixel in a step
             cursor[N_PEND], cursor[CURRENT], cursor[BASE] = n_pend, current, base

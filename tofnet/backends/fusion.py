@@ -1,0 +1,237 @@
+"""Fusion: the paper's chain recognised in a graph and run by one kernel (an optimisation only).
+
+When a network is exactly input -> time of travel -> depth <- velocity (whatever the
+process names), the event-driven backends run it with the fused kernel of
+``tofnet.kernels.time_of_travel``: one pass over the events for the input filter, the
+units and the depth neurons, estimates written as events arrive. It computes what the
+per-process models compute, bit for bit (tests/test_fusion.py); any other graph, or a
+probe inside the chain, runs the models one by one.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from tofnet.backends.base import DROP_REASONS, RunResult
+from tofnet.backends.graph import canonical
+from tofnet.backends.runtime import velocity_table
+from tofnet.core.network import Network
+from tofnet.errors import BackendError, DataError
+from tofnet.events import DEPTH_DTYPE, TOT_DTYPE
+from tofnet.io.recording import VelocitySource
+from tofnet.kernels.region import KernelConfig, KernelOutput, TimeOfTravelKernel, copy_records
+from tofnet.models.depth import OUTCOMES
+from tofnet.models.input import check_time_order
+from tofnet.models.registry import _registered
+from tofnet.processes import DepthProcess, InputProcess, TimeOfTravelProcess, VelocityProcess
+
+#: Velocity updates computed ahead of the stream, so that a packet rarely pays for them.
+VELOCITY_LOOKAHEAD = 1024
+
+
+@dataclass(frozen=True)
+class PipelineParams:
+    """Resolved parameters of input -> time-of-travel -> depth <- velocity.
+
+    Times in seconds, lengths in metres, sizes in pixels.
+    """
+
+    sensor_size: tuple[int, int]
+    timestep: float
+    t0: float | None
+    refractory: float
+    refractory_per_polarity: bool
+    distance: int
+    counter_bits: int
+    min_depth: float
+    max_depth: float
+    velocity_source: str
+    velocity_constant: tuple[float, float, float] | None
+    velocity_samples: str | None
+    velocity_per: str
+    velocity_patch_size: int
+    update_every: int
+    intrinsics: tuple[float, float, float, float] | None
+    names: tuple[str, str, str, str]  # input, time-of-travel, depth, velocity
+
+    @property
+    def timestep_us(self) -> int:
+        """Timestep in whole microseconds (events are stamped in µs)."""
+        return int(round(self.timestep * 1e6))
+
+    @property
+    def refractory_us(self) -> int:
+        return int(round(self.refractory * 1e6))
+
+    @property
+    def counter_max(self) -> int:
+        """Largest counter value before overflow: ``2**counter_bits - 1``."""
+        return (1 << self.counter_bits) - 1
+
+    @property
+    def latency_steps(self) -> int:
+        """Steps from an input event to its depth: one per connection (input->ToT->depth)."""
+        return 2
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+_CHAIN = (InputProcess, TimeOfTravelProcess, DepthProcess, VelocityProcess)
+
+
+def paper_chain(network: Network, family: str, probes=()) -> PipelineParams | None:
+    """The chain's parameters when ``network`` is exactly the paper's four processes, else None.
+
+    The processes must be of exactly those types with tofnet's own models for ``family``
+    (a subclass or a user-registered model runs unfused), connected input.events ->
+    tot.events, tot.counts -> depth.counts, velocity.a_t -> depth.a_t and nothing else;
+    probes may name only the counters and the depth.
+    """
+    procs = network.processes
+    if len(procs) != 4 or sorted(type(p).__name__ for p in procs) != sorted(c.__name__ for c in _CHAIN):
+        return None
+    by_type = {type(p): p for p in procs}
+    if set(by_type) != set(_CHAIN) or any((cls, family) in _registered for cls in _CHAIN):
+        return None
+    inp, tot, dep, vel = (by_type[c] for c in _CHAIN)
+    expected = {(inp.events, tot.events), (tot.counts, dep.counts), (vel.a_t, dep.a_t)}
+    if set(network.connections()) != expected or len(list(network.connections())) != 3:
+        return None
+    if not set(probes) <= {tot.counts.qualified_name, dep.depth.qualified_name}:
+        return None
+    return PipelineParams(
+        sensor_size=network.sensor_size, timestep=inp.timestep, t0=inp.t0, refractory=inp.refractory,
+        refractory_per_polarity=inp.refractory_per_polarity, distance=tot.distance, counter_bits=tot.counter_bits,
+        min_depth=dep.min_depth, max_depth=dep.max_depth, velocity_source=vel.source,
+        velocity_constant=vel.velocity, velocity_samples=vel.samples, velocity_per=vel.per,
+        velocity_patch_size=vel.patch_size, update_every=vel.update_every,
+        intrinsics=tuple(vel.intrinsics) if vel.intrinsics is not None else None,
+        names=(inp.name, tot.name, dep.name, vel.name))
+
+
+def pipeline_of(network: Network) -> PipelineParams:
+    """``paper_chain`` for the fixed family, raising when the network is not the paper's chain."""
+    found = paper_chain(network, "fixed")
+    if found is None:
+        raise BackendError(f"network {network.name!r} is not input -> time_of_travel -> depth <- velocity")
+    return found
+
+
+class FusedStream:
+    """The paper's chain on a live event stream through the fused kernel (the ``GraphStream`` API).
+
+    Estimates come out as soon as the event that triggers them is fed (a partial step's
+    too); memory is fixed by the sensor and the largest packet.
+    """
+
+    def __init__(self, backend: str, config: KernelConfig, pipeline: PipelineParams,
+                 velocity_source: VelocitySource, t0_us: int | None, record_tot: bool = False,
+                 order: list[str] | None = None):
+        self.backend = backend
+        self.pipeline = pipeline
+        self.kernel = TimeOfTravelKernel(config, t0_us=t0_us or 0)
+        self.velocity_source = velocity_source
+        self.t0_us = t0_us
+        self.timestep_us = pipeline.timestep_us
+        self.record_tot = record_tot
+        self.order = list(order or pipeline.names)
+        names = pipeline.names
+        self.depth_name, self.tot_name = f"{names[2]}.depth", f"{names[1]}.counts"
+        self.sinks = [self.depth_name]
+        self.payloads = {self.depth_name: "depth", **({self.tot_name: "count"} if record_tot else {})}
+        self.primary = self.depth_name
+        #: Time-of-travel spikes of the latest ``feed`` (``TOT_DTYPE``) when ``record_tot``.
+        self.tot: np.ndarray | None = None
+        self._events_in = 0
+        self._latest_us: int | None = None  # no later packet may start before this (µs)
+        self._last_event_us: int | None = None
+        self._table: tuple[int, np.ndarray] = (0, np.zeros((0, 3)))
+        self._started = time.perf_counter()
+        self._closed = False
+
+    def _rows(self, first: int, count: int) -> tuple[np.ndarray, int]:
+        """Velocity updates ``first .. first+count-1`` (``VelocityRows``): the cached table when it
+        covers them, else a new one computed ``VELOCITY_LOOKAHEAD`` updates ahead."""
+        start, table = self._table
+        if start <= first and first + count <= start + len(table):
+            return table, start
+        p = self.pipeline
+        try:
+            table = velocity_table(self.velocity_source, self.t0_us, p.timestep_us, p.update_every,
+                                   max(count, VELOCITY_LOOKAHEAD), first)
+        except (BackendError, DataError):  # e.g. not finite beyond the rows asked for: compute only those
+            table = velocity_table(self.velocity_source, self.t0_us, p.timestep_us, p.update_every, count, first)
+        self._table = (first, table)
+        return table, first
+
+    def _start(self, events: np.ndarray, until_us: int | None) -> bool:
+        """Checks and counting before any state changes; False for an empty packet."""
+        from tofnet.backends.stream import check_events
+        if self._closed:
+            raise BackendError("stream is closed")
+        check_events(events)
+        check_time_order(events, self._latest_us, "stream")
+        n = len(events)
+        if n:
+            self._latest_us = self._last_event_us = int(events["t"][-1])
+        if until_us is not None:
+            self._latest_us = max(self._latest_us or until_us, until_us)
+        self._events_in += n
+        if n and self.t0_us is None:
+            self.t0_us = self.kernel.t0_us = int(events["t"][0])
+        return n > 0
+
+    def feed(self, events: np.ndarray, until_us: int | None = None) -> np.ndarray:
+        """Depth estimates (``DEPTH_DTYPE``) produced by ``events`` (``EVENT_DTYPE``, time-ordered)."""
+        if not self._start(events, until_us):
+            self.tot = np.empty(0, TOT_DTYPE) if self.record_tot else None
+            return np.empty(0, DEPTH_DTYPE)
+        into = np.empty(len(events), DEPTH_DTYPE)  # the kernel writes the caller's array: no copy
+        end, n_tot = self.kernel.run_events(events, self._rows, into, 0, self.record_tot)
+        self.tot = copy_records(self.kernel.buffers()[2][:n_tot]) if self.record_tot else None
+        return into[:end]
+
+    def feed_all(self, events: np.ndarray, until_us: int | None = None) -> dict[str, np.ndarray]:
+        depth = canonical(self.feed(events, until_us))
+        return {self.depth_name: depth, **({self.tot_name: canonical(self.tot)} if self.record_tot else {})}
+
+    def feed_into(self, events: np.ndarray, into: np.ndarray, offset: int) -> KernelOutput | None:
+        """Like ``feed``, but write the estimates to ``into[offset:]`` (room for ``len(events)``).
+
+        Returns the kernel's output (``depth`` a view of ``into``; ``tot`` valid until the next
+        call, no ``z_raw``), None for an empty packet. Spares a copy when the caller collects the estimates.
+        """
+        if not self._start(events, None):
+            return None
+        return self.kernel.process_events(events, self._rows, record_tot=self.record_tot, into=into, offset=offset,
+                                          copy=False)
+
+    def close(self) -> RunResult:
+        """The counts so far; ``outputs`` are empty (``feed`` returned every estimate)."""
+        if self._closed:
+            raise BackendError("stream is closed")
+        self._closed = True
+        kernel, names = self.kernel, self.pipeline.names
+        fmt = kernel.config.fixed
+        counts = {
+            names[0]: {"events_in": self._events_in, "accepted": kernel.accepted,
+                       **{reason: int(c) for reason, c in zip(DROP_REASONS, kernel.drops)}},
+            names[1]: {"spikes": kernel.tot_spikes},
+            names[2]: {name: int(c) for name, c in zip(OUTCOMES, kernel.outcomes)},
+            names[3]: {}}
+        counts = {name: counts[name] for name in self.order}
+        outputs = {self.depth_name: np.empty(0, DEPTH_DTYPE)}
+        if self.record_tot:
+            outputs[self.tot_name] = np.empty(0, TOT_DTYPE)
+        t0, last = self.t0_us if self.t0_us is not None else 0, self._last_event_us
+        last_step = (last - t0) // self.timestep_us if last is not None and last >= t0 else -1
+        return RunResult(
+            self.backend, outputs, counts, last_step + 1 + self.pipeline.latency_steps,
+            t0, self.timestep_us,
+            {name: (2 if name == self.depth_name else 1) for name in outputs}, dict(self.payloads),
+            wall_time=time.perf_counter() - self._started,
+            extra={"frac_bits": fmt.frac_bits, "payload_bits": fmt.payload_bits} if fmt else {})

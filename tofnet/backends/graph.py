@@ -1,0 +1,226 @@
+"""Executing any process graph: one model per process, in topological order, one step of delay per connection.
+
+``GraphExecutor`` advances every model over the same range of steps at a time. A
+connection (``Edge``) queues the records its source sent; a model running steps
+``[first, end)`` is given, on each input port, the records sent in steps before
+``end - 1`` that it has not seen (those of step ``end - 1`` arrive in step ``end``), so
+the result does not depend on how the steps are grouped: one range or one step at a
+time give the same records (the network is feed-forward). Records move between models
+in the canonical order: by step, then ``y``, then ``x`` (stable otherwise).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable
+
+import networkx as nx
+import numpy as np
+from numba import njit
+
+from tofnet.core.network import Network
+from tofnet.core.ports import InPort, OutPort
+from tofnet.core.process import Process
+from tofnet.errors import NetworkError
+from tofnet.models.base import Model, ModelContext, concat
+from tofnet.models.registry import model_for
+
+#: ``place(process, model_class, ctx) -> model``: builds (or places remotely) one process's model.
+Placer = Callable[[Process, type, ModelContext], Any]
+
+
+@njit(cache=True)
+def _first_disorder(step, y, x, minor) -> int:
+    """Index of the first record out of (step, y, x, minor) order, or -1."""
+    for i in range(1, step.shape[0]):
+        if step[i] != step[i - 1]:
+            if step[i] < step[i - 1]:
+                return i
+            continue
+        if y[i] != y[i - 1]:
+            if y[i] < y[i - 1]:
+                return i
+            continue
+        if x[i] < x[i - 1] or (x[i] == x[i - 1] and minor[i] < minor[i - 1]):
+            return i
+    return -1
+
+
+def canonical(records: np.ndarray) -> np.ndarray:
+    """``records`` in the canonical order: by step, then y, then x (then ``direction`` for
+    counter spikes; stable otherwise). Returns ``records`` itself when already so; when only
+    some steps are out of pixel order (packets that split a step), re-sorts just those."""
+    if len(records) < 2:
+        return records
+    names = records.dtype.names
+    step = np.ascontiguousarray(records["step"])
+    if "x" not in names or "y" not in names:
+        return records if np.all(step[1:] >= step[:-1]) else records[np.argsort(step, kind="stable")]
+    y, x = np.ascontiguousarray(records["y"]), np.ascontiguousarray(records["x"])
+    minor = np.ascontiguousarray(records["direction"]) if "direction" in names else np.zeros(len(records), np.uint8)
+    first = _first_disorder(step, y, x, minor)
+    if first < 0:
+        return records
+    if np.any(step[1:] < step[:-1]):
+        return records[np.lexsort((minor, x, y, step))]
+    out = records.copy()
+    later = np.flatnonzero((step[1:] == step[:-1]) & ((y[1:] < y[:-1]) | ((y[1:] == y[:-1]) & (
+        (x[1:] < x[:-1]) | ((x[1:] == x[:-1]) & (minor[1:] < minor[:-1]))))))
+    for s in np.unique(step[later]):
+        lo, hi = np.searchsorted(step, s, "left"), np.searchsorted(step, s, "right")
+        part = out[lo:hi]
+        out[lo:hi] = part[np.lexsort((minor[lo:hi], part["x"], part["y"]))]
+    return out
+
+
+@dataclass
+class Edge:
+    """One connection: records its source sent that its target has not been given yet."""
+
+    source: str
+    source_port: str
+    target: str
+    target_port: str
+    queue: list[np.ndarray] = field(default_factory=list)
+
+    def take(self, before: int, dtype: np.dtype) -> np.ndarray:
+        """Remove and return the queued records sent before step ``before``."""
+        waiting = concat(self.queue, dtype)
+        cut = int(np.searchsorted(waiting["step"], before)) if len(waiting) else 0
+        self.queue = [waiting[cut:]] if cut < len(waiting) else []
+        return waiting[:cut]
+
+
+@dataclass
+class Node:
+    """A process, its model (or a stand-in for one running elsewhere) and its connections."""
+
+    process: Process
+    model: Any
+    inputs: dict[str, list[Edge]]
+    outputs: dict[str, list[Edge]]
+
+
+def resolve_probes(network: Network, probes: Iterable[str], record_tot: bool = False) -> list[str]:
+    """Probe names checked against the network (``process.port`` of an output port)."""
+    names = list(dict.fromkeys(probes))
+    if record_tot:
+        names += [port.qualified_name for p in network.processes for port in p.ports.values()
+                  if isinstance(port, OutPort) and port.spec.payload.name == "count" and port.qualified_name not in names]
+    for name in names:
+        proc_name, _, port_name = str(name).partition(".")
+        port = network.process(proc_name).port(port_name)
+        if isinstance(port, InPort):
+            sources = ", ".join(s.qualified_name for s in port.sources) or "nothing"
+            raise NetworkError(f"probe {name}: an input port; probe the output feeding it ({sources})")
+    return names
+
+
+def sinks_of(network: Network) -> list[str]:
+    """Output ports connected to nothing: what a run returns."""
+    return [port.qualified_name for p in network.processes for port in p.ports.values()
+            if isinstance(port, OutPort) and not port.targets]
+
+
+def latencies(network: Network, readers: set[str]) -> dict[str, int]:
+    """Per process: connections on the longest path from an event-reading process (0 if none)."""
+    out = {}
+    for name in nx.topological_sort(network.graph):
+        preds = [out[p] + 1 for p in network.graph.predecessors(name) if out[p] >= 0]
+        out[name] = max(preds, default=0 if name in readers else -1)
+    return {name: max(d, 0) for name, d in out.items()}
+
+
+class GraphExecutor:
+    """Runs a network's models over ranges of steps; returns what sinks and probes sent.
+
+    ``family`` picks the models (``tofnet.models.registry``); ``place`` may build a
+    model elsewhere (``multiproc``). ``recording`` is the camera's metadata (its events are
+    not read here: ``feed`` gives them). ``t0_us``/``timestep_us``: the clock.
+    """
+
+    def __init__(self, network: Network, *, family: str, backend: str, t0_us: int, timestep_us: int,
+                 recording=None, fixed_format=None, probes: Iterable[str] = (),
+                 backends_by_family: Callable[[], dict[str, list[str]]] | None = None, place: Placer | None = None):
+        self.network = network
+        self.t0_us, self.timestep_us = t0_us, timestep_us
+        self.clock = 0
+        self.sinks = sinks_of(network)
+        self.probes = [p for p in probes if p not in self.sinks]
+        self.wanted = set(self.sinks) | set(self.probes)
+        order = network.topological_order()
+        classes = {p.name: model_for(p, family, backend, backends_by_family) for p in order}
+        self.readers = {name for name, cls in classes.items() if cls.reads_events}
+        self.latency = latencies(network, self.readers)
+        self.edges = [Edge(src.process.name, src.name, dst.process.name, dst.name)
+                      for src, dst in network.connections()]
+        metas: dict[str, dict[str, Any]] = {}
+        self.nodes: list[Node] = []
+        for process in order:
+            inputs = {s.name: [e for e in self.edges if e.target == process.name and e.target_port == s.name]
+                      for s in process.inports}
+            outputs = {s.name: [e for e in self.edges if e.source == process.name and e.source_port == s.name]
+                       for s in process.outports}
+            ctx = ModelContext(family, tuple(process.sensor_size), t0_us, timestep_us, fixed_format, recording,
+                               None, {port: [metas[e.source].get(e.source_port) for e in edges]
+                                      for port, edges in inputs.items()})
+            cls = classes[process.name]
+            metas[process.name] = cls.output_meta(process, ctx)
+            model = place(process, cls, ctx) if place is not None else cls(process, ctx)
+            self.nodes.append(Node(process, model, inputs, outputs))
+        self.drain_steps = max(self.latency.values(), default=0)
+
+    # -- events -------------------------------------------------------------------------------
+    def feed(self, events: np.ndarray) -> None:
+        """Give camera events (time order) to every event-reading model."""
+        for node in self.nodes:
+            if node.process.name in self.readers:
+                node.model.feed(events)
+
+    def complete_until(self) -> int | None:
+        """Steps before this one have all their events (None: no event has come yet)."""
+        marks = [node.model.complete_until() for node in self.nodes if node.process.name in self.readers]
+        if not marks or any(m is None for m in marks):
+            return None
+        return min(marks)
+
+    # -- running ------------------------------------------------------------------------------
+    def advance(self, end: int) -> dict[str, np.ndarray]:
+        """Run every model over steps ``[clock, end)``; the records sinks and probes sent."""
+        first = self.clock
+        if end <= first:
+            return {}
+        collected: dict[str, np.ndarray] = {}
+        for node in self.nodes:
+            process = node.process
+            inputs = {}
+            for port, edges in node.inputs.items():
+                dtype = process.port(port).spec.payload.dtype
+                parts = [edge.take(end - 1, dtype) for edge in edges]
+                inputs[port] = parts[0] if len(parts) == 1 else canonical(concat(parts, dtype))
+            sent = node.model.run(first, end, inputs)
+            for port, edges in node.outputs.items():
+                records = sent.get(port)
+                if records is None:
+                    continue
+                records = canonical(records)
+                for edge in edges:
+                    if len(records):
+                        edge.queue.append(records)
+                name = f"{process.name}.{port}"
+                if name in self.wanted:
+                    collected[name] = records
+        self.clock = end
+        return collected
+
+    def counts(self) -> dict[str, dict[str, int]]:
+        """What each process counted, in the network's process order."""
+        by_name = {node.process.name: dict(node.model.counts()) for node in self.nodes}
+        return {p.name: by_name[p.name] for p in self.network.processes}
+
+    def output_latency(self, name: str) -> int:
+        return self.latency[name.split(".")[0]]
+
+    def payload_of(self, name: str) -> str:
+        proc_name, _, port = name.partition(".")
+        return self.network.process(proc_name).port(port).spec.payload.name

@@ -1,0 +1,169 @@
+"""Backends that run every model in this process: ``reference``, ``float`` and ``fixed``.
+
+A run is a stream (``open_stream``) fed the recording in packets, so memory does not grow
+with the recording (apart from the outputs ``run`` collects). ``float`` and ``fixed`` run
+the paper's chain through the fused kernel when they recognise it (``fusion.paper_chain``;
+``fuse=False`` turns that off); every other graph runs model by model.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Iterable
+
+import numpy as np
+
+from tofnet.backends.base import Backend, ProgressCallback, RunResult
+from tofnet.backends.fusion import FusedStream, PipelineParams, paper_chain
+from tofnet.backends.graph import GraphExecutor, canonical, resolve_probes, sinks_of
+from tofnet.backends.runtime import clock_of, intrinsics_of, start_time_us, velocity_source_of
+from tofnet.backends.stream import DEFAULT_PACKET_EVENTS, GraphStream, run_in_packets
+from tofnet.compiler.compiled import network_of
+from tofnet.core.network import Network
+from tofnet.errors import BackendError
+from tofnet.events import DEPTH_DTYPE, EVENT_DTYPE, TOT_DTYPE
+from tofnet.io.recording import Intrinsics, Recording, VelocitySource
+from tofnet.kernels.region import KernelConfig
+
+#: Initial size of a fused run's result buffer in estimates (at most one per event); 4M x 28 B
+#: of address space, resident only where written.
+RESULT_CAPACITY = 1 << 22
+
+
+def binding(recording: Recording | None, intrinsics: Intrinsics | None,
+            velocity_source: VelocitySource | None) -> Recording:
+    """What a stream knows about the camera: a recording's metadata, or the pieces given."""
+    if recording is not None:
+        return recording
+    return Recording(np.empty(0, EVENT_DTYPE), intrinsics=intrinsics, trajectory=velocity_source, source="the stream")
+
+
+def payloads_of(network: Network, names: Iterable[str]) -> dict[str, str]:
+    out = {}
+    for name in names:
+        proc, _, port = name.partition(".")
+        out[name] = network.process(proc).port(port).spec.payload.name
+    return out
+
+
+class LocalBackend(Backend):
+    """Runs the models of ``family`` in this process, model by model (``GraphExecutor``)."""
+
+    #: Whether this backend may run a recognised chain through a fused kernel.
+    fuses = False
+
+    def __init__(self, packet_events: int = DEFAULT_PACKET_EVENTS, fuse: bool = True):
+        if isinstance(packet_events, bool) or not isinstance(packet_events, int) or packet_events < 1:
+            raise BackendError(f"packet_events must be a positive whole number, got {packet_events!r}")
+        self.packet_events = packet_events
+        self.fuse = bool(fuse)
+
+    def _format(self):
+        return None
+
+    def open_stream(self, compiled, *, recording: Recording | None = None, intrinsics: Intrinsics | None = None,
+                    velocity_source: VelocitySource | None = None, t0_us: int | None = None,
+                    probes: Iterable[str] = (), record_tot: bool = False) -> GraphStream | FusedStream:
+        """A stream running ``compiled`` (a ``CompiledNetwork`` or ``Network``).
+
+        What the processes need to know about the camera comes from ``recording`` (its
+        metadata) or from ``intrinsics`` and ``velocity_source``. ``t0_us`` None: the
+        network's ``t0``, else the first event fed. ``probes``: output ports to return
+        besides the sinks (``record_tot``: every time-of-travel counter port).
+        """
+        network = network_of(compiled)
+        known = binding(recording, intrinsics, velocity_source)
+        clock = clock_of(network)
+        t0 = clock.t0_us if t0_us is None else int(t0_us)
+        probes = resolve_probes(network, probes, record_tot)
+        if self.fuses and self.fuse:
+            pipeline = paper_chain(network, self.family, probes)
+            if pipeline is not None:
+                return self._fused_stream(network, pipeline, known, t0, f"{pipeline.names[1]}.counts" in probes)
+
+        def build(start_us: int) -> GraphExecutor:
+            from tofnet.backends.registry import backends_by_family
+            return GraphExecutor(network, family=self.family, backend=self.name, t0_us=start_us,
+                                 timestep_us=clock.timestep_us, recording=known, fixed_format=self._format(),
+                                 probes=probes, backends_by_family=backends_by_family)
+
+        sinks = sinks_of(network)
+        stream = GraphStream(self.name, build, t0, clock.timestep_us, sinks,
+                             payloads_of(network, list(dict.fromkeys(sinks + probes))))
+        if stream.executor is None:
+            build(0)  # check models and bindings now, not at the first event
+        fmt = self._format()
+        if fmt is not None:
+            stream.extra.update(frac_bits=fmt.frac_bits, payload_bits=fmt.payload_bits)
+        return stream
+
+    def _fused_stream(self, network: Network, pipeline: PipelineParams, known: Recording, t0_us: int | None,
+                      record_tot: bool) -> FusedStream:
+        intr = intrinsics_of(pipeline.intrinsics, known, pipeline.names[3])
+        source = velocity_source_of(pipeline.velocity_source, pipeline.velocity_constant, pipeline.velocity_samples,
+                                    known, pipeline.names[3])
+        config = KernelConfig.from_pipeline(pipeline, intr, self._format())
+        return FusedStream(self.name, config, pipeline, source, t0_us, record_tot, order=[p.name for p in
+                                                                                       network.processes])
+
+    def run(self, compiled, recording: Recording, *, probes: Iterable[str] = (), record_tot: bool = False,
+            progress: ProgressCallback | None = None) -> RunResult:
+        network = network_of(compiled)
+        t0 = start_time_us(clock_of(network).t0_us, recording)
+        stream = self.open_stream(network, recording=recording, t0_us=t0, probes=probes, record_tot=record_tot)
+        if isinstance(stream, FusedStream):
+            return self._run_fused(stream, recording.events, progress)
+        return run_in_packets(stream, recording.events, self.packet_events, progress)
+
+    def _run_fused(self, stream: FusedStream, events: np.ndarray, progress: ProgressCallback | None) -> RunResult:
+        started = time.perf_counter()
+        total = len(events)
+        depth = _Collector(DEPTH_DTYPE, min(total, RESULT_CAPACITY))
+        tot = _Collector(TOT_DTYPE, 0)
+        for lo in range(0, total, self.packet_events):
+            packet = events[lo:lo + self.packet_events]
+            buffer, offset = depth.reserve(len(packet))
+            out = stream.feed_into(packet, buffer, offset)  # the kernel writes the estimates in place
+            if out is not None:
+                depth.commit(len(out.depth))
+                if stream.record_tot:
+                    tot.add(out.tot)
+            if progress is not None:
+                progress(min(lo + self.packet_events, total), total)
+        result = stream.close()
+        result.outputs[stream.depth_name] = canonical(depth.array())
+        if stream.record_tot:
+            result.outputs[stream.tot_name] = canonical(tot.array())
+        result.wall_time = time.perf_counter() - started
+        return result
+
+
+class _Collector:
+    """Appends record arrays into one buffer that grows geometrically (one copy per record)."""
+
+    def __init__(self, dtype: np.dtype, capacity: int):
+        self._buffer = np.empty(capacity, dtype)
+        self._size = 0
+
+    def reserve(self, n: int) -> tuple[np.ndarray, int]:
+        """``(buffer, offset)`` with room for ``n`` records at ``offset``; ``commit`` how many were written."""
+        end = self._size + n
+        if end > len(self._buffer):
+            grown = np.empty(max(end, 2 * len(self._buffer)), self._buffer.dtype)
+            raw = np.dtype((np.void, grown.dtype.itemsize))
+            grown[:self._size].view(raw)[:] = self._buffer[:self._size].view(raw)
+            self._buffer = grown
+        return self._buffer, self._size
+
+    def commit(self, n: int) -> None:
+        self._size += n
+
+    def add(self, part: np.ndarray) -> None:
+        buffer, offset = self.reserve(len(part))
+        raw = np.dtype((np.void, part.dtype.itemsize))  # packed records copy field by field, bytes do not
+        buffer[offset:offset + len(part)].view(raw)[:] = part.view(raw)
+        self.commit(len(part))
+
+    def array(self) -> np.ndarray:
+        """The records so far. A view: pages of the buffer never written are never resident."""
+        return self._buffer[:self._size]

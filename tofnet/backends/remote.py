@@ -1,0 +1,155 @@
+"""Core-placed processes of a compiled network run in worker processes: planning and the host's stand-in.
+
+Each core-placed process has one model instance per compiled core (``Region`` = the
+core's pixels), held by a worker. The host's ``RemoteModel`` takes the process's place
+in the ``GraphExecutor``: it sends each core exactly the input records the compiled
+mapping routes to it (spikes inside the core's halo; field updates to every core), and
+joins what the cores send back. A model that cannot hold a region runs as one instance.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Callable
+
+import numpy as np
+
+from tofnet.compiler.partition import rects_mask
+from tofnet.core.process import Process
+from tofnet.kernels.region import Region
+from tofnet.models.base import Model, ModelContext, concat
+
+#: A model instance on a worker: (process name, core index; -1 for a whole-layer instance).
+Key = tuple[str, int]
+
+
+@dataclass(frozen=True)
+class WorkerPlan:
+    """The compiled cores (global indices) one worker runs."""
+
+    index: int
+    cores: tuple[int, ...]
+
+
+def plan_workers(compiled, workers: int) -> list[WorkerPlan]:
+    """Split every core-placed layer's cores over at most ``workers`` processes.
+
+    Each layer's cores (in patch order, row by row) are dealt out in contiguous, equal-sized
+    groups, so every worker holds a share of every layer and its halos stay between
+    neighbours. Workers that would get nothing are not planned.
+    """
+    n = max(1, min(int(workers), max((layer.cores for layer in compiled.layers), default=1)))
+    cores: list[list[int]] = [[] for _ in range(n)]
+    for layer in compiled.layers:
+        indices = np.arange(layer.first_core, layer.first_core + layer.cores)
+        for w, group in enumerate(np.array_split(indices, n)):
+            cores[w].extend(int(i) for i in group)
+    return [WorkerPlan(w, tuple(c)) for w, c in enumerate(cores)]
+
+
+def routing_table(compiled, plans: list[WorkerPlan], layer: str) -> np.ndarray:
+    """``(workers, height, width)`` booleans: which workers a spike at each pixel reaches, for ``layer``."""
+    width, height = compiled.network.process(layer).sensor_size
+    ys, xs = np.mgrid[0:height, 0:width]
+    route = np.zeros((len(plans), height, width), dtype=bool)
+    for core in compiled.cores_of(layer):
+        worker = next(p.index for p in plans if core.index in p.cores)
+        route[worker] |= core.receives_mask(xs, ys)
+    return route
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """What a worker needs to build one model instance (plain, picklable data)."""
+
+    key: Key
+    model_class: type
+    process_class: type
+    process_name: str
+    values: dict
+    ctx: ModelContext
+
+    def build(self) -> Model:
+        process = self.process_class(name=self.process_name, **self.values)
+        return self.model_class(process, self.ctx)
+
+
+@dataclass(frozen=True)
+class Placement:
+    """One instance of a remote process: its key, worker, and the input rectangles it needs."""
+
+    key: Key
+    worker: int
+    halo: tuple | None  # None: every record
+
+
+class RemoteModel:
+    """The host's stand-in for a core-placed process whose instances live on workers.
+
+    ``call(worker, message, reply_kind, doing)`` sends and waits (the session's channels);
+    the instances run in parallel on their workers, one round trip per ``run``.
+    """
+
+    def __init__(self, process: Process, model_class: type, placements: list[Placement],
+                 exchange: Callable[[dict[int, tuple]], dict[int, tuple]]):
+        self.process = process
+        self.model_class = model_class
+        self.placements = placements
+        self.exchange = exchange
+        self._spike_ports = {spec.name for spec in process.inports if spec.payload.kind == "spikes"}
+        self._dtypes = {spec.name: spec.payload.dtype for spec in process.outports}
+
+    def _route(self, placement: Placement, inputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        if placement.halo is None:
+            return inputs
+        out = {}
+        for port, records in inputs.items():
+            if port in self._spike_ports and len(records):
+                records = records[rects_mask(placement.halo, records["x"], records["y"])]
+            out[port] = records
+        return out
+
+    def run(self, first: int, end: int, inputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        jobs: dict[int, list] = {}
+        for placement in self.placements:
+            jobs.setdefault(placement.worker, []).append((placement.key, self._route(placement, inputs)))
+        replies = self.exchange({w: ("run", items, first, end) for w, items in jobs.items()})
+        parts: dict[str, list[np.ndarray]] = {port: [] for port in self._dtypes}
+        for worker in sorted(replies):
+            for _, outputs in replies[worker][1]:
+                for port, records in outputs.items():
+                    if len(records):
+                        parts[port].append(records)
+        return {port: concat(chunks, self._dtypes[port]) for port, chunks in parts.items()}
+
+    def counts(self) -> dict[str, int]:
+        workers = sorted({p.worker for p in self.placements})
+        keys = [p.key for p in self.placements]
+        replies = self.exchange({w: ("counts", [k for p, k in zip(self.placements, keys) if p.worker == w])
+                                 for w in workers})
+        total: dict[str, int] = {}
+        for worker in workers:
+            for counts in replies[worker][1]:
+                for name, value in counts.items():
+                    total[name] = total.get(name, 0) + int(value)
+        return total
+
+
+def placements_for(compiled, process: Process, model_class: type, plans: list[WorkerPlan],
+                   ctx: ModelContext) -> tuple[list[Placement], list[ModelSpec]]:
+    """Where the instances of ``process`` run and how each is built."""
+    values = process.values
+    ctx = replace(ctx, recording=None)  # what a core-placed model needs arrives on its ports
+    if not getattr(model_class, "supports_regions", False):
+        worker = sorted(plans, key=lambda p: len(p.cores))[0].index
+        key = (process.name, -1)
+        return [Placement(key, worker, None)], [ModelSpec(key, model_class, type(process), process.name, values, ctx)]
+    placements, specs = [], []
+    for core in compiled.cores_of(process.name):
+        worker = next(p.index for p in plans if core.index in p.cores)
+        key = (process.name, core.index)
+        region = Region(core.x0, core.x1, core.y0, core.y1)
+        placements.append(Placement(key, worker, tuple(core.halo)))
+        specs.append(ModelSpec(key, model_class, type(process), process.name, values, replace(ctx, region=region)))
+    return placements, specs
+

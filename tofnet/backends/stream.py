@@ -1,0 +1,150 @@
+"""Any network on a live event stream: feed packets in time order, get what each produced, close."""
+
+from __future__ import annotations
+
+import time
+from typing import Callable, Iterable
+
+import numpy as np
+
+from tofnet.backends.base import ProgressCallback, RunResult
+from tofnet.backends.graph import GraphExecutor
+from tofnet.errors import BackendError
+from tofnet.events import EVENT_DTYPE
+from tofnet.models.input import check_time_order
+
+#: Events per packet when a backend runs a whole recording (bounded memory).
+DEFAULT_PACKET_EVENTS = 1 << 17
+
+
+def primary_output(sinks: list[str], payloads: dict[str, str]) -> str | None:
+    """The output ``feed`` returns: the only sink, else the only depth sink (None when ambiguous)."""
+    if len(sinks) == 1:
+        return sinks[0]
+    depth = [s for s in sinks if payloads.get(s) == "depth"]
+    return depth[0] if len(depth) == 1 else None
+
+
+def check_events(events) -> None:
+    if not isinstance(events, np.ndarray) or events.dtype != EVENT_DTYPE:
+        got = events.dtype if isinstance(events, np.ndarray) else type(events).__name__
+        raise BackendError(f"events must be a numpy array of dtype {EVENT_DTYPE} (tofnet.events.EVENT_DTYPE), "
+                           f"got {got}")
+
+
+class GraphStream:
+    """A network running on a stream of events; memory is fixed by the network, not the stream's length.
+
+    ``feed(events)`` returns the records of the primary output (the one sink, or the one
+    depth output) that the packet made complete; ``feed_all`` those of every sink and probe.
+    A step is complete once an event of a later step arrived, or ``until_us`` says no event
+    before that time will come. ``close()`` runs the steps still in flight and returns their
+    outputs with the counts. A refused packet (wrong dtype, out of time order) leaves the
+    stream as it was. ``t0_us`` None: step 0 starts at the first event fed.
+    """
+
+    def __init__(self, backend: str, build: Callable[[int], GraphExecutor], t0_us: int | None,
+                 timestep_us: int, sinks: list[str], payloads: dict[str, str]):
+        self.backend = backend
+        self._build = build
+        self.t0_us = t0_us
+        self.timestep_us = timestep_us
+        self.executor: GraphExecutor | None = None if t0_us is None else build(t0_us)
+        self.sinks, self.payloads = sinks, payloads
+        self.primary = primary_output(sinks, payloads)
+        self._latest_us: int | None = None
+        self._events_in = 0
+        self._started = time.perf_counter()
+        self._closed = False
+        #: Backend facts added to the result (e.g. the fixed-point format).
+        self.extra: dict = {}
+
+    def feed_all(self, events: np.ndarray, until_us: int | None = None) -> dict[str, np.ndarray]:
+        """The records each sink and probe sent in the steps this packet completed."""
+        if self._closed:
+            raise BackendError("stream is closed")
+        check_events(events)
+        check_time_order(events, self._latest_us, "stream")
+        if until_us is not None and len(events) and int(events["t"][-1]) >= until_us:
+            raise BackendError(f"until_us={until_us} µs but the packet holds events up to {int(events['t'][-1])} µs")
+        if self.executor is None and len(events):
+            self.t0_us = int(events["t"][0])
+            self.executor = self._build(self.t0_us)
+        self._events_in += len(events)
+        if len(events):
+            self._latest_us = int(events["t"][-1])
+        if until_us is not None:
+            self._latest_us = max(self._latest_us or until_us, until_us)
+        ex = self.executor
+        if ex is None:
+            return {}
+        ex.feed(events)
+        horizon = ex.complete_until()
+        if until_us is not None and until_us >= self.t0_us:
+            horizon = max(horizon or 0, (until_us - self.t0_us) // self.timestep_us)
+        return ex.advance(horizon) if horizon is not None else {}
+
+    def feed(self, events: np.ndarray, until_us: int | None = None) -> np.ndarray:
+        """The records of the primary output (depth, for the paper's network) this packet completed."""
+        if self.primary is None:
+            raise BackendError(f"the network has several outputs ({', '.join(self.sinks)}); use feed_all")
+        out = self.feed_all(events, until_us)
+        return out.get(self.primary, self._empty(self.primary))
+
+    def _empty(self, name: str) -> np.ndarray:
+        proc, _, port = name.partition(".")
+        return self.executor.network.process(proc).port(port).spec.payload.empty() if self.executor else \
+            np.empty(0, EVENT_DTYPE)
+
+    def close(self) -> RunResult:
+        """Run the steps still in flight; their outputs (``outputs``) and every count so far."""
+        if self._closed:
+            raise BackendError("stream is closed")
+        self._closed = True
+        ex = self.executor
+        if ex is None:
+            raise BackendError("stream closed before any event: nothing ran (t0 unknown)")
+        last = ex.complete_until()
+        last = -1 if last is None else last  # the step of the latest event; it is complete now
+        steps = last + 1 + ex.drain_steps  # every output of every event is out after these
+        outputs = ex.advance(max(ex.clock, steps))
+        wanted = [name for name in ex.sinks + ex.probes]
+        return RunResult(self.backend, outputs, ex.counts(), steps, self.t0_us, self.timestep_us,
+                         {name: ex.output_latency(name) for name in wanted},
+                         {name: ex.payload_of(name) for name in wanted},
+                         wall_time=time.perf_counter() - self._started, extra=dict(self.extra))
+
+
+class Collected:
+    """Records of several outputs gathered packet by packet, joined once at the end."""
+
+    def __init__(self):
+        self.parts: dict[str, list[np.ndarray]] = {}
+
+    def add(self, outputs: dict[str, np.ndarray]) -> None:
+        for name, records in outputs.items():
+            self.parts.setdefault(name, []).append(records)
+
+    def joined(self, names: Iterable[str], empty: Callable[[str], np.ndarray]) -> dict[str, np.ndarray]:
+        out = {}
+        for name in names:
+            parts = [p for p in self.parts.get(name, []) if len(p)]
+            out[name] = np.concatenate(parts) if len(parts) > 1 else (parts[0] if parts else empty(name))
+        return out
+
+
+def run_in_packets(stream: GraphStream, events: np.ndarray, packet_events: int,
+                   progress: ProgressCallback | None) -> RunResult:
+    """Feed ``events`` in packets; the result holds every output's records and the counts."""
+    started = time.perf_counter()
+    collected = Collected()
+    total = len(events)
+    for lo in range(0, total, packet_events):
+        collected.add(stream.feed_all(events[lo:lo + packet_events]))
+        if progress is not None:
+            progress(min(lo + packet_events, total), total)
+    result = stream.close()
+    collected.add(result.outputs)
+    result.outputs = collected.joined(result.payloads, stream._empty)
+    result.wall_time = time.perf_counter() - started
+    return result

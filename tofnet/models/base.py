@@ -1,0 +1,152 @@
+"""What a process model is: the code that runs one process on one backend family.
+
+A model is built per process (per core region on ``multiproc``) with a ``ModelContext`` and
+then advanced over ranges of steps: ``run(first, end, inputs)`` simulates steps
+``first .. end-1``. ``inputs[port]`` holds every record sent to that port in steps
+``first-1 .. end-2`` (the one-step delay of every connection), sorted by step; the model
+returns, per output port, the records it sends in steps ``first .. end-1`` (the ``step``
+field is the step of sending). Records are numpy structured arrays laid out by the port's
+payload (``Payload.dtype``). ``StepModel`` turns a per-step ``step(k, inbox)`` into that.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from tofnet.core.process import Process
+from tofnet.errors import BackendError
+from tofnet.kernels.region import Region
+
+FAMILIES = ("reference", "float", "fixed")
+
+
+@dataclass
+class ModelContext:
+    """Everything a model is built with besides its process.
+
+    ``family``: ``reference``, ``float`` or ``fixed``; ``fixed_format`` the fixed-point format
+    (``tofnet.kernels.fixed_point.FixedPointFormat``) for ``fixed``; ``t0_us`` the start of
+    step 0 and ``timestep_us`` the step (µs); ``recording`` what is known about the camera
+    (intrinsics, poses, IMU; its events are not for models) — None on a worker; ``region``
+    the pixels this instance holds (None: all); ``inputs[port]`` the static descriptions
+    (``output_meta``) of what feeds each input port, one per source.
+    """
+
+    family: str
+    sensor_size: tuple[int, int]
+    t0_us: int
+    timestep_us: int
+    fixed_format: Any = None
+    recording: Any = None
+    region: Region | None = None
+    inputs: dict[str, list[Any]] = field(default_factory=dict)
+
+    @property
+    def arithmetic(self) -> str:
+        return "float" if self.family in ("reference", "float") else "fixed"
+
+    @property
+    def bounds(self) -> tuple[int, int, int, int]:
+        """``(x0, x1, y0, y1)`` of the pixels held: the region, else the sensor."""
+        if self.region is None:
+            return (0, self.sensor_size[0], 0, self.sensor_size[1])
+        r = self.region
+        return (r.x0, r.x1, r.y0, r.y1)
+
+    def input_meta(self, process: Process, port: str) -> Any:
+        """The one description (``output_meta``) of what feeds ``port``; raises naming what is missing."""
+        metas = [m for m in self.inputs.get(port) or [] if m is not None]
+        if not metas or any(m != metas[0] for m in metas[1:]):
+            what = "has no description from the process feeding it" if not metas else "is fed by sources that differ"
+            raise BackendError(f"{process.name}.{port} {what} ({type(process).__name__} needs one: "
+                               "see docs/extending.md, output_meta)")
+        return metas[0]
+
+    @property
+    def timestep_s(self) -> float:
+        """The timestep in seconds, ``timestep_us / 1e6`` (every model computes it this way)."""
+        return self.timestep_us / 1e6
+
+
+class Model:
+    """Runs one process. Subclasses set the class attributes and implement ``run``."""
+
+    #: True when the model takes the recording's events (``feed``) instead of input ports.
+    reads_events: ClassVar[bool] = False
+    #: True when one instance may hold a region of the sensor (``multiproc`` cores).
+    supports_regions: ClassVar[bool] = False
+
+    def __init__(self, process: Process, ctx: ModelContext):
+        self.process = process
+        self.ctx = ctx
+
+    @classmethod
+    def output_meta(cls, process: Process, ctx: ModelContext) -> dict[str, Any]:
+        """Static descriptions of the output ports that receivers need (e.g. sampling, units)."""
+        return {}
+
+    def feed(self, events: np.ndarray) -> None:
+        """Take camera events (``EVENT_DTYPE``, time order); only for ``reads_events`` models."""
+        raise BackendError(f"{self.process.name}: {type(self).__name__} does not read events")
+
+    def complete_until(self) -> int | None:
+        """For ``reads_events`` models: steps before this one have all their input (None: none yet)."""
+        return None
+
+    def run(self, first: int, end: int, inputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        raise NotImplementedError
+
+    def counts(self) -> dict[str, int]:
+        """What the process counted so far (drops, rejections, spikes), by reason."""
+        return {}
+
+
+class StepModel(Model):
+    """A model written one step at a time: ``step(k, inbox) -> outbox``.
+
+    ``inbox[port]`` is the records sent to ``port`` in step ``k-1`` (None when nothing
+    was); ``outbox[port]`` the records to send in step ``k`` (None for nothing); their
+    ``step`` field is set to ``k`` here. Readable and slow: it is called every step.
+    """
+
+    def step(self, k: int, inbox: dict[str, np.ndarray | None]) -> dict[str, np.ndarray | None]:
+        raise NotImplementedError
+
+    def run(self, first: int, end: int, inputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        cuts = {port: np.searchsorted(records["step"], np.arange(first - 1, end)) for port, records in inputs.items()}
+        parts: dict[str, list[np.ndarray]] = {spec.name: [] for spec in self.process.outports}
+        for i, k in enumerate(range(first, end)):
+            inbox = {}
+            for port, records in inputs.items():
+                lo, hi = cuts[port][i], cuts[port][i + 1]
+                inbox[port] = records[lo:hi] if hi > lo else None
+            for port, sent in self.step(k, inbox).items():
+                if sent is not None and len(sent):
+                    sent = np.array(sent, copy=True)
+                    sent["step"] = k
+                    parts[port].append(sent)
+        return {port: concat(chunks, _dtype_of(self.process, port)) for port, chunks in parts.items()}
+
+
+def _dtype_of(process: Process, port: str) -> np.dtype:
+    return process.port(port).spec.payload.dtype
+
+
+def concat(chunks: list[np.ndarray], dtype: np.dtype) -> np.ndarray:
+    """One record array from several (an empty one of ``dtype`` when there are none)."""
+    if not chunks:
+        return np.empty(0, dtype=dtype)
+    return chunks[0] if len(chunks) == 1 else np.concatenate(chunks)
+
+
+def records(dtype: np.dtype, n: int = 0, **columns: Any) -> np.ndarray:
+    """A record array of ``n`` rows (or as long as the columns) with the given columns filled."""
+    if columns:
+        n = len(next(iter(columns.values())))
+    out = np.zeros(n, dtype=dtype)
+    for name, values in columns.items():
+        out[name] = values
+    return out

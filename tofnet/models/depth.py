@@ -1,0 +1,88 @@
+"""The depth process (paper eq. 8): dense per step (reference) and event-driven (float, fixed)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from tofnet.backends.base import REJECT_REASONS
+from tofnet.core.ports import Payload
+from tofnet.kernels.depth import EMITTED, classify, float_depth, signed_axis_count
+from tofnet.kernels.region import KernelConfig, TimeOfTravelKernel
+from tofnet.models.base import Model, ModelContext, StepModel, records
+from tofnet.processes import DepthProcess
+
+#: Outcomes a depth neuron counts: the rejection reasons, then emitted estimates.
+OUTCOMES = REJECT_REASONS + ("emitted",)
+
+
+@njit(cache=True)
+def _depth_neurons(counts, at_x, at_y, seconds_per_count, min_depth, max_depth, out_z, out_reason):
+    for i in range(counts.shape[1]):
+        sx = signed_axis_count(counts[0, i], counts[1, i])
+        sy = signed_axis_count(counts[2, i], counts[3, i])
+        z = float_depth(sx, sy, at_x[i], at_y[i], seconds_per_count)
+        out_z[i] = z
+        out_reason[i] = classify(sx != 0 or sy != 0, z, min_depth, max_depth)
+
+
+class DepthStepModel(StepModel):
+    """Holds the latest ``A t`` as dense arrays; turns the counters of a step into depths (float)."""
+
+    def __init__(self, process: DepthProcess, ctx: ModelContext):
+        super().__init__(process, ctx)
+        width, height = ctx.sensor_size
+        self.field = ctx.input_meta(process, "a_t")
+        self.seconds_per_count = ctx.input_meta(process, "counts").seconds_per_count
+        self.at_x, self.at_y = np.zeros((height, width)), np.zeros((height, width))
+        self.outcomes = dict.fromkeys(OUTCOMES, 0)
+        self.width = width
+        self._dtype = Payload.DEPTH.dtype
+
+    def step(self, k: int, inbox: dict) -> dict:
+        velocity = inbox.get("a_t")
+        if velocity is not None:  # applied before this step's counters; the last update of a step wins
+            last = velocity[-1]
+            self.at_x, self.at_y = self.field.dense((last["tx"], last["ty"], last["tz"]))
+        spikes = inbox.get("counts")
+        if spikes is None:
+            return {"depth": None}
+        pixel = spikes["y"].astype(np.int64) * self.width + spikes["x"]
+        pixels, slot = np.unique(pixel, return_inverse=True)
+        counts = np.zeros((4, len(pixels)), dtype=np.int64)
+        counts[spikes["direction"], slot] = spikes["count"]
+        px, py = pixels % self.width, pixels // self.width
+        z = np.empty(len(pixels))
+        reason = np.empty(len(pixels), dtype=np.int64)
+        _depth_neurons(counts, self.at_x[py, px], self.at_y[py, px], self.seconds_per_count,
+                       self.process.min_depth, self.process.max_depth, z, reason)
+        for code, name in enumerate(REJECT_REASONS):
+            self.outcomes[name] += int(np.count_nonzero(reason == code))
+        keep = reason == EMITTED
+        self.outcomes["emitted"] += int(np.count_nonzero(keep))
+        t = self.ctx.t0_us + (k + 1) * self.ctx.timestep_us  # the end of the step
+        return {"depth": records(self._dtype, t=np.full(int(keep.sum()), t), x=px[keep], y=py[keep], z=z[keep])}
+
+    def counts(self) -> dict[str, int]:
+        return dict(self.outcomes)
+
+
+class DepthEventModel(Model):
+    """The depth neurons of a region, event-driven, in the backend's arithmetic (docs/fixed_point.md)."""
+
+    supports_regions = True
+
+    def __init__(self, process: DepthProcess, ctx: ModelContext):
+        super().__init__(process, ctx)
+        field = ctx.input_meta(process, "a_t")
+        counts = ctx.input_meta(process, "counts")
+        config = KernelConfig(tuple(ctx.sensor_size), ctx.timestep_s, counts.distance, 1, process.min_depth,
+                              process.max_depth, 1, field.per_pixel, field.patch_size, field.intrinsics,
+                              ctx.fixed_format)
+        self.kernel = TimeOfTravelKernel(config, ctx.region, ctx.t0_us)
+
+    def run(self, first: int, end: int, inputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        return {"depth": self.kernel.process_counts(inputs["counts"], inputs["a_t"])}
+
+    def counts(self) -> dict[str, int]:
+        return {name: int(c) for name, c in zip(OUTCOMES, self.kernel.outcomes)}

@@ -1,0 +1,69 @@
+"""The input process on every backend family: the shared input filter, one spike per active pixel per step."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tofnet.backends.base import DROP_REASONS
+from tofnet.core.ports import Payload
+from tofnet.errors import BackendError
+from tofnet.kernels.input_filter import InputFilter
+from tofnet.models.base import Model, ModelContext, concat, records
+from tofnet.processes import InputProcess
+
+
+def check_time_order(events: np.ndarray, after_us: int | None, who: str) -> None:
+    """Refuse (before any state changes) events out of time order, or before ``after_us`` µs."""
+    t = events["t"]
+    back = np.flatnonzero(t[1:] < t[:-1])
+    if len(back):
+        i = int(back[0]) + 1
+        raise BackendError(f"{who}: events are not sorted by time: event {i} at {int(t[i])} µs follows "
+                           f"{int(t[i - 1])} µs; feed events in time order")
+    if after_us is not None and len(t) and int(t[0]) < after_us:
+        raise BackendError(f"{who}: events are not sorted by time: this packet starts at {int(t[0])} µs, before "
+                           f"the previous packet's last event at {after_us} µs; the packet was refused and "
+                           "the stream is unchanged")
+
+
+class InputModel(Model):
+    """Runs camera events through ``InputFilter`` as they are fed; sends the accepted ones in their step.
+
+    An event accepted in step ``k`` is sent in step ``k`` with its polarity. Accepted spikes
+    wait here until the executor runs their step, so packets may end anywhere.
+    """
+
+    reads_events = True
+
+    def __init__(self, process: InputProcess, ctx: ModelContext):
+        super().__init__(process, ctx)
+        self.filter = InputFilter(ctx.sensor_size, ctx.t0_us, ctx.timestep_us, round(process.refractory * 1e6),
+                                  process.refractory_per_polarity)
+        self._waiting: list[np.ndarray] = []
+        self._latest_us: int | None = None
+        self._dtype = Payload.POLARITY.dtype
+
+    def feed(self, events: np.ndarray) -> None:
+        if len(events) == 0:
+            return
+        check_time_order(events, self._latest_us, self.process.name)
+        steps, xs, ys, ps = self.filter.feed(events)
+        self._latest_us = int(events["t"][-1])
+        if len(steps):
+            self._waiting.append(records(self._dtype, step=steps, x=xs, y=ys, p=ps))
+
+    def complete_until(self) -> int | None:
+        if self._latest_us is None or self._latest_us < self.ctx.t0_us:
+            return None
+        return (self._latest_us - self.ctx.t0_us) // self.ctx.timestep_us
+
+    def run(self, first: int, end: int, inputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        waiting = concat(self._waiting, self._dtype)
+        cut = int(np.searchsorted(waiting["step"], end))
+        self._waiting = [waiting[cut:]] if cut < len(waiting) else []
+        return {"events": waiting[:cut]}
+
+    def counts(self) -> dict[str, int]:
+        flt = self.filter
+        return {"events_in": flt.events_in, "accepted": flt.accepted,
+                **{reason: int(c) for reason, c in zip(DROP_REASONS, flt.drops)}}

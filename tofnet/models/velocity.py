@@ -1,0 +1,78 @@
+"""The velocity process on every backend family: camera velocity updates for the ``velocity_term`` field."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tofnet.backends.runtime import intrinsics_of, velocity_source_of, velocity_table
+from tofnet.core.ports import Payload
+from tofnet.errors import BackendError, DataError
+from tofnet.kernels.velocity import sample_grid, velocity_term
+from tofnet.models.base import Model, ModelContext, records
+from tofnet.processes import VelocityProcess
+
+#: Updates computed ahead of the clock, so that a short run rarely asks the source.
+LOOKAHEAD = 1024
+
+
+@dataclass(frozen=True)
+class VelocityField:
+    """How receivers turn a ``velocity_term`` update (camera velocity t, m/s) into ``A t`` (px*m/s).
+
+    ``A t`` of pixel (x, y) is evaluated at the pixel (``per_pixel``) or at the centre of its
+    ``patch_size`` square (patches tile the sensor from (0, 0)), with ``intrinsics``
+    ``(fx, fy, cx, cy)`` px.
+    """
+
+    per_pixel: bool
+    patch_size: int
+    intrinsics: tuple[float, float, float, float]
+    sensor_size: tuple[int, int]
+
+    def dense(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``A t`` at every pixel: two ``(height, width)`` arrays (the reference models' view)."""
+        width, height = self.sensor_size
+        u, v = sample_grid(self.per_pixel, self.patch_size, width, height)
+        return velocity_term(float(t[0]), float(t[1]), float(t[2]), u, v, *self.intrinsics)
+
+
+class VelocityModel(Model):
+    """Sends update ``j`` in step ``j * update_every``: the camera velocity at the start of that step."""
+
+    def __init__(self, process: VelocityProcess, ctx: ModelContext):
+        super().__init__(process, ctx)
+        self.source = velocity_source_of(process.source, process.velocity, process.samples, ctx.recording,
+                                         process.name)
+        self.update_every = int(process.update_every)
+        self._table: tuple[int, np.ndarray] = (0, np.zeros((0, 3)))
+        self._dtype = Payload.VELOCITY_TERM.dtype
+
+    @classmethod
+    def output_meta(cls, process: VelocityProcess, ctx: ModelContext) -> dict:
+        intr = intrinsics_of(process.intrinsics, ctx.recording, process.name)
+        return {"a_t": VelocityField(process.per == "pixel", int(process.patch_size),
+                                     (intr.fx, intr.fy, intr.cx, intr.cy), tuple(ctx.sensor_size))}
+
+    def _rows(self, first: int, count: int) -> np.ndarray:
+        start, table = self._table
+        if not (start <= first and first + count <= start + len(table)):
+            try:
+                table = velocity_table(self.source, self.ctx.t0_us, self.ctx.timestep_us, self.update_every,
+                                       max(count, LOOKAHEAD), first)
+            except (BackendError, DataError):  # e.g. not finite beyond the rows asked for: compute only those
+                table = velocity_table(self.source, self.ctx.t0_us, self.ctx.timestep_us, self.update_every,
+                                       count, first)
+            start = first
+            self._table = (start, table)
+        return table[first - start:first - start + count]
+
+    def run(self, first: int, end: int, inputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        u = self.update_every
+        j0, j1 = -(-first // u), -(-end // u)  # updates whose step j*u lies in [first, end)
+        if j1 <= j0:
+            return {"a_t": np.empty(0, self._dtype)}
+        t = self._rows(j0, j1 - j0)
+        return {"a_t": records(self._dtype, step=np.arange(j0, j1, dtype=np.int64) * u,
+                               tx=t[:, 0], ty=t[:, 1], tz=t[:, 2])}
