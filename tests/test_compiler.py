@@ -41,14 +41,22 @@ def test_the_pixel_limit_comes_from_the_budget_and_the_declared_needs():
     assert max_pixels_per_core(tot, core.core.limits(), 10**6) == 512
 
 
-def test_cores_are_numbered_chip_by_chip_tot_first():
+def test_one_chip_numbers_the_layers_one_after_the_other():
+    compiled = compile_network(paper((240, 180)), patch=(30, 30))
+    assert [c.index for c in compiled.cores] == list(range(96)) and compiled.chips_used == 1
+    assert {c.process for c in compiled.cores[:48]} == {"time_of_travel"}
+    assert [c.process for c in compiled.cores_of("depth")] == ["depth"] * 48
+
+
+def test_on_several_chips_a_regions_layers_share_a_chip():
     compiled = compile_network(paper((346, 260)), patch=(30, 30))
     assert [l.cores for l in compiled.layers] == [108, 108] and compiled.chips_used == 2
     assert [c.index for c in compiled.cores] == list(range(216))
-    assert {c.process for c in compiled.cores[:108]} == {"time_of_travel"}
-    assert {c.process for c in compiled.cores[108:]} == {"depth"}
     assert compiled.cores[127].chip == 0 and compiled.cores[128].chip == 1 and compiled.cores[128].slot == 0
-    assert compiled.layer("depth").chips == (0, 1)
+    assert compiled.layer("depth").chips == (0, 1) and compiled.layer("time_of_travel").chips == (0, 1)
+    for tot, depth in zip(compiled.cores_of("time_of_travel"), compiled.cores_of("depth")):
+        assert tot.rect == depth.rect and tot.chip == depth.chip  # the same region, on one chip
+    assert compiled.traffic[1].cross_chip == 0
 
 
 @pytest.mark.parametrize("size, cores, chips", [((346, 260), 216, 2), ((640, 480), 704, 6), ((1280, 720), 2064, 17)])
@@ -227,8 +235,9 @@ def test_tot_to_depth_and_velocity_traffic():
     assert mixed.traffic[1].mean_cores == 1 and mixed.traffic[2].messages == 8 * 4 * 2
     per_pixel = compile_network(paper(velocity={"per": "pixel", "update_every": 10}), patch=(30, 30))
     assert per_pixel.traffic[2].messages == 240 * 180 and per_pixel.traffic[2].per_second == 240 * 180 * 100
-    two_chips = compile_network(paper((346, 260)), patch=(30, 30))
-    assert 0 < two_chips.traffic[1].cross_chip < 1
+    # Depth cores taller than time-of-travel cores: a few regions straddle the chip seam.
+    two_chips = compile_network(paper((346, 260)), patch={"time_of_travel": (30, 30), "depth": (30, 40)})
+    assert two_chips.chips_used == 2 and 0 < two_chips.traffic[1].cross_chip < 0.1
 
 
 # ---------------------------------------------------------------- the compiled network

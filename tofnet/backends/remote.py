@@ -41,8 +41,8 @@ def plan_workers(compiled, workers: int) -> list[WorkerPlan]:
     n = max(1, min(int(workers), max((layer.cores for layer in compiled.layers), default=1)))
     cores: list[list[int]] = [[] for _ in range(n)]
     for layer in compiled.layers:
-        indices = np.arange(layer.first_core, layer.first_core + layer.cores)
-        for w, group in enumerate(np.array_split(indices, n)):
+        indices = [core.index for core in compiled.cores_of(layer.name)]
+        for w, group in enumerate(np.array_split(np.array(indices, dtype=np.int64), n)):
             cores[w].extend(int(i) for i in group)
     return [WorkerPlan(w, tuple(c)) for w, c in enumerate(cores)]
 

@@ -71,6 +71,9 @@ class CoreAssignment:
 class LayerMapping:
     """One core-placed process: patch size (w, h) px, grid of patches, its cores and their use.
 
+    ``first_core`` is the lowest global index of its cores (contiguous on one chip; on
+    several chips the layers of a region are numbered together, see ``core_numbers``).
+
     ``usage_max`` is the use of the fullest core (ragged edge cores use less);
     ``limits`` the per-core limits it was checked against; ``chips`` the chips it spans.
     """
@@ -131,8 +134,8 @@ class CompiledNetwork:
 
     def cores_of(self, name: str) -> list[CoreAssignment]:
         """The cores of layer ``name``, in patch order (row by row)."""
-        layer = self.layer(name)
-        return list(self.cores[layer.first_core:layer.first_core + layer.cores])
+        self.layer(name)  # raises for an unknown layer
+        return sorted((c for c in self.cores if c.process == name), key=lambda c: (c.y0, c.x0))
 
     def core_map(self, name: str) -> np.ndarray:
         """``(height, width)`` array: the global index of the core holding each pixel of ``name``."""
@@ -229,23 +232,52 @@ def compile_network(network: Network, budget: Budget | str | Mapping = LOIHI2,
     _check_chips(network, budget, plans, total)
 
     per_chip = budget.chip.cores
-    layers, cores, by_name, index = [], [], {}, 0
-    for plan in plans:
-        process, first = plan.process, index
-        by_name[process.name] = (plan, first)
-        for rect, halo in zip(plan.rects, plan.halos):
+    numbers = core_numbers(plans, per_chip)
+    layers, cores, by_name = [], [], {}
+    for plan, indices in zip(plans, numbers):
+        process = plan.process
+        by_name[process.name] = (plan, indices)
+        for index, rect, halo in zip(indices, plan.rects, plan.halos):
             pixels = (rect[2] - rect[0]) * (rect[3] - rect[1])
             cores.append(CoreAssignment(index, index // per_chip, index % per_chip, process.name, *rect,
                                         usage=usage_of(process, pixels), halo=tuple(halo)))
-            index += 1
         full = usage_of(process, plan.patch[0] * plan.patch[1])
-        chips = tuple(range(first // per_chip, (index - 1) // per_chip + 1))
+        chips = tuple(sorted({i // per_chip for i in indices}))
         layers.append(LayerMapping(process.name, type(process).__name__, plan.patch, plan.grid, len(plan.rects),
-                                   first, usage_of(process, 1), full, {k: limits[k] for k in full}, chips,
+                                   min(indices), usage_of(process, 1), full, {k: limits[k] for k in full}, chips,
                                    plan.automatic))
+    cores.sort(key=lambda c: c.index)
     host = tuple(p.name for p in ordered if p.placement == "host")
     traffic = traffic_of(network, by_name, per_chip)
     return CompiledNetwork(network, budget, tuple(layers), tuple(cores), tuple(traffic), host, patch)
+
+
+def core_numbers(plans: list, per_chip: int) -> list[list[int]]:
+    """Global core index of every patch of every layer (lists in each plan's patch order).
+
+    On one chip, layer after layer. When the network needs several chips, the layers of
+    one image region are numbered together, region by region (regions: the patches of the
+    layer with the largest patches, row by row), so a region's layers share a chip where
+    they fit and spikes between layers rarely cross chips.
+    """
+    total = sum(len(plan.rects) for plan in plans)
+    if total <= per_chip or len(plans) < 2:
+        out, index = [], 0
+        for plan in plans:
+            out.append(list(range(index, index + len(plan.rects))))
+            index += len(plan.rects)
+        return out
+    anchor = max(plans, key=lambda plan: plan.patch[0] * plan.patch[1])
+    (aw, ah), columns = anchor.patch, anchor.grid[0]
+    keyed = []
+    for layer, plan in enumerate(plans):
+        for k, (x0, y0, x1, y1) in enumerate(plan.rects):
+            cx, cy = (x0 + x1 - 1) // 2, (y0 + y1 - 1) // 2  # the region holding the patch's centre
+            keyed.append(((cy // ah) * columns + cx // aw, layer, k))
+    out = [[0] * len(plan.rects) for plan in plans]
+    for index, (_, layer, k) in enumerate(sorted(keyed)):
+        out[layer][k] = index
+    return out
 
 
 def _check_chips(network: Network, budget: Budget, plans: list, total: int) -> None:

@@ -273,9 +273,9 @@ class Traffic:
 def traffic_of(network, plans: Mapping[str, tuple[LayerPlan, int]], chip_cores: int) -> list[Traffic]:
     """Traffic of every connection into a core-placed process.
 
-    ``plans`` maps a layer name to its plan and the global index of its first core.
+    ``plans`` maps a layer name to its plan and the global index of each of its cores
+    (in the plan's patch order).
     """
-    from tofnet.processes import VelocityProcess  # declarations only; no backend
     out = []
     for source_port, target_port in network.connections():
         src, dst = source_port.process, target_port.process
@@ -285,8 +285,8 @@ def traffic_of(network, plans: Mapping[str, tuple[LayerPlan, int]], chip_cores: 
         width, height = dst.sensor_size
         names = (source_port.qualified_name, target_port.qualified_name)
         channels = source_port.spec.channels
-        if isinstance(src, VelocityProcess):
-            out.append(_update_traffic(network, src, plan, names, channels))
+        if source_port.spec.payload.kind == "field":
+            out.append(_update_traffic(network, source_port, plan, names, channels))
             continue
         counts = np.zeros((height, width), dtype=np.int32)
         for halo in plan.halos:
@@ -300,15 +300,16 @@ def traffic_of(network, plans: Mapping[str, tuple[LayerPlan, int]], chip_cores: 
         src_plan, src_first = plans[src.name]
         label = np.empty((height, width), dtype=np.int64)
         for k, (x0, y0, x1, y1) in enumerate(src_plan.rects):
-            label[y0:y1, x0:x1] = src_first + k
+            label[y0:y1, x0:x1] = k
         links = [set() for _ in src_plan.rects]
         crossing = delivered = 0
         for k, halo in enumerate(plan.halos):
             (x0, y0, x1, y1), mask = local_mask(halo)
             sources = label[y0:y1, x0:x1][mask]
             for s in np.unique(sources):
-                links[s - src_first].add(k)
-            crossing += int(np.count_nonzero(sources // chip_cores != (first + k) // chip_cores))
+                links[s].add(k)
+            chips_of_sources = np.asarray(src_first)[sources] // chip_cores
+            crossing += int(np.count_nonzero(chips_of_sources != first[k] // chip_cores))
             delivered += sources.size
         fan = [len(s) for s in links]
         out.append(Traffic(*names, "event", channels, mean, peak, mean, links_mean=float(np.mean(fan)),
@@ -317,11 +318,11 @@ def traffic_of(network, plans: Mapping[str, tuple[LayerPlan, int]], chip_cores: 
     return out
 
 
-def _update_traffic(network, velocity, plan: LayerPlan, names: tuple[str, str], channels: int) -> Traffic:
-    # One message per (depth core, A t value it must hold): per patch, the velocity
-    # patches overlapping the core; per pixel, every pixel.
+def _update_traffic(network, port, plan: LayerPlan, names: tuple[str, str], channels: int) -> Traffic:
+    # One message per (core, value of the field it must hold): the squares of the source's
+    # field layout that overlap the core (its process declares the layout).
     width, height = plan.process.sensor_size
-    side = int(velocity.patch_size) if velocity.per == "patch" else 1
+    side, every = port.process.field_layout(port.name)
     columns = -(-width // side)
     per_core = []
     for halo in plan.halos:
@@ -330,8 +331,8 @@ def _update_traffic(network, velocity, plan: LayerPlan, names: tuple[str, str], 
         per_core.append(len(np.unique((ys + y0) // side * columns + (xs + x0) // side)))
     messages = float(sum(per_core))
     steps = [p.timestep for p in network.processes if "timestep" in p.values]
-    per_second = messages / (velocity.update_every * steps[0]) if steps else None
-    what = f"one A t per {side}x{side} patch" if velocity.per == "patch" else "one A t per pixel"
+    per_second = messages / (every * steps[0]) if steps else None
+    what = f"one value per {side}x{side} patch" if side > 1 else "one value per pixel"
     return Traffic(*names, "update", channels, float(np.mean(per_core)), int(max(per_core)), messages,
                    per_second=per_second,
-                   note=f"{what}, every {velocity.update_every} step(s); {channels} values per message")
+                   note=f"{what}, every {every} step(s); {channels} values per message")

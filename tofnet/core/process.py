@@ -111,6 +111,12 @@ class Process:
         """
         return [(0, 0)]
 
+    def field_layout(self, port: str) -> tuple[int, int]:
+        """For an output port of ``field`` payload: ``(side, every)``, the side (px) of the squares
+        that share one value and the steps between two updates. The compiler sizes the traffic
+        of the port from it. Default: a value per pixel, every step."""
+        return (1, 1)
+
     def set_param(self, name: str, value: Any) -> None:
         """Change one parameter, with the same conversion and checks as the constructor."""
         declared = {p.name: p for p in self.all_params()}

@@ -35,6 +35,10 @@ class VelocityProcess(Process):
     )
     placement = "host"
 
+    def field_layout(self, port: str) -> tuple[int, int]:
+        """One ``A t`` per ``patch_size`` square (per pixel: 1), every ``update_every`` steps."""
+        return (int(self.patch_size) if self.per == "patch" else 1, int(self.update_every))
+
     def _check(self) -> None:
         values = self._values
         if values["source"] == "constant" and values["velocity"] is None:
