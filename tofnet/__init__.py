@@ -1,10 +1,12 @@
 """tofnet: low-latency monocular depth from event timing, as a neuromorphic process graph."""
 
-from tofnet.core import InPort, Network, OutPort, Process
+from tofnet.core import InPort, Network, OutPort, Param, Payload, PortSpec, Process
 from tofnet.networks import depth_network
-from tofnet.processes import DepthProcess, InputProcess, TimeOfTravelProcess, VelocityProcess
+from tofnet.processes import (BackgroundActivityFilterProcess, DepthProcess, InputProcess, TimeOfTravelProcess,
+                              VelocityProcess)
 
 __version__ = "0.1.0"
 
-__all__ = ["InPort", "OutPort", "Process", "Network", "InputProcess", "TimeOfTravelProcess", "DepthProcess",
-           "VelocityProcess", "depth_network", "__version__"]
+__all__ = ["InPort", "OutPort", "Param", "Payload", "PortSpec", "Process", "Network", "InputProcess",
+           "TimeOfTravelProcess", "DepthProcess", "VelocityProcess", "BackgroundActivityFilterProcess",
+           "depth_network", "__version__"]

@@ -7,8 +7,10 @@ written; errors name the file, the line and the key. The format is in docs/spec.
 
 from __future__ import annotations
 
+import importlib
 import re
 from dataclasses import dataclass, field
+from importlib.metadata import entry_points
 from importlib.resources import files
 from pathlib import Path
 from typing import Any, Mapping
@@ -207,11 +209,15 @@ class _Reader:
     def process_type(self, body: Mapping, path: str) -> type[Process]:
         type_name = body["type"]
         if isinstance(type_name, str):
-            for candidate in (type_name, type_name + "Process"):
-                if candidate in Process._registry:
-                    return Process._registry[candidate]
+            try:
+                found = process_class(type_name)
+            except TofnetError as err:
+                raise self.fail(body, "type", f"{path}.type", str(err)) from None
+            if found is not None:
+                return found
         raise self.fail(body, "type", f"{path}.type",
-                        f"unknown process type {type_name!r}; expected one of {', '.join(_known_types())}")
+                        f"unknown process type {type_name!r}; expected one of {', '.join(_known_types())}, "
+                        "'package.module:ClassName' or a 'tofnet.processes' entry point")
 
     def connections(self, tree: Mapping, processes: dict[str, Process]) -> None:
         section = tree.get("connections") or []
@@ -295,7 +301,55 @@ def _strip_field(message: str, field_name: str) -> str:
 
 
 def _known_types() -> list[str]:
-    return sorted(Process._registry)
+    return sorted(set(Process._registry) | {ep.name for ep in entry_points(group=ENTRY_POINTS)})
+
+
+#: Entry-point group through which installed packages offer process types to specs.
+ENTRY_POINTS = "tofnet.processes"
+
+
+def process_class(type_name: str) -> type[Process] | None:
+    """The process class a spec's ``type`` names, None when unknown.
+
+    In order: ``package.module:ClassName`` (imported; running its module is what registers
+    its models), a class already imported (``DepthProcess`` or ``Depth``), a
+    ``tofnet.processes`` entry point of that name. Raises when an import fails or names
+    something that is not a process type.
+    """
+    if ":" in type_name:
+        module_name, _, attr = type_name.partition(":")
+        try:
+            module = importlib.import_module(module_name)
+        except Exception as err:  # the user's module: whatever it raises, one line
+            raise SpecError(f"cannot import {module_name!r} for process type {type_name!r}: "
+                            f"{type(err).__name__}: {err}") from None
+        found = getattr(module, attr, None)
+        if not (isinstance(found, type) and issubclass(found, Process)):
+            raise SpecError(f"{type_name!r} is not a process type (a subclass of tofnet.Process)")
+        return found
+    for candidate in (type_name, type_name + "Process"):
+        if candidate in Process._registry:
+            return Process._registry[candidate]
+    for ep in entry_points(group=ENTRY_POINTS):
+        if ep.name == type_name:
+            try:
+                found = ep.load()
+            except Exception as err:
+                raise SpecError(f"entry point {ENTRY_POINTS}:{type_name} failed to load: "
+                                f"{type(err).__name__}: {err}") from None
+            if isinstance(found, type) and issubclass(found, Process):
+                return found
+            raise SpecError(f"entry point {ENTRY_POINTS}:{type_name} is not a process type")
+    return None
+
+
+def type_name_of(process: Process) -> str:
+    """How a spec names the type of ``process``: the class name for tofnet's own and for
+    classes a script defines, else ``package.module:ClassName`` (importable in a new process)."""
+    cls = type(process)
+    if cls.__module__.startswith("tofnet.") or cls.__module__ in ("__main__", "__mp_main__"):
+        return cls.__name__
+    return f"{cls.__module__}:{cls.__qualname__}"
 
 
 def _ports(process: Process, kind: type = object) -> str:
@@ -342,7 +396,7 @@ def network_to_dict(network: Network, full: bool = False) -> dict[str, Any]:
     """
     processes = {}
     for process in network.processes:
-        body: dict[str, Any] = {"type": type(process).__name__}
+        body: dict[str, Any] = {"type": type_name_of(process)}
         for param in type(process).all_params():
             value = process.values[param.name]
             if not full and not _worth_writing(process, param, value):
@@ -457,7 +511,7 @@ def _flow(value: Any) -> str:
 
 def network_signature(network: Network) -> dict[str, Any]:
     """What makes two networks equal: process names, types, parameter values and connections."""
-    return {"processes": {p.name: (type(p).__name__, p.values) for p in network.processes},
+    return {"processes": {p.name: (type_name_of(p), p.values) for p in network.processes},
             "connections": sorted(f"{s.qualified_name} -> {t.qualified_name}" for s, t in network.connections())}
 
 

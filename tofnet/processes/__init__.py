@@ -1,8 +1,10 @@
-"""The four processes of the paper's network, as declarations (ports, parameters, docs)."""
+"""The processes tofnet ships, as declarations (ports, parameters, docs): no execution code."""
 
+from tofnet.processes.background_filter import BackgroundActivityFilterProcess
 from tofnet.processes.depth import DepthProcess
 from tofnet.processes.input import InputProcess
 from tofnet.processes.time_of_travel import TimeOfTravelProcess
 from tofnet.processes.velocity import VelocityProcess
 
-__all__ = ["InputProcess", "TimeOfTravelProcess", "DepthProcess", "VelocityProcess"]
+__all__ = ["InputProcess", "TimeOfTravelProcess", "DepthProcess", "VelocityProcess",
+           "BackgroundActivityFilterProcess"]
