@@ -13,7 +13,8 @@ from tofnet.core.process import Process
 from tofnet.errors import SpecError
 from tofnet.io.spec import (default_spec_path, dump_spec, load_budget, load_spec, network_from_dict,
                             network_to_dict, networks_equal, spec_from_dict, spec_to_dict)
-from tofnet.processes import DepthProcess, InputProcess, TimeOfTravelProcess, VelocityProcess
+from tofnet.processes import (BackgroundActivityFilterProcess, DepthProcess, InputProcess, TimeOfTravelProcess,
+                              VelocityProcess)
 
 PAPER = """\
 name: paper
@@ -51,14 +52,16 @@ def every_parameter_changed() -> Network:
     """A network in which every parameter of every process type differs from its default."""
     inp = InputProcess(name="cam", sensor_size=(64, 48), timestep="250us", refractory="2.5ms",
                        refractory_per_polarity=True, t0=1.5)
+    baf = BackgroundActivityFilterProcess(name="baf", radius=2, window="12ms")
     tot = TimeOfTravelProcess(name="tot", distance=3, counter_bits=12)
     dep = DepthProcess(name="z", min_depth="10cm", max_depth=7.5)
     vel = VelocityProcess(name="v", source="samples", velocity=[0.1, -0.2, 0.3], samples="vel.txt", per="pixel",
                           patch_size=16, update_every=5, intrinsics=[200.0, 201.5, 31.5, 23.5])
-    inp.events.connect(tot.events)
+    inp.events.connect(baf.events)
+    baf.passed.connect(tot.events)
     tot.counts.connect(dep.counts)
     vel.a_t.connect(dep.a_t)
-    return Network([inp, tot, dep, vel], name="everything")
+    return Network([inp, baf, tot, dep, vel], name="everything")
 
 
 def test_every_process_type_and_parameter_round_trips():
@@ -67,7 +70,7 @@ def test_every_process_type_and_parameter_round_trips():
         defaults = {p.name: p.coerce(p.default, "x") for p in type(process).all_params() if p.name != "sensor_size"}
         assert all(process.values[k] != v for k, v in defaults.items()), process.name
     assert {type(p).__name__ for p in net.processes} == {
-        name for name, cls in Process._registry.items() if cls.__module__.startswith("tofnet.")}
+        name for name, cls in Process._registry.items() if cls.__module__.startswith("tofnet.processes")}
     for full in (False, True):
         text = dump_spec(net, full=full)
         again = load_spec(text).network

@@ -68,9 +68,10 @@ def apply_overrides(network: Network, **values: Any) -> None:
 
 def run(recording: Recording, network: Network | None = None, *, backend: str = DEFAULT_BACKEND,
         backend_options: dict | None = None, compile_options: dict | None = None, record_tot: bool = False,
-        progress: ProgressCallback | None = None) -> tuple[RunResult, Any]:
+        probes: tuple[str, ...] | list[str] = (), progress: ProgressCallback | None = None) -> tuple[RunResult, Any]:
     """Compile ``network`` (default: the paper's, sized to the recording) and run it on ``recording``.
 
+    ``probes`` names output ports (``"process.port"``) to return besides the sinks.
     Returns ``(result, compiled)``.
     """
     from tofnet.backends.registry import get_backend
@@ -79,5 +80,6 @@ def run(recording: Recording, network: Network | None = None, *, backend: str = 
     if network is None:
         network = depth_network(recording.sensor_size or (240, 180))
     compiled = compile_network(network, **(compile_options or {}))
-    result = get_backend(backend, **(backend_options or {})).run(compiled, recording, record_tot=record_tot, progress=progress)
+    result = get_backend(backend, **(backend_options or {})).run(compiled, recording, record_tot=record_tot,
+                                                                 probes=probes, progress=progress)
     return result, compiled

@@ -1,11 +1,12 @@
-"""Ready-made networks: the paper's depth network built from the four processes."""
+"""Ready-made networks: the paper's depth network and the variants the examples use."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Iterable
 
 from tofnet.core.network import Network
-from tofnet.processes import DepthProcess, InputProcess, TimeOfTravelProcess, VelocityProcess
+from tofnet.processes import (BackgroundActivityFilterProcess, DepthProcess, InputProcess, TimeOfTravelProcess,
+                              VelocityProcess)
 
 
 def depth_network(sensor_size: tuple[int, int] = (240, 180), *, name: str = "depth",
@@ -24,3 +25,38 @@ def depth_network(sensor_size: tuple[int, int] = (240, 180), *, name: str = "dep
     tot.counts.connect(dep.counts)
     vel.a_t.connect(dep.a_t)
     return Network([inp, tot, dep, vel], name=name)
+
+
+def multi_distance_network(sensor_size: tuple[int, int] = (240, 180), distances: Iterable[int] = (1, 2), *,
+                           name: str = "distances", input: dict[str, Any] | None = None,
+                           depth: dict[str, Any] | None = None, velocity: dict[str, Any] | None = None) -> Network:
+    """One input, one velocity, and a time-of-travel + depth branch per distance (the paper's Fig. 6b
+    in one run): processes ``tot<d>`` and ``depth<d>``, outputs ``depth<d>.depth``."""
+    inp = InputProcess(name="input", sensor_size=sensor_size, **(input or {}))
+    vel = VelocityProcess(name="velocity", **(velocity or {}))
+    processes = [inp]
+    for d in distances:
+        tot = TimeOfTravelProcess(name=f"tot{d}", distance=d)
+        dep = DepthProcess(name=f"depth{d}", **(depth or {}))
+        inp.events.connect(tot.events)
+        tot.counts.connect(dep.counts)
+        vel.a_t.connect(dep.a_t)
+        processes += [tot, dep]
+    return Network(processes + [vel], name=name)
+
+
+def denoised_network(sensor_size: tuple[int, int] = (240, 180), *, name: str = "denoised",
+                     input: dict[str, Any] | None = None, denoise: dict[str, Any] | None = None,
+                     time_of_travel: dict[str, Any] | None = None, depth: dict[str, Any] | None = None,
+                     velocity: dict[str, Any] | None = None) -> Network:
+    """The paper's network with a background-activity filter between input and time of travel."""
+    inp = InputProcess(name="input", sensor_size=sensor_size, **(input or {}))
+    baf = BackgroundActivityFilterProcess(name="denoise", **(denoise or {}))
+    tot = TimeOfTravelProcess(name="time_of_travel", **(time_of_travel or {}))
+    dep = DepthProcess(name="depth", **(depth or {}))
+    vel = VelocityProcess(name="velocity", **(velocity or {}))
+    inp.events.connect(baf.events)
+    baf.passed.connect(tot.events)
+    tot.counts.connect(dep.counts)
+    vel.a_t.connect(dep.a_t)
+    return Network([inp, baf, tot, dep, vel], name=name)

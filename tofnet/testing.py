@@ -170,3 +170,46 @@ class LinearVelocity:
     def velocity_at(self, t: np.ndarray) -> np.ndarray:
         share = np.clip(np.asarray(t, dtype=np.float64) / self.duration_s, 0.0, 1.0)[:, None]
         return self.start + share * (self.end - self.start)
+
+
+# -- a process written as a user would write one: a declaration, a model, a registration -------
+from tofnet.core.params import Param  # noqa: E402
+from tofnet.core.ports import Payload, PortSpec  # noqa: E402
+from tofnet.core.process import Process  # noqa: E402
+from tofnet.models import StepModel, model  # noqa: E402
+
+
+class ParityGateProcess(Process):
+    """Passes the spikes of pixels with ``(x + y) % 2 == parity`` (a checkerboard mask).
+
+    A stand-in for a user's own process in tests and the conformance suite: declared and
+    registered through the public API only (``Process``, ``@model``), core-placed so that
+    ``multiproc`` builds it on workers.
+    """
+
+    inports = (PortSpec("events", Payload.POLARITY, 1, "spikes"),)
+    outports = (PortSpec("passed", Payload.POLARITY, 1, "the spikes of the chosen parity"),)
+    params = (Param("parity", "int", 0, doc="0: pixels with x + y even; 1: odd", minimum=0, maximum=1),)
+    resources_per_pixel = {"accumulators": 1, "neurons": 1}
+
+
+@model(ParityGateProcess)  # one plain model for every family: integer logic, same on all backends
+class ParityGateModel(StepModel):
+    supports_regions = True  # it holds no per-pixel state: any region works
+
+    def __init__(self, process, ctx):
+        super().__init__(process, ctx)
+        self.passed = 0
+
+    def step(self, k, inbox):
+        spikes = inbox.get("events")
+        if spikes is None:
+            return {"passed": None}
+        keep = (spikes["x"].astype(np.int64) + spikes["y"]) % 2 == self.process.parity
+        x0, x1, y0, y1 = self.ctx.bounds
+        keep &= (spikes["x"] >= x0) & (spikes["x"] < x1) & (spikes["y"] >= y0) & (spikes["y"] < y1)
+        self.passed += int(keep.sum())
+        return {"passed": np.array(spikes[keep])}
+
+    def counts(self):
+        return {"passed": self.passed}

@@ -116,9 +116,9 @@ class RunResult:
 
     @property
     def latency_steps(self) -> int:
-        if self.depth_outputs:
-            return self.latency[self.depth_output]
-        return max(self.latency.values(), default=0)
+        """Steps from an event to the depth output (the longest of several; of any output without one)."""
+        names = self.depth_outputs or list(self.latency)
+        return max((self.latency[n] for n in names), default=0)
 
     @property
     def latency_seconds(self) -> float:

@@ -21,6 +21,8 @@ def register(subparsers) -> None:
                                                     "see 'tofnet conformance --list'")
     p.add_argument("--record-tot", action="store_true",
                    help="also save the time-of-travel spikes (next to --out, *_tot.npz)")
+    p.add_argument("--probe", action="append", default=[], metavar="PROCESS.PORT",
+                   help="also save what an output port sent (next to --out: OUT.PROCESS.PORT.npz); repeatable")
     p.add_argument("--json", metavar="FILE", help="write the run summary as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress, summary only")
     p.set_defaults(handler=handle)
@@ -71,7 +73,6 @@ def handle(args) -> int:
     from tofnet.api import DEFAULT_BACKEND, run
     from tofnet.cli.progress import Progress
     from tofnet.io import read_recording
-    from tofnet.io.depth import write_depth
 
     started = time.perf_counter()
     recording = read_recording(args.recording)
@@ -81,29 +82,50 @@ def handle(args) -> int:
         backend_options = {}  # the spec's options belong to the spec's backend
     progress = None if args.quiet else Progress(f"tofnet run [{backend}]")
     result, compiled = run(recording, network, backend=backend, backend_options=backend_options,
-                           compile_options=compile_options,
-                           record_tot=args.record_tot, progress=progress)
+                           compile_options=compile_options, record_tot=args.record_tot, probes=args.probe,
+                           progress=progress)
     if progress:
         progress.done()
     out = Path(args.out)
     summary = result.summary()
     summary["recording"] = str(args.recording)
     summary["total_time_s"] = time.perf_counter() - started
-    write_depth(out, result.depth, t0_us=result.t0_us, timestep_us=result.timestep_us,
-                latency_steps=result.latency_steps, summary=summary)
-    if args.record_tot:
-        import numpy as np
-        tot_path = out.with_name(out.stem + "_tot.npz")
-        np.savez_compressed(tot_path, **{name: result.tot[name] for name in result.tot.dtype.names})
-        summary["tot_file"] = str(tot_path)
-    print(format_summary(summary, result, out, network_width=network.sensor_size))
+    written = write_outputs(out, result, summary, args.record_tot)
+    summary["files"] = {name: str(path) for name, path in written.items()}
+    print(format_summary(summary, result, written, network_width=network.sensor_size))
     if args.json:
         Path(args.json).write_text(json.dumps(summary, indent=2) + "\n")
     return 0
 
 
-def format_summary(summary: dict, result, out: Path, network_width) -> str:
-    """The closing report: where every event went, and how fast."""
+def write_outputs(out: Path, result, summary: dict, record_tot: bool) -> dict[str, Path]:
+    """Write every depth output (``OUT``, or ``OUT.<process>.npz`` when there are several) and every
+    probe (``OUT.<process>.<port>.npz``); the time-of-travel spikes of ``--record-tot`` to ``OUT_tot.npz``.
+    Returns output name -> file."""
+    import numpy as np
+    from tofnet.io.depth import write_depth
+
+    written: dict[str, Path] = {}
+    depth_names = result.depth_outputs
+    for name in depth_names:
+        path = out if len(depth_names) == 1 else out.with_name(f"{out.stem}.{name.split('.')[0]}{out.suffix}")
+        write_depth(path, result.outputs[name], t0_us=result.t0_us, timestep_us=result.timestep_us,
+                    latency_steps=result.latency[name], summary=summary)
+        written[name] = path
+    for name, records in result.outputs.items():
+        if name in written:
+            continue
+        if record_tot and result.payloads.get(name) == "count" and len(result.depth_outputs) == 1:
+            path = out.with_name(out.stem + "_tot.npz")
+        else:
+            path = out.with_name(f"{out.stem}.{name}.npz")
+        np.savez_compressed(path, **{field: records[field] for field in records.dtype.names})
+        written[name] = path
+    return written
+
+
+def format_summary(summary: dict, result, written: dict, network_width) -> str:
+    """The closing report: where every event went, what each process did, and how fast."""
     width, height = network_width
     lines = [f"recording      {summary['recording']}  ({width}x{height} px, {summary['steps']} steps of "
              f"{summary['timestep_s'] * 1e3:g} ms)",
@@ -112,15 +134,27 @@ def format_summary(summary: dict, result, out: Path, network_width) -> str:
              f"  accepted     {summary['accepted']:>12,}"]
     for reason, count in summary["dropped"].items():
         lines.append(f"  dropped      {count:>12,}  {reason.replace('_', ' ')}")
-    lines.append(f"tot spikes     {summary['tot_spikes']:>12,}")
-    lines.append(f"depth out      {summary['depth_out']:>12,}  -> {out}")
-    for reason, count in summary["rejected"].items():
-        lines.append(f"  rejected     {count:>12,}  {reason.replace('_', ' ')}")
-    if len(result.depth):
-        import numpy as np
-        z = result.depth["z"]
-        lines.append(f"depth range    {np.percentile(z, 5):.3f} .. {np.percentile(z, 95):.3f} m (5th-95th pct), "
-                     f"median {np.median(z):.3f} m")
+    depth_names = result.depth_outputs
+    if len(depth_names) == 1:
+        lines.append(f"tot spikes     {summary['tot_spikes']:>12,}")
+        lines.append(f"depth out      {summary['depth_out']:>12,}  -> {written[depth_names[0]]}")
+        for reason, count in summary["rejected"].items():
+            lines.append(f"  rejected     {count:>12,}  {reason.replace('_', ' ')}")
+    else:
+        for process, counts in summary["counts"].items():
+            if counts and "events_in" not in counts:
+                told = ", ".join(f"{k.replace('_', ' ')} {v:,}" for k, v in counts.items())
+                lines.append(f"{process:<14} {told}")
+    for name, path in written.items():
+        if len(depth_names) != 1 or name != depth_names[0]:
+            lines.append(f"output         {len(result.outputs[name]):>12,}  {name} -> {path}")
+    for name in depth_names:
+        z = result.outputs[name]["z"]
+        if len(z):
+            import numpy as np
+            which = "" if len(depth_names) == 1 else f" ({name})"
+            lines.append(f"depth range    {np.percentile(z, 5):.3f} .. {np.percentile(z, 95):.3f} m (5th-95th pct), "
+                         f"median {np.median(z):.3f} m{which}")
     rate = summary["events_in"] / summary["wall_time_s"] if summary["wall_time_s"] > 0 else float("inf")
     lines.append(f"latency        {summary['latency_steps']} steps ({summary['latency_s'] * 1e3:g} ms)")
     lines.append(f"wall time      {summary['wall_time_s']:.3f} s network ({rate / 1e6:.2f} M events/s), "

@@ -17,7 +17,8 @@ import numpy as np
 from tofnet.core.network import Network
 from tofnet.events import EVENT_DTYPE, make_events
 from tofnet.io.recording import Intrinsics, Recording
-from tofnet.networks import depth_network
+from tofnet.networks import denoised_network, depth_network, multi_distance_network
+from tofnet.processes import DepthProcess, InputProcess, TimeOfTravelProcess, VelocityProcess
 from tofnet.testing import (TEST_INTRINSICS, LinearVelocity, directed_edge, merge_events, moving_edge,
                             moving_pattern, noise_events)
 
@@ -225,6 +226,47 @@ def _depth_range() -> Scene:
 @case("empty", "no events at all")
 def _empty() -> Scene:
     return Scene(net((4, 3)), rec(np.empty(0, dtype=EVENT_DTYPE)))
+
+
+# -- graph shapes beyond the paper's chain --------------------------------------------------
+def _constant(velocity) -> dict:
+    return {"source": "constant", "velocity": list(velocity), "per": "pixel"}
+
+
+@case("graph-two-distances", "one input feeding time of travel at distances 1 and 2, two depth outputs, "
+      "one velocity process (fan-out), on 8x8 cores")
+def _two_distances() -> Scene:
+    size, flow = (24, 16), (300.0, -150.0)
+    network = multi_distance_network(size, (1, 2), input={"refractory": 0, "t0": 0}, velocity=_constant(camera_for(flow)))
+    return Scene(network, rec(moving_pattern(size, flow, 200_000, seed=8)), (8, 8))
+
+
+@case("graph-denoised", "a background-activity filter (core-placed) between input and time of travel, under "
+      "noise at 30 Hz per pixel, on 8x8 cores")
+def _denoised() -> Scene:
+    size, flow = (24, 16), (250.0, 100.0)
+    network = denoised_network(size, input={"refractory": "1ms", "t0": 0}, denoise={"window": "4ms"},
+                               velocity=_constant(camera_for(flow)))
+    return Scene(network, rec(moving_pattern(size, flow, 200_000, seed=9), noise_events(size, 30.0, 200_000, seed=10)),
+                 (8, 8))
+
+
+@case("graph-user-process", "a process declared and registered outside tofnet's own (tofnet.testing."
+      "ParityGateProcess), core-placed between input and time of travel with distance 2")
+def _user_process() -> Scene:
+    from tofnet.testing import ParityGateProcess
+    size, flow = (20, 14), (-200.0, 250.0)
+    inp = InputProcess(name="input", sensor_size=size, refractory=0, t0=0)
+    gate = ParityGateProcess(name="gate", parity=1)
+    tot = TimeOfTravelProcess(name="time_of_travel", distance=2)
+    dep = DepthProcess(name="depth")
+    vel = VelocityProcess(name="velocity", **_constant(camera_for(flow)))
+    inp.events.connect(gate.events)
+    gate.passed.connect(tot.events)
+    tot.counts.connect(dep.counts)
+    vel.a_t.connect(dep.a_t)
+    network = Network([inp, gate, tot, dep, vel], name="user-process")
+    return Scene(network, rec(moving_pattern(size, flow, 200_000, seed=11)), (7, 5))
 
 
 def get_case(name: str) -> Case:

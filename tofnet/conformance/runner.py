@@ -46,13 +46,13 @@ class BackendRunner:
     def arithmetic(self) -> str:
         return self.backend.arithmetic
 
-    def run(self, compiled, recording, *, record_tot: bool = True):
+    def run(self, compiled, recording, *, record_tot: bool = True, probes=()):
         if not callable(getattr(self.backend, "session", None)):
-            return self.backend.run(compiled, recording, record_tot=record_tot)
+            return self.backend.run(compiled, recording, record_tot=record_tot, probes=probes)
         if self.session is None:
             self.session = self.stack.enter_context(self.backend.session())
         try:
-            return self.session.run(recording, compiled=compiled, record_tot=record_tot)
+            return self.session.run(recording, compiled=compiled, record_tot=record_tot, probes=probes)
         except Exception:
             self.session = None  # a failed session is closed; the next case opens a new one
             raise

@@ -1,0 +1,63 @@
+"""YAML specs for any graph: every shape round-trips, user process types load by module path or entry point."""
+
+import pytest
+
+from tofnet.errors import SpecError
+from tofnet.io import spec as spec_module
+from tofnet.io.spec import dump_spec, load_spec, networks_equal, spec_from_dict
+from tofnet.networks import denoised_network, depth_network, multi_distance_network
+
+
+def user_network():
+    from tofnet import DepthProcess, InputProcess, Network, TimeOfTravelProcess, VelocityProcess
+    from tofnet.testing import ParityGateProcess
+    inp, gate = InputProcess(name="input", sensor_size=(40, 30)), ParityGateProcess(name="gate", parity=1)
+    tot, dep, vel = TimeOfTravelProcess(name="tot", distance=2), DepthProcess(name="depth"), VelocityProcess()
+    inp.events.connect(gate.events)
+    gate.passed.connect(tot.events)
+    tot.counts.connect(dep.counts)
+    vel.a_t.connect(dep.a_t)
+    return Network([inp, gate, tot, dep, vel], name="user")
+
+
+@pytest.mark.parametrize("build", [
+    lambda: depth_network((64, 48)),
+    lambda: multi_distance_network((64, 48), (1, 2, 3)),
+    lambda: denoised_network((64, 48), denoise={"radius": 2, "window": "12ms"}),
+    user_network,
+], ids=["paper", "three-distances", "denoised", "user-process"])
+def test_every_graph_round_trips(build):
+    network = build()
+    for full in (False, True):
+        again = load_spec(dump_spec(network, full=full)).network
+        assert networks_equal(again, network)
+
+
+def test_a_user_process_is_written_and_read_by_module_path():
+    text = dump_spec(user_network())
+    assert "type: 'tofnet.testing:ParityGateProcess'" in text
+    loaded = load_spec(text).network
+    assert type(loaded.process("gate")).__name__ == "ParityGateProcess" and loaded.process("gate").parity == 1
+
+
+def test_bad_module_paths_get_one_line_naming_the_key():
+    body = {"processes": {"x": {"type": "no_such_module_xyz:Thing"}}}
+    with pytest.raises(SpecError, match=r"processes\.x\.type: cannot import 'no_such_module_xyz'"):
+        spec_from_dict(body)
+    body = {"processes": {"x": {"type": "tofnet.networks:depth_network"}}}
+    with pytest.raises(SpecError, match="is not a process type"):
+        spec_from_dict(body)
+
+
+def test_an_entry_point_offers_a_process_type(monkeypatch):
+    class EntryPoint:
+        name = "ParityGate2"
+
+        def load(self):
+            from tofnet.testing import ParityGateProcess
+            return ParityGateProcess
+
+    monkeypatch.setattr(spec_module, "entry_points", lambda group: [EntryPoint()] if group == "tofnet.processes" else [])
+    text = ("processes:\n  input: {type: InputProcess, sensor_size: [10, 8]}\n  gate: {type: ParityGate2}\n"
+            "connections:\n  - input.events -> gate.events\n")
+    assert type(load_spec(text).network.process("gate")).__name__ == "ParityGateProcess"
