@@ -84,3 +84,14 @@ def test_build_paper_network_example(capsys, monkeypatch):
     monkeypatch.setattr(sys, "argv", ["build_paper_network.py"])
     runpy.run_path(str(ROOT / "examples" / "build_paper_network.py"), run_name="__main__")
     assert "48 + 48 = 96 on 1 chip" in capsys.readouterr().out
+
+
+def test_the_custom_process_example_runs_as_documented():
+    import subprocess
+    import sys
+    done = subprocess.run([sys.executable, str(ROOT / "examples" / "custom_process.py"), "--duration", "0.08"],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    out = done.stdout
+    assert "consistent.kept" in out and "multiproc vs fixed (exact): same" in out
+    assert "float vs reference (float): same" in out and "fixed vs reference (quantised): same" in out
