@@ -1,7 +1,7 @@
 """The depth layer on its own: time-of-travel counter spikes and velocity updates in, depth out.
 
 The unfused twin of the depth part of ``time_of_travel.process``: both call the same
-``depth_neuron``. It runs on the state of a ``region.TimeOfTravelKernel`` (sample tables,
+``refresh_sample`` (``A t``/``W`` per sample and update) and ``depth_of`` (eq. 8). It runs on the state of a ``region.TimeOfTravelKernel`` (sample tables,
 ``A t``/``W`` caches, counts) built for the depth layer's region.
 """
 
@@ -10,7 +10,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from tofnet.kernels.time_of_travel import DT, T0, X0, X1, Y0, Y1, depth_neuron, depth_params, views
+from tofnet.kernels.time_of_travel import (DT, EMITTED, REJECTED, T0, X0, X1, Y0, Y1, depth_of, depth_params,
+                                          refresh_sample, views)
 
 # Slots of the velocity state carried between calls: the velocity the neurons hold (m/s) and its update id.
 VEL_TX, VEL_TY, VEL_TZ, VEL_ID = range(4)
@@ -31,7 +32,8 @@ def depth_from_counts(c_step, c_x, c_y, c_dir, c_count, v_step, v_t, velocity, i
     for i in range(1, n):
         if c_step[i] < c_step[i - 1]:
             return n_out, 1
-    params = depth_params(ip, fp, out_raw)
+    params = depth_params(ip, fp)
+    keep_raw = out_raw.shape[0] > 0
     x0, y0, x1, y1, t0, dt = ip[X0], ip[Y0], ip[X1], ip[Y1], ip[T0], ip[DT]
     tx, ty, tz, update = velocity[VEL_TX], velocity[VEL_TY], velocity[VEL_TZ], np.int64(velocity[VEL_ID])
     v = 0
@@ -55,9 +57,18 @@ def depth_from_counts(c_step, c_x, c_y, c_dir, c_count, v_step, v_t, velocity, i
             update += 1
             v += 1
         if x0 <= x < x1 and y0 <= y < y1:
-            n_out = depth_neuron(m0, m1, m2, m3, 1, rows[y - y0] + cols[x - x0], update, tx, ty, tz, m + 1,
-                                 t0 + (m + 2) * dt, x, y, params, counts, cache_j, cache_w, cache_at, points,
-                                 out, out_raw, n_out)
+            sample = rows[y - y0] + cols[x - x0]
+            if cache_j[sample] != update:
+                refresh_sample(sample, update, tx, ty, tz, params, cache_j, cache_w, cache_at, points)
+            z, raw, slot = depth_of(m0, m1, m2, m3, 1, cache_w[2 * sample], cache_w[2 * sample + 1],
+                                    cache_at[2 * sample], cache_at[2 * sample + 1], params)
+            counts[REJECTED + slot] += 1
+            if slot == EMITTED - REJECTED:
+                estimate = out[n_out]
+                estimate.t, estimate.x, estimate.y, estimate.z, estimate.step = t0 + (m + 2) * dt, x, y, z, m + 1
+                if keep_raw:
+                    out_raw[n_out] = raw
+                n_out += 1
     while v < n_vel:  # later updates: held for the next call's spikes
         tx, ty, tz = v_t[v, 0], v_t[v, 1], v_t[v, 2]
         update += 1

@@ -121,3 +121,15 @@ class InputFilter:
     @property
     def dropped(self) -> dict[str, int]:
         return {reason: int(c) for reason, c in zip(DROP_REASONS, self.drops)}
+
+
+@njit(cache=True)
+def first_out_of_order(t, after) -> int:
+    """Index of the first time in ``t`` (µs) below its predecessor, or below ``after`` for the
+    first one; -1 when ``t`` is in time order."""
+    previous = after
+    for i in range(t.shape[0]):
+        if t[i] < previous:
+            return i
+        previous = t[i]
+    return -1

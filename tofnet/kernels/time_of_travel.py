@@ -133,50 +133,44 @@ def outcome(fired: int, measured: bool, z, min_depth, max_depth) -> int:
 
 
 @njit(cache=True, inline="always")
-def depth_params(ip, fp, out_raw):
-    """The depth neuron's constants, read once per call (``depth_neuron``'s ``params``)."""
-    fixed = ip[FIXED] != 0
+def depth_params(ip, fp):
+    """The depth neuron's constants, read once per call (``depth_of``'s ``params``)."""
     frac_bits = ip[FRAC_BITS]
-    return (fixed, frac_bits, ip[PAYLOAD_BITS], 1.0 / (1 << frac_bits), ip[MIN_RAW], ip[MAX_RAW],
-            fp[MIN_DEPTH], fp[MAX_DEPTH], fp[FX], fp[FY], fp[CX], fp[CY], fp[SECONDS_PER_COUNT],
-            out_raw.shape[0] > 0)
+    return (ip[FIXED] != 0, frac_bits, ip[PAYLOAD_BITS], 1.0 / (1 << frac_bits), ip[MIN_RAW], ip[MAX_RAW],
+            fp[MIN_DEPTH], fp[MAX_DEPTH], fp[FX], fp[FY], fp[CX], fp[CY], fp[SECONDS_PER_COUNT])
+
+
+@njit(cache=True)
+def refresh_sample(sample, update, tx, ty, tz, params, cache_j, cache_w, cache_at, points):
+    """``A t`` (and ``W = A t * dt / distance`` quantised, in fixed point) of one sample under
+    velocity ``update``, cached: called once per sample (patch or pixel) and update."""
+    fixed, frac_bits, payload_bits, _, _, _, _, _, fx, fy, cx, cy, seconds_per_count = params
+    at_x, at_y = velocity_term(tx, ty, tz, points[2 * sample], points[2 * sample + 1], fx, fy, cx, cy)
+    cache_at[2 * sample], cache_at[2 * sample + 1] = at_x, at_y
+    if fixed:  # W quantised once (docs/fixed_point.md)
+        cache_w[2 * sample] = quantize(at_x * seconds_per_count, frac_bits, payload_bits)
+        cache_w[2 * sample + 1] = quantize(at_y * seconds_per_count, frac_bits, payload_bits)
+    cache_j[sample] = update
 
 
 @njit(cache=True, inline="always")
-def depth_neuron(m0, m1, m2, m3, fired, sample, update, tx, ty, tz, step, stamp_us, x, y, params, counts,
-                 cache_j, cache_w, cache_at, points, out, out_raw, n_out):
-    """The depth neuron of pixel (x, y) in ``step`` given its four counters (paper eq. 8).
-
-    ``sample`` indexes where ``A t`` is evaluated; ``A t`` (and ``W`` in fixed point) is cached
-    per sample and velocity ``update`` (any id that changes when the velocity does). Counts the
-    outcome; writes the estimate to ``out[n_out]`` and returns ``n_out`` + 1 when it is emitted.
-    Shared by the fused kernel and the depth-only kernel (``depth_from_counts``).
-    """
-    (fixed, frac_bits, payload_bits, lsb, min_raw, max_raw, min_depth, max_depth, fx, fy, cx, cy,
-     seconds_per_count, keep_raw) = params
+def depth_of(m0, m1, m2, m3, fired, w_x, w_y, at_x, at_y, params):
+    """The depth neuron (paper eq. 8) from its four counters and its sample's cached ``W``/``A t``:
+    ``(z metres, raw fixed-point z or 0, outcome slot)``. Scalars only (arrays passed to an
+    inlined function cost reference counting per event). Shared by the fused kernel and the
+    depth layer alone (``depth_counts``)."""
+    fixed, _, payload_bits, lsb, min_raw, max_raw, min_depth, max_depth, _, _, _, _, seconds_per_count = params
     sx, sy = axis_count(m0, m1), axis_count(m2, m3)
-    if cache_j[sample] != update:  # first depth neuron of this patch (or pixel) under this update
-        at_x, at_y = velocity_term(tx, ty, tz, points[2 * sample], points[2 * sample + 1], fx, fy, cx, cy)
-        cache_at[2 * sample], cache_at[2 * sample + 1] = at_x, at_y
-        if fixed:  # W = A t * dt / distance, quantised once (docs/fixed_point.md)
-            cache_w[2 * sample] = quantize(at_x * seconds_per_count, frac_bits, payload_bits)
-            cache_w[2 * sample + 1] = quantize(at_y * seconds_per_count, frac_bits, payload_bits)
-        cache_j[sample] = update
     measured = (sx | sy) != 0
     if fixed:
-        raw = fixed_depth(sx, sy, cache_w[2 * sample], cache_w[2 * sample + 1], payload_bits)
+        raw = fixed_depth(sx, sy, w_x, w_y, payload_bits)
         slot = outcome(fired, measured, raw, min_raw, max_raw)
         z = raw * lsb
     else:
         raw = 0
-        z = float_depth(sx, sy, cache_at[2 * sample], cache_at[2 * sample + 1], seconds_per_count)
+        z = float_depth(sx, sy, at_x, at_y, seconds_per_count)
         slot = outcome(fired, measured, z, min_depth, max_depth)
-    counts[REJECTED + slot] += 1
-    estimate = out[n_out]  # written always, kept when emitted
-    estimate.t, estimate.x, estimate.y, estimate.z, estimate.step = stamp_us, x, y, z, step
-    if keep_raw:
-        out_raw[n_out] = raw
-    return n_out + (slot == EMITTED - REJECTED)
+    return z, raw, slot
 
 
 @njit(cache=True, inline="always")  # a call in the event loop makes the loop 30 % slower (docs/performance.md)
@@ -286,7 +280,8 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
     t0, dt, refractory, width, height = ip[T0], ip[DT], ip[REFRACTORY_US], ip[WIDTH], ip[HEIGHT]
     stride, row, update_every = ip[STRIDE], ip[ROW], ip[UPDATE_EVERY]
     per_polarity = ip[PER_POLARITY] != 0
-    params = depth_params(ip, fp, out_raw)
+    params = depth_params(ip, fp)
+    keep_raw = out_raw.shape[0] > 0
     max_diff = 2 * ip[COUNTER_MAX]
     latest = FILTER_WORD + 2 if per_polarity else FILTER_WORD
     hx0, hy0, hx1, hy1 = x0 - d, y0 - d, x1 + d, y1 + d
@@ -363,9 +358,17 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
                         n_tot += 1
             # 2. The pixel's depth neuron, in step k+2.
             if emit_depth:
-                n_out = depth_neuron(m0, m1, m2, m3, fired, rows[y - y0] + cols[x - x0], update, tx, ty, tz,
-                                     k + 2, stamp_us, x, y, params, counts, cache_j, cache_w, cache_at, points,
-                                     out, out_raw, n_out)
+                sample = rows[y - y0] + cols[x - x0]
+                if cache_j[sample] != update:  # the first depth neuron of this sample under this update
+                    refresh_sample(sample, update, tx, ty, tz, params, cache_j, cache_w, cache_at, points)
+                z, raw, slot = depth_of(m0, m1, m2, m3, fired, cache_w[2 * sample], cache_w[2 * sample + 1],
+                                        cache_at[2 * sample], cache_at[2 * sample + 1], params)
+                counts[REJECTED + slot] += 1
+                estimate = out[n_out]  # written always, kept when emitted
+                estimate.t, estimate.x, estimate.y, estimate.z, estimate.step = stamp_us, x, y, z, k + 2
+                if keep_raw:
+                    out_raw[n_out] = raw
+                n_out += slot == EMITTED - REJECTED
         # 3. Facilitations, applied when step k is complete.
         if n_pend == pend.shape[0]:  # more than one spike per pixel in a step
             cursor[N_PEND], cursor[CURRENT], cursor[BASE] = n_pend, current, base

@@ -7,7 +7,7 @@ import numpy as np
 from tofnet.backends.base import DROP_REASONS
 from tofnet.core.ports import Payload
 from tofnet.errors import BackendError
-from tofnet.kernels.input_filter import InputFilter
+from tofnet.kernels.input_filter import NEVER, InputFilter, first_out_of_order
 from tofnet.models.base import Model, ModelContext, concat, records
 from tofnet.processes import InputProcess
 
@@ -15,12 +15,11 @@ from tofnet.processes import InputProcess
 def check_time_order(events: np.ndarray, after_us: int | None, who: str) -> None:
     """Refuse (before any state changes) events out of time order, or before ``after_us`` µs."""
     t = events["t"]
-    back = np.flatnonzero(t[1:] < t[:-1])
-    if len(back):
-        i = int(back[0]) + 1
+    i = first_out_of_order(t, NEVER if after_us is None else after_us)
+    if i > 0:
         raise BackendError(f"{who}: events are not sorted by time: event {i} at {int(t[i])} µs follows "
                            f"{int(t[i - 1])} µs; feed events in time order")
-    if after_us is not None and len(t) and int(t[0]) < after_us:
+    if i == 0:
         raise BackendError(f"{who}: events are not sorted by time: this packet starts at {int(t[0])} µs, before "
                            f"the previous packet's last event at {after_us} µs; the packet was refused and "
                            "the stream is unchanged")

@@ -1,0 +1,125 @@
+"""The paper network's speed now against an earlier commit, measured in one run.
+
+    python benchmarks/versions.py                 # against e2dc198 (before the open process graph)
+    python benchmarks/versions.py --base v0.1 --rounds 7
+
+Checks the base commit out into a temporary git worktree, writes the same streams to
+disk once (benchmarks/streams.py: the slider and fast_slider scenes, uniform and moving
+edges at 1 M and 20 M events/s, 240x180), and then times both code trees in alternating
+subprocesses, ``--rounds`` times each (a slow spell of a shared machine then hits both):
+the ``fixed`` backend's ``run`` on each whole stream (CPU time) and the stream fed in
+1 ms packets (mean µs per packet). Best round per tree; the ratio is now / base.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+import streams
+
+ROOT = Path(__file__).resolve().parent.parent
+DEFAULT_BASE = "e2dc198"  # the last commit before the open process graph (issue 9)
+STREAMS = (("slider", None), ("fast_slider", None), ("uniform", 1e6), ("edges", 1e6), ("uniform", 20e6),
+           ("edges", 20e6))
+INTRINSICS = (199.1, 198.5, 119.5, 89.5)
+VELOCITY = (-0.5, 0.05, 0.1)  # m/s; a constant velocity keeps both trees on the same input
+
+TIMER = r'''
+import gc, json, sys, time
+import numpy as np
+from tofnet.backends.event_driven import FixedBackend
+from tofnet.io.recording import ConstantVelocity, Intrinsics, Recording
+from tofnet.networks import depth_network
+
+files, intrinsics, velocity = json.loads(sys.argv[1]), Intrinsics(*json.loads(sys.argv[2])), tuple(json.loads(sys.argv[3]))
+out = {}
+for name, path in files.items():
+    events = np.load(path)
+    recording = Recording(events, intrinsics=intrinsics, trajectory=ConstantVelocity(velocity), sensor_size=(240, 180))
+    net = depth_network((240, 180), velocity={"source": "constant", "velocity": list(velocity)})
+    FixedBackend().run(net, recording)  # compile or load the cache
+    gc.collect()
+    started = time.process_time()
+    FixedBackend().run(net, recording)
+    run_s = time.process_time() - started
+    t = events["t"]
+    bounds = np.searchsorted(t, np.arange(int(t[0]), int(t[-1]) + 1001, 1000))
+    stream = FixedBackend().open_stream(net, intrinsics=intrinsics, velocity_source=ConstantVelocity(velocity),
+                                        t0_us=int(t[0]))
+    parts = [events[lo:hi] for lo, hi in zip(bounds[:-1], bounds[1:])]
+    clock = time.perf_counter
+    started = clock()
+    for part in parts:
+        stream.feed(part)
+    out[name] = {"events": len(events), "run_s": run_s, "packet_us": (clock() - started) / len(parts) * 1e6}
+print(json.dumps(out))
+'''
+
+
+def write_streams(folder: Path, duration: float) -> dict[str, str]:
+    files = {}
+    for kind, rate in STREAMS:
+        name = kind if rate is None else f"{kind} {rate / 1e6:g}M"
+        recording = streams.scenario(kind, duration, print) if rate is None else \
+            getattr(streams, kind)((240, 180), rate, duration)
+        path = folder / (name.replace(" ", "_") + ".npy")
+        np.save(path, recording.events)
+        files[name] = str(path)
+    return files
+
+
+def time_tree(tree: Path, script: Path, files: dict[str, str]) -> dict:
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    done = subprocess.run([sys.executable, str(script), json.dumps(files), json.dumps(INTRINSICS),
+                           json.dumps(VELOCITY)], env=env, capture_output=True, text=True, cwd=tree)
+    if done.returncode:
+        raise SystemExit(f"timing {tree} failed:\n{done.stderr[-3000:]}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--base", default=DEFAULT_BASE, help=f"git commit to compare with (default {DEFAULT_BASE})")
+    parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--duration", type=float, default=1.0, help="seconds per stream")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        base_tree = tmp / "base"
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(base_tree), args.base],
+                       check=True, capture_output=True)
+        try:
+            script = tmp / "timer.py"
+            script.write_text(TIMER)
+            files = write_streams(tmp, args.duration)
+            best: dict[str, dict] = {"base": {}, "now": {}}
+            for r in range(args.rounds):
+                for label, tree in (("base", base_tree), ("now", ROOT)):
+                    print(f"round {r + 1}/{args.rounds}: {label}", flush=True)
+                    for name, m in time_tree(tree, script, files).items():
+                        kept = best[label].setdefault(name, dict(m))
+                        kept["run_s"] = min(kept["run_s"], m["run_s"])
+                        kept["packet_us"] = min(kept["packet_us"], m["packet_us"])
+        finally:
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(base_tree)], check=False)
+    print(f"\n## The paper's network (fixed backend, fused), {args.base} vs now; best of {args.rounds} rounds, "
+          f"load average {' '.join(f'{v:.2f}' for v in os.getloadavg())}\n")
+    print("| stream | events | base M ev/s | now M ev/s | now / base | base µs per 1 ms packet | now | now / base |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+    for name in best["now"]:
+        b, n = best["base"][name], best["now"][name]
+        print(f"| {name} | {n['events']:,} | {b['events'] / b['run_s'] / 1e6:.1f} | {n['events'] / n['run_s'] / 1e6:.1f} "
+              f"| {n['run_s'] / b['run_s']:.2f}x time | {b['packet_us']:.1f} | {n['packet_us']:.1f} "
+              f"| {n['packet_us'] / b['packet_us']:.2f}x |")
+
+
+if __name__ == "__main__":
+    main()
