@@ -50,14 +50,15 @@ class AedatSource(EventSource):
         self.track_id = events[0].id
         self.sensor_size = tuple(events[0].dimensions)
         self.n_events = counts.get(self.track_id)
-        self.detail = f"track {self.track_id}"
+        self.detail = f"events track {self.track_id}"
         for track in tracks:
             if track.id == self.track_id:
                 continue
             count = counts.get(track.id)
             size = f" {track.dimensions[0]}x{track.dimensions[1]}" if track.dimensions else ""
+            what = "samples (read as the IMU)" if track.data_type == "imus" else "packets"
             self.streams[f"{track.data_type} (track {track.id})"] = \
-                f"{count if count is not None else '?'} {'samples' if track.data_type == 'imus' else 'packets'}{size}"
+                f"{count if count is not None else '?'} {what}{size}"
 
     def _packets(self, size_hint: int) -> Iterable[np.ndarray]:
         from faery.extension import aedat
@@ -87,24 +88,22 @@ def imu_to_ecd(packet: np.ndarray) -> np.ndarray:
     return out
 
 
-def write_aedat4(path: str | Path, chunks: Iterable[np.ndarray], sensor_size: tuple[int, int],
-                 imu: np.ndarray | None = None) -> int:
-    """Write ``EVENT_DTYPE`` chunks (and ECD-convention IMU rows) as AEDAT4; returns the event count.
+def write_aedat4(path: str | Path, chunks: Iterable[np.ndarray], meta) -> int:
+    """Write ``EVENT_DTYPE`` chunks as AEDAT4 (LZ4); returns the event count.
 
-    Times must be >= 0 (AEDAT4 stores unsigned µs). IMU samples go in their own track,
-    in time order with the events (DV reads packets in file order).
+    ``meta`` is a ``Recording`` or ``EventSource``: its ``sensor_size`` is needed first,
+    its ``imu`` (ECD rows, converted back to µs, g, °/s) is read after the events, so
+    a source's IMU is complete, and written as a second track after them. Times must be
+    >= 0 (AEDAT4 stores unsigned µs).
     """
     import faery
     from faery.extension import aedat
 
-    width, height = (int(v) for v in sensor_size)
-    tracks = [_track_node(0, "EVTS", "events", {"sizeX": ("int", width), "sizeY": ("int", height)})]
-    if imu is not None and len(imu):
-        tracks.append(_track_node(1, "IMUS", "imu", {}))
+    width, height = (int(v) for v in meta.sensor_size)
+    tracks = [_track_node(0, "EVTS", "events", {"sizeX": ("int", width), "sizeY": ("int", height)}),
+              _track_node(1, "IMUS", "imu", {})]
     description = [aedat.DescriptionNode(name="outInfo", path="/mainloop/Recorder/outInfo/", attributes={},
                                          nodes=tracks)]
-    imu_packets = _imu_packets(imu) if imu is not None and len(imu) else iter(())
-    pending = next(imu_packets, None)
     written = 0
     with aedat.Encoder(path=path, description=description, compression=aedat.LZ4_DEFAULT) as encoder:
         for chunk in chunks:
@@ -112,16 +111,13 @@ def write_aedat4(path: str | Path, chunks: Iterable[np.ndarray], sensor_size: tu
                 continue
             if chunk["t"][0] < 0:
                 raise DataError(located(path, None, f"AEDAT4 stores times >= 0 µs, got {int(chunk['t'][0])}"))
-            while pending is not None and pending["t"][-1] <= chunk["t"][0]:
-                encoder.write(1, pending)
-                pending = next(imu_packets, None)
             packet = np.empty(len(chunk), dtype=faery.EVENTS_DTYPE)
             packet["t"], packet["x"], packet["y"], packet["on"] = chunk["t"], chunk["x"], chunk["y"], chunk["p"] == 1
             encoder.write(0, packet)
             written += len(chunk)
-        while pending is not None:
-            encoder.write(1, pending)
-            pending = next(imu_packets, None)
+        if meta.imu is not None:
+            for packet in _imu_packets(meta.imu):
+                encoder.write(1, packet)
     return written
 
 

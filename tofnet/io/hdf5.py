@@ -194,13 +194,14 @@ def read_calib_group(handle, group: str, path: object) -> tuple[Intrinsics | Non
     return intrinsics, (tuple(int(v) for v in size) if size is not None else None)
 
 
-def write_hdf5(path: str | Path, chunks: Iterable[np.ndarray], *, sensor_size: tuple[int, int] | None = None,
-               intrinsics: Intrinsics | None = None, trajectory=None, imu: np.ndarray | None = None) -> int:
+def write_hdf5(path: str | Path, chunks: Iterable[np.ndarray], meta) -> int:
     """Write events in the DSEC layout (plus tofnet's calib/poses/imu groups); returns the event count.
 
     ``events/t`` is int64 µs after ``t_offset`` (the first event's time), ``x``, ``y``
     uint16, ``p`` uint8; ``ms_to_idx[k]`` is the index of the first event at or after
-    ``t_offset + k`` ms. Chunks are appended as they come (bounded memory).
+    ``t_offset + k`` ms. Chunks are appended as they come (bounded memory). ``meta``
+    (a ``Recording`` or ``EventSource``) gives sensor size, intrinsics, poses and IMU,
+    read after the events.
     """
     h5py = require("h5py", path)
     written, next_ms, t_offset = 0, 0, None
@@ -226,6 +227,7 @@ def write_hdf5(path: str | Path, chunks: Iterable[np.ndarray], *, sensor_size: t
             written += len(chunk)
         _append(ms_to_idx, np.array([written]))
         out.create_dataset("t_offset", data=np.int64(t_offset or 0))
+        sensor_size, intrinsics, trajectory, imu = meta.sensor_size, meta.intrinsics, meta.trajectory, meta.imu
         if sensor_size is not None:
             out.create_dataset("calib/resolution", data=np.asarray(sensor_size, dtype=np.int64))
         if intrinsics is not None:
@@ -233,7 +235,7 @@ def write_hdf5(path: str | Path, chunks: Iterable[np.ndarray], *, sensor_size: t
                                                                   intrinsics.cy]))
             out.create_dataset("calib/distortion_coeffs", data=np.asarray(intrinsics.distortion, dtype=np.float64))
             out.create_dataset("calib/distortion_model", data=intrinsics.distortion_model)
-        if trajectory is not None:
+        if trajectory is not None and hasattr(trajectory, "quaternions"):
             out.create_dataset("poses/t", data=trajectory.times)
             out.create_dataset("poses/position", data=trajectory.positions)
             out.create_dataset("poses/quaternion", data=trajectory.quaternions)
