@@ -35,6 +35,10 @@ def parse_columns(columns: str | tuple[str, ...] | list[str] | None, source: obj
     return names
 
 
+class PlainColumns(dict):
+    """Columns cut from a plain ``(n, 4)`` array (their order is an assumption worth naming in errors)."""
+
+
 def _polarity_name(names) -> str | None:
     return next((name for name in POLARITY_NAMES if name in names), None)
 
@@ -52,7 +56,7 @@ def columns_of(path: object, array: np.ndarray, what: str,
         return {"t": array["t"], "x": array["x"], "y": array["y"], "p": array[polarity]}
     if array.ndim == 2 and array.shape[1] == 4:
         order = parse_columns(columns)
-        return {name: array[:, k] for k, name in enumerate(order)}
+        return PlainColumns((name, array[:, k]) for k, name in enumerate(order))
     raise DataError(located(path, None, f"{what} has shape {array.shape} and dtype {array.dtype}; expected a "
                                         "structured array with fields t, x, y, p or an (n, 4) array of columns "
                                         "t x y p (another order: --columns)"))

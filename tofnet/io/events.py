@@ -361,7 +361,7 @@ def read_events_npy(path: str | Path, columns: str | tuple[str, ...] | None = No
     A float ``t`` is seconds, an integer ``t`` microseconds.
     Polarity -1 maps to 0 (OFF); booleans are accepted.
     """
-    from tofnet.io.arrays import columns_of, npz_columns
+    from tofnet.io.arrays import PlainColumns, columns_of, npz_columns
 
     path = Path(path)
     try:
@@ -380,7 +380,13 @@ def read_events_npy(path: str | Path, columns: str | tuple[str, ...] | None = No
                 raise DataError(located(path, None, f"cannot read array ({err})")) from None
     else:
         arrays = columns_of(path, loaded, "the array", columns)
-    return events_from_columns(arrays, path)
+    try:
+        return events_from_columns(arrays, path)
+    except DataError as err:
+        if columns is None and isinstance(arrays, PlainColumns):
+            raise DataError(f"{err} (a plain (n, 4) array is read as columns t x y p; "
+                            "for another order pass --columns, e.g. x,y,t,p)") from None
+        raise
 
 
 def events_from_columns(columns: dict[str, np.ndarray], source: object = "<memory>") -> np.ndarray:
