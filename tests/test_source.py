@@ -48,6 +48,7 @@ class _Synthetic(EventSource):
 
 
 def test_chunks_hold_bounded_memory():
+    list(_Synthetic(n_packets=2, packet=10).chunks(5))  # compile (or load) the copy kernel first
     source = _Synthetic(n_packets=400, packet=10_000)  # 4 M events, 52 MB if held at once
     tracemalloc.start()
     total = 0

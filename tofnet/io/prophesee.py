@@ -39,7 +39,6 @@ class FaerySource(EventSource):
 
     def __init__(self, path: str | Path, kind: str):
         super().__init__(path)
-        import faery
         from faery.extension import dat, es, evt
 
         self.format = kind
@@ -71,8 +70,7 @@ class FaerySource(EventSource):
             if kind == "evt":
                 with evt.Decoder(self.path, fallback, None) as decoder:
                     self.detail = decoder.version.upper()
-        self._decoder = faery.file_decoder.Decoder(self.path, dimensions_fallback=fallback or (1280, 720),
-                                                   file_type=kind, time_range_cache=None)
+        self._fallback = fallback
 
     def _dat_count(self) -> int | None:
         # A DAT file is a '%' text header, one type byte, one size byte, then 8 bytes per event.
@@ -86,7 +84,21 @@ class FaerySource(EventSource):
         return size // _DAT_EVENT_BYTES if size >= 0 and size % _DAT_EVENT_BYTES == 0 else None
 
     def _packets(self, size_hint: int) -> Iterable[np.ndarray]:
+        import faery
+        from faery.extension import dat, evt
+
+        # EVT and DAT straight from the decoders (fields t, x, y, then polarity: 'on' or
+        # DAT's 0/1 'payload'); Event Stream through faery's Decoder, which flips its y axis.
         try:
-            yield from self._decoder
+            if self.format == "evt":
+                with evt.Decoder(self.path, self._fallback, None) as decoder:
+                    for packet in decoder:
+                        if "events" in packet:
+                            yield packet["events"]
+            elif self.format == "dat":
+                with dat.Decoder(self.path, self._fallback, None) as decoder:
+                    yield from decoder
+            else:
+                yield from faery.file_decoder.Decoder(self.path, file_type="es", time_range_cache=None)
         except RuntimeError as err:
             raise DataError(located(self.path, None, f"cannot decode ({err})")) from None

@@ -15,6 +15,7 @@ from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 
 from tofnet.errors import DataError, located
 from tofnet.events import EVENT_DTYPE
@@ -67,16 +68,14 @@ class EventSource:
         if n_events < 1:
             raise ValueError(f"n_events must be positive, got {n_events}")
         done = 0
-        last_t = None
-        for chunk in _rechunk(self._packets(n_events), n_events):
-            t = chunk["t"]
-            if last_t is not None and t[0] < last_t:
-                self._time_back(done, last_t, int(t[0]))
-            back = np.flatnonzero(t[1:] < t[:-1])
-            if back.size:
-                i = int(back[0]) + 1
-                self._time_back(done + i - 1, int(t[i - 1]), int(t[i]))
-            last_t = int(t[-1])
+        previous = None
+        for chunk, back in _rechunk(self._packets(n_events), n_events):
+            if back >= 0:
+                before = int(chunk["t"][back - 1]) if back > 0 else previous
+                raise DataError(located(self.path, None, f"event {done + back + 1}: time goes back "
+                                                         f"({int(chunk['t'][back])} µs after {before} µs); "
+                                                         "events must be sorted by time"))
+            previous = int(chunk["t"][-1])
             done += len(chunk)
             if progress is not None:
                 progress(done, self.n_events)
@@ -120,31 +119,59 @@ class EventSource:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def _time_back(self, index: int, before: int, after: int) -> None:
-        raise DataError(located(self.path, None, f"event {index + 1}: time goes back ({after} µs after {before} µs); "
-                                                 "events must be sorted by time"))
 
 
-def _rechunk(packets: Iterable[np.ndarray], n: int) -> Iterator[np.ndarray]:
+def _rechunk(packets: Iterable[np.ndarray], n: int) -> Iterator[tuple[np.ndarray, int]]:
     """Re-cut arrays of any sizes into new ``EVENT_DTYPE`` arrays of ``n`` (the last shorter).
 
-    Each event is copied once, converting the dtype on the way (fields by position).
+    Yields ``(chunk, back)``: ``back`` is the index in the chunk of the first event
+    stamped earlier than the one before it (across packets and chunks too), or -1. Each
+    event is copied once, in a compiled loop that also checks the order.
     """
     buffer = np.empty(n, dtype=EVENT_DTYPE)
-    fill = 0
+    fill, back = 0, -1
+    last_t = np.zeros(1, dtype=np.int64)
+    started = np.zeros(1, dtype=np.bool_)
     for packet in packets:
+        names = packet.dtype.names
+        columns = [packet[name] for name in names[:4]]
         start, size = 0, len(packet)
         while start < size:
             take = min(n - fill, size - start)
-            buffer[fill:fill + take] = packet[start:start + take]
+            first_back = _copy_checked(buffer["t"], buffer["x"], buffer["y"], buffer["p"], fill, *columns,
+                                       start, take, last_t, started)
+            if back < 0 and first_back >= 0:
+                back = fill + first_back
             fill += take
             start += take
             if fill == n:
-                yield buffer
+                yield buffer, back
                 buffer = np.empty(n, dtype=EVENT_DTYPE)
-                fill = 0
+                fill, back = 0, -1
     if fill:
-        yield buffer[:fill].copy()
+        yield buffer[:fill].copy(), back
+
+
+@njit(cache=True)
+def _copy_checked(out_t, out_x, out_y, out_p, at, t, x, y, p, start, count, last_t, started):
+    """Copy ``count`` events from ``start`` into the chunk fields at ``at``; first time going back or -1."""
+    for i in range(count):
+        out_t[at + i] = t[start + i]
+        out_x[at + i] = x[start + i]
+        out_y[at + i] = y[start + i]
+        out_p[at + i] = 1 if p[start + i] else 0
+    first_back = -1
+    if count > 0:
+        if started[0] and out_t[at] < last_t[0]:
+            first_back = 0
+        else:
+            for i in range(1, count):
+                if out_t[at + i] < out_t[at + i - 1]:
+                    first_back = i
+                    break
+        last_t[0] = out_t[at + count - 1]
+        started[0] = True
+    return first_back
 
 
 class RecordingSource(EventSource):
