@@ -1,8 +1,10 @@
 """Recordings in, depth out: event files, ECD folders, ground truth, calibration, depth files.
 
-``read_recording`` is the one entry point the CLI and examples use; the format
-modules underneath are ``ecd``, ``events``, ``groundtruth``, ``calibration`` and
-``depth``. See ``docs/formats.md``.
+``read_recording`` is the one entry point the CLI and examples use (``open_recording``
+for reading in chunks, ``source``); the format modules underneath are ``ecd``,
+``events``, ``arrays``, ``groundtruth``, ``calibration``, ``depth``, and, through
+optional extras, ``aedat``, ``prophesee``, ``hdf5``, ``hdf5_datasets``, ``rosbag``;
+``detect`` recognises them; ``convert``, ``maps`` and ``ply`` write. See ``docs/formats.md``.
 """
 
 from __future__ import annotations
