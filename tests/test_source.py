@@ -9,7 +9,7 @@ from tofnet.cli import main
 from tofnet.errors import DataError
 from tofnet.events import EVENT_DTYPE, make_events
 from tofnet.io import detect_format, read_recording
-from tofnet.io.source import EventSource, open_recording
+from tofnet.io.source import EventSource
 
 
 def test_content_decides_over_the_name(tmp_path):

@@ -104,8 +104,9 @@ def _text_calibration(intrinsics, messages: list[str]):
 
 
 def _write_imu(path: Path, imu) -> None:
-    rows = "".join(" ".join(repr(float(v)) for v in row) + "\n" for row in imu)
-    path.write_text("# t ax ay az gx gy gz  (s, m/s^2, rad/s)\n" + rows, encoding="utf-8")
+    from tofnet.io.groundtruth import _write_rows  # the shared exact-float table writer
+
+    _write_rows(path, imu, "# t ax ay az gx gy gz  (s, m/s², rad/s)")
 
 
 def _side_files(folder: Path, meta, messages: list[str], force: bool) -> None:
