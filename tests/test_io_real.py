@@ -12,9 +12,7 @@ from tofnet.io import read_recording
 from tofnet.io.recording import ConstantVelocity, Intrinsics
 from tofnet.io.source import open_recording
 
-REAL = Path(__file__).resolve().parents[1].parent / "shared" / "real"
-if not REAL.is_dir():
-    REAL = Path("/work/shared/real")
+REAL = Path(__file__).resolve().parents[1].parent / "shared" / "real"  # ../shared/real beside the checkout
 pytestmark = pytest.mark.skipif(not REAL.is_dir(), reason="no ../shared/real/ folder of real recordings")
 pytest.importorskip("faery")
 

@@ -242,6 +242,10 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
 
     path = Path(path)
     kind = detect_format(path)
+    if columns is not None and kind not in ("npy", "npz"):
+        raise DataError(located(path, None, f"--columns applies to plain numpy arrays (.npy/.npz), not {kind} files"))
+    if topics and kind != "rosbag1":
+        raise DataError(located(path, None, f"topics apply to ROS bags, not {kind} files"))
     if kind in ("aedat4", "evt", "dat", "es"):
         from tofnet.io.prophesee import open_faery
         source = open_faery(path, kind)
@@ -253,17 +257,17 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
         source = RosbagSource(path, topics)
     else:
         source = RecordingSource(_read_in_memory(path, kind, columns), kind, path)
-    if kind in ("aedat4", "evt", "dat", "es", "hdf5", "rosbag1"):
-        fill_from_side_files(source)
-    if columns is not None and kind not in ("npy", "npz"):
-        raise DataError(located(path, None, f"--columns applies to plain numpy arrays (.npy/.npz), not {kind} files"))
-    if topics and kind != "rosbag1":
-        raise DataError(located(path, None, f"topics apply to ROS bags, not {kind} files"))
-    if sensor_size is not None:
-        width, height = (int(v) for v in sensor_size)
-        if width < 1 or height < 1:
-            raise DataError(f"sensor size must be positive, got {width}x{height}")
-        source.sensor_size = (width, height)
+    try:
+        if kind in ("aedat4", "evt", "dat", "es", "hdf5", "rosbag1"):
+            fill_from_side_files(source)
+        if sensor_size is not None:
+            width, height = (int(v) for v in sensor_size)
+            if width < 1 or height < 1:
+                raise DataError(f"sensor size must be positive, got {width}x{height}")
+            source.sensor_size = (width, height)
+    except BaseException:
+        source.close()
+        raise
     return source
 
 
