@@ -73,7 +73,7 @@ def test_txt_round_trip_is_exact(tmp_path):
 
 @pytest.mark.parametrize("text, line, message", [
     ("0.1 1 2 0\n0.2 1 2\n", 2, "expected 4 columns"),
-    ("0.1 1 2 0 7\n", 1, "found 5 column"),
+    ("0.1 1 2 0\n0.2 1 2 -1 x\n0.3 1 2 1 \n0.4 5 6\n", 4, "found 3 column"),
     ("0.1 1 2 0\nabc 1 2 0\n", 2, "column 't': expected a number, got 'abc'"),
     ("0.1 1 y 0\n", 1, "column 'y': expected a number"),
     ("0.1 1.5 2 0\n", 1, "column 'x': expected a whole number"),

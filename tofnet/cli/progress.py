@@ -17,16 +17,19 @@ class Progress:
         self.printed = False
         self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
 
-    def __call__(self, done: int, total: int) -> None:
+    def __call__(self, done: int, total: int | None) -> None:
         now = time.perf_counter() - self.started
         interval = 0.2 if self.tty else 10.0
         if now < self.delay or now - self.last_print < interval:
             return
         self.last_print = now
-        share = done / total if total else 1.0
-        eta = now / share - now if share > 0 else float("nan")
-        line = (f"{self.label}: {share:6.1%}  {_si(done)}/{_si(total)} {self.unit}  "
-                f"{now:5.1f} s elapsed, ~{eta:4.0f} s left")
+        if total is None:  # a reader that cannot know the total in advance
+            line = f"{self.label}: {_si(done)} {self.unit}  {now:5.1f} s elapsed"
+        else:
+            share = done / total if total else 1.0
+            eta = now / share - now if share > 0 else float("nan")
+            line = (f"{self.label}: {share:6.1%}  {_si(done)}/{_si(total)} {self.unit}  "
+                    f"{now:5.1f} s elapsed, ~{eta:4.0f} s left")
         self.stream.write(("\r" + line) if self.tty else line + "\n")
         self.stream.flush()
         self.printed = True

@@ -12,10 +12,13 @@ from tofnet.errors import TofnetError
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("run", help="estimate depth from a recording",
-                              description="Run the depth network on an event recording (an ECD folder, "
-                                          "events.txt, or a .npy/.npz event array) and write depth events.")
-    p.add_argument("recording", help="ECD folder (events.txt, calib.txt, groundtruth.txt), events.txt, .npy or .npz")
+                              description="Run the depth network on an event recording (an ECD folder or any "
+                                          "format 'tofnet info' reads) and write depth events.")
+    p.add_argument("recording", help="ECD folder (events.txt, calib.txt, groundtruth.txt) or event file "
+                                     "(.txt .npy .npz .aedat4 .raw .dat .es .h5 .bag)")
     add_network_options(p)
+    from tofnet.cli.inputs import add_input_options
+    add_input_options(p)
     p.add_argument("--out", default="depth.npz", help="depth output, .npz or .csv (default: depth.npz)")
     p.add_argument("--backend", default=None, help="backend name (default: the spec's, else 'fixed'); "
                                                     "see 'tofnet conformance --list'")
@@ -75,7 +78,8 @@ def handle(args) -> int:
     from tofnet.io import read_recording
 
     started = time.perf_counter()
-    recording = read_recording(args.recording)
+    from tofnet.cli.inputs import input_options
+    recording = read_recording(args.recording, **input_options(args))
     network, compile_options, spec_backend, backend_options = build_network(args, recording.sensor_size)
     backend = args.backend or spec_backend or DEFAULT_BACKEND
     if args.backend and args.backend != spec_backend:

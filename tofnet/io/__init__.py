@@ -1,8 +1,10 @@
 """Recordings in, depth out: event files, ECD folders, ground truth, calibration, depth files.
 
-``read_recording`` is the one entry point the CLI and examples use; the format
-modules underneath are ``ecd``, ``events``, ``groundtruth``, ``calibration`` and
-``depth``. See ``docs/formats.md``.
+``read_recording`` is the one entry point the CLI and examples use (``open_recording``
+for reading in chunks, ``source``); the format modules underneath are ``ecd``,
+``events``, ``arrays``, ``groundtruth``, ``calibration``, ``depth``, and, through
+optional extras, ``aedat``, ``prophesee``, ``hdf5``, ``hdf5_datasets``, ``rosbag``;
+``detect`` recognises them; ``convert``, ``maps`` and ``ply`` write. See ``docs/formats.md``.
 """
 
 from __future__ import annotations
@@ -12,7 +14,6 @@ from pathlib import Path
 import importlib
 from typing import TYPE_CHECKING
 
-from tofnet.errors import DataError, located
 from tofnet.io.recording import ConstantVelocity, Intrinsics, Recording, VelocitySource
 
 # Readers load on first use: ``tofnet.io.spec`` (and ``tofnet compile``) should not pay
@@ -26,6 +27,7 @@ _LAZY = {
     "Trajectory": "groundtruth", "VelocitySamples": "groundtruth", "read_groundtruth": "groundtruth",
     "read_velocity_samples": "groundtruth", "write_groundtruth": "groundtruth",
     "write_velocity_samples": "groundtruth",
+    "open_recording": "source", "EventSource": "source", "detect_format": "detect", "FORMATS": "detect",
 }
 
 if TYPE_CHECKING:
@@ -45,45 +47,32 @@ def __getattr__(name: str):
 
 
 #: File suffixes ``read_recording`` accepts besides a folder.
-EVENT_SUFFIXES = (".txt", ".npy", ".npz")
+EVENT_SUFFIXES = (".txt", ".npy", ".npz", ".aedat4", ".raw", ".dat", ".es", ".h5", ".hdf5", ".bag")
 
 
-def read_recording(path: str | Path, sensor_size: tuple[int, int] | None = None) -> Recording:
-    """Read a recording from an ECD folder, an events ``.txt`` or a ``.npy``/``.npz`` events file.
+def read_recording(path: str | Path, sensor_size: tuple[int, int] | None = None, *,
+                   columns: str | tuple[str, ...] | None = None, topics: dict[str, str] | None = None,
+                   progress=None) -> Recording:
+    """Read a whole recording in any format ``tofnet.io.detect`` knows (see ``docs/formats.md``).
 
+    An ECD folder, an events ``.txt``, ``.npy``/``.npz`` arrays, AEDAT4, Prophesee RAW/DAT,
+    Event Stream, HDF5 (DSEC/TUM-VIE, MVSEC, M3ED) or a ROS1 bag, recognised by content.
     For a file, ``calib.txt``, ``groundtruth.txt``, ``imu.txt`` and ``sensor_size.txt``
-    in the same folder are read too, and ``<stem>_depth.npy`` as the true depth per
-    event. ``sensor_size`` (width, height px), when given, overrides ``sensor_size.txt``.
-    Raises ``DataError`` for a missing path, an unknown format or no events.
+    in the same folder fill in what the file does not hold, and ``<stem>_depth.npy``
+    gives the true depth per event of text/numpy files. ``sensor_size`` (width, height
+    px) overrides the recording's; ``columns`` orders a plain ``(n, 4)`` array; ``topics``
+    overrides ROS bag topics; ``progress(done, total)`` is called as events are read.
+    Raises ``DataError`` for a missing path, an unknown format or no events. For large
+    files, ``open_recording`` reads in chunks.
     """
-    from tofnet.io.ecd import attach_sidecars, read_ecd
-    from tofnet.io.events import read_events_npy, read_events_txt
+    from tofnet.io.source import open_recording
 
-    path = Path(path)
-    if not path.exists():
-        raise DataError(located(path, None, "no such file or folder; expected an ECD folder or an events "
-                                            "file (.txt, .npy, .npz)"))
-    if path.is_dir():
-        recording = read_ecd(path)
-    elif path.suffix in EVENT_SUFFIXES:
-        events = read_events_txt(path) if path.suffix == ".txt" else read_events_npy(path)
-        recording = attach_sidecars(Recording(events=events, source=str(path)), path.parent,
-                                    gt_depth_name=f"{path.stem}_depth.npy")
-    else:
-        raise DataError(located(path, None, f"unknown recording format {path.suffix!r}; expected an ECD folder "
-                                            "or an events file (.txt, .npy, .npz)"))
-    if len(recording.events) == 0:
-        raise DataError(located(path, None, "no events"))
-    if sensor_size is not None:
-        width, height = (int(v) for v in sensor_size)
-        if width < 1 or height < 1:
-            raise DataError(f"sensor size must be positive, got {width}x{height}")
-        recording.sensor_size = (width, height)
-    return recording
+    with open_recording(path, sensor_size=sensor_size, columns=columns, topics=topics) as source:
+        return source.read(progress)
 
 
 __all__ = [
-    "read_recording", "read_ecd", "write_ecd", "read_imu", "attach_sidecars",
+    "read_recording", "open_recording", "EventSource", "detect_format", "FORMATS", "read_ecd", "write_ecd", "read_imu", "attach_sidecars",
     "read_events_txt", "write_events_txt", "read_events_npy", "write_events_npy", "events_from_columns",
     "read_calibration", "write_calibration",
     "Trajectory", "VelocitySamples", "read_groundtruth", "write_groundtruth", "read_velocity_samples",

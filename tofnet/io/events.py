@@ -166,7 +166,7 @@ def _parse_events(buf, t, x, y, p, info, pow10, i64_max, max_coord):
             columns += 1
             while i < end and _is_space(buf[i]):
                 i += 1
-        if columns != 4:
+        if columns < 4:  # columns past the 4th are ignored (see docs/formats.md)
             info[_STATUS] = _COLUMN_COUNT
             info[_COLUMN] = columns
             return n
@@ -233,7 +233,7 @@ def _read_bytes(path: Path) -> bytes:
 def read_events_txt(path: str | Path) -> np.ndarray:
     """Read ECD ``events.txt``: lines ``t x y p`` (t seconds, x column, y row, p 0/1 or -1/1).
 
-    Returns an ``EVENT_DTYPE`` array with ``t`` in integer microseconds. Blank lines
+    Columns after the fourth are ignored. Returns an ``EVENT_DTYPE`` array with ``t`` in integer microseconds. Blank lines
     and ``#`` comments are skipped. Raises ``DataError`` naming the line for a
     malformed line, a negative or >65535 coordinate, a polarity outside {-1, 0, 1},
     a timestamp earlier than the previous line's, or a file without events.
@@ -351,14 +351,18 @@ def write_events_txt(path: str | Path, events: np.ndarray, chunk: int = 1_000_00
             handle.write(out[:k].tobytes())
 
 
-def read_events_npy(path: str | Path) -> np.ndarray:
+def read_events_npy(path: str | Path, columns: str | tuple[str, ...] | None = None) -> np.ndarray:
     """Read events from ``.npy`` or ``.npz`` into ``EVENT_DTYPE`` (t in µs).
 
     ``.npy``: a structured array with fields ``t x y p``, or an ``(n, 4)`` array of
-    columns ``t x y p``. ``.npz``: a structured array under key ``events``, or arrays
-    ``t``, ``x``, ``y``, ``p``. A float ``t`` is seconds, an integer ``t`` microseconds.
+    columns ``t x y p`` (another order: ``columns="x,y,t,p"``). ``.npz``: a structured
+    array under key ``events`` or ``event_data``, or arrays ``t``, ``x``, ``y``, ``p``.
+    The polarity may be named ``p``, ``on`` or ``polarity`` (``tofnet.io.arrays``).
+    A float ``t`` is seconds, an integer ``t`` microseconds.
     Polarity -1 maps to 0 (OFF); booleans are accepted.
     """
+    from tofnet.io.arrays import PlainColumns, columns_of, npz_columns
+
     path = Path(path)
     try:
         loaded = np.load(path, allow_pickle=False)
@@ -370,33 +374,19 @@ def read_events_npy(path: str | Path) -> np.ndarray:
         raise DataError(located(path, None, f"not a readable .npy/.npz file ({err})")) from None
     if isinstance(loaded, np.lib.npyio.NpzFile):
         with loaded:
-            keys = list(loaded.files)
             try:
-                if "events" in keys:
-                    columns = _columns_of(path, loaded["events"], "'events'")
-                elif set(_COLUMNS) <= set(keys):
-                    columns = {name: loaded[name] for name in _COLUMNS}
-                else:
-                    raise DataError(located(path, None, f"expected a structured array 'events' or arrays 't', 'x', "
-                                                        f"'y', 'p'; found {', '.join(keys) or 'nothing'}"))
+                arrays = npz_columns(path, loaded, columns)
             except (ValueError, OSError, zipfile.BadZipFile) as err:
                 raise DataError(located(path, None, f"cannot read array ({err})")) from None
     else:
-        columns = _columns_of(path, loaded, "the array")
-    return events_from_columns(columns, path)
-
-
-def _columns_of(path: Path, array: np.ndarray, what: str) -> dict[str, np.ndarray]:
-    if array.dtype.names:
-        missing = [name for name in _COLUMNS if name not in array.dtype.names]
-        if missing:
-            raise DataError(located(path, None, f"{what} has fields {', '.join(array.dtype.names)}; "
-                                                f"expected t, x, y, p (missing {', '.join(missing)})"))
-        return {name: array[name] for name in _COLUMNS}
-    if array.ndim == 2 and array.shape[1] == 4:
-        return {name: array[:, k] for k, name in enumerate(_COLUMNS)}
-    raise DataError(located(path, None, f"{what} has shape {array.shape} and dtype {array.dtype}; expected a "
-                                        "structured array with fields t, x, y, p or an (n, 4) array of columns t x y p"))
+        arrays = columns_of(path, loaded, "the array", columns)
+    try:
+        return events_from_columns(arrays, path)
+    except DataError as err:
+        if columns is None and isinstance(arrays, PlainColumns):
+            raise DataError(f"{err} (a plain (n, 4) array is read as columns t x y p; "
+                            "for another order pass --columns, e.g. x,y,t,p)") from None
+        raise
 
 
 def events_from_columns(columns: dict[str, np.ndarray], source: object = "<memory>") -> np.ndarray:

@@ -12,13 +12,19 @@ from tofnet.events import EVENT_DTYPE
 
 @dataclass(frozen=True)
 class Intrinsics:
-    """Pinhole intrinsics in pixels; ``distortion`` is (k1, k2, p1, p2, k3) as in ECD ``calib.txt``."""
+    """Pinhole intrinsics in pixels and the lens distortion (OpenCV conventions).
+
+    ``distortion_model`` ``"radtan"``: ``distortion`` is (k1, k2, p1, p2, k3) as in ECD
+    ``calib.txt`` and ROS ``plumb_bob``; ``"equidistant"`` (OpenCV fisheye, Kannala-Brandt,
+    DSEC and M3ED): (k1, k2, k3, k4). An empty ``distortion`` means none.
+    """
 
     fx: float
     fy: float
     cx: float
     cy: float
     distortion: tuple[float, ...] = ()
+    distortion_model: str = "radtan"
 
 
 class VelocitySource(Protocol):

@@ -1,0 +1,104 @@
+"""`tofnet convert` and `tofnet.io.convert`: every target reads back to the same depth, bit for bit."""
+
+import numpy as np
+import pytest
+
+from tofnet.cli import main
+from tofnet.errors import DataError
+from tofnet.io import read_recording
+from tofnet.io.arrays import write_npz_recording
+from tofnet.io.convert import convert
+from tofnet.io.source import open_recording
+
+from formats_helpers import pattern_recording
+
+TARGETS = [("ecd", "rec", None), ("npz", "rec.npz", None), ("hdf5", "rec.h5", "h5py"),
+           ("aedat4", "rec.aedat4", "faery")]
+
+
+@pytest.fixture(scope="module")
+def original(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("original")
+    write_npz_recording(folder / "rec.npz", pattern_recording())
+    return read_recording(folder / "rec.npz"), folder / "rec.npz"
+
+
+def _depth(recording):
+    from tofnet.api import run
+
+    result, _ = run(recording, backend="fixed")
+    return result
+
+
+@pytest.fixture(scope="module")
+def original_depth(original):
+    result = _depth(original[0])
+    assert len(result.depth) > 100  # the comparison below means something
+    return result.depth
+
+
+@pytest.mark.parametrize("kind, name, needs", TARGETS)
+def test_each_target_gives_the_same_depth_bit_for_bit(tmp_path, original, original_depth, kind, name, needs):
+    if needs:
+        pytest.importorskip(needs)
+    recording, path = original
+    with open_recording(path) as source:
+        messages = convert(source, tmp_path / name)
+    assert messages[0].startswith(f"wrote {len(recording.events):,} events")
+    read = read_recording(tmp_path / name)
+    assert np.array_equal(read.events, recording.events)
+    assert read.intrinsics == recording.intrinsics and read.sensor_size == recording.sensor_size
+    depth = _depth(read).depth
+    assert np.array_equal(depth, original_depth)
+
+
+def test_chain_through_every_format_is_lossless(tmp_path, original, original_depth):
+    pytest.importorskip("h5py")
+    pytest.importorskip("faery")
+    current = original[1]
+    for k, name in enumerate(["a.h5", "b.aedat4", "c", "d.npz", "e.h5"]):
+        folder = tmp_path / str(k)
+        with open_recording(current) as source:
+            convert(source, folder / name)
+        current = folder / name
+    assert np.array_equal(_depth(read_recording(current)).depth, original_depth)
+
+
+def test_refuses_to_overwrite_and_leaves_no_partial_file(tmp_path, original):
+    (tmp_path / "rec.h5").write_text("precious")
+    with open_recording(original[1]) as source, pytest.raises(DataError, match="already exists"):
+        convert(source, tmp_path / "rec.h5")
+    assert (tmp_path / "rec.h5").read_text() == "precious"
+    with pytest.raises(DataError, match="cannot write '.csv'"):
+        convert(open_recording(original[1]), tmp_path / "rec.csv")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rec.h5"]
+
+
+def test_equidistant_distortion_is_reported_when_the_target_cannot_hold_it(tmp_path, original):
+    from dataclasses import replace
+
+    recording = original[0]
+    recording_fisheye = replace(recording.intrinsics, distortion=(0.1, 0.01, 0.0, 0.0), distortion_model="equidistant")
+    source = open_recording(original[1])
+    source.intrinsics = recording_fisheye
+    messages = convert(source, tmp_path / "rec")
+    assert any("equidistant coefficients (0.1, 0.01, 0.0, 0.0) are NOT written" in m for m in messages)
+    assert read_recording(tmp_path / "rec").intrinsics.distortion == ()
+
+
+def test_cli_convert_and_info(tmp_path, original, capsys):
+    pytest.importorskip("h5py")
+    assert main(["convert", str(original[1]), str(tmp_path / "rec.h5"), "--quiet"]) == 0
+    assert "wrote" in capsys.readouterr().out
+    assert main(["convert", str(original[1]), str(tmp_path / "rec.h5"), "--quiet"]) == 2
+    assert "already exists (use --force" in capsys.readouterr().err
+    assert main(["info", str(tmp_path / "rec.h5"), "--quiet", "--json", str(tmp_path / "info.json")]) == 0
+    out = capsys.readouterr().out
+    events = original[0].events
+    assert f"events         {len(events):,}" in out and "hdf5 (DSEC layout)" in out
+    on = np.count_nonzero(events["p"]) / len(events)
+    assert f"ON {on:.1%}" in out
+    import json
+    facts = json.loads((tmp_path / "info.json").read_text())
+    assert facts["events"] == len(events) and facts["sensor_size"] == [64, 48]
+    assert facts["poses"]["count"] == len(original[0].trajectory.times) and facts["imu_samples"] == 41

@@ -1,0 +1,132 @@
+"""AEDAT4, Prophesee RAW (EVT2, EVT2.1, EVT3), DAT and Event Stream, with fixtures written by faery itself."""
+
+import sys
+
+import numpy as np
+import pytest
+
+from tofnet.errors import DataError
+from tofnet.io import read_recording
+from tofnet.io.source import open_recording
+
+faery = pytest.importorskip("faery")
+
+from formats_helpers import SENSOR, faery_events, pattern_recording  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def recording():
+    return pattern_recording()
+
+
+def _write(path, events, **kwargs):
+    faery.events_stream_from_array(faery_events(events), dimensions=SENSOR).to_file(path, **kwargs)
+
+
+@pytest.mark.parametrize("name, kwargs, detail", [
+    ("rec.aedat4", {}, "events track 0"),
+    ("rec.raw", {"version": "evt3"}, "EVT3"),
+    ("rec.raw", {"version": "evt2"}, "EVT2"),
+    ("rec.dat", {}, "DAT2, cd"),
+])
+def test_files_written_by_faery_read_back_exactly(tmp_path, recording, name, kwargs, detail):
+    path = tmp_path / name
+    _write(path, recording.events, **kwargs)
+    source = open_recording(path)
+    assert source.detail == detail
+    assert source.sensor_size == SENSOR
+    assert source.n_events in (None, len(recording.events))
+    read = read_recording(path)
+    assert np.array_equal(read.events, recording.events)
+
+
+def test_event_stream_reads_back_relative_to_its_first_event(tmp_path, recording):
+    # Event Stream keeps no absolute start time: times come back from the first event on.
+    path = tmp_path / "rec.es"
+    _write(path, recording.events)
+    events = read_recording(path).events
+    expected = recording.events.copy()
+    expected["t"] -= expected["t"][0]
+    assert np.array_equal(events, expected)
+
+
+@pytest.mark.parametrize("chunk", [1, 997, 10_000, 10**7])
+def test_chunks_are_time_ordered_copies_of_the_whole(tmp_path, recording, chunk):
+    path = tmp_path / "rec.raw"
+    _write(path, recording.events, version="evt3")
+    with open_recording(path) as source:
+        chunks = list(source.chunks(chunk)) if chunk != 1 else list(source.chunks(1))[:50]
+    assert all(len(c) == chunk for c in chunks[:-1])
+    whole = np.concatenate(chunks)
+    assert np.array_equal(whole, recording.events[:len(whole)])
+    if chunk > 1:
+        assert len(whole) == len(recording.events)
+
+
+def test_progress_hook_reports_events_read(tmp_path, recording):
+    path = tmp_path / "rec.dat"
+    _write(path, recording.events)
+    calls = []
+    read_recording(path, progress=lambda done, total: calls.append((done, total)))
+    assert calls[-1] == (len(recording.events), len(recording.events))  # DAT: total from the file size
+    assert [done for done, _ in calls] == sorted(done for done, _ in calls)
+
+
+def test_aedat4_with_imu_and_calibration_side_files(tmp_path, recording):
+    from tofnet.io.aedat import write_aedat4
+    from tofnet.io.calibration import write_calibration
+
+    path = tmp_path / "rec.aedat4"
+    write_aedat4(path, [recording.events[:1000], recording.events[1000:]], recording)
+    write_calibration(tmp_path / "calib.txt", recording.intrinsics)
+    source = open_recording(path)
+    assert source.n_events == len(recording.events)
+    assert any("imus" in name for name in source.streams)
+    read = source.read()
+    assert np.array_equal(read.events, recording.events)
+    assert read.imu.shape == recording.imu.shape
+    # stored as float32 g and °/s by the format
+    assert np.allclose(read.imu, recording.imu, rtol=1e-6, atol=1e-6)
+    assert read.intrinsics == recording.intrinsics
+    assert any("calib.txt" in note for note in read.notes)
+
+
+def test_evt_header_without_size_gives_unknown_sensor_then_extent(tmp_path, recording):
+    path = tmp_path / "rec.raw"
+    _write(path, recording.events, version="evt2")
+    data = path.read_bytes()
+    header_end = 0
+    while data.startswith(b"%", header_end):
+        header_end = data.index(b"\n", header_end) + 1
+    kept = [line for line in data[:header_end].splitlines(keepends=True)
+            if not line.lower().startswith((b"% geometry", b"% format"))]
+    (tmp_path / "bare.raw").write_bytes(b"".join(kept) + data[header_end:])
+    source = open_recording(tmp_path / "bare.raw")
+    assert source.sensor_size is None
+    read = source.read()
+    assert np.array_equal(read.events, recording.events)
+    extent = (int(recording.events["x"].max()) + 1, int(recording.events["y"].max()) + 1)
+    assert read.sensor_size == extent and any("extent" in note for note in read.notes)
+    assert read_recording(tmp_path / "bare.raw", sensor_size=SENSOR).sensor_size == SENSOR
+
+
+def test_missing_extra_is_one_line_naming_it(tmp_path, recording, monkeypatch):
+    path = tmp_path / "rec.aedat4"
+    _write(path, recording.events)
+    monkeypatch.setitem(sys.modules, "faery", None)
+    with pytest.raises(DataError) as caught:
+        read_recording(path)
+    message = str(caught.value)
+    assert "\n" not in message and "rec.aedat4" in message and "pip install \"tofnet[formats]\"" in message
+
+
+def test_evt_decoder_keeps_times_monotonic(tmp_path, recording):
+    # faery's EVT decoder gives an event stamped before its predecessor the predecessor's
+    # stamp (documented in docs/formats.md); tofnet reads what it decodes.
+    events = recording.events.copy()
+    events["t"][500] = events["t"][499] - 10
+    path = tmp_path / "rec.raw"
+    _write(path, events, version="evt3", enforce_monotonic_timestamps=False)
+    read = read_recording(path).events
+    assert read["t"][500] == events["t"][499]
+    assert np.array_equal(np.delete(read, 500), np.delete(events, 500))

@@ -1,0 +1,119 @@
+"""Outputs other tools load: dense depth maps (.npy, 16-bit PNG) and .ply point clouds; `tofnet export`."""
+
+import numpy as np
+import pytest
+
+from tofnet.cli import main
+from tofnet.errors import DataError
+from tofnet.events import DEPTH_DTYPE
+from tofnet.io.groundtruth import Trajectory
+from tofnet.io.maps import depth_maps, depth_to_png16, write_depth_maps
+from tofnet.io.ply import depth_points, write_ply
+from tofnet.io.recording import Intrinsics
+
+INTRINSICS = Intrinsics(100.0, 110.0, 4.0, 3.0)
+
+
+def _depth(rows):
+    depth = np.zeros(len(rows), dtype=DEPTH_DTYPE)
+    for i, (t, x, y, z) in enumerate(rows):
+        depth[i] = (t, x, y, z, t // 1000)
+    return depth
+
+
+def test_maps_keep_the_latest_estimate_and_its_age():
+    depth = _depth([(1000, 1, 1, 2.0), (4000, 1, 1, 3.0), (6000, 2, 1, 5.0), (25_000, 0, 0, 1.0)])
+    maps = list(depth_maps(depth, (8, 6), 10_000, t0_us=0))
+    assert [m.index for m in maps] == [0, 1, 2] and [m.estimates for m in maps] == [3, 0, 1]
+    first = maps[0]
+    assert first.depth[1, 1] == 3.0 and first.age_ms[1, 1] == pytest.approx(6.0)
+    assert first.depth[1, 2] == 5.0 and np.isnan(first.depth[0, 0]) and np.isnan(first.age_ms[0, 0])
+    assert np.isnan(maps[1].depth).all()  # nothing new and max_age = window
+    held = list(depth_maps(depth, (8, 6), 10_000, t0_us=0, max_age_us=20_000))
+    assert held[1].depth[1, 1] == 3.0 and held[1].age_ms[1, 1] == pytest.approx(16.0)
+    with pytest.raises(DataError, match="outside the 2x2 map"):
+        list(depth_maps(depth, (2, 2), 10_000))
+
+
+def test_png16_holds_millimetres(tmp_path):
+    from PIL import Image
+
+    depth = np.array([[np.nan, 0.0015, 1.2345], [65.535, 70.0, -1.0]], dtype=np.float32)
+    image, saturated = depth_to_png16(depth)
+    assert image.tolist() == [[0, 2, 1234 if np.float32(1.2345) * 1000 < 1234.5 else 1235], [65535, 65535, 0]]
+    assert saturated == 1
+    done = write_depth_maps(depth_maps(_depth([(500, 1, 0, 1.5), (1500, 0, 1, 2.25)]), (2, 2), 1000, t0_us=0),
+                            tmp_path)
+    assert done == {"windows": 2, "saturated_png_pixels": 0}
+    with Image.open(tmp_path / "depth_000001.png") as png:
+        assert png.mode in ("I;16", "I") and png.size == (2, 2)
+        assert np.array(png).tolist() == [[0, 0], [2250, 0]]
+    assert np.load(tmp_path / "depth_000000.npy")[0, 1] == 1.5
+    assert (tmp_path / "index.csv").read_text().splitlines()[1] == "0,0.000000,0.001000,1,1"
+
+
+def _read_ply(path):
+    """A minimal PLY reader for the files tofnet writes (header, then binary or ASCII vertices)."""
+    data = path.read_bytes()
+    end = data.index(b"end_header\n") + len(b"end_header\n")
+    header = data[:end].decode().splitlines()
+    count = int(next(line.split()[2] for line in header if line.startswith("element vertex")))
+    names = [line.split()[2] for line in header if line.startswith("property")]
+    types = {"float": "<f4", "uchar": "u1"}
+    dtype = [(line.split()[2], types[line.split()[1]]) for line in header if line.startswith("property")]
+    if "binary_little_endian" in header[1]:
+        return np.frombuffer(data[end:], dtype=dtype, count=count), names
+    rows = np.loadtxt(data[end:].decode().splitlines(), ndmin=2)
+    out = np.zeros(count, dtype=dtype)
+    for k, name in enumerate(names):
+        out[name] = rows[:, k]
+    return out, names
+
+
+@pytest.mark.parametrize("binary", [True, False])
+def test_ply_camera_frame(tmp_path, binary):
+    depth = _depth([(0, 4, 3, 2.0), (0, 14, 3, 2.0), (0, 4, 14, 4.0)])
+    points = depth_points(depth, INTRINSICS)
+    assert np.allclose(points, [[0, 0, 2.0], [0.2, 0, 2.0], [0, 0.4, 4.0]])
+    colors = np.array([[255, 0, 0], [0, 255, 0], [0, 0, 255]], dtype=np.uint8)
+    assert write_ply(tmp_path / "c.ply", points, colors=colors, binary=binary) == 3
+    vertices, names = _read_ply(tmp_path / "c.ply")
+    assert names == ["x", "y", "z", "red", "green", "blue"]
+    assert np.allclose(np.column_stack([vertices["x"], vertices["y"], vertices["z"]]), points)
+    assert vertices["blue"].tolist() == [0, 0, 255]
+    plyfile = pytest.importorskip("plyfile")
+    read = plyfile.PlyData.read(str(tmp_path / "c.ply"))
+    assert np.allclose(read["vertex"]["z"], points[:, 2])
+
+
+def test_ply_world_frame_and_distortion():
+    # camera at x = 1 m, turned 90 degrees about y: its optical axis is the world's +x
+    trajectory = Trajectory([0.0, 1.0], [[1, 0, 0], [1, 0, 0]], [[0, np.sin(np.pi / 4), 0, np.cos(np.pi / 4)]] * 2)
+    depth = _depth([(500_000, 4, 3, 2.0)])
+    assert np.allclose(depth_points(depth, INTRINSICS, trajectory, frame="world"), [[3.0, 0, 0]])
+    with pytest.raises(DataError, match="world frame needs the recording's poses"):
+        depth_points(depth, INTRINSICS, None, frame="world")
+    distorted = Intrinsics(100.0, 110.0, 4.0, 3.0, (-0.3, 0.0, 0.0, 0.0, 0.0))
+    raw = depth_points(_depth([(0, 24, 3, 1.0)]), distorted)
+    assert raw[0, 0] > 0.2  # barrel distortion pulled the pixel in: the true ray lies further out
+    assert np.allclose(depth_points(_depth([(0, 24, 3, 1.0)]), distorted, raw_pixels=False), [[0.2, 0, 1.0]])
+
+
+def test_cli_export_maps_and_cloud(tmp_path, capsys):
+    from tofnet.io.depth import write_depth
+    from tofnet.io.ecd import write_ecd
+    from tofnet.testing import moving_edge
+
+    events = moving_edge((8, 6), -50.0, "u")
+    write_ecd(tmp_path / "rec", events, intrinsics=INTRINSICS, sensor_size=(8, 6))
+    depth = _depth([(1000, 1, 1, 2.0), (12_000, 2, 2, 3.0)])
+    write_depth(tmp_path / "depth.npz", depth, t0_us=0, timestep_us=1000, latency_steps=2,
+                summary={"recording": str(tmp_path / "rec")})
+    assert main(["export", str(tmp_path / "depth.npz"), "--maps", str(tmp_path / "maps"), "--window", "10ms",
+                 "--ply", str(tmp_path / "cloud.ply")]) == 0
+    out = capsys.readouterr().out
+    assert "2 windows of 10ms" in out and "2 points (camera frame)" in out
+    assert sorted(p.name for p in (tmp_path / "maps").iterdir())[:3] == ["age_000000.npy", "age_000001.npy",
+                                                                        "depth_000000.npy"]
+    assert main(["export", str(tmp_path / "depth.npz")]) == 2
+    assert "nothing to do" in capsys.readouterr().err

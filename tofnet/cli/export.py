@@ -1,0 +1,71 @@
+"""``tofnet export``: depth estimates to files other tools load (depth maps, point clouds)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from tofnet.errors import TofnetError
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("export", help="depth estimates to dense depth maps (.npy, 16-bit PNG) and .ply",
+                              description="Turn the depth events of 'tofnet run' into dense H x W depth maps "
+                                          "per time window (float32 metres .npy, age map .npy, 16-bit PNG in "
+                                          "millimetres) and/or a point cloud (.ply) in the camera or world frame.")
+    p.add_argument("depth", help="depth file written by 'tofnet run' (.npz or .csv)")
+    p.add_argument("--recording", help="the recording the depth came from (intrinsics, poses, sensor size); "
+                                       "default: the one named in the depth file's summary")
+    p.add_argument("--maps", metavar="DIR", help="write depth_<k>.npy, age_<k>.npy, depth_<k>.png and index.csv")
+    p.add_argument("--window", default="10ms", help="time window per map, e.g. 10ms (default 10ms)")
+    p.add_argument("--max-age", help="keep a pixel's estimate in later windows while younger than this "
+                                     "(default: the window)")
+    p.add_argument("--no-png", action="store_true", help="maps as .npy only")
+    p.add_argument("--ply", metavar="FILE", help="write the estimates as a point cloud")
+    p.add_argument("--frame", choices=("camera", "world"), default="camera",
+                   help="point cloud frame: camera (OpenCV axes) or world (needs poses); default camera")
+    p.add_argument("--pixels", choices=("raw", "undistorted"), default="raw",
+                   help="whether the estimates' pixels are raw sensor pixels (the lens distortion is undone "
+                        "before back-projecting; the default) or already undistorted")
+    p.add_argument("--ascii", action="store_true", help="ASCII .ply instead of binary little-endian")
+    p.add_argument("--no-color", action="store_true", help="no depth colours in the .ply")
+    p.add_argument("--sensor-size", metavar="WxH", help="map size in pixels (default: the recording's)")
+    p.set_defaults(handler=handle)
+
+
+def handle(args) -> int:
+    from tofnet.core.params import parse_size
+    from tofnet.io.depth import read_depth
+    from tofnet.units import seconds
+
+    if not args.maps and not args.ply:
+        raise TofnetError("nothing to do: give --maps DIR and/or --ply FILE")
+    depth, meta = read_depth(args.depth)
+    recording_path = args.recording or (meta.get("summary") or {}).get("recording")
+    recording = None
+    if recording_path:
+        from tofnet.io import read_recording
+        recording = read_recording(recording_path)
+    elif args.ply or not args.sensor_size:
+        raise TofnetError("--recording is needed (the depth file does not name its recording)")
+    sensor = parse_size(args.sensor_size, "--sensor-size") if args.sensor_size else \
+        (recording.sensor_size or (240, 180))
+    if args.maps:
+        from tofnet.io.maps import depth_maps, write_depth_maps
+        window_us = int(round(seconds(args.window, "--window") * 1e6))
+        max_age_us = int(round(seconds(args.max_age, "--max-age") * 1e6)) if args.max_age else None
+        done = write_depth_maps(depth_maps(depth, sensor, window_us, t0_us=meta.get("t0_us"),
+                                           max_age_us=max_age_us), args.maps, png=not args.no_png)
+        print(f"maps           {done['windows']} windows of {args.window} -> {Path(args.maps)}/ (index.csv)")
+        if done["saturated_png_pixels"]:
+            print(f"warning        {done['saturated_png_pixels']:,} PNG pixels beyond 65.535 m written as 65535")
+    if args.ply:
+        from tofnet.io.ply import depth_colors, depth_points, write_ply
+        points = depth_points(depth, recording.intrinsics, recording.trajectory, frame=args.frame,
+                              raw_pixels=args.pixels == "raw")
+        colors = None if args.no_color else depth_colors(depth["z"])
+        written = write_ply(args.ply, points, colors=colors, binary=not args.ascii,
+                            comment=f"tofnet depth from {args.depth}, {args.frame} frame, metres")
+        skipped = len(points) - written
+        print(f"point cloud    {written:,} points ({args.frame} frame) -> {args.ply}"
+              + (f"; {skipped:,} skipped (pixel without undistortion)" if skipped else ""))
+    return 0

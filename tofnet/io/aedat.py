@@ -1,0 +1,149 @@
+"""AEDAT4 (iniVation DV) files through faery: events, IMU, and the other streams counted.
+
+An AEDAT4 file interleaves packets of several tracks (events, frames, IMU, triggers).
+tofnet reads the first event track (sensor size from its header, event count from the
+file's index table) and converts the IMU samples to the ECD convention: seconds,
+m/s² (DV stores g) and rad/s (DV stores °/s). The container has to be decoded in file
+order, so the IMU is complete once the events have been read (``read()``, or the end
+of ``chunks()``). ``write_aedat4`` writes events and IMU back (tests, ``tofnet convert``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+
+import numpy as np
+
+from tofnet.errors import DataError, located
+from tofnet.io.source import EventSource
+
+#: Standard gravity, m/s² per g (DV's accelerometer unit).
+GRAVITY = 9.80665
+_IMU_FIELDS = ("accelerometer_x", "accelerometer_y", "accelerometer_z", "gyroscope_x", "gyroscope_y", "gyroscope_z")
+
+
+class AedatSource(EventSource):
+    """An AEDAT4 file; events from its first event track."""
+
+    format = "aedat4"
+
+    def __init__(self, path: str | Path):
+        super().__init__(path)
+        from faery.extension import aedat
+
+        try:
+            with aedat.Decoder(self.path) as decoder:
+                tracks = decoder.tracks()
+                try:
+                    counts: dict[int, int] = {}
+                    for definition in decoder.file_data_definitions():
+                        counts[definition.track_id] = counts.get(definition.track_id, 0) + definition.elements_count
+                except RuntimeError:
+                    counts = {}  # no index table (an interrupted recording): counts unknown
+        except RuntimeError as err:
+            raise DataError(located(self.path, None, f"not a readable AEDAT4 file ({err})")) from None
+        events = [track for track in tracks if track.data_type == "events"]
+        if not events:
+            raise DataError(located(self.path, None, "the file has no event track; found "
+                                                     + (", ".join(t.data_type for t in tracks) or "no tracks")))
+        self.track_id = events[0].id
+        self.sensor_size = tuple(events[0].dimensions)
+        self.n_events = counts.get(self.track_id)
+        self.detail = f"events track {self.track_id}"
+        for track in tracks:
+            if track.id == self.track_id:
+                continue
+            count = counts.get(track.id)
+            size = f" {track.dimensions[0]}x{track.dimensions[1]}" if track.dimensions else ""
+            what = "samples (read as the IMU)" if track.data_type == "imus" else "packets"
+            self.streams[f"{track.data_type} (track {track.id})"] = \
+                f"{count if count is not None else '?'} {what}{size}"
+
+    def _packets(self, size_hint: int) -> Iterable[np.ndarray]:
+        from faery.extension import aedat
+
+        imu = []
+        with aedat.Decoder(self.path) as decoder:
+            try:
+                for track, packet in decoder:
+                    if track.id == self.track_id and len(packet):
+                        yield packet
+                    elif track.data_type == "imus" and len(packet):
+                        imu.append(imu_to_ecd(packet))
+            except RuntimeError as err:
+                raise DataError(located(self.path, None, f"cannot decode ({err})")) from None
+        if imu:
+            self.imu = np.concatenate(imu)
+
+
+def imu_to_ecd(packet: np.ndarray) -> np.ndarray:
+    """DV IMU samples (µs, g, °/s) as ``(n, 7)`` rows ``t ax ay az gx gy gz`` (s, m/s², rad/s)."""
+    out = np.empty((len(packet), 7))
+    out[:, 0] = packet["t"] * 1e-6
+    for k, name in enumerate(_IMU_FIELDS):
+        out[:, 1 + k] = packet[name]
+    out[:, 1:4] *= GRAVITY
+    out[:, 4:7] *= np.pi / 180.0
+    return out
+
+
+def write_aedat4(path: str | Path, chunks: Iterable[np.ndarray], meta) -> int:
+    """Write ``EVENT_DTYPE`` chunks as AEDAT4 (LZ4); returns the event count.
+
+    ``meta`` is a ``Recording`` or ``EventSource``: its ``sensor_size`` is needed first,
+    its ``imu`` (ECD rows, converted back to µs, g, °/s) is read after the events, so
+    a source's IMU is complete, and written as a second track after them. Times must be
+    >= 0 (AEDAT4 stores unsigned µs).
+    """
+    import faery
+    from faery.extension import aedat
+
+    width, height = (int(v) for v in meta.sensor_size)
+    tracks = [_track_node(0, "EVTS", "events", {"sizeX": ("int", width), "sizeY": ("int", height)}),
+              _track_node(1, "IMUS", "imu", {})]
+    description = [aedat.DescriptionNode(name="outInfo", path="/mainloop/Recorder/outInfo/", attributes={},
+                                         nodes=tracks)]
+    written = 0
+    with aedat.Encoder(path=path, description=description, compression=aedat.LZ4_DEFAULT) as encoder:
+        for chunk in chunks:
+            if len(chunk) == 0:
+                continue
+            if chunk["t"][0] < 0:
+                raise DataError(located(path, None, f"AEDAT4 stores times >= 0 µs, got {int(chunk['t'][0])}"))
+            packet = np.empty(len(chunk), dtype=faery.EVENTS_DTYPE)
+            packet["t"], packet["x"], packet["y"], packet["on"] = chunk["t"], chunk["x"], chunk["y"], chunk["p"] == 1
+            encoder.write(0, packet)
+            written += len(chunk)
+        if meta.imu is not None:
+            for packet in _imu_packets(meta.imu):
+                encoder.write(1, packet)
+    return written
+
+
+def _track_node(track: int, type_id: str, name: str, info: dict):
+    from faery.extension import aedat
+
+    attributes = {"compression": aedat.DescriptionAttribute(attribute_type="string", value="LZ4"),
+                  "originalOutputName": aedat.DescriptionAttribute(attribute_type="string", value=name),
+                  "typeIdentifier": aedat.DescriptionAttribute(attribute_type="string", value=type_id)}
+    info_attributes = {key: aedat.DescriptionAttribute(attribute_type=kind, value=value)
+                       for key, (kind, value) in {**info, "source": ("string", "tofnet")}.items()}
+    base = f"/mainloop/Recorder/outInfo/{track}/"
+    return aedat.DescriptionNode(name=str(track), path=base, attributes=attributes,
+                                 nodes=[aedat.DescriptionNode(name="info", path=base + "info/",
+                                                              attributes=info_attributes, nodes=[])])
+
+
+def _imu_packets(imu: np.ndarray, per_packet: int = 100) -> Iterator[np.ndarray]:
+    """ECD IMU rows back to DV samples (µs, g, °/s), ``per_packet`` at a time."""
+    dtype = np.dtype([("t", "<u8"), ("temperature", "<f4")] + [(name, "<f4") for name in _IMU_FIELDS]
+                     + [(f"magnetometer_{axis}", "<f4") for axis in "xyz"])
+    for start in range(0, len(imu), per_packet):
+        rows = imu[start:start + per_packet]
+        packet = np.zeros(len(rows), dtype=dtype)
+        packet["t"] = np.round(rows[:, 0] * 1e6).astype(np.uint64)
+        for k, name in enumerate(_IMU_FIELDS):
+            packet[name] = rows[:, 1 + k] / (GRAVITY if k < 3 else np.pi / 180.0)
+        yield packet
+

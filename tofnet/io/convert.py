@@ -1,0 +1,136 @@
+"""Write a recording in another format: an ECD folder, ``.npz``, HDF5 (DSEC layout) or AEDAT4.
+
+What the target cannot hold is either written as ECD side files next to it (AEDAT4:
+``calib.txt``, ``groundtruth.txt``; ``read_recording`` reads them back) or reported in
+the returned messages; nothing is dropped without a line saying so. The output appears
+under its final name only once complete (written under a temporary name, then renamed).
+HDF5 and AEDAT4 are written chunk by chunk (bounded memory); ECD and ``.npz`` need the
+whole recording in memory.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+from tofnet.errors import DataError, located
+from tofnet.io.source import DEFAULT_CHUNK, EventSource, ProgressHook
+
+#: Output kinds by suffix; a name without suffix is an ECD folder.
+OUTPUTS = {"": "ecd", ".npz": "npz", ".h5": "hdf5", ".hdf5": "hdf5", ".aedat4": "aedat4"}
+
+
+def output_kind(out: str | Path) -> str:
+    """``ecd``, ``npz``, ``hdf5`` or ``aedat4`` from the output name; ``DataError`` otherwise."""
+    suffix = Path(out).suffix.lower()
+    if suffix not in OUTPUTS:
+        raise DataError(located(out, None, f"cannot write {suffix!r}; expected a folder name (ECD), .npz, "
+                                           ".h5/.hdf5 (DSEC layout) or .aedat4"))
+    return OUTPUTS[suffix]
+
+
+def convert(source: EventSource, out: str | Path, *, force: bool = False,
+            progress: ProgressHook | None = None) -> list[str]:
+    """Write ``source`` to ``out`` (format from its name); returns lines saying what went where."""
+    out = Path(out)
+    kind = output_kind(out)
+    if out.exists() and not force:
+        raise DataError(located(out, None, "already exists (use --force to replace it)"))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    partial = out.with_name(f".{out.name}.partial-{os.getpid()}")
+    messages: list[str] = []
+    try:
+        if kind in ("ecd", "npz"):
+            recording = source.read(progress)
+            count = len(recording.events)
+            _write_whole(kind, partial, recording, messages, final=out)
+            meta = recording
+        else:
+            from tofnet.io.aedat import write_aedat4
+            from tofnet.io.hdf5 import write_hdf5
+            if kind == "aedat4" and source.sensor_size is None:
+                source.sensor_size = _extent(source)
+                messages.append(f"sensor size {source.sensor_size[0]}x{source.sensor_size[1]} from the events' "
+                                "extent (the input does not say)")
+            writer = write_hdf5 if kind == "hdf5" else write_aedat4
+            count = writer(partial, source.chunks(DEFAULT_CHUNK, progress), source)
+            meta = source
+            if source.has_depth:
+                messages.append(f"not written: true depth per event ({kind} has no place for it)")
+        if count == 0:
+            raise DataError(located(source.path, None, "no events"))
+        if out.exists():
+            shutil.rmtree(out) if out.is_dir() else out.unlink()
+        os.replace(partial, out)
+    finally:
+        if partial.exists():
+            shutil.rmtree(partial) if partial.is_dir() else partial.unlink()
+    if kind == "aedat4":
+        _side_files(out.parent, meta, messages, force)
+    return [f"wrote {count:,} events to {out} ({kind})"] + messages
+
+
+def _write_whole(kind: str, partial: Path, recording, messages: list[str], final: Path) -> None:
+    import numpy as np
+
+    if kind == "npz":
+        from tofnet.io.arrays import write_npz_recording
+        write_npz_recording(partial, recording)
+        if recording.gt_depth is not None:
+            depth_path = final.with_name(f"{final.stem}_depth.npy")
+            np.save(depth_path, recording.gt_depth)
+            messages.append(f"true depth per event -> {depth_path}")
+        return
+    from tofnet.io.ecd import write_ecd
+    intrinsics = _text_calibration(recording.intrinsics, messages)
+    trajectory = recording.trajectory
+    poses = (trajectory.times, trajectory.positions, trajectory.quaternions) \
+        if trajectory is not None and hasattr(trajectory, "quaternions") else (None, None, None)
+    write_ecd(partial, recording.events, intrinsics=intrinsics, times=poses[0], positions=poses[1],
+              quaternions=poses[2], sensor_size=recording.sensor_size, gt_depth=recording.gt_depth)
+    if recording.imu is not None:
+        _write_imu(partial / "imu.txt", recording.imu)
+
+
+def _text_calibration(intrinsics, messages: list[str]):
+    """``intrinsics`` as ``calib.txt`` can hold them (radial-tangential or no distortion)."""
+    if intrinsics is not None and intrinsics.distortion and intrinsics.distortion_model != "radtan":
+        from dataclasses import replace
+        messages.append(f"calib.txt holds radial-tangential distortion only: the {intrinsics.distortion_model} "
+                        f"coefficients {intrinsics.distortion} are NOT written")
+        intrinsics = replace(intrinsics, distortion=(), distortion_model="radtan")
+    return intrinsics
+
+
+def _write_imu(path: Path, imu) -> None:
+    from tofnet.io.groundtruth import _write_rows  # the shared exact-float table writer
+
+    _write_rows(path, imu, "# t ax ay az gx gy gz  (s, m/s², rad/s)")
+
+
+def _side_files(folder: Path, meta, messages: list[str], force: bool) -> None:
+    """ECD ``calib.txt``/``groundtruth.txt`` next to a file that cannot hold them."""
+    from tofnet.io.calibration import write_calibration
+    from tofnet.io.groundtruth import write_groundtruth
+
+    writes = []
+    intrinsics = _text_calibration(meta.intrinsics, messages)
+    if intrinsics is not None:
+        writes.append(("calib.txt", lambda p: write_calibration(p, intrinsics)))
+    if meta.trajectory is not None and hasattr(meta.trajectory, "quaternions"):
+        t = meta.trajectory
+        writes.append(("groundtruth.txt", lambda p: write_groundtruth(p, t.times, t.positions, t.quaternions)))
+    for name, write in writes:
+        if (folder / name).exists() and not force:
+            messages.append(f"NOT written: {folder / name} exists (use --force to replace it)")
+            continue
+        write(folder / name)
+        messages.append(f"{name.split('.')[0]} -> {folder / name} (read back as a side file)")
+
+
+def _extent(source: EventSource) -> tuple[int, int]:
+    width = height = 0
+    for chunk in source.chunks():
+        width, height = max(width, int(chunk["x"].max()) + 1), max(height, int(chunk["y"].max()) + 1)
+    return width, height

@@ -1,0 +1,252 @@
+"""HDF5 event files through h5py: the DSEC/TUM-VIE layout (also what tofnet writes), MVSEC, M3ED.
+
+The layout is recognised from the datasets present:
+
+- ``events/{x,y,t,p}`` (DSEC, TUM-VIE, tofnet): ``t`` µs relative to the scalar
+  ``t_offset`` (0 when absent); ``ms_to_idx`` is not needed to read. tofnet adds
+  ``calib/{intrinsics,distortion_coeffs,distortion_model,resolution}``,
+  ``poses/{t,position,quaternion}`` and ``imu/{t,accel,gyro}``; DSEC's
+  ``calibration/cam_to_cam.yaml`` (``cam0`` left, ``cam3`` right) is read when found.
+- ``davis/left/events`` (MVSEC): ``(n, 4)`` rows ``x, y, t [s], p [-1/1]``; IMU from
+  ``davis/left/imu``; poses and depth from the ``*_gt.hdf5`` file next to it.
+- ``prophesee/left/{x,y,t,p}`` (M3ED): ``t`` µs; calibration from ``prophesee/left/calib``;
+  poses and depth from ``*_depth_gt.h5`` (or ``*_pose_gt.h5``) next to it.
+
+Compressed datasets with a filter h5py lacks (Blosc, Zstandard, ...) need ``hdf5plugin``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+
+from tofnet.errors import DataError, located
+from tofnet.io.extras import require
+from tofnet.io.recording import Intrinsics
+from tofnet.io.source import EventSource
+
+#: Filters every h5py build has: deflate, shuffle, fletcher32, szip, nbit, scaleoffset, lzf.
+_BUILTIN_FILTERS = {1, 2, 3, 4, 5, 6, 32000}
+
+
+def open_hdf5(path: Path) -> EventSource:
+    """The reader for the layout found in ``path``; ``DataError`` naming the groups otherwise."""
+    h5py = require("h5py", path)
+    try:
+        handle = h5py.File(path, "r")
+    except OSError as err:
+        raise DataError(located(path, None, f"not a readable HDF5 file ({err})")) from None
+    try:
+        if _has(handle, "events", ("x", "y", "t", "p")):
+            return DsecSource(path, handle)
+        if "davis/left/events" in handle:
+            from tofnet.io.hdf5_datasets import MvsecSource
+            return MvsecSource(path, handle)
+        if _has(handle, "prophesee/left", ("x", "y", "t", "p")):
+            from tofnet.io.hdf5_datasets import M3edSource
+            return M3edSource(path, handle)
+        found = ", ".join(sorted(handle.keys())) or "nothing"
+        raise DataError(located(path, None, f"no event datasets; expected events/{{x,y,t,p}} (DSEC, TUM-VIE), "
+                                            f"davis/left/events (MVSEC) or prophesee/left/{{x,y,t,p}} (M3ED); "
+                                            f"found {found}"))
+    except BaseException:
+        handle.close()
+        raise
+
+
+def _has(handle, group: str, names: tuple[str, ...]) -> bool:
+    return group in handle and all(f"{group}/{name}" in handle for name in names)
+
+
+def readable(dataset, path: object):
+    """``dataset``, after making sure its compression filter can be decoded (``hdf5plugin``)."""
+    from h5py import h5z
+
+    plist = dataset.id.get_create_plist()
+    for k in range(plist.get_nfilters()):
+        code, _, _, name = plist.get_filter(k)
+        if code in _BUILTIN_FILTERS or h5z.filter_avail(code):
+            continue
+        label = name.decode("latin-1", "replace") if isinstance(name, bytes) else str(name)
+        require("hdf5plugin", path, f"dataset '{dataset.name}' (compressed with {label or 'filter'} #{code})")
+        if not h5z.filter_avail(code):
+            raise DataError(located(path, None, f"dataset '{dataset.name}': compression filter #{code} "
+                                                f"({label}) is not available even with hdf5plugin"))
+    return dataset
+
+
+def scalar(handle, name: str, default=None):
+    """A scalar or small dataset as a Python/numpy value, ``default`` when absent."""
+    if name not in handle:
+        return default
+    value = handle[name][()]
+    return value.decode() if isinstance(value, bytes) else value
+
+
+class ColumnsSource(EventSource):
+    """Events in four 1-D datasets (``x``, ``y``, ``t`` µs, ``p``) plus a time offset in µs."""
+
+    format = "hdf5"
+
+    def __init__(self, path: Path, handle, group: str, t_offset: int = 0):
+        super().__init__(path)
+        self.handle = handle
+        self.columns = {name: readable(handle[f"{group}/{name}"], path) for name in ("t", "x", "y", "p")}
+        lengths = {name: d.shape for name, d in self.columns.items()}
+        if len({shape for shape in lengths.values()}) != 1 or len(lengths["t"]) != 1:
+            raise DataError(located(path, None, f"{group}/{{t,x,y,p}} must be 1-D of one length, got {lengths}"))
+        if self.columns["t"].dtype.kind not in "iu":
+            raise DataError(located(path, None, f"{group}/t: expected integer microseconds, "
+                                                f"got {self.columns['t'].dtype}"))
+        self.n_events = int(lengths["t"][0])
+        self.t_offset = int(t_offset)
+
+    def _packets(self, size_hint: int) -> Iterable[np.ndarray]:
+        from tofnet.io.events import events_from_columns
+
+        for start in range(0, self.n_events, size_hint):
+            stop = min(start + size_hint, self.n_events)
+            arrays = {name: dataset[start:stop] for name, dataset in self.columns.items()}
+            arrays["t"] = arrays["t"].astype(np.int64) + self.t_offset
+            yield events_from_columns(arrays, f"{self.path} (events {start}..{stop - 1})")
+
+    def close(self) -> None:
+        self.handle.close()
+
+
+class DsecSource(ColumnsSource):
+    """DSEC / TUM-VIE ``events/{x,y,t,p}`` + ``t_offset``, and what tofnet adds (see the module docstring)."""
+
+    def __init__(self, path: Path, handle):
+        super().__init__(path, handle, "events", t_offset=scalar(handle, "t_offset", 0))
+        self.detail = "DSEC layout"
+        if "ms_to_idx" in handle:
+            self.streams["ms_to_idx"] = f"{handle['ms_to_idx'].shape[0]} ms index entries"
+        self.intrinsics, self.sensor_size = read_calib_group(handle, "calib", path)
+        if "poses" in handle:
+            from tofnet.io.groundtruth import Trajectory
+            self.trajectory = Trajectory(handle["poses/t"][()], handle["poses/position"][()],
+                                         handle["poses/quaternion"][()], source=f"{path}:poses")
+        if "imu" in handle:
+            self.imu = np.column_stack([handle["imu/t"][()], handle["imu/accel"][()], handle["imu/gyro"][()]])
+        if self.intrinsics is None:
+            self._dsec_calibration()
+        for key in sorted(set(handle.keys()) - {"events", "ms_to_idx", "t_offset", "calib", "poses", "imu"}):
+            self.streams[key] = "not read"
+
+    def _dsec_calibration(self) -> None:
+        # DSEC: <sequence>/events/{left,right}/events.h5 and <sequence>/calibration/cam_to_cam.yaml.
+        side = self.path.parent.name
+        yaml_path = self.path.parent.parent.parent / "calibration" / "cam_to_cam.yaml"
+        if side not in ("left", "right") or not yaml_path.is_file():
+            return
+        import yaml
+        try:
+            camera = yaml.safe_load(yaml_path.read_text())["intrinsics"]["cam0" if side == "left" else "cam3"]
+            self.intrinsics = intrinsics_from(camera["camera_matrix"], camera.get("distortion_coeffs", ()),
+                                              camera.get("distortion_model", "radtan"))
+            self.sensor_size = self.sensor_size or tuple(int(v) for v in camera["resolution"])
+        except (KeyError, TypeError, ValueError, yaml.YAMLError) as err:
+            raise DataError(located(yaml_path, None, f"expected intrinsics/cam0 (or cam3) with camera_matrix "
+                                                     f"[fx, fy, cx, cy] ({err})")) from None
+        self.notes.append(f"intrinsics from {yaml_path}")
+
+
+#: Distortion model names as datasets write them -> tofnet's (``Intrinsics.distortion_model``).
+MODEL_NAMES = {"radtan": "radtan", "plumb_bob": "radtan", "radial-tangential": "radtan", "pinhole": "radtan",
+               "equidistant": "equidistant", "fisheye": "equidistant", "kb4": "equidistant"}
+
+
+def intrinsics_from(matrix, coefficients, model: str) -> Intrinsics:
+    """``Intrinsics`` from ``[fx, fy, cx, cy]`` and distortion coefficients of a named model.
+
+    radtan: ``k1 k2 p1 p2 [k3]`` (k3 = 0 when absent); equidistant: ``k1 k2 k3 k4``.
+    """
+    model_name = MODEL_NAMES.get(str(model).lower().strip())
+    if model_name is None:
+        raise ValueError(f"unknown distortion model {model!r}; expected one of {', '.join(sorted(MODEL_NAMES))}")
+    coefficients = tuple(float(c) for c in np.ravel(coefficients))
+    if model_name == "radtan" and len(coefficients) == 4:
+        coefficients = coefficients + (0.0,)
+    expected = 5 if model_name == "radtan" else 4
+    if coefficients and len(coefficients) != expected:
+        raise ValueError(f"{model_name} distortion needs {expected} coefficients, got {len(coefficients)}")
+    if not any(coefficients):
+        coefficients = ()
+    fx, fy, cx, cy = (float(v) for v in np.ravel(matrix)[:4])
+    return Intrinsics(fx, fy, cx, cy, distortion=coefficients,
+                      distortion_model=model_name if coefficients else "radtan")
+
+
+def read_calib_group(handle, group: str, path: object) -> tuple[Intrinsics | None, tuple[int, int] | None]:
+    """``{group}/{intrinsics,distortion_coeffs,distortion_model,resolution}`` (M3ED, tofnet)."""
+    if f"{group}/intrinsics" not in handle:
+        size = scalar(handle, f"{group}/resolution")
+        return None, (tuple(int(v) for v in size) if size is not None else None)
+    try:
+        intrinsics = intrinsics_from(handle[f"{group}/intrinsics"][()], scalar(handle, f"{group}/distortion_coeffs", ()),
+                                     scalar(handle, f"{group}/distortion_model", "radtan"))
+    except ValueError as err:
+        raise DataError(located(path, None, f"{group}: {err}")) from None
+    size = scalar(handle, f"{group}/resolution")
+    return intrinsics, (tuple(int(v) for v in size) if size is not None else None)
+
+
+def write_hdf5(path: str | Path, chunks: Iterable[np.ndarray], meta) -> int:
+    """Write events in the DSEC layout (plus tofnet's calib/poses/imu groups); returns the event count.
+
+    ``events/t`` is int64 µs after ``t_offset`` (the first event's time), ``x``, ``y``
+    uint16, ``p`` uint8; ``ms_to_idx[k]`` is the index of the first event at or after
+    ``t_offset + k`` ms. Chunks are appended as they come (bounded memory). ``meta``
+    (a ``Recording`` or ``EventSource``) gives sensor size, intrinsics, poses and IMU,
+    read after the events.
+    """
+    h5py = require("h5py", path)
+    written, next_ms, t_offset = 0, 0, None
+    with h5py.File(path, "w") as out:
+        columns = {name: out.create_dataset(f"events/{name}", shape=(0,), maxshape=(None,), dtype=dtype,
+                                            chunks=(1 << 16,))
+                   for name, dtype in (("t", "<i8"), ("x", "<u2"), ("y", "<u2"), ("p", "u1"))}
+        ms_to_idx = out.create_dataset("ms_to_idx", shape=(0,), maxshape=(None,), dtype="<u8", chunks=(1 << 12,))
+        for chunk in chunks:
+            if len(chunk) == 0:
+                continue
+            if t_offset is None:
+                t_offset = int(chunk["t"][0])
+            relative = chunk["t"] - t_offset
+            for name, dataset in columns.items():
+                dataset.resize((written + len(chunk),))
+                dataset[written:] = relative if name == "t" else chunk[name]
+            last_ms = int(relative[-1]) // 1000
+            if last_ms >= next_ms:
+                bounds = np.arange(next_ms, last_ms + 1, dtype=np.int64) * 1000
+                _append(ms_to_idx, written + np.searchsorted(relative, bounds, side="left"))
+                next_ms = last_ms + 1
+            written += len(chunk)
+        _append(ms_to_idx, np.array([written]))
+        out.create_dataset("t_offset", data=np.int64(t_offset or 0))
+        sensor_size, intrinsics, trajectory, imu = meta.sensor_size, meta.intrinsics, meta.trajectory, meta.imu
+        if sensor_size is not None:
+            out.create_dataset("calib/resolution", data=np.asarray(sensor_size, dtype=np.int64))
+        if intrinsics is not None:
+            out.create_dataset("calib/intrinsics", data=np.array([intrinsics.fx, intrinsics.fy, intrinsics.cx,
+                                                                  intrinsics.cy]))
+            out.create_dataset("calib/distortion_coeffs", data=np.asarray(intrinsics.distortion, dtype=np.float64))
+            out.create_dataset("calib/distortion_model", data=intrinsics.distortion_model)
+        if trajectory is not None and hasattr(trajectory, "quaternions"):
+            out.create_dataset("poses/t", data=trajectory.times)
+            out.create_dataset("poses/position", data=trajectory.positions)
+            out.create_dataset("poses/quaternion", data=trajectory.quaternions)
+        if imu is not None and len(imu):
+            out.create_dataset("imu/t", data=imu[:, 0])
+            out.create_dataset("imu/accel", data=imu[:, 1:4])
+            out.create_dataset("imu/gyro", data=imu[:, 4:7])
+    return written
+
+
+def _append(dataset, values: np.ndarray) -> None:
+    start = dataset.shape[0]
+    dataset.resize((start + len(values),))
+    dataset[start:] = values

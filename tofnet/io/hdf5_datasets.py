@@ -1,0 +1,176 @@
+"""MVSEC and M3ED HDF5 files, with their ground truth (poses, depth images) from the companion file.
+
+Ground-truth depth comes as images at given times; the true depth of an event is the
+value of the image nearest in time at the event's pixel (NaN where the image has 0,
+NaN or inf, or when the nearest image is more than ``MAX_DEPTH_GAP_S`` away). Only the
+images a chunk needs are read.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+
+from tofnet.errors import DataError, located
+from tofnet.io.hdf5 import ColumnsSource, read_calib_group, readable
+
+#: An event further than this from every depth image gets no true depth (s).
+MAX_DEPTH_GAP_S = 0.1
+
+
+class DepthImages:
+    """Depth images ``(n, H, W)`` metres at times ``times_us``: per-event lookup."""
+
+    def __init__(self, dataset, times_us: np.ndarray, source: object):
+        if dataset.ndim != 3 or dataset.shape[0] != len(times_us):
+            raise DataError(located(source, None, f"depth images {dataset.shape} do not match {len(times_us)} "
+                                                  "timestamps"))
+        self.dataset, self.times_us = dataset, np.asarray(times_us, dtype=np.int64)
+        self.height, self.width = dataset.shape[1:]
+
+    def lookup(self, events: np.ndarray) -> np.ndarray:
+        """True depth (m) of each event, NaN where unknown."""
+        t = events["t"]
+        after = np.clip(np.searchsorted(self.times_us, t), 0, len(self.times_us) - 1)
+        before = np.clip(after - 1, 0, len(self.times_us) - 1)
+        nearest = np.where(np.abs(self.times_us[before] - t) <= np.abs(self.times_us[after] - t), before, after)
+        depth = np.full(len(events), np.nan)
+        ok = (np.abs(self.times_us[nearest] - t) <= MAX_DEPTH_GAP_S * 1e6) & (events["x"] < self.width) & \
+             (events["y"] < self.height)
+        for frame in np.unique(nearest[ok]):
+            pick = ok & (nearest == frame)
+            image = self.dataset[int(frame)]
+            depth[pick] = image[events["y"][pick], events["x"][pick]]
+        depth[~np.isfinite(depth) | (depth <= 0)] = np.nan
+        return depth
+
+
+def matrix_to_quaternion(rotation: np.ndarray) -> np.ndarray:
+    """Unit quaternions ``(n, 4)`` ``qx qy qz qw`` from rotation matrices ``(n, 3, 3)`` (Shepperd)."""
+    r = np.asarray(rotation, dtype=np.float64).reshape(-1, 3, 3)
+    q = np.empty((r.shape[0], 4))
+    trace = r[:, 0, 0] + r[:, 1, 1] + r[:, 2, 2]
+    diagonal = np.stack([r[:, 0, 0], r[:, 1, 1], r[:, 2, 2], trace], axis=1)
+    for n, k in enumerate(np.argmax(diagonal, axis=1)):
+        m = r[n]
+        if k == 3:
+            s = 2.0 * np.sqrt(1.0 + trace[n])
+            q[n] = [(m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, s / 4]
+        else:
+            i, j, l = k, (k + 1) % 3, (k + 2) % 3
+            s = 2.0 * np.sqrt(1.0 + m[i, i] - m[j, j] - m[l, l])
+            q[n, i] = s / 4
+            q[n, j] = (m[j, i] + m[i, j]) / s
+            q[n, l] = (m[l, i] + m[i, l]) / s
+            q[n, 3] = (m[l, j] - m[j, l]) / s
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def trajectory_from_matrices(times_s: np.ndarray, camera_to_world: np.ndarray, source: object):
+    """A ``Trajectory`` from 4x4 camera-to-world transforms at ``times_s``."""
+    from tofnet.io.groundtruth import Trajectory
+
+    matrices = np.asarray(camera_to_world, dtype=np.float64)
+    return Trajectory(times_s, matrices[:, :3, 3], matrix_to_quaternion(matrices[:, :3, :3]), source=source)
+
+
+def _companion(path: Path, stem_suffix: str, suffixes: tuple[str, ...]) -> Path | None:
+    """``<base><suffix>`` next to ``path`` where ``path`` is ``<base>_data.<ext>``."""
+    stem = path.stem[:-len("_data")] if path.stem.endswith("_data") else path.stem
+    for suffix in suffixes:
+        candidate = path.with_name(f"{stem}{stem_suffix}{suffix}")
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+class _GroundTruthMixin:
+    def _open_gt(self, gt_path: Path):
+        import h5py
+        try:
+            return h5py.File(gt_path, "r")
+        except OSError as err:
+            raise DataError(located(gt_path, None, f"not a readable HDF5 file ({err})")) from None
+
+    def _depth(self, events: np.ndarray, first_index: int) -> np.ndarray | None:
+        return self.depth_images.lookup(events)
+
+    def close(self) -> None:
+        for handle in (self.handle, getattr(self, "gt_handle", None)):
+            if handle is not None:
+                handle.close()
+
+
+class MvsecSource(_GroundTruthMixin, ColumnsSource):
+    """MVSEC ``*_data.hdf5`` (left DAVIS) with ``*_gt.hdf5`` poses and raw depth images."""
+
+    def __init__(self, path: Path, handle):
+        from tofnet.io.source import EventSource
+        EventSource.__init__(self, path)
+        self.handle, self.gt_handle = handle, None
+        self.detail = "MVSEC layout, davis/left"
+        self.rows = readable(handle["davis/left/events"], path)
+        if self.rows.ndim != 2 or self.rows.shape[1] != 4:
+            raise DataError(located(path, None, f"davis/left/events: expected (n, 4) rows x, y, t, p; "
+                                                f"got shape {self.rows.shape}"))
+        self.n_events = int(self.rows.shape[0])
+        if "davis/left/image_raw" in handle and handle["davis/left/image_raw"].ndim == 3:
+            height, width = handle["davis/left/image_raw"].shape[1:]
+            self.sensor_size = (int(width), int(height))
+            self.streams["davis/left/image_raw"] = f"{handle['davis/left/image_raw'].shape[0]} images"
+        if "davis/left/imu" in handle and "davis/left/imu_ts" in handle:
+            self.imu = np.column_stack([handle["davis/left/imu_ts"][()], handle["davis/left/imu"][()]])
+        for key in sorted(k for k in handle.get("davis", {}).keys() if k != "left"):
+            self.streams[f"davis/{key}"] = "not read"
+        gt_path = _companion(path, "_gt", (".hdf5", ".h5"))
+        if gt_path is None:
+            self.notes.append("no *_gt.hdf5 next to the file: no poses or depth")
+            return
+        self.gt_handle = gt = self._open_gt(gt_path)
+        if "davis/left/pose" in gt:
+            self.trajectory = trajectory_from_matrices(gt["davis/left/pose_ts"][()], gt["davis/left/pose"][()],
+                                                       f"{gt_path}:davis/left/pose")
+        if "davis/left/depth_image_raw" in gt:
+            self.depth_images = DepthImages(gt["davis/left/depth_image_raw"],
+                                            np.round(gt["davis/left/depth_image_raw_ts"][()] * 1e6), gt_path)
+            self.has_depth = True
+        self.notes.append(f"poses and depth from {gt_path.name}")
+
+    def _packets(self, size_hint: int) -> Iterable[np.ndarray]:
+        from tofnet.io.events import events_from_columns
+
+        for start in range(0, self.n_events, size_hint):
+            rows = self.rows[start:start + size_hint]
+            yield events_from_columns({"x": rows[:, 0], "y": rows[:, 1], "t": rows[:, 2], "p": rows[:, 3]},
+                                      f"{self.path} (davis/left/events rows {start}..{start + len(rows) - 1})")
+
+
+class M3edSource(_GroundTruthMixin, ColumnsSource):
+    """M3ED ``*_data.h5`` (left Prophesee) with ``*_depth_gt.h5`` (or ``*_pose_gt.h5``) ground truth."""
+
+    def __init__(self, path: Path, handle):
+        super().__init__(path, handle, "prophesee/left", t_offset=0)
+        self.gt_handle = None
+        self.detail = "M3ED layout, prophesee/left"
+        self.intrinsics, self.sensor_size = read_calib_group(handle, "prophesee/left/calib", path)
+        for key in sorted(set(handle.keys()) - {"prophesee"}):
+            self.streams[key] = "not read"
+        gt_path = _companion(path, "_depth_gt", (".h5", ".hdf5")) or _companion(path, "_pose_gt", (".h5", ".hdf5"))
+        if gt_path is None:
+            self.notes.append("no *_depth_gt.h5 or *_pose_gt.h5 next to the file: no poses or depth")
+            return
+        self.gt_handle = gt = self._open_gt(gt_path)
+        times_us = gt["ts"][()].astype(np.int64) if "ts" in gt else None
+        if "Cn_T_C0" in gt and times_us is not None:
+            # Cn_T_C0 maps the first camera frame into camera n: the camera-to-world pose is its inverse.
+            self.trajectory = trajectory_from_matrices(times_us * 1e-6, np.linalg.inv(gt["Cn_T_C0"][()]),
+                                                       f"{gt_path}:Cn_T_C0")
+        if "depth/prophesee/left" in gt and times_us is not None:
+            self.depth_images = DepthImages(gt["depth/prophesee/left"], times_us, gt_path)
+            self.has_depth = True
+        self.notes.append(f"ground truth from {gt_path.name}")
+
+
+__all__ = ["MvsecSource", "M3edSource", "DepthImages", "matrix_to_quaternion", "trajectory_from_matrices"]

@@ -1,0 +1,137 @@
+"""Dense depth maps per time window, with an age map, as ``.npy`` and 16-bit PNG.
+
+Window ``k`` covers ``[t0 + k W, t0 + (k+1) W)`` µs. Each pixel shows its latest estimate
+made before the window's end and at most ``max_age`` old (default ``W``: only this
+window's estimates); the age map gives, in milliseconds, how long before the window's
+end that estimate was made. Pixels without one are NaN.
+
+PNG: single-channel 16-bit greyscale, depth in whole millimetres (rounded to nearest),
+0 = no depth, depths above 65.535 m written as 65535 (counted). Written with Pillow,
+which tofnet already has through matplotlib; no new dependency.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from tofnet.errors import DataError, located
+
+#: Largest depth a 16-bit millimetre PNG holds, m.
+PNG_MAX_DEPTH = 65.535
+
+
+@dataclass
+class DepthMap:
+    """One window: ``depth`` (H, W) float32 m and ``age_ms`` (H, W) float32, NaN where none."""
+
+    index: int
+    t_start_us: int
+    t_end_us: int
+    depth: np.ndarray
+    age_ms: np.ndarray
+    estimates: int  # estimates made in this window
+
+
+def depth_maps(depth: np.ndarray, sensor_size: tuple[int, int], window_us: int, *, t0_us: int | None = None,
+               max_age_us: int | None = None) -> Iterator[DepthMap]:
+    """``DepthMap`` per window from ``DEPTH_DTYPE`` estimates sorted by time (memory: two H x W maps)."""
+    if window_us <= 0:
+        raise DataError(f"window must be positive, got {window_us} µs")
+    width, height = (int(v) for v in sensor_size)
+    max_age_us = window_us if max_age_us is None else int(max_age_us)
+    t = depth["t"]
+    if len(t) and np.any(t[1:] < t[:-1]):
+        raise DataError("depth estimates must be sorted by time")
+    outside = (depth["x"] >= width) | (depth["y"] >= height)
+    if np.any(outside):
+        raise DataError(f"{int(outside.sum())} estimates lie outside the {width}x{height} map "
+                        f"(first at x={int(depth['x'][outside][0])}, y={int(depth['y'][outside][0])})")
+    if len(t) == 0:
+        return
+    t0 = int(t[0]) if t0_us is None else int(t0_us)
+    latest_z = np.full(height * width, np.nan, dtype=np.float32)
+    latest_t = np.zeros(height * width, dtype=np.int64)
+    flat = depth["y"].astype(np.int64) * width + depth["x"]
+    n_windows = int((int(t[-1]) - t0) // window_us) + 1
+    bounds = np.searchsorted(t, t0 + np.arange(n_windows + 1, dtype=np.int64) * window_us, side="left")
+    for k in range(max(n_windows, 0)):
+        start, stop = bounds[k], bounds[k + 1]
+        if stop > start:
+            # The last estimate of each pixel in the window wins.
+            reverse = flat[start:stop][::-1]
+            pixels, first = np.unique(reverse, return_index=True)
+            last = stop - 1 - first
+            latest_z[pixels] = depth["z"][last]
+            latest_t[pixels] = t[last]
+        t_end = t0 + (k + 1) * window_us
+        age_us = (t_end - latest_t).astype(np.float64)
+        fresh = ~np.isnan(latest_z) & (age_us <= max_age_us)
+        yield DepthMap(k, t_end - window_us, t_end,
+                       np.where(fresh, latest_z, np.nan).reshape(height, width).astype(np.float32),
+                       np.where(fresh, age_us * 1e-3, np.nan).reshape(height, width).astype(np.float32),
+                       int(stop - start))
+
+
+def depth_to_png16(depth_m: np.ndarray) -> tuple[np.ndarray, int]:
+    """Depth (m, NaN none) as uint16 millimetres (0 none); also how many pixels saturated at 65535."""
+    valid = np.isfinite(depth_m) & (depth_m > 0)
+    mm = np.zeros(depth_m.shape, dtype=np.uint16)
+    values = np.floor(depth_m[valid] * 1000.0 + 0.5)
+    saturated = int(np.count_nonzero(values > 65535))
+    mm[valid] = np.clip(values, 1, 65535).astype(np.uint16)
+    return mm, saturated
+
+
+def write_png16(path: str | Path, image: np.ndarray) -> None:
+    """A uint16 (H, W) array as a 16-bit greyscale PNG (written whole, then renamed)."""
+    from PIL import Image
+
+    path = Path(path)
+    partial = path.with_name(f".{path.name}.partial-{os.getpid()}")
+    try:
+        Image.fromarray(np.ascontiguousarray(image, dtype=np.uint16)).save(partial, format="PNG")
+        os.replace(partial, path)
+    finally:
+        partial.unlink(missing_ok=True)
+
+
+def write_depth_maps(maps: Iterator[DepthMap], folder: str | Path, *, png: bool = True) -> dict:
+    """Write ``depth_<k>.npy``, ``age_<k>.npy`` (and ``depth_<k>.png``) per window and ``index.csv``.
+
+    ``index.csv``: ``window,t_start_s,t_end_s,pixels_with_depth,estimates_in_window``.
+    Returns ``{"windows": n, "saturated_png_pixels": n}``.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    rows = ["window,t_start_s,t_end_s,pixels_with_depth,estimates_in_window"]
+    saturated = 0
+    for depth_map in maps:
+        stem = f"{depth_map.index:06d}"
+        _save_npy(folder / f"depth_{stem}.npy", depth_map.depth)
+        _save_npy(folder / f"age_{stem}.npy", depth_map.age_ms)
+        if png:
+            image, clipped = depth_to_png16(depth_map.depth)
+            saturated += clipped
+            write_png16(folder / f"depth_{stem}.png", image)
+        pixels = int(np.count_nonzero(np.isfinite(depth_map.depth)))
+        rows.append(f"{depth_map.index},{depth_map.t_start_us * 1e-6:.6f},{depth_map.t_end_us * 1e-6:.6f},"
+                    f"{pixels},{depth_map.estimates}")
+    (folder / "index.csv").write_text("\n".join(rows) + "\n", encoding="utf-8")
+    return {"windows": len(rows) - 1, "saturated_png_pixels": saturated}
+
+
+def _save_npy(path: Path, array: np.ndarray) -> None:
+    partial = path.with_name(f".{path.name}.partial-{os.getpid()}")
+    try:
+        with open(partial, "wb") as handle:
+            np.save(handle, array)
+        os.replace(partial, path)
+    except OSError as err:
+        raise DataError(located(path, None, f"cannot write: {err.strerror or err}")) from None
+    finally:
+        partial.unlink(missing_ok=True)

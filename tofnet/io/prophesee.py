@@ -1,0 +1,104 @@
+"""Prophesee RAW (EVT2, EVT2.1, EVT3) and DAT files, and Event Stream (.es), through faery.
+
+faery (the ``formats`` extra) decodes them in compiled code; tofnet converts its
+packets (``t`` µs, ``x``, ``y``, ``on``) to ``EVENT_DTYPE`` chunks. Timestamps are kept
+as the file has them: an EVT file's clock usually starts where the camera's did (the
+real sample starts at 11.2 s), a DAT file's at 0. ``open_faery`` also dispatches
+AEDAT4 to ``tofnet.io.aedat``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+
+from tofnet.errors import DataError, located
+from tofnet.io.extras import require
+from tofnet.io.source import EventSource
+
+#: Width/height passed to faery when the header has no geometry: the largest it accepts,
+#: so no event is refused; the sensor size is then reported as unknown.
+_NO_GEOMETRY = (65535, 65535)
+#: Bytes per event in DAT files (after the header and the 2-byte type/size record).
+_DAT_EVENT_BYTES = 8
+
+
+def open_faery(path: Path, kind: str) -> EventSource:
+    """The source for a file faery reads: ``kind`` is ``aedat4``, ``evt``, ``dat`` or ``es``."""
+    require("faery", path)
+    if kind == "aedat4":
+        from tofnet.io.aedat import AedatSource
+        return AedatSource(path)
+    return FaerySource(path, kind)
+
+
+class FaerySource(EventSource):
+    """EVT2/EVT2.1/EVT3 RAW, DAT and Event Stream files."""
+
+    def __init__(self, path: str | Path, kind: str):
+        super().__init__(path)
+        from faery.extension import dat, es, evt
+
+        self.format = kind
+        fallback = None
+        try:
+            if kind == "evt":
+                with evt.Decoder(self.path, None, None) as decoder:
+                    self.detail, self.sensor_size = decoder.version.upper(), tuple(decoder.dimensions)
+            elif kind == "dat":
+                with dat.Decoder(self.path, None, None) as decoder:
+                    self.detail, self.sensor_size = f"{decoder.version.upper()}, {decoder.event_type}", \
+                        tuple(decoder.dimensions)
+                    if decoder.event_type != "cd":
+                        raise DataError(located(self.path, None, f"DAT file of {decoder.event_type!r} events; "
+                                                                 "expected 'cd' (change detection) events"))
+                self.n_events = self._dat_count()
+            else:
+                with es.Decoder(self.path, 0) as decoder:
+                    self.detail, self.sensor_size = f"{decoder.event_type}, v{decoder.version}", \
+                        tuple(decoder.dimensions)
+                    if decoder.event_type not in ("dvs", "atis"):
+                        raise DataError(located(self.path, None, f"Event Stream of {decoder.event_type!r} events; "
+                                                                 "expected 'dvs' or 'atis'"))
+        except RuntimeError as err:
+            if "size" not in str(err) or kind == "es":
+                raise DataError(located(self.path, None, f"not a readable {kind.upper()} file ({err})")) from None
+            fallback = _NO_GEOMETRY
+            self.notes.append("the header gives no sensor size (width, height)")
+            if kind == "evt":
+                with evt.Decoder(self.path, fallback, None) as decoder:
+                    self.detail = decoder.version.upper()
+        self._fallback = fallback
+
+    def _dat_count(self) -> int | None:
+        # A DAT file is a '%' text header, one type byte, one size byte, then 8 bytes per event.
+        with open(self.path, "rb") as handle:
+            header = 0
+            for line in handle:
+                if not line.startswith(b"%"):
+                    break
+                header += len(line)
+        size = self.path.stat().st_size - header - 2
+        return size // _DAT_EVENT_BYTES if size >= 0 and size % _DAT_EVENT_BYTES == 0 else None
+
+    def _packets(self, size_hint: int) -> Iterable[np.ndarray]:
+        import faery
+        from faery.extension import dat, evt
+
+        # EVT and DAT straight from the decoders (fields t, x, y, then polarity: 'on' or
+        # DAT's 0/1 'payload'); Event Stream through faery's Decoder, which flips its y axis.
+        try:
+            if self.format == "evt":
+                with evt.Decoder(self.path, self._fallback, None) as decoder:
+                    for packet in decoder:
+                        if "events" in packet:
+                            yield packet["events"]
+            elif self.format == "dat":
+                with dat.Decoder(self.path, self._fallback, None) as decoder:
+                    yield from decoder
+            else:
+                yield from faery.file_decoder.Decoder(self.path, file_type="es", time_range_cache=None)
+        except RuntimeError as err:
+            raise DataError(located(self.path, None, f"cannot decode ({err})")) from None

@@ -1,0 +1,292 @@
+"""An open recording: its metadata at once, its events in time-ordered chunks of bounded size.
+
+``open_recording(path)`` returns an ``EventSource`` for any format ``detect_format``
+knows. Its attributes (``sensor_size``, ``intrinsics``, ``trajectory``, ``imu``,
+``n_events``, ``streams``, ``notes``) come from the file's header or index (and from
+ECD side files next to it for what the file lacks) without decoding the events;
+``chunks(n)`` then yields ``EVENT_DTYPE`` arrays of ``n`` events (the last one shorter),
+holding at most about one chunk in memory, and ``read()`` loads everything into a
+``Recording``, which is what ``read_recording`` does.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Iterator
+from pathlib import Path
+
+import numpy as np
+from numba import njit
+
+from tofnet.errors import DataError, located
+from tofnet.events import EVENT_DTYPE
+from tofnet.io.recording import Intrinsics, Recording, VelocitySource
+
+#: Events per chunk unless asked otherwise: 13 MB of ``EVENT_DTYPE``.
+DEFAULT_CHUNK = 1_000_000
+
+#: ``progress(events_done, events_total)``; the total is ``None`` when the file does not say.
+ProgressHook = Callable[[int, "int | None"], None]
+
+
+class EventSource:
+    """Base of every reader: metadata as attributes, events through ``chunks``.
+
+    Subclasses set the attributes in ``__init__`` and implement ``_packets`` (and
+    ``_depth`` when the file holds ground-truth depth).
+    """
+
+    format = "?"
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self.detail = ""  # e.g. "EVT3", "DSEC layout"
+        self.sensor_size: tuple[int, int] | None = None
+        self.intrinsics: Intrinsics | None = None
+        self.trajectory: VelocitySource | None = None
+        self.imu: np.ndarray | None = None  # (n, 7): t s, accel m/s², gyro rad/s
+        self.n_events: int | None = None  # known without decoding, else None
+        self.has_depth = False
+        self.streams: dict[str, str] = {}  # other streams in the file: name -> what
+        self.notes: list[str] = []
+
+    # --- to implement -------------------------------------------------------------
+    def _packets(self, size_hint: int) -> Iterable[np.ndarray]:
+        """Event arrays in file order: ``EVENT_DTYPE`` or any dtype with fields t, x, y, p in that order."""
+        raise NotImplementedError
+
+    def _depth(self, events: np.ndarray, first_index: int) -> np.ndarray | None:
+        """True depth (m, NaN unknown) of ``events``, which start at event ``first_index`` of the file."""
+        return None
+
+    # --- the interface ------------------------------------------------------------
+    def chunks(self, n_events: int = DEFAULT_CHUNK, progress: ProgressHook | None = None) -> Iterator[np.ndarray]:
+        """``EVENT_DTYPE`` arrays of ``n_events`` events (the last shorter), in time order.
+
+        Each array is new (the caller may keep it). Raises ``DataError`` naming the
+        event index when a timestamp is earlier than the one before it.
+        """
+        if n_events < 1:
+            raise ValueError(f"n_events must be positive, got {n_events}")
+        done = 0
+        previous = None
+        size = min(n_events, self.n_events) if self.n_events else n_events
+        for chunk, back in _rechunk(self._packets(size), size):
+            if back >= 0:
+                before = int(chunk["t"][back - 1]) if back > 0 else previous
+                raise DataError(located(self.path, None, f"event {done + back + 1}: time goes back "
+                                                         f"({int(chunk['t'][back])} µs after {before} µs); "
+                                                         "events must be sorted by time"))
+            previous = int(chunk["t"][-1])
+            done += len(chunk)
+            if progress is not None:
+                progress(done, self.n_events)
+            yield chunk
+
+    def read(self, progress: ProgressHook | None = None) -> Recording:
+        """All events and metadata as a ``Recording``; ``DataError`` when there are no events."""
+        parts, depths = [], []
+        done = 0
+        for chunk in self.chunks(DEFAULT_CHUNK, progress):
+            parts.append(chunk)
+            if self.has_depth:
+                depths.append(self._depth(chunk, done))
+            done += len(chunk)
+        if not parts:
+            raise DataError(located(self.path, None, "no events"))
+        events = parts[0] if len(parts) == 1 else np.concatenate(parts)
+        del parts
+        recording = Recording(events=events, intrinsics=self.intrinsics, trajectory=self.trajectory,
+                              sensor_size=self.sensor_size, imu=self.imu, source=str(self.path),
+                              notes=list(self.notes))
+        if depths:
+            recording.gt_depth = np.concatenate(depths)
+        if recording.sensor_size is None:
+            extent = (int(events["x"].max()) + 1, int(events["y"].max()) + 1)
+            recording.sensor_size = extent
+            recording.notes.append(f"sensor size not in the file: {extent[0]}x{extent[1]} taken from the events' "
+                                   "extent (pass --sensor-size to set it)")
+        return recording
+
+    def describe(self) -> str:
+        """``format (detail)`` for messages and ``tofnet info``."""
+        return f"{self.format} ({self.detail})" if self.detail else self.format
+
+    def close(self) -> None:
+        """Release the file (readers that keep one open override this)."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+
+def _rechunk(packets: Iterable[np.ndarray], n: int) -> Iterator[tuple[np.ndarray, int]]:
+    """Re-cut arrays of any sizes into new ``EVENT_DTYPE`` arrays of ``n`` (the last shorter).
+
+    Yields ``(chunk, back)``: ``back`` is the index in the chunk of the first event
+    stamped earlier than the one before it (across packets and chunks too), or -1. Each
+    event is copied once, in a compiled loop that also checks the order.
+    """
+    buffer = np.empty(n, dtype=EVENT_DTYPE)
+    fill, back = 0, -1
+    last_t = np.zeros(1, dtype=np.int64)
+    started = np.zeros(1, dtype=np.bool_)
+    for packet in packets:
+        names = packet.dtype.names
+        columns = [packet[name] for name in names[:4]]
+        start, size = 0, len(packet)
+        while start < size:
+            take = min(n - fill, size - start)
+            first_back = _copy_checked(buffer["t"], buffer["x"], buffer["y"], buffer["p"], fill, *columns,
+                                       start, take, last_t, started)
+            if back < 0 and first_back >= 0:
+                back = fill + first_back
+            fill += take
+            start += take
+            if fill == n:
+                yield buffer, back
+                buffer = np.empty(n, dtype=EVENT_DTYPE)
+                fill, back = 0, -1
+    if fill:
+        # A copy only when most of the buffer is empty (a fresh copy costs page faults too).
+        yield (buffer[:fill] if 2 * fill >= n else buffer[:fill].copy()), back
+
+
+@njit(cache=True)
+def _copy_checked(out_t, out_x, out_y, out_p, at, t, x, y, p, start, count, last_t, started):
+    """Copy ``count`` events from ``start`` into the chunk fields at ``at``; first time going back or -1."""
+    for i in range(count):
+        out_t[at + i] = t[start + i]
+        out_x[at + i] = x[start + i]
+        out_y[at + i] = y[start + i]
+        out_p[at + i] = 1 if p[start + i] else 0
+    first_back = -1
+    if count > 0:
+        if started[0] and out_t[at] < last_t[0]:
+            first_back = 0
+        else:
+            for i in range(1, count):
+                if out_t[at + i] < out_t[at + i - 1]:
+                    first_back = i
+                    break
+        last_t[0] = out_t[at + count - 1]
+        started[0] = True
+    return first_back
+
+
+class RecordingSource(EventSource):
+    """A recording already in memory (ECD folders, text and numpy files), served in chunks."""
+
+    def __init__(self, recording: Recording, format: str, path: str | Path):
+        super().__init__(path)
+        self.format = format
+        self.recording = recording
+        self.sensor_size = recording.sensor_size
+        self.intrinsics = recording.intrinsics
+        self.trajectory = recording.trajectory
+        self.imu = recording.imu
+        self.n_events = len(recording.events)
+        self.has_depth = recording.gt_depth is not None
+        self.notes = list(recording.notes)
+
+    def _packets(self, size_hint: int) -> Iterable[np.ndarray]:
+        events = self.recording.events
+        for start in range(0, len(events), size_hint):
+            yield events[start:start + size_hint]
+
+    def _depth(self, events: np.ndarray, first_index: int) -> np.ndarray | None:
+        return self.recording.gt_depth[first_index:first_index + len(events)]
+
+    def read(self, progress: ProgressHook | None = None) -> Recording:
+        recording = self.recording
+        # Attributes set after opening (a sensor size override) win over what was read.
+        recording.sensor_size, recording.intrinsics = self.sensor_size, self.intrinsics
+        recording.trajectory, recording.imu = self.trajectory, self.imu
+        if progress is not None:
+            progress(len(recording.events), len(recording.events))
+        return recording
+
+
+def fill_from_side_files(source: EventSource) -> EventSource:
+    """Take from ECD side files next to ``source.path`` what the file itself does not hold.
+
+    ``calib.txt`` (intrinsics), ``groundtruth.txt`` (poses), ``imu.txt`` and
+    ``sensor_size.txt``; the file's own values win. Each one used is noted.
+    """
+    from tofnet.io.calibration import read_calibration
+    from tofnet.io.ecd import CALIBRATION, GROUNDTRUTH, IMU, SENSOR_SIZE, read_imu, read_sensor_size
+    from tofnet.io.groundtruth import read_groundtruth
+
+    folder = source.path.parent
+    for name, attribute, reader in ((CALIBRATION, "intrinsics", read_calibration),
+                                    (GROUNDTRUTH, "trajectory", read_groundtruth),
+                                    (IMU, "imu", read_imu), (SENSOR_SIZE, "sensor_size", read_sensor_size)):
+        if getattr(source, attribute) is None and (folder / name).is_file():
+            setattr(source, attribute, reader(folder / name))
+            source.notes.append(f"{attribute.replace('_', ' ')} from {name} next to the file")
+    return source
+
+
+def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = None,
+                   columns: str | tuple[str, ...] | None = None,
+                   topics: dict[str, str] | None = None) -> EventSource:
+    """Open any recording ``detect_format`` knows; see the module docstring.
+
+    ``sensor_size`` (width, height px) overrides the file's; ``columns`` gives the column
+    order of a plain ``(n, 4)`` numpy array (e.g. ``"x,y,t,p"``); ``topics`` overrides the
+    ROS bag topics found automatically (keys ``events``, ``pose``, ``imu``, ``camera_info``).
+    """
+    from tofnet.io.detect import detect_format
+
+    path = Path(path)
+    kind = detect_format(path)
+    if columns is not None and kind not in ("npy", "npz"):
+        raise DataError(located(path, None, f"--columns applies to plain numpy arrays (.npy/.npz), not {kind} files"))
+    if topics and kind != "rosbag1":
+        raise DataError(located(path, None, f"topics apply to ROS bags, not {kind} files"))
+    if kind in ("aedat4", "evt", "dat", "es"):
+        from tofnet.io.prophesee import open_faery
+        source = open_faery(path, kind)
+    elif kind == "hdf5":
+        from tofnet.io.hdf5 import open_hdf5
+        source = open_hdf5(path)
+    elif kind == "rosbag1":
+        from tofnet.io.rosbag import RosbagSource
+        source = RosbagSource(path, topics)
+    else:
+        source = RecordingSource(_read_in_memory(path, kind, columns), kind, path)
+    try:
+        if kind in ("aedat4", "evt", "dat", "es", "hdf5", "rosbag1"):
+            fill_from_side_files(source)
+        if sensor_size is not None:
+            width, height = (int(v) for v in sensor_size)
+            if width < 1 or height < 1:
+                raise DataError(f"sensor size must be positive, got {width}x{height}")
+            source.sensor_size = (width, height)
+    except BaseException:
+        source.close()
+        raise
+    return source
+
+
+def _read_in_memory(path: Path, kind: str, columns) -> Recording:
+    from tofnet.io.ecd import attach_sidecars, read_ecd
+    from tofnet.io.events import read_events_npy, read_events_txt
+
+    if kind == "ecd":
+        recording = read_ecd(path)
+    else:
+        if kind == "text":
+            events = read_events_txt(path)
+        else:
+            events = read_events_npy(path, columns=columns)
+        recording = attach_sidecars(Recording(events=events, source=str(path)), path.parent,
+                                    gt_depth_name=f"{path.stem}_depth.npy")
+        if kind == "npz":
+            from tofnet.io.arrays import apply_npz_metadata
+            apply_npz_metadata(recording, path)
+    if len(recording.events) == 0:
+        raise DataError(located(path, None, "no events"))
+    return recording
