@@ -121,7 +121,7 @@ def study(name: str, args):
         score("eq. 7, poses, interval", *depth(poses, "interval"), 0.0)
         score("eq. 7, gyro, interval", *depth(gyro, "interval"), 0.0)
         score("eq. 7, noisy gyro, interval", *depth(noisy, "interval"), 0.0)
-        for r_min in (0.25, 0.5):
+        for r_min in (0.1, 0.25, 0.5):
             score(f"eq. 7, poses, interval, r > {r_min}", *depth(poses, "interval"), r_min)
 
     split_rows, filter_rows = [], []
