@@ -103,7 +103,7 @@ def study(name: str, args):
         rows.append([name, label, fmt(int(keep.sum())), fmt(100 * keep.sum() / events_in),
                      fmt(100 * float(np.median(np.abs(rel))) if rel.size else float("nan")),
                      f"{100 * float(np.median(rel)):+.1f}" if rel.size else "-",
-                     fmt(int((inputs.measured & (share <= (min_share or 0.0))).sum())) if min_share is not None else "-"])
+                     "-" if min_share is None else fmt(int((inputs.measured & (share <= min_share)).sum()))])
         results[label] = (z, share, keep)
 
     # The network's own output first: the recomputation must reproduce it.
@@ -174,7 +174,8 @@ def main(argv: list[str] | None = None) -> int:
         filter_rows += f
         checks.append(c["same"])
     print(f"Rotation study: {args.duration:g} s per scenario, seed {args.seed}, {args.size}, {args.pixels} pixels, "
-          f"1 ms steps, 8-bit counters, per-pixel A t; noisy gyro {args.gyro_noise:g} rad/s/sqrt(Hz), bias {args.gyro_bias:g} rad/s")
+          f"1 ms steps, 8-bit counters, per-pixel A t; noisy gyro {args.gyro_noise:g} rad/s/sqrt(Hz), "
+          f"bias {args.gyro_bias:g} rad/s")
     print(f"eq. 8 recomputed from the tot spikes equals the network's output: {all(checks)}")
     print()
     print(text_table(["scenario", "depth from", "estimates", "coverage %", "median |rel| %", "median rel %",

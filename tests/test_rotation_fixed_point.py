@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tofnet.kernels.depth import EMITTED, ROTATION_DOMINATED, classify_rotation, float_depth_rotation, translational_share
+from tofnet.kernels.depth import (EMITTED, ROTATION_DOMINATED, classify_rotation, float_depth_rotation,
+                                  translational_share)
 from tofnet.kernels.fixed_point import (divide_round_half_away, fixed_depth_rotation, fixed_share, quantize,
                                         rotation_depth_tolerance)
 

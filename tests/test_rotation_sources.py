@@ -67,7 +67,8 @@ def test_pose_rate_is_the_derivative_of_the_slerp():
 
 
 def test_relative_rotation_is_accurate_for_tiny_and_large_angles():
-    for vector in (np.array([1e-12, 0, 0]), np.array([0, 3e-9, 0]), np.array([0.0, 0.0, 3.1]), np.array([1.0, 2.0, -1.5])):
+    vectors = (np.array([1e-12, 0, 0]), np.array([0, 3e-9, 0]), np.array([0.0, 0.0, 3.1]), np.array([1.0, 2.0, -1.5]))
+    for vector in vectors:
         vector = vector if np.linalg.norm(vector) < math.pi else vector / np.linalg.norm(vector) * 3.0
         q0 = axis_angle_quaternion(np.array([0.4, 0.1, -0.3]))
         q1 = quaternion_multiply(q0, axis_angle_quaternion(vector))

@@ -194,7 +194,8 @@ def gyroscope_from_imu(imu: np.ndarray, *, source: object = "<memory>", **option
     """A ``Gyroscope`` from an ``imu.txt`` table ``t ax ay az gx gy gz`` (``tofnet.io.ecd.read_imu``)."""
     imu = np.asarray(imu, dtype=np.float64)
     if imu.ndim != 2 or imu.shape[1] != 7:
-        raise DataError(located(source, None, f"IMU samples: expected rows 't ax ay az gx gy gz', got shape {imu.shape}"))
+        raise DataError(located(source, None, f"IMU samples: expected rows 't ax ay az gx gy gz', "
+                                              f"got shape {imu.shape}"))
     return Gyroscope(imu[:, 0], imu[:, 4:7], source=source, **options)
 
 

@@ -123,7 +123,8 @@ def generate_rotating(config: SimConfig, *, seed: int = 0, progress: Progress | 
         t0, log0, depth0 = t1, log1, depth1
         if progress is not None and time.perf_counter() - last_report > 0.1:
             last_report = time.perf_counter()
-            progress(int(t0 * 1000), int(config.duration * 1000))
+            # The render count is not known in advance: extrapolated from the time simulated so far.
+            progress(renders, max(renders, int(renders * config.duration / t0)))
 
     events, gt_depth, n_contrast = _merge(buf, noise_t, noise_pixel, noise_p, noise_d, width)
     pose_times = np.arange(int(np.floor(config.duration * config.pose_rate + 1e-9)) + 1) / config.pose_rate

@@ -48,9 +48,9 @@ def simulate(name_or_config: str | SimConfig, out_dir: str | Path | None, *, dur
     Returns
     -------
     summary dict: ``scenario``, ``seed``, ``duration_s``, ``sensor_size``, ``events``,
-    ``events_on``, ``events_per_s``, ``max_angular_speed_radps`` (a bound, 0 without rotation), ``depth_min``/``depth_median``/``depth_max`` (m,
-    over events), ``renders``, ``max_render_step_px``, ``sim_time_s``,
-    ``write_time_s``, ``out_dir``, ``files``.
+    ``events_on``, ``events_per_s``, ``max_angular_speed_radps`` (a bound, 0 without rotation),
+    ``depth_min``/``depth_median``/``depth_max`` (m, over events), ``renders``,
+    ``max_render_step_px``, ``sim_time_s``, ``write_time_s``, ``out_dir``, ``files``.
     """
     config = resolve(name_or_config, duration=duration, sensor_size=sensor_size)
     result = generate(config, seed=seed, progress=progress)
