@@ -1,6 +1,8 @@
-"""The depth neuron's arithmetic (paper eq. 8), shared by every backend."""
+"""The depth neuron's arithmetic (paper eq. 8, and eq. 7 for a rotating camera), shared by every backend."""
 
 from __future__ import annotations
+
+import math
 
 from numba import njit
 
@@ -38,3 +40,51 @@ def classify(measured: bool, z: float, min_depth: float, max_depth: float) -> in
     if z >= max_depth:
         return TOO_FAR
     return EMITTED
+
+
+# --- rotation (paper eq. 7; docs/rotation.md) ------------------------------------------------------------
+
+#: Rejected because translation explains too small a share of the measured image motion
+#: (``translational_share <= min_share``); to be appended to REJECT_REASONS as
+#: ``"rotation_dominated"``.
+ROTATION_DOMINATED = 3
+
+
+@njit(cache=True)
+def translational_share(signed_x: int, signed_y: int, bw_x: float, bw_y: float,
+                        seconds_per_count: float) -> float:
+    """``r = 1 − (B ω)·td``: the share of the measured image motion that translation explains.
+
+    ``(A t / Z + B ω)·td = 1`` for an edge crossing a pixel in ``td``, so
+    ``(A t / Z)·td = r``; ``r = 1`` without rotation. A relative error ``e`` of ``td``
+    becomes a depth error of about ``e / r``. ``bw`` in px/s, ``td = signed count *
+    seconds_per_count``; dimensionless.
+    """
+    return 1.0 - (bw_x * signed_x + bw_y * signed_y) * seconds_per_count
+
+
+@njit(cache=True)
+def float_depth_rotation(signed_x: int, signed_y: int, at_x: float, at_y: float, bw_x: float, bw_y: float,
+                         seconds_per_count: float) -> float:
+    """Paper eq. 7, ``Z = (A t)·td / (1 − (B ω)·td)`` metres; eq. 8 when ``bw = 0``.
+
+    Meant for ``translational_share > 0`` (``classify_rotation`` rejects the rest);
+    a zero share gives ``inf``, a negative one a depth of the wrong sign.
+    """
+    share = translational_share(signed_x, signed_y, bw_x, bw_y, seconds_per_count)
+    numerator = float_depth(signed_x, signed_y, at_x, at_y, seconds_per_count)
+    if share == 0.0:
+        return math.inf
+    return numerator / share
+
+
+@njit(cache=True)
+def classify_rotation(measured: bool, share, z, min_share, min_depth, max_depth) -> int:
+    """``classify`` with eq. 7's extra test, in this order: no axis measured, then
+    ``share <= min_share`` (ROTATION_DOMINATED), then the depth range. Floats or fixed-point ints.
+    """
+    if not measured:
+        return NO_MEASUREMENT
+    if share <= min_share:
+        return ROTATION_DOMINATED
+    return classify(measured, z, min_depth, max_depth)

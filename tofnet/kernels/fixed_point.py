@@ -129,3 +129,78 @@ def relative_error_bound(at: float, timestep: float, distance: int, frac_bits: i
     """
     w = abs(at) * timestep / distance
     return 2.0 ** -(frac_bits + 1) / w
+
+
+# --- rotation (paper eq. 7; docs/rotation.md) ------------------------------------------------------------
+#
+# ``V = (B ω) * dt / distance`` (dimensionless per count) is quantised like ``W``, in the
+# same format (F fractional bits, P-bit payload). The share ``r = 1 − s·V`` and the depth
+# ``Z = N / r`` (``N = s·W``) are computed with integers only; the one division is exact
+# and rounds half away from zero.
+
+
+@njit(cache=True)
+def fixed_share(signed_x: int, signed_y: int, v_x: int, v_y: int, frac_bits: int) -> int:
+    """``r_raw = 2**F − s_x*V_x − s_y*V_y``: the translational share in units of ``2**-F`` (int64, not saturated).
+
+    With counters of at most 30 bits and ``V`` of at most 32, ``|r_raw| < 2**62``.
+    """
+    return (1 << frac_bits) - signed_x * v_x - signed_y * v_y
+
+
+@njit(cache=True)
+def divide_round_half_away(numerator: int, denominator: int, shift: int, bits: int) -> int:
+    """``numerator * 2**shift / denominator`` rounded half away from zero, saturated to ``bits`` bits.
+
+    Exact for ``denominator > 0``, ``|numerator| < 2**63`` and ``shift <= 61``, ``bits <= 62``:
+    the quotient of ``|numerator|`` is split into its whole part and ``shift`` bits of
+    binary long division, and no intermediate value leaves int64 (``2 r >= d`` is tested
+    as ``r >= d − r``). A ``denominator <= 0`` is outside the contract and gives the most
+    negative value (so a caller's ``too_near`` test rejects it).
+    """
+    top = (1 << (bits - 1)) - 1
+    if denominator <= 0:
+        return -top - 1
+    magnitude = -numerator if numerator < 0 else numerator
+    whole = magnitude // denominator
+    rest = magnitude - whole * denominator
+    if whole > ((top + 1) >> shift):
+        # The magnitude exceeds 2**(bits-1): saturated whichever the sign.
+        return top if numerator >= 0 else -top - 1
+    fraction = 0
+    for _ in range(shift):
+        fraction <<= 1
+        if rest >= denominator - rest:
+            rest -= denominator - rest
+            fraction |= 1
+        else:
+            rest += rest
+    if rest >= denominator - rest:  # the remainder is at least half a unit: away from zero
+        fraction += 1
+    magnitude = (whole << shift) + fraction
+    if numerator >= 0:
+        return magnitude if magnitude <= top else top
+    return -magnitude if magnitude <= top + 1 else -top - 1
+
+
+@njit(cache=True)
+def fixed_depth_rotation(signed_x: int, signed_y: int, w_x: int, w_y: int, share_raw: int,
+                         frac_bits: int, bits: int) -> int:
+    """Eq. 7 on integers: ``Z_raw = round_half_away((s_x*W_x + s_y*W_y) * 2**F / r_raw)``, saturated to ``bits``.
+
+    ``W`` and ``Z_raw`` in units of ``2**-F`` m, ``r_raw`` in units of ``2**-F``; the
+    caller rejects ``r_raw <= min_share_raw`` (>= 0) first, so ``r_raw >= 1`` here.
+    """
+    return divide_round_half_away(signed_x * w_x + signed_y * w_y, share_raw, frac_bits, bits)
+
+
+def rotation_depth_tolerance(m_x, m_y, z, share: float, frac_bits: int = DEFAULT_FRAC_BITS):
+    """Bound on ``|z_fixed − z_float|`` (m) for eq. 7, without saturation.
+
+    ``N`` and ``r`` are each off by at most ``c = (|m_x| + |m_y|) * 2**-(F+1)`` (rounded
+    ``W`` and ``V``), the division adds half a unit: ``Z_q − Z = (εN − Z εr) / r_q + ρ``, so
+    ``|Z_q − Z| <= c (1 + |z|) / share + 2**-(F+1)`` with ``share`` the fixed-point
+    share ``r_raw * 2**-F`` and ``z`` the larger of the two depths (metres).
+    """
+    c = (abs(m_x) + abs(m_y)) * 2.0 ** -(frac_bits + 1)
+    return c * (1.0 + abs(z)) / share + 2.0 ** -(frac_bits + 1)

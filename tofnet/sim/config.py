@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 from tofnet.io.recording import Intrinsics
 from tofnet.sim.camera import DEFAULT_INTRINSICS, DEFAULT_SENSOR_SIZE, Trajectory, check_sensor_size, scaled_intrinsics
 from tofnet.sim.errors import SimError
+from tofnet.sim.rotation import ImuModel, RotatingTrajectory
 from tofnet.sim.scene import Scene
 
 
@@ -22,7 +23,8 @@ class SimConfig:
     Parameters
     ----------
     name : label written in summaries.
-    scene, trajectory : what is seen and how the camera moves (m, s).
+    scene, trajectory : what is seen and how the camera moves (m, s); a ``RotatingTrajectory``
+        also turns the camera.
     duration : seconds simulated from t = 0.
     intrinsics, sensor_size : pinhole camera (pixels) and ``(width, height)``.
     contrast_on, contrast_off : mean log-intensity thresholds C+ and C-.
@@ -33,12 +35,13 @@ class SimConfig:
     occlusion_depth : true depth of an event where an occluding contour crossed the pixel
         between two renders: ``"nearest_in_time"`` (the render nearer to the event) or
         ``"nearer_surface"`` (the occluding surface, whose motion made the event).
+    imu : an ``ImuModel`` writes ``imu.txt`` (gyroscope and accelerometer); None: no IMU.
     description : one line for ``--list`` and the docs.
     """
 
     name: str
     scene: Scene
-    trajectory: Trajectory
+    trajectory: Trajectory | RotatingTrajectory
     duration: float = 1.0
     intrinsics: Intrinsics = DEFAULT_INTRINSICS
     sensor_size: tuple[int, int] = DEFAULT_SENSOR_SIZE
@@ -49,6 +52,7 @@ class SimConfig:
     pose_rate: float = 1000.0
     max_step_px: float = 0.25
     occlusion_depth: str = "nearest_in_time"
+    imu: ImuModel | None = None
     description: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
@@ -64,6 +68,8 @@ class SimConfig:
         if self.occlusion_depth not in OCCLUSION_DEPTHS:
             raise SimError(f"occlusion_depth: expected one of {', '.join(OCCLUSION_DEPTHS)}, "
                            f"got {self.occlusion_depth!r}")
+        if self.imu is not None and not isinstance(self.imu, ImuModel):
+            raise SimError(f"imu: expected an ImuModel or None, got {type(self.imu).__name__}")
         if not (self.intrinsics.fx > 0 and self.intrinsics.fy > 0):
             raise SimError(f"intrinsics: expected positive focal lengths in pixels, got {self.intrinsics!r}")
 

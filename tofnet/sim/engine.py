@@ -13,6 +13,7 @@ from tofnet.io.recording import Intrinsics, Recording
 from tofnet.sim.config import SimConfig
 from tofnet.sim.dvs import DEPTH_JUMP, count_crossings, emit_crossings, thresholds
 from tofnet.sim.render import Renderer, max_flow, render_times
+from tofnet.sim.rotation import imu_samples
 from tofnet.sim.scene import pack_scene
 
 #: ``progress(renders_done, renders_total)``, called at most ten times a second.
@@ -26,7 +27,8 @@ class SimResult:
     ``events`` (``EVENT_DTYPE``, sorted by time), ``gt_depth`` (float32 m, one per
     event: camera-frame z of the surface at that pixel and time), poses sampled at
     ``config.pose_rate`` (``pose_times`` s, ``positions`` m, ``quaternions`` qx qy qz qw,
-    always identity) and ``stats`` (renders, ``max_render_step_px``, wall time ...).
+    identity unless the camera turns), ``stats`` (renders, ``max_render_step_px``, wall
+    time ...) and ``imu`` (``imu.txt`` rows ``t ax ay az gx gy gz``, or None).
     """
 
     config: SimConfig
@@ -37,6 +39,7 @@ class SimResult:
     positions: np.ndarray
     quaternions: np.ndarray
     stats: dict = field(default_factory=dict)
+    imu: np.ndarray | None = None
 
     @property
     def intrinsics(self) -> Intrinsics:
@@ -49,7 +52,7 @@ class SimResult:
     def to_recording(self) -> Recording:
         """The result as a ``Recording`` (trajectory = the exact piecewise-constant velocity)."""
         return Recording(events=self.events, intrinsics=self.intrinsics, trajectory=self.config.trajectory,
-                         sensor_size=self.sensor_size, gt_depth=self.gt_depth.astype(np.float64),
+                         sensor_size=self.sensor_size, gt_depth=self.gt_depth.astype(np.float64), imu=self.imu,
                          source=f"sim:{self.config.name}:seed={self.seed}")
 
 
@@ -88,8 +91,12 @@ def generate(config: SimConfig, *, seed: int = 0, progress: Progress | None = No
     """Simulate ``config`` and return events with per-event ground-truth depth.
 
     Everything random (textures, thresholds, noise) comes from ``seed``: the same
-    config and seed give identical events.
+    config and seed give identical events. A turning camera (``config.trajectory.rotates``)
+    is simulated by ``tofnet.sim.engine_rotating``.
     """
+    if getattr(config.trajectory, "rotates", False):
+        from tofnet.sim.engine_rotating import generate_rotating  # it builds on this module
+        return generate_rotating(config, seed=seed, progress=progress)
     start = time.perf_counter()
     k = config.intrinsics
     width, height = config.sensor_size
@@ -146,7 +153,8 @@ def generate(config: SimConfig, *, seed: int = 0, progress: Progress | None = No
              "noise_events": int(noise_t.size), "faces": len(scene.names),
              "wall_time_s": time.perf_counter() - start}
     return SimResult(config=config, seed=seed, events=events, gt_depth=gt_depth, pose_times=pose_times,
-                     positions=traj.position_at(pose_times), quaternions=quaternions, stats=stats)
+                     positions=traj.position_at(pose_times), quaternions=quaternions, stats=stats,
+                     imu=imu_samples(config, seed))
 
 
 def _merge(buf: _Buffers, noise_t, noise_pixel, noise_p, noise_d, width: int) -> tuple[np.ndarray, np.ndarray, int]:

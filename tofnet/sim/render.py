@@ -137,13 +137,26 @@ class Renderer:
         self.intrinsics = intrinsics
         self.width, self.height = sensor_size
 
-    def render(self, position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(log_intensity, depth)`` float64 arrays of ``width * height`` (row-major) at ``position`` (m)."""
+    def render(self, position: np.ndarray, rotation: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """``(log_intensity, depth)`` float64 arrays of ``width * height`` (row-major) at ``position`` (m).
+
+        ``rotation`` is the camera-to-world ``R_wc`` (3x3) of a turning camera; without
+        it the camera frame is the world frame. A turned camera renders the scene moved
+        into its frame (``R_wc^T (P − c)``, face by face), so depth stays camera-frame z.
+        """
         n = self.width * self.height
         log_i, depth = np.empty(n), np.empty(n)
         s, k = self.scene, self.intrinsics
-        _render(np.ascontiguousarray(position, dtype=np.float64), k.fx, k.fy, k.cx, k.cy, self.width, self.height,
-                s.centers, s.axes_u, s.axes_v, s.normals, s.half, s.one_sided, s.shade, s.texel, s.tex_offset,
+        cam, centers, axes_u, axes_v, normals = (np.ascontiguousarray(position, dtype=np.float64), s.centers,
+                                                 s.axes_u, s.axes_v, s.normals)
+        if rotation is not None:
+            r = np.asarray(rotation, dtype=np.float64)
+            # Rows times R is R^T applied to each row.
+            centers, axes_u, axes_v, normals = (np.ascontiguousarray(a) for a in
+                                                ((s.centers - cam) @ r, s.axes_u @ r, s.axes_v @ r, s.normals @ r))
+            cam = np.zeros(3)
+        _render(cam, k.fx, k.fy, k.cx, k.cy, self.width, self.height,
+                centers, axes_u, axes_v, normals, s.half, s.one_sided, s.shade, s.texel, s.tex_offset,
                 s.tex_shape, s.tex_flat, LOG_EPS, log_i, depth)
         if np.isnan(depth).any():
             i = int(np.flatnonzero(np.isnan(depth))[0])

@@ -38,7 +38,8 @@ def simulate(name_or_config: str | SimConfig, out_dir: str | Path | None, *, dur
     ----------
     name_or_config : a name in ``SCENARIOS`` or a ``SimConfig``.
     out_dir : folder to write (``events.txt``, ``calib.txt``, ``groundtruth.txt``,
-        ``sensor_size.txt``, ``events_depth.npy``); ``None`` writes nothing.
+        ``sensor_size.txt``, ``events_depth.npy``, and ``imu.txt`` when the config has an
+        IMU); ``None`` writes nothing.
     duration : seconds (default: the scenario's, 1 s).
     seed : textures, thresholds and noise; same seed, same events.
     sensor_size : ``(width, height)`` px; the intrinsics scale to keep the field of view.
@@ -47,9 +48,9 @@ def simulate(name_or_config: str | SimConfig, out_dir: str | Path | None, *, dur
     Returns
     -------
     summary dict: ``scenario``, ``seed``, ``duration_s``, ``sensor_size``, ``events``,
-    ``events_on``, ``events_per_s``, ``depth_min``/``depth_median``/``depth_max`` (m,
-    over events), ``renders``, ``max_render_step_px``, ``sim_time_s``,
-    ``write_time_s``, ``out_dir``, ``files``.
+    ``events_on``, ``events_per_s``, ``max_angular_speed_radps`` (a bound, 0 without rotation),
+    ``depth_min``/``depth_median``/``depth_max`` (m, over events), ``renders``,
+    ``max_render_step_px``, ``sim_time_s``, ``write_time_s``, ``out_dir``, ``files``.
     """
     config = resolve(name_or_config, duration=duration, sensor_size=sensor_size)
     result = generate(config, seed=seed, progress=progress)
@@ -67,7 +68,12 @@ def write_result(result: SimResult, out_dir: str | Path) -> list[str]:
     write_ecd(out_dir, result.events, intrinsics=result.intrinsics, times=result.pose_times,
               positions=result.positions, quaternions=result.quaternions, sensor_size=result.sensor_size,
               gt_depth=result.gt_depth)
-    return ["events.txt", "calib.txt", "groundtruth.txt", "sensor_size.txt", "events_depth.npy"]
+    files = ["events.txt", "calib.txt", "groundtruth.txt", "sensor_size.txt", "events_depth.npy"]
+    if result.imu is not None:
+        from tofnet.io.rotation import write_imu
+        write_imu(Path(out_dir) / "imu.txt", result.imu[:, 0], result.imu[:, 1:4], result.imu[:, 4:7])
+        files.append("imu.txt")
+    return files
 
 
 def summarize(result: SimResult, out_dir: str | Path | None = None, files: list[str] | None = None,
@@ -86,6 +92,7 @@ def summarize(result: SimResult, out_dir: str | Path | None = None, files: list[
         "intrinsics": {"fx": config.intrinsics.fx, "fy": config.intrinsics.fy,
                        "cx": config.intrinsics.cx, "cy": config.intrinsics.cy},
         "max_speed_mps": float(speeds.max()),
+        "max_angular_speed_radps": float(getattr(config.trajectory, "max_angular_speed", 0.0)),
         "events": int(ev.size),
         "events_on": int(np.count_nonzero(ev["p"])),
         "noise_events": result.stats["noise_events"],
