@@ -11,6 +11,9 @@ host -> worker                     worker -> host
 ("build", specs)                   ("built",)
 ("run", items, first, end)         ("run", [(key, outputs), ...])
 ("counts", keys)                   ("counts", [counts of each key])
+("get", keys, var, step)           ("get", [the variable's values of each key])
+("set", keys, var, value, step)    ("set", [None, ...])
+("param", keys, name, value)       ("param", [None, ...])
 ("finish",)                        ("finished",)
 ("fault", kind)                    (nothing; test hook, see ``_FAULTS``)
 ("stop",) or end of file           (exits)
@@ -115,6 +118,15 @@ class _Worker:
             return ("run", [(key, self.models[key].run(first, end, inputs)) for key, inputs in items])
         if kind == "counts":
             return ("counts", [self.models[key].counts() for key in message[1]])
+        if kind == "get":
+            _, keys, name, step = message
+            return ("get", [self.models[key].get_var(name, step) for key in keys])
+        if kind == "set":
+            _, keys, name, value, step = message
+            return ("set", [self.models[key].set_var(name, value, step) for key in keys])
+        if kind == "param":
+            _, keys, name, value = message
+            return ("param", [self.models[key].set_param(name, value) for key in keys])
         if kind == "finish":
             self.models = {}
             return ("finished",)

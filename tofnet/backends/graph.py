@@ -21,7 +21,7 @@ from numba import njit
 from tofnet.core.network import Network
 from tofnet.core.ports import InPort, OutPort
 from tofnet.core.process import Process
-from tofnet.errors import NetworkError
+from tofnet.errors import BackendError, NetworkError
 from tofnet.models.base import Model, ModelContext, concat
 from tofnet.models.registry import model_for
 
@@ -212,6 +212,48 @@ class GraphExecutor:
                     collected[name] = records
         self.clock = end
         return collected
+
+    # -- state between runs (sessions) ---------------------------------------------------------
+    def node(self, name: str) -> Node:
+        for node in self.nodes:
+            if node.process.name == name:
+                return node
+        self.network.process(name)  # raises naming the processes
+        raise NetworkError(f"no process {name!r}")
+
+    def get_var(self, process: str, name: str) -> np.ndarray:
+        """Variable ``name`` of ``process`` at the start of step ``clock`` (every earlier step ran)."""
+        node = self.node(process)
+        var = type(node.process).var(name)
+        value = np.asarray(node.model.get_var(name, self.clock))
+        expected = var.shape_for(node.process.sensor_size)
+        if value.shape != expected:
+            raise BackendError(f"{process}.{name}: the model returned shape {value.shape}, expected {expected}")
+        return value.astype(var.dtype, copy=False)
+
+    def set_var(self, process: str, name: str, value) -> None:
+        """Replace a settable variable before step ``clock`` runs (any array broadcastable to its shape)."""
+        node = self.node(process)
+        var = type(node.process).var(name)
+        if not var.settable:
+            raise BackendError(f"{process}.{name} is read-only ({var.doc})")
+        expected = var.shape_for(node.process.sensor_size)
+        try:
+            full = np.broadcast_to(np.asarray(value), expected).astype(var.dtype)
+        except (ValueError, TypeError) as err:
+            raise BackendError(f"{process}.{name}: expected values of shape {expected} ({var.dtype}): {err}") from None
+        node.model.set_var(name, np.ascontiguousarray(full), self.clock)
+
+    def set_param(self, process: str, name: str, value) -> None:
+        """Change a parameter from step ``clock`` on, with the declaration's checks; the model must accept it."""
+        node = self.node(process)
+        previous = node.process.values.get(name)
+        node.process.set_param(name, value)  # converts and checks, or raises naming the field
+        try:
+            node.model.set_param(name, node.process.values[name])
+        except BaseException:
+            node.process.set_param(name, previous)
+            raise
 
     def counts(self) -> dict[str, dict[str, int]]:
         """What each process counted, in the network's process order."""

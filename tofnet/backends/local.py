@@ -63,20 +63,22 @@ class LocalBackend(Backend):
 
     def open_stream(self, compiled, *, recording: Recording | None = None, intrinsics: Intrinsics | None = None,
                     velocity_source: VelocitySource | None = None, t0_us: int | None = None,
-                    probes: Iterable[str] = (), record_tot: bool = False) -> GraphStream | FusedStream:
+                    probes: Iterable[str] = (), record_tot: bool = False,
+                    fuse: bool | None = None) -> GraphStream | FusedStream:
         """A stream running ``compiled`` (a ``CompiledNetwork`` or ``Network``).
 
         What the processes need to know about the camera comes from ``recording`` (its
         metadata) or from ``intrinsics`` and ``velocity_source``. ``t0_us`` None: the
         network's ``t0``, else the first event fed. ``probes``: output ports to return
-        besides the sinks (``record_tot``: every time-of-travel counter port).
+        besides the sinks (``record_tot``: every time-of-travel counter port). ``fuse``
+        overrides the backend's choice (False: model by model, as sessions need).
         """
         network = network_of(compiled)
         known = binding(recording, intrinsics, velocity_source)
         clock = clock_of(network)
         t0 = clock.t0_us if t0_us is None else int(t0_us)
         probes = resolve_probes(network, probes, record_tot)
-        if self.fuses and self.fuse:
+        if self.fuses and (self.fuse if fuse is None else fuse):
             pipeline = paper_chain(network, self.family, probes)
             if pipeline is not None:
                 return self._fused_stream(network, pipeline, known, t0, f"{pipeline.names[1]}.counts" in probes)

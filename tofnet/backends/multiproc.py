@@ -36,7 +36,8 @@ DEFAULT_TIMEOUT = 120.0
 DEFAULT_START_TIMEOUT = 300.0
 #: Steps per chunk: one synchronisation of host and workers per core-placed process and chunk.
 DEFAULT_CHUNK_STEPS = 250
-_REPLY = {"build": "built", "run": "run", "counts": "counts", "finish": "finished"}
+_REPLY = {"build": "built", "run": "run", "counts": "counts", "finish": "finished", "get": "get", "set": "set",
+          "param": "param"}
 
 
 def compiled_of(compiled) -> CompiledNetwork:

@@ -81,6 +81,7 @@ class Placement:
     key: Key
     worker: int
     halo: tuple | None  # None: every record
+    rect: tuple[int, int, int, int] | None = None  # (x0, y0, x1, y1) held; None: the whole sensor
 
 
 class RemoteModel:
@@ -122,6 +123,35 @@ class RemoteModel:
                         parts[port].append(records)
         return {port: concat(chunks, self._dtypes[port]) for port, chunks in parts.items()}
 
+    def _each(self, kind: str, *args) -> list:
+        """Send ``(kind, keys, *args)`` to every worker holding an instance; the answers in placement order."""
+        workers = sorted({p.worker for p in self.placements})
+        replies = self.exchange({w: (kind, [p.key for p in self.placements if p.worker == w], *args)
+                                 for w in workers})
+        by_key = {}
+        for w in workers:
+            keys = [p.key for p in self.placements if p.worker == w]
+            by_key.update(zip(keys, replies[w][1]))
+        return [by_key[p.key] for p in self.placements]
+
+    def get_var(self, name: str, step: int) -> np.ndarray:
+        parts = self._each("get", name, step)
+        if len(parts) == 1 and self.placements[0].rect is None:
+            return parts[0]
+        width, height = self.process.sensor_size
+        first = np.asarray(parts[0])
+        full = np.zeros(first.shape[:-2] + (height, width), dtype=first.dtype)
+        for placement, part in zip(self.placements, parts):
+            x0, y0, x1, y1 = placement.rect
+            full[..., y0:y1, x0:x1] = part
+        return full
+
+    def set_var(self, name: str, value: np.ndarray, step: int) -> None:
+        self._each("set", name, value, step)
+
+    def set_param(self, name: str, value) -> None:
+        self._each("param", name, value)
+
     def counts(self) -> dict[str, int]:
         workers = sorted({p.worker for p in self.placements})
         keys = [p.key for p in self.placements]
@@ -149,7 +179,7 @@ def placements_for(compiled, process: Process, model_class: type, plans: list[Wo
         worker = next(p.index for p in plans if core.index in p.cores)
         key = (process.name, core.index)
         region = Region(core.x0, core.x1, core.y0, core.y1)
-        placements.append(Placement(key, worker, tuple(core.halo)))
+        placements.append(Placement(key, worker, tuple(core.halo), core.rect))
         specs.append(ModelSpec(key, model_class, type(process), process.name, values, replace(ctx, region=region)))
     return placements, specs
 

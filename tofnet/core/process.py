@@ -7,6 +7,7 @@ from typing import Any, ClassVar
 
 from tofnet.core.params import Param
 from tofnet.core.ports import InPort, OutPort, PortSpec
+from tofnet.core.vars import Var
 from tofnet.errors import NetworkError
 
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
@@ -26,6 +27,8 @@ class Process:
     inports: ClassVar[tuple[PortSpec, ...]] = ()
     outports: ClassVar[tuple[PortSpec, ...]] = ()
     params: ClassVar[tuple[Param, ...]] = ()
+    #: State variables a session can read (and some set) between runs (Lava's ``Var``).
+    vars: ClassVar[tuple[Var, ...]] = ()
     #: Per-pixel needs on a neuromorphic core, e.g. ``{"accumulators": 8, "neurons": 4}``.
     resources_per_pixel: ClassVar[dict[str, int]] = {}
     #: ``"core"``: runs on neuromorphic cores; ``"host"``: runs off-chip (input, velocity).
@@ -103,6 +106,15 @@ class Process:
     def values(self) -> dict[str, Any]:
         """A copy of the parameter values (durations in s, lengths in m)."""
         return dict(self._values)
+
+    @classmethod
+    def var(cls, name: str) -> Var:
+        """The declared variable ``name``; raises naming the ones there are."""
+        for v in cls.vars:
+            if v.name == name:
+                return v
+        known = ", ".join(v.name for v in cls.vars) or "none"
+        raise NetworkError(f"{cls.__name__} has no variable {name!r}; variables: {known}")
 
     def receptive_offsets(self) -> list[tuple[int, int]]:
         """Offsets ``(du, dv)`` (px) of the input pixels one pixel of this process reads.

@@ -382,3 +382,15 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
                 cursor[T_HI] = ts[i]
                 break
     return n_out, n_tot, OK
+
+
+@njit(cache=True)
+def flush_pending(ints, floats):
+    """Apply the buffered facilitations now (their step is complete: no spike of it will come)."""
+    ip, cursor, _, _, _, _, _, pend, rec, _, _, _ = views(ints, floats)
+    n_pend = cursor[N_PEND]
+    if n_pend > 0:
+        d, stride, row = ip[DISTANCE], ip[STRIDE], ip[ROW]
+        su, sv = np.uint64(2 * stride * d), np.uint64(2 * stride * row * d)
+        _flush(rec.view(np.int32), pend, n_pend, (cursor[CURRENT] + 1 - cursor[BASE]) << 1, su, sv)
+        cursor[N_PEND] = 0

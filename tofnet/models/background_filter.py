@@ -49,6 +49,16 @@ class BackgroundFilterStepModel(StepModel):
     def counts(self) -> dict[str, int]:
         return {"passed": self.passed, "isolated": self.isolated}
 
+    def get_var(self, name: str, step: int) -> np.ndarray:
+        if name == "last_spike":
+            return self.last.copy()
+        return super().get_var(name, step)
+
+    def set_var(self, name: str, value: np.ndarray, step: int) -> None:
+        if name != "last_spike":
+            return super().set_var(name, value, step)
+        self.last[...] = value
+
 
 class BackgroundFilterEventModel(Model):
     """The filter over a region of pixels (and its halo), in one pass over the spikes."""
@@ -76,3 +86,21 @@ class BackgroundFilterEventModel(Model):
 
     def counts(self) -> dict[str, int]:
         return {"passed": int(self._counts[0]), "isolated": int(self._counts[1])}
+
+    def _inner(self) -> np.ndarray:
+        """The region's own pixels of ``last`` (without the halo), ``[h, w]`` (a view)."""
+        p = self.pad
+        return self.last.reshape(-1, self.row)[p:-p, p:-p]
+
+    def get_var(self, name: str, step: int) -> np.ndarray:
+        if name == "last_spike":
+            return self._inner().copy()
+        return super().get_var(name, step)
+
+    def set_var(self, name: str, value: np.ndarray, step: int) -> None:
+        if name != "last_spike":
+            return super().set_var(name, value, step)
+        p, (width, height) = self.pad, self.ctx.sensor_size
+        padded = np.full((height + 2 * p, width + 2 * p), NEVER_STEP, dtype=np.int64)
+        padded[p:p + height, p:p + width] = value
+        self.last.reshape(-1, self.row)[...] = padded[self.y0:self.y1 + 2 * p, self.x0:self.x1 + 2 * p]

@@ -103,6 +103,29 @@ class Model:
         """What the process counted so far (drops, rejections, spikes), by reason."""
         return {}
 
+    def get_var(self, name: str, step: int) -> np.ndarray:
+        """Variable ``name`` (declared in ``process.vars``) at the start of ``step``: every step
+        before it has run. Per-pixel variables cover the pixels this instance holds."""
+        raise BackendError(f"{self.process.name} ({type(self.process).__name__}): its {type(self).__name__} "
+                           f"does not expose the variable {name!r}")
+
+    def set_var(self, name: str, value: np.ndarray, step: int) -> None:
+        """Replace variable ``name`` before ``step`` runs. ``value`` covers the whole sensor (per-pixel
+        variables); an instance holding a region takes its pixels (and the halo copies it keeps)."""
+        raise BackendError(f"{self.process.name} ({type(self.process).__name__}): its {type(self).__name__} "
+                           f"cannot set the variable {name!r}")
+
+    def set_param(self, name: str, value: Any) -> None:
+        """Apply a parameter the session changed (already checked by the declaration) from the next
+        step on; a model that reads the parameter only when built refuses."""
+        raise BackendError(f"{self.process.name}.{name}: cannot change while the network runs "
+                           f"({type(self).__name__} reads it when it is built); start a new session instead")
+
+    def region_view(self, full: np.ndarray) -> np.ndarray:
+        """The part of a full-sensor array (``[..., height, width]``) this instance holds."""
+        x0, x1, y0, y1 = self.ctx.bounds
+        return full[..., y0:y1, x0:x1]
+
 
 class StepModel(Model):
     """A model written one step at a time: ``step(k, inbox) -> outbox``.

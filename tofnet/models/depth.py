@@ -66,6 +66,11 @@ class DepthStepModel(StepModel):
     def counts(self) -> dict[str, int]:
         return dict(self.outcomes)
 
+    def get_var(self, name: str, step: int) -> np.ndarray:
+        if name == "a_t":
+            return np.stack([self.at_x, self.at_y])
+        return super().get_var(name, step)
+
 
 class DepthEventModel(Model):
     """The depth neurons of a region, event-driven, in the backend's arithmetic (docs/fixed_point.md)."""
@@ -80,6 +85,12 @@ class DepthEventModel(Model):
                               process.max_depth, 1, field.per_pixel, field.patch_size, field.intrinsics,
                               ctx.fixed_format)
         self.kernel = TimeOfTravelKernel(config, ctx.region, ctx.t0_us)
+        self.field = field
+
+    def get_var(self, name: str, step: int) -> np.ndarray:
+        if name == "a_t":  # the velocity update the neurons hold, as A t at every pixel
+            return self.region_view(np.stack(self.field.dense(self.kernel._held_velocity[:3])))
+        return super().get_var(name, step)
 
     def run(self, first: int, end: int, inputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         return {"depth": self.kernel.process_counts(inputs["counts"], inputs["a_t"])}

@@ -62,6 +62,29 @@ class InputModel(Model):
         self._waiting = [waiting[cut:]] if cut < len(waiting) else []
         return {"events": waiting[:cut]}
 
+    def _words(self) -> tuple[np.ndarray, int]:
+        """The filter's last-accepted times per pixel ``[H, W, words]`` and the word of any polarity."""
+        flt = self.filter
+        return flt._last.reshape(flt.height, flt.width, -1), (2 if flt.per_polarity else 0)
+
+    def get_var(self, name: str, step: int) -> np.ndarray:
+        if name == "last_accepted":
+            words, latest = self._words()
+            return words[:, :, latest].copy()
+        return super().get_var(name, step)
+
+    def set_var(self, name: str, value: np.ndarray, step: int) -> None:
+        if name != "last_accepted":
+            return super().set_var(name, value, step)
+        words, _ = self._words()
+        words[...] = np.asarray(value, dtype=np.int64)[:, :, None]  # the per-polarity words too
+
+    def set_param(self, name: str, value) -> None:
+        if name == "refractory":  # events fed from now on are filtered with the new period
+            self.filter.refractory_us = int(round(value * 1e6))
+            return
+        super().set_param(name, value)
+
     def counts(self) -> dict[str, int]:
         flt = self.filter
         return {"events_in": flt.events_in, "accepted": flt.accepted,

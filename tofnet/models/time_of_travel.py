@@ -10,6 +10,7 @@ from tofnet.core.ports import Payload
 from tofnet.errors import BackendError
 from tofnet.events import DIRECTION_OFFSETS
 from tofnet.kernels.region import KernelConfig, TimeOfTravelKernel
+from tofnet.kernels.unit_state import counters, set_counters
 from tofnet.models.base import Model, ModelContext, StepModel, records
 from tofnet.processes import TimeOfTravelProcess
 
@@ -88,6 +89,21 @@ class TimeOfTravelStepModel(_SendsCounts, StepModel):
     def counts(self) -> dict[str, int]:
         return {"spikes": self.sent}
 
+    def get_var(self, name: str, step: int) -> np.ndarray:
+        if name == "counter":
+            return self.counter.copy()
+        if name == "polarity":
+            return np.where(self.counter > 0, self.polarity, 0).astype(np.uint8)
+        return super().get_var(name, step)
+
+    def set_var(self, name: str, value: np.ndarray, step: int) -> None:
+        if name == "counter":
+            self.counter[...] = value
+        elif name == "polarity":
+            self.polarity[...] = value
+        else:
+            super().set_var(name, value, step)
+
 
 class TimeOfTravelEventModel(_SendsCounts, Model):
     """The event-driven units (facilitation timestamps, ``tofnet.kernels.time_of_travel``) of a region."""
@@ -117,3 +133,19 @@ class TimeOfTravelEventModel(_SendsCounts, Model):
 
     def counts(self) -> dict[str, int]:
         return {"spikes": self.kernel.tot_spikes}
+
+    def get_var(self, name: str, step: int) -> np.ndarray:
+        if name in ("counter", "polarity"):
+            counter, polarity = counters(self.kernel, step)
+            return counter if name == "counter" else polarity
+        return super().get_var(name, step)
+
+    def set_var(self, name: str, value: np.ndarray, step: int) -> None:
+        if name not in ("counter", "polarity"):
+            return super().set_var(name, value, step)
+        counter, polarity = counters(self.kernel, step)
+        if name == "counter":
+            counter = self.region_view(value)
+        else:
+            polarity = self.region_view(value)
+        set_counters(self.kernel, counter, polarity, step)

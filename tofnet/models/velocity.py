@@ -48,6 +48,7 @@ class VelocityModel(Model):
         self.update_every = int(process.update_every)
         self._table: tuple[int, np.ndarray] = (0, np.zeros((0, 3)))
         self._dtype = Payload.VELOCITY_TERM.dtype
+        self._last = np.full(3, np.nan)
 
     @classmethod
     def output_meta(cls, process: VelocityProcess, ctx: ModelContext) -> dict:
@@ -74,5 +75,18 @@ class VelocityModel(Model):
         if j1 <= j0:
             return {"a_t": np.empty(0, self._dtype)}
         t = self._rows(j0, j1 - j0)
+        self._last = t[-1].copy()
         return {"a_t": records(self._dtype, step=np.arange(j0, j1, dtype=np.int64) * u,
                                tx=t[:, 0], ty=t[:, 1], tz=t[:, 2])}
+
+    def get_var(self, name: str, step: int) -> np.ndarray:
+        if name == "last_velocity":
+            return self._last.copy()
+        return super().get_var(name, step)
+
+    def set_param(self, name: str, value) -> None:
+        if name == "velocity" and self.process.source == "constant":  # updates sent from now on
+            self.source = velocity_source_of("constant", value, None, None, self.process.name)
+            self._table = (0, np.zeros((0, 3)))
+            return
+        super().set_param(name, value)

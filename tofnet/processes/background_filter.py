@@ -5,6 +5,7 @@ from __future__ import annotations
 from tofnet.core.params import Param
 from tofnet.core.ports import Payload, PortSpec
 from tofnet.core.process import Process
+from tofnet.core.vars import Var
 
 
 class BackgroundActivityFilterProcess(Process):
@@ -31,6 +32,8 @@ class BackgroundActivityFilterProcess(Process):
         Param("window", "duration", "30ms", unit="s", doc="how recent a neighbour's spike must be (jAER's default)",
               minimum=0.0),
     )
+    vars = (Var("last_spike", "pixel", "int64", "steps", "the step the pixel last received a spike; -2**62 before "
+                "the first", settable=True),)
     resources_per_pixel = {"accumulators": 2, "neurons": 2}
 
     def receptive_offsets(self) -> list[tuple[int, int]]:

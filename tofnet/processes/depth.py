@@ -5,6 +5,7 @@ from __future__ import annotations
 from tofnet.core.params import Param
 from tofnet.core.ports import Payload, PortSpec
 from tofnet.core.process import Process
+from tofnet.core.vars import Var
 from tofnet.errors import NetworkError
 
 
@@ -27,6 +28,8 @@ class DepthProcess(Process):
         Param("min_depth", "length", 0.05, unit="m", doc="estimates at or below are rejected", minimum=0.0),
         Param("max_depth", "length", 20.0, unit="m", doc="estimates at or above are rejected", minimum=0.0),
     )
+    vars = (Var("a_t", "channels", "float64", "px*m/s", "A t each neuron holds: the last update that arrived "
+                "(0 before the first)", channels=2),)
     # 4 time differences + 2 velocity terms (paper §4.2); one neuron.
     resources_per_pixel = {"accumulators": 6, "neurons": 1}
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from tofnet.core.params import Param
 from tofnet.core.ports import Payload, PortSpec
 from tofnet.core.process import Process
+from tofnet.core.vars import Var
 
 #: Default refractory period. An edge makes each pixel it crosses fire a burst of
 #: events (a 1-2 px edge takes 1-2 pixel crossings to pass); a refractory period
@@ -39,4 +40,6 @@ class InputProcess(Process):
         Param("t0", "duration", None, unit="s", optional=True,
               doc="start of step 0; the first event's time when omitted"),
     )
+    vars = (Var("last_accepted", "pixel", "int64", "µs", "time of the pixel's last accepted event (any polarity); "
+                "-2**62 before the first", settable=True),)
     placement = "host"

@@ -5,6 +5,7 @@ from __future__ import annotations
 from tofnet.core.params import Param
 from tofnet.core.ports import Payload, PortSpec
 from tofnet.core.process import Process
+from tofnet.core.vars import Var
 
 
 class TimeOfTravelProcess(Process):
@@ -24,6 +25,10 @@ class TimeOfTravelProcess(Process):
         Param("distance", "int", 1, unit="px", doc="pixels between facilitating and trigger pixel", minimum=1),
         Param("counter_bits", "int", 8, unit="bits", doc="width of the unsigned counter", minimum=1, maximum=30),
     )
+    vars = (Var("counter", "channels", "int64", "steps", "the counter each unit shows at the start of the step "
+                "(0: idle), channels +u, -u, +v, -v", channels=4, settable=True),
+            Var("polarity", "channels", "uint8", "", "the polarity of the unit's last facilitation (0 when idle)",
+                channels=4, settable=True))
     # 4 units x (trigger + facilitating) accumulators; 4 neurons (paper §4.1).
     resources_per_pixel = {"accumulators": 8, "neurons": 4}
 

@@ -1,0 +1,255 @@
+"""Run control, Lava style: run a network some steps at a time, read and set its state in between.
+
+    with Session(network, recording, backend="fixed") as s:
+        s.run(steps=10)                              # Lava: proc.run(RunSteps(10))
+        s.get("time_of_travel.counter")              # Lava: var.get()   -> [4, H, W] at step 10
+        s.set("input.refractory", "30ms")            # a parameter, from step 10 on
+        s.run(until=0.5)                             # to 0.5 s after t0
+        result = s.finish()                          # the rest; equal to one uninterrupted run
+
+The session keeps the network's state between runs: running in chunks of any size gives
+exactly the records of one run (tests/test_session.py, every backend). It runs the models
+one by one (never the fused kernel), so every process's state can be read. Docs:
+docs/sessions.md.
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from typing import Any, Iterable
+
+import numpy as np
+
+from tofnet.backends.base import Backend, RunResult
+from tofnet.backends.registry import get_backend
+from tofnet.backends.runtime import clock_of, start_time_us
+from tofnet.backends.stream import Collected
+from tofnet.core.network import Network
+from tofnet.errors import BackendError, TofnetError
+from tofnet.io.recording import Recording
+from tofnet.monitor import Monitor
+
+
+class Session:
+    """A network open on a backend and a recording (or a live source), advanced on request.
+
+    ``network``: a ``Network`` or ``CompiledNetwork``; ``recording``: the events to step
+    through (None: a live source, give ``intrinsics``/``velocity_source`` and ``feed``
+    events); ``backend``: a name or a ``Backend``; ``probes``: output ports to keep besides
+    the sinks; ``monitors``: ``Monitor`` objects or their strings (``"proc.var@x,y"``).
+    ``step`` is the next step to run: every step before it has run. The session works on
+    its own copy of the network: ``set`` never changes the caller's processes.
+    """
+
+    def __init__(self, network, recording: Recording | None = None, *, backend: str | Backend = "fixed",
+                 backend_options: dict | None = None, compile_options: dict | None = None,
+                 probes: Iterable[str] = (), monitors: Iterable[Monitor | str] = (), intrinsics=None,
+                 velocity_source=None, t0_us: int | None = None):
+        from tofnet.compiler import CompiledNetwork, compile_network
+
+        compiled = network if isinstance(network, CompiledNetwork) else compile_network(
+            network, **(compile_options or {}))
+        self.compiled = copy.deepcopy(compiled)  # set() changes parameters: of this session's copy only
+        self.network: Network = self.compiled.network
+        self.recording = recording
+        self.backend = get_backend(backend, **(backend_options or {})) if isinstance(backend, str) else backend
+        self.monitors = [m if isinstance(m, Monitor) else Monitor.parse(m) for m in monitors]
+        ports = self._bind_monitors()
+        clock = clock_of(self.network)
+        if recording is not None and t0_us is None:
+            t0_us = start_time_us(clock.t0_us, recording)
+        self._resource = None
+        options = dict(recording=recording, intrinsics=intrinsics, velocity_source=velocity_source, t0_us=t0_us,
+                       probes=list(dict.fromkeys([*probes, *ports])))
+        self.stream = self._open(options)
+        self.timestep_us = self.stream.timestep_us
+        self._cursor = 0  # next event of the recording to feed
+        self._collected = Collected()
+        self._state = "open"
+        self._started = time.perf_counter()
+        self._sample()
+
+    # -- opening and closing --------------------------------------------------------------------
+    def _open(self, options: dict):
+        backend = self.backend
+        if callable(getattr(backend, "session", None)):  # multiproc: workers kept for the session
+            self._resource = backend.session(self.compiled)
+            self._resource.open()
+            try:
+                return self._resource.open_stream(**options)
+            except BaseException:
+                self._resource.close(graceful=False)
+                raise
+        opener = getattr(backend, "open_stream", None)
+        if opener is None:
+            raise BackendError(f"backend {backend.name!r} offers no streams, which a session needs")
+        try:
+            return opener(self.compiled, fuse=False, **options)
+        except TypeError:
+            return opener(self.compiled, **options)
+
+    def _bind_monitors(self) -> list[str]:
+        """Check each monitor's target; the ports among them become probes."""
+        ports = []
+        for monitor in self.monitors:
+            process = self.network.process(monitor.process)
+            if any(v.name == monitor.name for v in type(process).vars):
+                monitor.kind = "var"
+            else:
+                process.port(monitor.name)  # raises naming the ports
+                monitor.kind = "port"
+                ports.append(monitor.target)
+        return ports
+
+    def __enter__(self) -> "Session":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    def stop(self) -> None:
+        """Release what the backend holds (multiproc workers); the session cannot run after this."""
+        if self._resource is not None:
+            resource, self._resource = self._resource, None
+            resource.close(graceful=self._state != "failed")
+        if self._state == "open":
+            self._state = "stopped"
+
+    # -- where it is ----------------------------------------------------------------------------
+    @property
+    def executor(self):
+        if self.stream.executor is None:
+            raise BackendError("session: no event has come yet, so step 0 has no start time (feed events first)")
+        return self.stream.executor
+
+    @property
+    def step(self) -> int:
+        """The next step to run (every step before it has run)."""
+        return self.stream.executor.clock if self.stream.executor is not None else 0
+
+    @property
+    def time(self) -> float:
+        """Seconds from step 0's start to the start of ``step``."""
+        return self.step * self.timestep_us * 1e-6
+
+    def _check_open(self) -> None:
+        if self._state != "open":
+            raise BackendError(f"session is {self._state}; open a new one")
+
+    # -- running --------------------------------------------------------------------------------
+    def run(self, steps: int | None = None, *, until: float | None = None) -> dict[str, np.ndarray]:
+        """Run ``steps`` more steps, or up to ``until`` seconds after step 0's start, or (neither)
+        to the step of the recording's last event. Returns what sinks and probes sent meanwhile."""
+        self._check_open()
+        if self.recording is None:
+            raise BackendError("session on a live source: use feed(events, until_us=...)")
+        if steps is not None and until is not None:
+            raise TofnetError("run: give steps or until, not both")
+        t0, dt = self.stream.t0_us, self.timestep_us
+        if steps is not None:
+            if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
+                raise TofnetError(f"run: steps must be a whole number >= 0, got {steps!r}")
+            target = self.step + int(steps)
+        elif until is not None:
+            target = max(self.step, int(np.ceil(float(until) * 1e6 / dt - 1e-9)))
+        else:
+            t = self.recording.events["t"]
+            target = max(self.step, (int(t[-1]) - t0) // dt + 1 if len(t) else 0)
+        out = Collected()
+        for boundary in self._boundaries(target):
+            events = self.recording.events
+            end = int(np.searchsorted(events["t"], t0 + boundary * dt, side="left"))
+            out.add(self._guard(lambda: self.stream.feed_all(events[self._cursor:end], until_us=t0 + boundary * dt)))
+            self._cursor = end
+            self._sample()
+        produced = out.joined(list(out.parts), lambda name: np.empty(0))
+        self._keep(produced)
+        return produced
+
+    def feed(self, events: np.ndarray, until_us: int | None = None) -> dict[str, np.ndarray]:
+        """Live source: feed events (time order); the records of the steps they completed."""
+        self._check_open()
+        produced = self._guard(lambda: self.stream.feed_all(events, until_us))
+        self._keep(produced)
+        self._sample()
+        return produced
+
+    def _keep(self, produced: dict[str, np.ndarray]) -> None:
+        self._collected.add(produced)
+        for m in self.monitors:
+            if m.kind == "port" and m.target in produced and len(produced[m.target]):
+                m.record_port(produced[m.target])
+
+    def _boundaries(self, target: int) -> list[int]:
+        """Where to stop on the way to ``target``: every sampling step of a variable monitor, and ``target``."""
+        stops = {target}
+        for m in self.monitors:
+            if m.kind == "var":
+                first = (self.step // m.every + 1) * m.every
+                stops.update(range(first, target, m.every))
+        return sorted(s for s in stops if s > self.step) or [target]
+
+    def _guard(self, action):
+        try:
+            return action()
+        except BaseException:
+            self._state = "failed"
+            self.stop()
+            raise
+
+    def _sample(self) -> None:
+        if self.stream.executor is None:
+            return
+        step = self.step
+        for m in self.monitors:
+            if m.kind == "var" and step % m.every == 0 and (not m.steps or m.steps[-1] != step):
+                m.record_var(step, self.get(m.target))
+
+    def finish(self) -> RunResult:
+        """Run what is left of the recording and the steps still in flight; the whole run's result
+        (every output since the session opened, every count). The session ends."""
+        self._check_open()
+        if self.recording is not None:
+            self.run()
+        result = self._guard(self.stream.close)
+        self._keep(result.outputs)
+        result.outputs = self._collected.joined(result.payloads, self.stream._empty)
+        result.wall_time = time.perf_counter() - self._started
+        self._state = "finished"
+        self.stop()
+        return result
+
+    # -- state ----------------------------------------------------------------------------------
+    def _split(self, name: str) -> tuple[Any, str]:
+        process_name, _, item = str(name).partition(".")
+        if not item:
+            raise TofnetError(f"expected PROCESS.NAME (a variable or a parameter), got {name!r}")
+        return self.network.process(process_name), item
+
+    def get(self, name: str):
+        """A variable at the start of ``step`` (``"time_of_travel.counter"``) or a parameter's value."""
+        process, item = self._split(name)
+        if any(v.name == item for v in type(process).vars):
+            return self.executor.get_var(process.name, item)
+        if item in process.values:
+            return process.values[item]
+        variables = ", ".join(v.name for v in type(process).vars) or "none"
+        raise TofnetError(f"{name}: {process.name} ({type(process).__name__}) has no variable or parameter "
+                          f"{item!r}; variables: {variables}; parameters: {', '.join(process.values)}")
+
+    def set(self, name: str, value) -> None:
+        """Set a variable (before ``step`` runs) or a parameter (from ``step`` on); see docs/sessions.md."""
+        self._check_open()
+        process, item = self._split(name)
+        if any(v.name == item for v in type(process).vars):
+            self.executor.set_var(process.name, item, value)
+        else:
+            self.executor.set_param(process.name, item, value)
+
+    def outputs(self) -> dict[str, np.ndarray]:
+        """Every record the sinks and probes sent so far."""
+        return self._collected.joined(list(self._collected.parts), lambda name: np.empty(0))
+
+    def counts(self) -> dict[str, dict[str, int]]:
+        return self.executor.counts()
