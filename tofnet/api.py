@@ -68,10 +68,13 @@ def apply_overrides(network: Network, **values: Any) -> None:
 
 def run(recording: Recording, network: Network | None = None, *, backend: str = DEFAULT_BACKEND,
         backend_options: dict | None = None, compile_options: dict | None = None, record_tot: bool = False,
-        probes: tuple[str, ...] | list[str] = (), progress: ProgressCallback | None = None) -> tuple[RunResult, Any]:
+        probes: tuple[str, ...] | list[str] = (), monitors: list | tuple = (),
+        progress: ProgressCallback | None = None) -> tuple[RunResult, Any]:
     """Compile ``network`` (default: the paper's, sized to the recording) and run it on ``recording``.
 
     ``probes`` names output ports (``"process.port"``) to return besides the sinks.
+    ``monitors`` (``tofnet.Monitor`` or ``"process.var@x,y"`` strings) are recorded while it runs,
+    through a ``Session`` (model by model); ``result.extra["monitors"]`` holds them.
     Returns ``(result, compiled)``.
     """
     from tofnet.backends.registry import get_backend
@@ -80,6 +83,24 @@ def run(recording: Recording, network: Network | None = None, *, backend: str = 
     if network is None:
         network = depth_network(recording.sensor_size or (240, 180))
     compiled = compile_network(network, **(compile_options or {}))
+    if monitors:
+        from tofnet.session import Session
+        with Session(compiled, recording, backend=backend, backend_options=backend_options, probes=probes,
+                     record_tot=record_tot, monitors=monitors) as session:
+            result = session.finish()
+        result.extra["monitors"] = session.monitors
+        return result, compiled
     result = get_backend(backend, **(backend_options or {})).run(compiled, recording, record_tot=record_tot,
                                                                  probes=probes, progress=progress)
     return result, compiled
+
+
+def constant_velocity(network: Network, text: str) -> None:
+    """``--velocity TX,TY,TZ``: every velocity process sends this constant (m/s, camera frame)."""
+    try:
+        value = [float(v) for v in str(text).split(",")]
+    except ValueError:
+        raise NetworkError(f"--velocity: expected TX,TY,TZ in m/s, got {text!r}") from None
+    for process in network.of_type(VelocityProcess):
+        process.set_param("velocity", value)
+        process.set_param("source", "constant")

@@ -36,16 +36,18 @@ class Session:
 
     ``network``: a ``Network`` or ``CompiledNetwork``; ``recording``: the events to step
     through (None: a live source, give ``intrinsics``/``velocity_source`` and ``feed``
-    events); ``backend``: a name or a ``Backend``; ``probes``: output ports to keep besides
-    the sinks; ``monitors``: ``Monitor`` objects or their strings (``"proc.var@x,y"``).
+    events); ``backend``: a name, a ``Backend``, or an open ``MultiprocSession`` (whose
+    workers it then uses and leaves running); ``probes``: output ports to keep besides
+    the sinks (``record_tot``: every time-of-travel counter port); ``monitors``: ``Monitor``
+    objects or their strings (``"proc.var@x,y"``).
     ``step`` is the next step to run: every step before it has run. The session works on
     its own copy of the network: ``set`` never changes the caller's processes.
     """
 
     def __init__(self, network, recording: Recording | None = None, *, backend: str | Backend = "fixed",
                  backend_options: dict | None = None, compile_options: dict | None = None,
-                 probes: Iterable[str] = (), monitors: Iterable[Monitor | str] = (), intrinsics=None,
-                 velocity_source=None, t0_us: int | None = None):
+                 probes: Iterable[str] = (), record_tot: bool = False, monitors: Iterable[Monitor | str] = (),
+                 intrinsics=None, velocity_source=None, t0_us: int | None = None):
         from tofnet.compiler import CompiledNetwork, compile_network
 
         compiled = network if isinstance(network, CompiledNetwork) else compile_network(
@@ -61,7 +63,7 @@ class Session:
             t0_us = start_time_us(clock.t0_us, recording)
         self._resource = None
         options = dict(recording=recording, intrinsics=intrinsics, velocity_source=velocity_source, t0_us=t0_us,
-                       probes=list(dict.fromkeys([*probes, *ports])))
+                       probes=list(dict.fromkeys([*probes, *ports])), record_tot=record_tot)
         self.stream = self._open(options)
         self.timestep_us = self.stream.timestep_us
         self._cursor = 0  # next event of the recording to feed
@@ -73,6 +75,8 @@ class Session:
     # -- opening and closing --------------------------------------------------------------------
     def _open(self, options: dict):
         backend = self.backend
+        if hasattr(backend, "pids") and callable(getattr(backend, "open_stream", None)):
+            return backend.open_stream(self.compiled, **options)  # an open multiproc session: its workers, not ours
         if callable(getattr(backend, "session", None)):  # multiproc: workers kept for the session
             self._resource = backend.session(self.compiled)
             self._resource.open()
@@ -101,6 +105,20 @@ class Session:
                 monitor.kind = "port"
                 ports.append(monitor.target)
         return ports
+
+    def add_monitors(self, monitors: Iterable[Monitor | str]) -> None:
+        """Start recording more monitors from ``step`` on (a port must be a sink or probed since the
+        session opened)."""
+        added = [m if isinstance(m, Monitor) else Monitor.parse(m) for m in monitors]
+        kept, self.monitors = self.monitors, added
+        ports = self._bind_monitors()
+        self.monitors = kept + added
+        wanted = set(self.stream.sinks) | set(self.stream.payloads)
+        missing = [p for p in ports if p not in wanted]
+        if missing:
+            raise TofnetError(f"monitor {missing[0]}: that port was not probed when the session opened; "
+                              "pass it in probes= (or as a monitor) to Session()")
+        self._sample()
 
     def __enter__(self) -> "Session":
         return self

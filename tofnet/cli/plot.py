@@ -14,6 +14,8 @@ KIND_HELP = {
     "error": "camera trajectory and windowed relative error over time (Fig. 3)",
     "cloud": "estimates back-projected to 3D with the camera path (Fig. 1)",
     "all": "every figure the recording supports",
+    "units": "the four time-of-travel units of chosen pixels at work: counters, spikes, depth (Fig. 2); "
+             "runs the network, so DEPTH is not needed",
 }
 
 
@@ -23,7 +25,7 @@ def register(subparsers) -> None:
                               description=f"Draw depth estimates as PNG figures. Kinds - {kinds}.")
     p.add_argument("kind", choices=tuple(KIND_HELP), help="which figure")
     p.add_argument("recording", help="the recording the depth was computed from (ECD folder or events file)")
-    p.add_argument("depth", help="depth estimates written by `tofnet run` (.npz)")
+    p.add_argument("depth", nargs="?", help="depth estimates written by `tofnet run` (.npz); not for 'units'")
     p.add_argument("--out", help="PNG to write (a folder for 'all'); default: next to DEPTH, "
                                  "named <depth>_<kind>.png")
     p.add_argument("--window", metavar="START:END|LENGTH",
@@ -33,11 +35,21 @@ def register(subparsers) -> None:
     p.add_argument("--reduce", choices=("latest", "median"), default="latest",
                    help="depth map: each pixel's latest or median depth in the window (default latest)")
     p.add_argument("--no-gt", action="store_true", help="leave out the ground truth panels and overlays")
+    g = p.add_argument_group("units")
+    g.add_argument("--pixel", action="append", default=[], metavar="X,Y",
+                   help="a pixel whose units to draw; repeatable (default: the busiest pixel of the window)")
+    g.add_argument("--spec", help="YAML network spec (default: the paper's network)")
+    g.add_argument("--backend", default="fixed", help="backend that runs it (default fixed)")
+    g.add_argument("--velocity", metavar="TX,TY,TZ", help="constant camera velocity in m/s instead of the poses")
     add_timing_options(p)
     p.set_defaults(handler=handle)
 
 
 def handle(args) -> int:
+    if args.kind == "units":
+        return handle_units(args)
+    if args.depth is None:
+        raise TofnetError(f"plot {args.kind}: give the depth file written by `tofnet run` after the recording")
     from tofnet.eval.metrics import require_timing
     from tofnet.eval.plots import available_kinds, figure, save_figure
     from tofnet.units import seconds
@@ -72,4 +84,46 @@ def handle(args) -> int:
         except OSError as err:
             raise DataError(f"{path}: cannot write the figure: {err.strerror or err}") from None
         print(written)
+    return 0
+
+
+def handle_units(args) -> int:
+    """``tofnet plot units REC [--pixel X,Y] [--window 0.1:0.15]``."""
+    import numpy as np
+
+    from tofnet.api import constant_velocity, load_network
+    from tofnet.eval.plots import save_figure
+    from tofnet.eval.units import unit_traces, units_figure
+    from tofnet.io import read_recording
+    from tofnet.units import seconds
+
+    recording = read_recording(args.recording)
+    network, _, _, _ = load_network(args.spec, sensor_size=None if args.spec else recording.sensor_size)
+    if args.velocity:
+        constant_velocity(network, args.velocity)
+    start, end = 0.1, 0.15
+    if args.window:
+        if ":" not in args.window:
+            raise TofnetError(f"--window for units: expected START:END in seconds since the start, got {args.window!r}")
+        a, b = args.window.split(":", 1)
+        start, end = seconds(a, "--window start"), seconds(b, "--window end")
+    t = recording.events["t"]
+    if args.pixel:
+        try:
+            pixels = [tuple(int(v) for v in text.split(",")) for text in args.pixel]
+        except ValueError:
+            raise TofnetError(f"--pixel: expected X,Y, got {args.pixel}") from None
+        if any(len(p) != 2 for p in pixels):
+            raise TofnetError(f"--pixel: expected X,Y, got {args.pixel}")
+    else:  # the busiest pixel of the window
+        inside = (t >= t[0] + start * 1e6) & (t < t[0] + end * 1e6)
+        width = int(recording.events["x"].max()) + 1
+        flat = recording.events["y"][inside].astype(np.int64) * width + recording.events["x"][inside]
+        if not len(flat):
+            raise TofnetError(f"no events in the window {start:g}..{end:g} s")
+        busiest = int(np.bincount(flat).argmax())
+        pixels = [(busiest % width, busiest // width)]
+    traces = unit_traces(recording, network, pixels, start, end, backend=args.backend)
+    out = Path(args.out) if args.out else Path(args.recording).with_name(Path(args.recording).stem + "_units.png")
+    print(save_figure(units_figure(traces), out))
     return 0

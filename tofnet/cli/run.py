@@ -26,6 +26,10 @@ def register(subparsers) -> None:
                    help="also save the time-of-travel spikes (next to --out, *_tot.npz)")
     p.add_argument("--probe", action="append", default=[], metavar="PROCESS.PORT",
                    help="also save what an output port sent (next to --out: OUT.PROCESS.PORT.npz); repeatable")
+    p.add_argument("--monitor", action="append", default=[], metavar="PROCESS.VAR[@X,Y;...]",
+                   help="record a state variable (or a port) at the start of every step, optionally at chosen "
+                        "pixels (next to --out: OUT.monitor.PROCESS.VAR.npz); repeatable; runs model by model")
+    p.add_argument("--monitor-every", type=int, default=1, metavar="K", help="sample monitors every K steps")
     p.add_argument("--json", metavar="FILE", help="write the run summary as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress, summary only")
     p.set_defaults(handler=handle)
@@ -49,7 +53,7 @@ def add_network_options(p: argparse.ArgumentParser) -> None:
 
 def build_network(args, recording_sensor_size):
     """The network the options describe, and the compile options and backend it names."""
-    from tofnet.api import apply_overrides, load_network
+    from tofnet.api import apply_overrides, constant_velocity, load_network
     from tofnet.core.params import parse_size  # the same WxH parsing as the spec
 
     sensor = parse_size(args.sensor_size, "--sensor-size") if args.sensor_size else None
@@ -59,14 +63,7 @@ def build_network(args, recording_sensor_size):
                     counter_bits=args.counter_bits, velocity_per=args.velocity_per,
                     update_every=args.update_every)
     if args.velocity:
-        from tofnet.processes import VelocityProcess
-        try:
-            value = [float(v) for v in args.velocity.split(",")]
-        except ValueError:
-            raise TofnetError(f"--velocity: expected TX,TY,TZ in m/s, got {args.velocity!r}") from None
-        for process in network.of_type(VelocityProcess):
-            process.set_param("velocity", value)
-            process.set_param("source", "constant")
+        constant_velocity(network, args.velocity)
     if args.patch:
         compile_options["patch"] = "auto" if args.patch == "auto" else parse_size(args.patch, "--patch")
     return network, compile_options, spec_backend, backend_options
@@ -85,9 +82,11 @@ def handle(args) -> int:
     if args.backend and args.backend != spec_backend:
         backend_options = {}  # the spec's options belong to the spec's backend
     progress = None if args.quiet else Progress(f"tofnet run [{backend}]")
+    from tofnet.monitor import Monitor
+    monitors = [Monitor.parse(text, args.monitor_every) for text in args.monitor]
     result, compiled = run(recording, network, backend=backend, backend_options=backend_options,
                            compile_options=compile_options, record_tot=args.record_tot, probes=args.probe,
-                           progress=progress)
+                           monitors=monitors, progress=progress)
     if progress:
         progress.done()
     out = Path(args.out)
@@ -125,6 +124,10 @@ def write_outputs(out: Path, result, summary: dict, record_tot: bool) -> dict[st
             path = out.with_name(f"{out.stem}.{name}.npz")
         np.savez_compressed(path, **{field: records[field] for field in records.dtype.names})
         written[name] = path
+    for monitor in result.extra.get("monitors", []):
+        path = out.with_name(f"{out.stem}.monitor.{monitor.target}.npz")
+        np.savez_compressed(path, **monitor.arrays())
+        written[f"monitor {monitor.target}"] = path
     return written
 
 
@@ -150,7 +153,9 @@ def format_summary(summary: dict, result, written: dict, network_width) -> str:
                 told = ", ".join(f"{k.replace('_', ' ')} {v:,}" for k, v in counts.items())
                 lines.append(f"{process:<14} {told}")
     for name, path in written.items():
-        if len(depth_names) != 1 or name != depth_names[0]:
+        if name.startswith("monitor "):
+            lines.append(f"monitor        {name[8:]} -> {path}")
+        elif len(depth_names) != 1 or name != depth_names[0]:
             lines.append(f"output         {len(result.outputs[name]):>12,}  {name} -> {path}")
     for name in depth_names:
         z = result.outputs[name]["z"]

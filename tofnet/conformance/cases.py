@@ -41,6 +41,8 @@ class Case:
     name: str
     doc: str
     build: Callable[[], Scene] = field(repr=False)
+    #: Steps at which every process's variables are compared too (through sessions).
+    variables_at: tuple[int, ...] = ()
 
 
 def net(sensor: tuple[int, int], velocity=(-0.5, 0.0, 0.0), *, refractory: Any = 0, t0: Any = 0,
@@ -267,6 +269,14 @@ def _user_process() -> Scene:
     vel.a_t.connect(dep.a_t)
     network = Network([inp, gate, tot, dep, vel], name="user-process")
     return Scene(network, rec(moving_pattern(size, flow, 200_000, seed=11)), (7, 5))
+
+
+# -- state variables read mid-run (sessions) ------------------------------------------------
+for _base, _steps in (("texture-blobs", (9, 60, 171)), ("patch-d2-ragged", (25, 90)), ("graph-denoised", (40, 120)),
+                      ("update-every", (33, 150))):
+    _found = next(c for c in CASES if c.name == _base)
+    CASES.append(Case(f"variables-{_base}", f"{_found.doc}; every variable compared at steps "
+                      f"{', '.join(map(str, _steps))}", _found.build, _steps))
 
 
 def get_case(name: str) -> Case:

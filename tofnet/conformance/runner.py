@@ -11,6 +11,7 @@ from tofnet.backends.base import Backend
 from tofnet.backends.registry import get_backend
 from tofnet.conformance.cases import CASES, Case, get_case
 from tofnet.conformance.compare import compare, mode_of
+from tofnet.conformance.variables import compare_variables
 from tofnet.errors import BackendError, TofnetError
 
 DEFAULT_BASELINE = "reference"
@@ -45,6 +46,14 @@ class BackendRunner:
     @property
     def arithmetic(self) -> str:
         return self.backend.arithmetic
+
+    def session_or_backend(self):
+        """What a ``Session`` should run on: the open multiproc session (its workers), else the backend."""
+        if callable(getattr(self.backend, "session", None)):
+            if self.session is None:
+                self.session = self.stack.enter_context(self.backend.session())
+            return self.session
+        return self.backend
 
     def run(self, compiled, recording, *, record_tot: bool = True, probes=()):
         if not callable(getattr(self.backend, "session", None)):
@@ -104,6 +113,9 @@ def run_suite(backend: str | Backend, against: str | Backend = DEFAULT_BASELINE,
                         cache[key] = expected
                 got = runners["test"].run(compiled, scene.recording)
                 comparison = compare(got, expected, mode, compiled.network)
+                if case.variables_at:
+                    comparison.differences += compare_variables(compiled, scene.recording, runners["test"],
+                                                                runners["base"], case.variables_at)
                 outcome = CaseResult(case.name, test.name, base.name, mode, comparison.ok, comparison.estimates,
                                      comparison.first, time.perf_counter() - started)
             except Exception as err:  # a backend's bug is a failed case, not the end of the suite

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from tofnet.errors import BackendError
 from tofnet.kernels import time_of_travel as tt
 from tofnet.kernels.region import TimeOfTravelKernel
 
@@ -35,11 +34,9 @@ def counters(kernel: TimeOfTravelKernel, now: int) -> tuple[np.ndarray, np.ndarr
 
 
 def set_counters(kernel: TimeOfTravelKernel, counter: np.ndarray, polarity: np.ndarray, now: int) -> None:
-    """Make the units show ``counter`` (``[4, H, W]``, 0 = idle) with ``polarity`` at the start of ``now``."""
-    maximum = (1 << kernel.config.counter_bits) - 1
+    """Make the units show ``counter`` (``[4, H, W]``, 0 = idle, at most the counter maximum) with
+    ``polarity`` at the start of ``now``."""
     counter = np.asarray(counter, dtype=np.int64)
-    if counter.min(initial=0) < 0 or counter.max(initial=0) > maximum:
-        raise BackendError(f"counter values must be in 0..{maximum} ({kernel.config.counter_bits}-bit counters)")
     tt.flush_pending(kernel._ints, kernel._floats)
     base = int(kernel._cursor[tt.BASE])
     facilitated = now - counter.transpose(1, 2, 0)  # the step a of each running unit

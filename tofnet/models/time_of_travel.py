@@ -44,6 +44,15 @@ def check_one_spike_per_pixel(process, step: int, xs: np.ndarray, ys: np.ndarray
                            "a time-of-travel unit takes at most one (the input process sends one)")
 
 
+def check_counter_values(process: TimeOfTravelProcess, name: str, value: np.ndarray) -> None:
+    """Counters must be 0 (idle) .. the counter maximum; polarities 0 or 1."""
+    top = (1 << int(process.counter_bits)) - 1 if name == "counter" else 1
+    if value.min(initial=0) < 0 or value.max(initial=0) > top:
+        what = f"counter values must be in 0..{top} ({process.counter_bits}-bit counters)" if name == "counter" \
+            else "polarity values must be 0 or 1"
+        raise BackendError(f"{process.name}.{name}: {what}")
+
+
 class TimeOfTravelStepModel(_SendsCounts, StepModel):
     """Algorithm 1 on dense state: a counter and a stored polarity per unit, every step."""
 
@@ -97,6 +106,8 @@ class TimeOfTravelStepModel(_SendsCounts, StepModel):
         return super().get_var(name, step)
 
     def set_var(self, name: str, value: np.ndarray, step: int) -> None:
+        if name in ("counter", "polarity"):
+            check_counter_values(self.process, name, value)
         if name == "counter":
             self.counter[...] = value
         elif name == "polarity":
@@ -143,6 +154,7 @@ class TimeOfTravelEventModel(_SendsCounts, Model):
     def set_var(self, name: str, value: np.ndarray, step: int) -> None:
         if name not in ("counter", "polarity"):
             return super().set_var(name, value, step)
+        check_counter_values(self.process, name, value)
         counter, polarity = counters(self.kernel, step)
         if name == "counter":
             counter = self.region_view(value)

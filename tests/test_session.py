@@ -1,0 +1,184 @@
+"""Run control: chunks of any size equal one run, variables, parameters, monitors, cleanup — on every backend."""
+
+import contextlib
+import os
+
+import numpy as np
+import pytest
+
+from tofnet import Monitor, Session
+from tofnet.backends.multiproc import MultiprocBackend
+from tofnet.backends.registry import available_backends, get_backend
+from tofnet.compiler import compile_network
+from tofnet.errors import BackendError, NetworkError, TofnetError
+from tofnet.io.recording import Recording
+from tofnet.kernels.input_filter import InputFilter
+from tofnet.networks import denoised_network, depth_network
+from tofnet.testing import TEST_INTRINSICS, merge_events, moving_pattern, noise_events
+
+SENSOR = (24, 16)
+VELOCITY = {"source": "constant", "velocity": [-0.5, 0.2, 0.1], "per": "pixel"}
+RECORDING = Recording(merge_events(moving_pattern(SENSOR, (300, -150), 100_000, seed=1),
+                                   noise_events(SENSOR, 20, 100_000, seed=2)), intrinsics=TEST_INTRINSICS)
+COMPILED = compile_network(denoised_network(SENSOR, input={"refractory": "1ms"}, denoise={"window": "4ms"},
+                                            velocity=VELOCITY), patch=(8, 8))
+VARIABLES = ["input.last_accepted", "denoise.last_spike", "time_of_travel.counter", "time_of_travel.polarity",
+             "depth.a_t", "velocity.last_velocity"]
+
+
+@pytest.fixture(scope="module")
+def workers():
+    with MultiprocBackend(workers=2).session() as session:
+        yield session
+
+
+def backend_of(name, workers):
+    return workers if name == "multiproc" else name
+
+
+@pytest.mark.parametrize("name", available_backends())
+def test_chunks_of_1_7_and_1000_steps_equal_one_run(name, workers):
+    whole = get_backend(name, **({"workers": 2} if name == "multiproc" else {})).run(COMPILED, RECORDING,
+                                                                                      record_tot=True)
+    assert len(whole.depth) > 500
+    for chunk in (1, 7, 1000):
+        with Session(COMPILED, RECORDING, backend=backend_of(name, workers), probes=["time_of_travel.counts"]) as s:
+            while s.step < 105:
+                s.run(steps=chunk)
+            result = s.finish()
+        for key, records in whole.outputs.items():
+            assert result.outputs[key].tobytes() == records.tobytes(), (chunk, key)
+        assert result.counts == whole.counts and result.steps == whole.steps
+
+
+def test_variables_agree_across_backends_at_every_step(workers):
+    sessions = {name: Session(COMPILED, RECORDING, backend=backend_of(name, workers))
+                for name in ("reference", "float", "fixed", "multiproc")}
+    with contextlib.ExitStack() as stack:
+        for s in sessions.values():
+            stack.enter_context(s)
+        for step in (0, 13, 40, 77):
+            values = {}
+            for name, s in sessions.items():
+                s.run(steps=step - s.step)
+                assert s.step == step and s.time == pytest.approx(step * 1e-3)
+                values[name] = {v: s.get(v) for v in VARIABLES}
+            for v in VARIABLES:
+                for name in sessions:
+                    assert np.array_equal(values[name][v], values["reference"][v], equal_nan=True), (step, v, name)
+        counter = values["reference"]["time_of_travel.counter"]
+        assert counter.shape == (4, 16, 24) and counter.max() > 1 and (counter > 0).sum() > 100
+
+
+@pytest.mark.parametrize("name", ["reference", "fixed", "multiproc"])
+def test_variables_round_trip_and_read_only_ones_refuse(name, workers):
+    with Session(COMPILED, RECORDING, backend=backend_of(name, workers)) as s:
+        s.run(steps=30)
+        counter = s.get("time_of_travel.counter").copy()
+        counter[0, 3, 4], counter[1] = 7, 0
+        s.set("time_of_travel.counter", counter)
+        assert np.array_equal(s.get("time_of_travel.counter"), counter)
+        s.set("denoise.last_spike", 12)  # broadcast to every pixel
+        assert (s.get("denoise.last_spike") == 12).all()
+        s.set("input.last_accepted", np.full((16, 24), 29_000))
+        assert (s.get("input.last_accepted") == 29_000).all()
+        with pytest.raises(BackendError, match="read-only"):
+            s.set("depth.a_t", 0.0)
+        with pytest.raises(BackendError, match="shape"):
+            s.set("time_of_travel.counter", np.zeros((3, 3)))
+        with pytest.raises(BackendError, match="counter values"):
+            s.set("time_of_travel.counter", 999)
+        with pytest.raises(NetworkError, match="no variable 'nope'"):
+            s.executor.get_var("depth", "nope")
+
+
+def test_a_parameter_changed_mid_recording_applies_from_then_on():
+    net = depth_network(SENSOR, input={"refractory": "20ms"}, velocity=VELOCITY)
+    with Session(net, RECORDING) as s:
+        s.run(steps=50)
+        s.set("input.refractory", "2ms")
+        assert s.get("input.refractory") == 0.002 and net.process("input").refractory == 0.02  # the caller's is untouched
+        result = s.finish()
+    # the meaning: events before step 50 filtered with 20 ms, later ones with 2 ms
+    events, t0 = RECORDING.events, int(RECORDING.events["t"][0])
+    flt = InputFilter(SENSOR, t0, 1000, 20_000)
+    cut = int(np.searchsorted(events["t"], t0 + 50_000))
+    flt.feed(events[:cut])
+    flt.refractory_us = 2_000
+    flt.feed(events[cut:])
+    assert result.accepted == flt.accepted and result.dropped == flt.dropped
+    with pytest.raises(TofnetError, match="closed|finished"):
+        s.run(steps=1)
+
+
+def test_a_constant_velocity_changed_mid_recording():
+    net = depth_network(SENSOR, input={"refractory": "1ms"}, velocity=VELOCITY)
+    with Session(net, RECORDING) as s:
+        s.run(steps=40)
+        s.set("velocity.velocity", [-1.0, 0.4, 0.2])  # twice as fast: depths double from update 40 on
+        s.run(steps=3)
+        assert np.allclose(s.get("velocity.last_velocity"), [-1.0, 0.4, 0.2])
+        with pytest.raises(BackendError, match="cannot change"):
+            s.set("time_of_travel.distance", 2)
+        assert s.get("time_of_travel.distance") == 1
+
+
+def test_monitors_record_what_was_asked_and_no_more():
+    monitors = [Monitor("time_of_travel.counter", every=5, pixels=[(3, 4), (10, 8)]),
+                Monitor.parse("input.events@3,4;10,8"), Monitor("depth.a_t", every=50)]
+    with Session(COMPILED, RECORDING, monitors=monitors) as s:
+        s.run(steps=23)
+        s.run(steps=40)
+        result = s.finish()
+    counter, events, a_t = monitors
+    assert counter.steps == list(range(0, result.steps, 5)) and counter.values.shape == (len(counter.steps), 4, 2)
+    assert counter.values.max() > 0
+    assert a_t.values.shape == (len(a_t.steps), 2, 16, 24)
+    spikes = events.values
+    assert len(spikes) > 2 and set(zip(spikes["x"].tolist(), spikes["y"].tolist())) <= {(3, 4), (10, 8)}
+    arrays = counter.arrays()
+    assert set(arrays) == {"step", "values", "x", "y"} and arrays["x"].tolist() == [3, 10]
+    with pytest.raises(TofnetError, match="PROCESS.VAR"):
+        Monitor.parse("nonsense")
+
+
+def test_stop_releases_the_workers_at_once():
+    s = Session(COMPILED, RECORDING, backend="multiproc", backend_options={"workers": 2})
+    pids = s._resource.pids
+    s.run(steps=20)
+    s.stop()
+    assert pids and not any(os.path.exists(f"/proc/{pid}") for pid in pids)
+    with pytest.raises(BackendError, match="stopped"):
+        s.run(steps=1)
+
+
+def test_the_variables_check_catches_a_backend_reporting_wrong_counters(monkeypatch):
+    from tofnet.conformance import run_suite
+    from tofnet.models.time_of_travel import TimeOfTravelEventModel
+
+    original = TimeOfTravelEventModel.get_var
+
+    def off_by_one(self, name, step):
+        value = original(self, name, step)
+        return value + (value > 0) if name == "counter" else value
+    monkeypatch.setattr(TimeOfTravelEventModel, "get_var", off_by_one)
+    (result,) = run_suite("fixed", "reference", cases=["variables-texture-blobs"])
+    assert not result.ok and "variable time_of_travel.counter at step 9 differs" in result.first
+
+
+def test_run_monitor_and_plot_units_from_the_command_line(tmp_path):
+    from tofnet.cli import main
+    from tofnet.io import write_ecd
+
+    folder = tmp_path / "rec"
+    write_ecd(folder, RECORDING.events, intrinsics=TEST_INTRINSICS, sensor_size=SENSOR)
+    out = tmp_path / "d.npz"
+    assert main(["run", str(folder), "--out", str(out), "--velocity=-0.5,0.2,0.1", "--refractory", "1ms",
+                 "--sensor-size", "24x16", "--monitor", "time_of_travel.counter@3,4;10,8", "--monitor-every", "10",
+                 "--quiet"]) == 0
+    saved = np.load(tmp_path / "d.monitor.time_of_travel.counter.npz")
+    assert saved["values"].shape == (len(saved["step"]), 4, 2) and saved["step"][1] == 10
+    png = tmp_path / "units.png"
+    assert main(["plot", "units", str(folder), "--pixel", "10,8", "--window", "0.02:0.06", "--out", str(png),
+                 "--velocity=-0.5,0.2,0.1"]) == 0
+    assert png.stat().st_size > 10_000
