@@ -236,3 +236,22 @@ def test_bad_options_are_rejected():
         MultiprocBackend(workers=0)
     with pytest.raises(BackendError, match="timeout"):
         MultiprocBackend(timeout=0)
+
+
+def test_one_timeout_bounds_the_start_too(leak_check, monkeypatch):
+    """A worker stopped (SIGSTOP) while starting is reported after ``timeout``: start-up has no longer wait."""
+    from tofnet.backends import _channel
+    start = _channel.Channel.__init__
+
+    def start_and_stop_one(self, ctx, index):
+        start(self, ctx, index)
+        leak_check.append(self.process.pid)
+        if index == 1:
+            os.kill(self.process.pid, signal.SIGSTOP)
+    monkeypatch.setattr(_channel.Channel, "__init__", start_and_stop_one)
+    backend = MultiprocBackend(workers=2, timeout=3.0)
+    assert backend.start_timeout == 3.0
+    s = backend.session()
+    with pytest.raises(BackendError, match=r"worker 1 .* did not answer within 3 s while starting"):
+        with s:
+            pass

@@ -32,8 +32,6 @@ from tofnet.kernels.fixed_point import DEFAULT_FRAC_BITS, DEFAULT_PAYLOAD_BITS, 
 
 #: Seconds to wait for any one answer of a worker while running (a chunk, a start).
 DEFAULT_TIMEOUT = 120.0
-#: Seconds for the workers to start: spawn, import numpy/numba, load or compile the kernels.
-DEFAULT_START_TIMEOUT = 300.0
 #: Steps per chunk: one synchronisation of host and workers per core-placed process and chunk.
 DEFAULT_CHUNK_STEPS = 250
 _REPLY = {"build": "built", "run": "run", "counts": "counts", "finish": "finished", "get": "get", "set": "set",
@@ -58,7 +56,8 @@ class MultiprocBackend(Backend):
     timeout
         Seconds to wait for any one answer of a worker; a ``BackendError`` names the worker.
     start_timeout
-        Seconds for all workers to start (spawn, imports, numba cache load or compile).
+        Seconds for all workers to start (spawn, imports, numba cache load or compile);
+        default: ``timeout``, so one option bounds every wait.
     chunk_steps
         Steps run per synchronisation.
     frac_bits, payload_bits
@@ -70,9 +69,10 @@ class MultiprocBackend(Backend):
     family = "fixed"
 
     def __init__(self, workers: int | None = None, *, timeout: float = DEFAULT_TIMEOUT,
-                 start_timeout: float = DEFAULT_START_TIMEOUT, chunk_steps: int = DEFAULT_CHUNK_STEPS,
+                 start_timeout: float | None = None, chunk_steps: int = DEFAULT_CHUNK_STEPS,
                  frac_bits: int = DEFAULT_FRAC_BITS, payload_bits: int = DEFAULT_PAYLOAD_BITS):
         workers = (os.cpu_count() or 1) if workers is None else workers
+        start_timeout = timeout if start_timeout is None else start_timeout
         for label, value in (("workers", workers), ("chunk_steps", chunk_steps)):
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise BackendError(f"multiproc: {label} must be a positive whole number, got {value!r}")
