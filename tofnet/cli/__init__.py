@@ -9,7 +9,7 @@ import sys
 from tofnet.errors import TofnetError
 
 #: Subcommand modules, in the order ``tofnet --help`` lists them.
-SUBCOMMANDS = ("demo", "run", "simulate", "eval", "plot", "compile", "conformance")
+SUBCOMMANDS = ("demo", "run", "simulate", "eval", "plot", "compile", "conformance", "batch")
 
 
 def build_parser() -> argparse.ArgumentParser:
