@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from tofnet.errors import TofnetError, located
+from tofnet.errors import SpecError, TofnetError, located
 from tofnet.io.spec import _line, _parse_yaml
 
 TOP_KEYS = ("name", "description", "output", "cache", "recordings", "networks", "grid", "backend", "keep")
@@ -94,9 +94,11 @@ def load_plan(path_or_text: str | Path, *, output: str | Path | None = None) -> 
     directory for text). ``output`` overrides the plan's ``output``.
     """
     text, source, base = _read_source(path_or_text)
-    tree = _parse_yaml(text, source, empty="empty plan; expected a mapping with recordings (and networks, grid)")
-    plan = _PlanReader(tree, source, base).read(output)
-    return plan
+    try:
+        tree = _parse_yaml(text, source, empty="empty plan; expected a mapping with recordings (and networks, grid)")
+    except SpecError as err:  # the spec reader's YAML errors, already located
+        raise PlanError(str(err)) from None
+    return _PlanReader(tree, source, base).read(output)
 
 
 def _read_source(path_or_text: str | Path) -> tuple[str, str, Path]:

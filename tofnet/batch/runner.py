@@ -9,9 +9,12 @@ cancels what is left and closes the cluster; ``resume=True`` skips finished task
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
+import signal
 import sys
+import threading
 import time
 import uuid
 from dataclasses import dataclass, field
@@ -33,7 +36,11 @@ TTY_EVERY, LOG_EVERY = 0.5, 10.0
 
 @dataclass
 class BatchResult:
-    """What a batch did: every row (plan order), the files written, and counts."""
+    """What a batch did: every row (plan order), the files written, and counts.
+
+    ``wall_time_s`` covers everything (cluster start-up, tasks, table, plot);
+    ``tasks_time_s`` the tasks alone, from the first submission to the last row.
+    """
 
     plan: Plan
     rows: list[dict]
@@ -41,6 +48,7 @@ class BatchResult:
     plot: Path | None = None
     resumed: int = 0
     wall_time_s: float = 0.0
+    tasks_time_s: float = 0.0
     workers: int = 0
 
     @property
@@ -54,10 +62,13 @@ class WarmUp(WorkerPlugin):
     idempotent = True
     name = "tofnet-warm-up"
 
-    def __init__(self, backends: tuple[str, ...]):
-        self.backends = backends
+    def __init__(self, backends: tuple[str, ...], ignore_sigint: bool = False):
+        self.backends, self.ignore_sigint = backends, ignore_sigint
 
     def setup(self, worker) -> None:
+        if self.ignore_sigint and threading.current_thread() is threading.main_thread():
+            # A local cluster's workers share the terminal's Ctrl-C; the client stops them cleanly.
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
         try:
             worker.tofnet_warm_up_s = warm_up(self.backends)
         except Exception as err:  # a warm-up failure must not stop the worker: its first task compiles instead
@@ -71,8 +82,22 @@ def local_cluster(workers: int | None = None, memory_limit: str | float | None =
     number is bytes, a string like ``"2GB"``. A worker over 95 % of it is restarted.
     """
     n = workers or os.cpu_count() or 1
-    return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, memory_limit=memory_limit,
-                        host="127.0.0.1", dashboard_address=None, silence_logs=logging.CRITICAL)
+    with _sigint_ignored():  # inherited by the worker processes: Ctrl-C reaches the client only
+        return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, memory_limit=memory_limit,
+                            host="127.0.0.1", dashboard_address=None, silence_logs=logging.CRITICAL)
+
+
+@contextlib.contextmanager
+def _sigint_ignored():
+    """Ignore SIGINT while processes are started (it stays ignored in them); restore it after."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def run_batch(plan: Plan, *, scheduler: str | None = None, workers: int | None = None,
@@ -93,7 +118,7 @@ def run_batch(plan: Plan, *, scheduler: str | None = None, workers: int | None =
         done = {t.number: row for t in tasks if (row := is_complete(t)) is not None}
     todo = [t for t in tasks if t.number not in done]
     resumed = len(done)
-    n_workers = 0
+    n_workers, tasks_time = 0, 0.0
     if todo:
         cluster = None
         if client is None:
@@ -102,9 +127,11 @@ def run_batch(plan: Plan, *, scheduler: str | None = None, workers: int | None =
         try:
             active = client or own_client
             backends = tuple(sorted({t.backend or "fixed" for t in todo}))
-            active.register_plugin(WarmUp(backends))
+            active.register_plugin(WarmUp(backends, ignore_sigint=cluster is not None))
             n_workers = len(active.scheduler_info()["workers"])
-            _Execution(active, todo, done, progress, len(tasks)).run()
+            execution = _Execution(active, todo, done, progress, len(tasks))
+            execution.run()
+            tasks_time = time.perf_counter() - execution.started
         finally:
             if client is None:
                 own_client.close()
@@ -114,7 +141,7 @@ def run_batch(plan: Plan, *, scheduler: str | None = None, workers: int | None =
     parameters = list(plan.grid)
     files = write_table(rows, parameters, plan.output)
     figure = plot(rows, parameters, plan.output / "plot.png")
-    return BatchResult(plan, rows, files, figure, resumed, time.perf_counter() - started, n_workers)
+    return BatchResult(plan, rows, files, figure, resumed, time.perf_counter() - started, tasks_time, n_workers)
 
 
 class _Execution:

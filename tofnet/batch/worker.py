@@ -156,12 +156,13 @@ def is_complete(task: Task) -> dict | None:
 
 
 def warm_up(backends: tuple[str, ...] = ("fixed",)) -> float:
-    """Load (or compile) the numba kernels of a run in this process: read and run a tiny recording; seconds."""
+    """Load (or compile) the numba kernels of a task in this process: read, run and score a tiny recording; seconds."""
     import tempfile
 
     import numpy as np
 
     from tofnet.api import run
+    from tofnet.eval.metrics import evaluate
     from tofnet.io import read_recording
     from tofnet.io.ecd import write_ecd
     from tofnet.io.recording import Intrinsics
@@ -170,14 +171,16 @@ def warm_up(backends: tuple[str, ...] = ("fixed",)) -> float:
 
     started = time.perf_counter()
     size = (16, 12)
-    times = np.array([0.0, 1.0])
+    events = moving_edge(size, -50.0, "u")
     with tempfile.TemporaryDirectory(prefix="tofnet-warm-up-") as folder:
-        write_ecd(folder, moving_edge(size, -50.0, "u"), intrinsics=Intrinsics(20.0, 20.0, 7.5, 5.5), times=times,
+        write_ecd(folder, events, intrinsics=Intrinsics(20.0, 20.0, 7.5, 5.5), times=np.array([0.0, 1.0]),
                   positions=np.array([[0.0, 0, 0], [0.5, 0, 0]]), quaternions=np.array([[0.0, 0, 0, 1]] * 2),
-                  sensor_size=size)
+                  sensor_size=size, gt_depth=np.full(len(events), 0.2))
         recording = read_recording(folder)
     for backend in backends:
-        run(recording, depth_network(size), backend=backend)
+        result, _ = run(recording, depth_network(size), backend=backend)
+    evaluate(recording, result.depth, {"t0_us": result.t0_us, "timestep_us": result.timestep_us,
+                                       "latency_steps": result.latency_steps})
     return time.perf_counter() - started
 
 

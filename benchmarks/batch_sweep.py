@@ -1,0 +1,164 @@
+"""The refractory sweep through ``tofnet batch``: 1 vs 2 local Dask workers, measured in one run (by hand, not CI).
+
+    python benchmarks/batch_sweep.py
+    python benchmarks/batch_sweep.py --scenarios slider,vertical --values 5,20,60 --duration 0.3 --serial
+
+Does what ``refractory_sweep.py`` does (every built-in scenario x refractory periods,
+the paper's network, metrics against the simulated depth) as one ``tofnet batch``
+plan, once per worker count (``--workers``, default ``1,2``), each on a fresh local
+cluster. The scenarios are simulated first into a shared cache, outside the timings.
+For each worker count it prints the cluster start-up (processes, imports and the
+numba warm-up of each worker), the tasks (first submission to last row), writing
+the table and the plot, and the total, then the speed-up of the tasks and of the
+total against the first count, the
+load average before and after (the machine may be shared), whether the tables are
+identical apart from timing columns, and the median relative error per scenario and
+period. ``--serial`` adds the same tasks run one by one in this process, without Dask.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from tofnet.batch import expand, load_plan
+from tofnet.batch.table import TIMING_COLUMNS, read_csv
+from tofnet.sim import built_in_scenarios
+
+VALUES_MS = "20,40,60,100"
+
+
+def log(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+def plan_text(scenarios: list[str], values: list[str], duration: float, size: str, seed: int, cache: Path,
+              output: Path) -> str:
+    return (f"name: batch-sweep\noutput: {output}\ncache: {cache}\n"
+            f"recordings:\n  - scenario: [{', '.join(scenarios)}]\n    duration: {duration}\n"
+            f"    sensor_size: {size}\n    seed: {seed}\n"
+            f"grid:\n  refractory: [{', '.join(v + 'ms' for v in values)}]\nkeep: [metrics]\n")
+
+
+def timed_batch(text: str, workers: int) -> dict:
+    """Start a local cluster of ``workers``, warm it up, run the plan; seconds of each part."""
+    from distributed import Client
+
+    from tofnet.batch import run_batch
+    from tofnet.batch.runner import WarmUp, local_cluster
+
+    started = time.perf_counter()
+    with local_cluster(workers) as cluster, Client(cluster, set_as_default=False) as client:
+        client.register_plugin(WarmUp(("fixed",), ignore_sigint=True))
+        warm = client.run(lambda dask_worker: getattr(dask_worker, "tofnet_warm_up_s", float("nan")))
+        ready = time.perf_counter()
+        result = run_batch(load_plan(text), client=client)
+        finished = time.perf_counter()
+    return {"workers": workers, "startup_s": ready - started, "batch_s": result.tasks_time_s,
+            "table_s": finished - ready - result.tasks_time_s,
+            "total_s": finished - started, "warm_up_s": sorted(warm.values()), "result": result,
+            "first_task_s": result.rows[0]["task_time_s"],
+            "median_task_s": statistics.median(r["task_time_s"] for r in result.rows)}
+
+
+def serial(text: str) -> dict:
+    """The same tasks one by one in this process (no Dask), after warming the kernels up here."""
+    from tofnet.batch.worker import run_task, warm_up
+
+    started = time.perf_counter()
+    warm_up()
+    ready = time.perf_counter()
+    for task in expand(load_plan(text)):
+        run_task(task)
+    finished = time.perf_counter()
+    return {"workers": "serial", "startup_s": ready - started, "batch_s": finished - ready, "table_s": 0.0,
+            "total_s": finished - started}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenarios", default=",".join(built_in_scenarios()))
+    parser.add_argument("--values", default=VALUES_MS, help=f"refractory periods in ms (default {VALUES_MS})")
+    parser.add_argument("--duration", type=float, default=0.5, help="seconds per scenario (default 0.5)")
+    parser.add_argument("--size", default="240x180")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--workers", default="1,2", help="worker counts to compare (default 1,2)")
+    parser.add_argument("--serial", action="store_true", help="also run the tasks in this process without Dask")
+    parser.add_argument("--cache", default=str(Path(tempfile.gettempdir()) / "tofnet-batch-sweep"))
+    args = parser.parse_args(argv)
+    scenarios = [s for s in args.scenarios.split(",") if s]
+    values = [v for v in args.values.split(",") if v]
+    counts = [int(n) for n in args.workers.split(",")]
+    cache = Path(args.cache)
+    out = Path(tempfile.mkdtemp(prefix="tofnet-batch-sweep-"))
+    texts = {n: plan_text(scenarios, values, args.duration, args.size, args.seed, cache, out / f"w{n}")
+             for n in [*counts, "serial"]}
+    n_tasks = len(expand(load_plan(texts[counts[0]])))
+    log(f"batch sweep: {len(scenarios)} scenarios x {len(values)} periods = {n_tasks} tasks, {args.duration:g} s "
+        f"at {args.size}; workers {counts}; {os.cpu_count()} cores")
+
+    from distributed import Client
+
+    from tofnet.batch.runner import local_cluster
+    from tofnet.batch.worker import simulate_scenario
+    primed = time.perf_counter()
+    todo = {t.scenario_folder: t for t in expand(load_plan(texts[counts[0]]))}
+    with local_cluster(max(counts)) as cluster, Client(cluster, set_as_default=False) as client:
+        client.gather(client.map(simulate_scenario, list(todo.values()), pure=False))
+    log(f"  scenarios ready in {cache} ({time.perf_counter() - primed:.1f} s)")
+
+    load_before = os.getloadavg()
+    runs = []
+    for n in counts:
+        runs.append(timed_batch(texts[n], n))
+        r = runs[-1]
+        log(f"  {n} worker(s): start-up {r['startup_s']:.1f} s, tasks {r['batch_s']:.1f} s")
+    if args.serial:
+        runs.append(serial(texts["serial"]))
+        log(f"  serial: tasks {runs[-1]['batch_s']:.1f} s")
+    load_after = os.getloadavg()
+
+    base = runs[0]
+    print(f"Refractory sweep through tofnet batch: {len(scenarios)} scenarios x {len(values)} periods "
+          f"({', '.join(values)} ms) = {n_tasks} tasks, {args.duration:g} s each at {args.size}, seed {args.seed}; "
+          f"{os.cpu_count()} cores")
+    print(f"load average before {' '.join(f'{x:.2f}' for x in load_before)}, "
+          f"after {' '.join(f'{x:.2f}' for x in load_after)} (1, 5, 15 min)")
+    print()
+    print(f"{'workers':>8} {'start-up s':>11} {'tasks s':>9} {'table+plot s':>13} {'total s':>9} {'tasks speed-up':>15} "
+          f"{'total speed-up':>15} {'warm-up s per worker':>22} {'first / median task s':>22}")
+    for r in runs:
+        warm = " ".join(f"{w:.2f}" for w in r.get("warm_up_s", [])) or "-"
+        tasks = f"{r['first_task_s']:.2f} / {r['median_task_s']:.2f}" if "first_task_s" in r else "-"
+        print(f"{r['workers']!s:>8} {r['startup_s']:11.2f} {r['batch_s']:9.2f} {r['table_s']:13.2f} {r['total_s']:9.2f} "
+              f"{base['batch_s'] / r['batch_s']:14.2f}x {base['total_s'] / r['total_s']:14.2f}x {warm:>22} {tasks:>22}")
+    tables = [[{k: v for k, v in row.items() if k not in TIMING_COLUMNS} for row in read_csv(r["result"].files[0])]
+              for r in runs if "result" in r]
+    print(f"\ntables identical apart from {', '.join(TIMING_COLUMNS)}: "
+          f"{'yes' if all(t == tables[0] for t in tables) else 'NO'}")
+    failed = [r for r in base["result"].rows if r["status"] != "ok"]
+    if failed:
+        print(f"failed tasks: {len(failed)}, e.g. {failed[0]['task_id']}: {failed[0]['error']}")
+    print(f"\nmedian relative error, % ({counts[0]}-worker table)")
+    print(f"{'scenario':>15} " + " ".join(f"{v + ' ms':>8}" for v in values))
+    for s in scenarios:
+        cells = {r["refractory"]: r.get("median_rel_pct") for r in base["result"].rows if r["scenario"] == s}
+        print(f"{s:>15} " + " ".join(f"{cells.get(v + 'ms') or float('nan'):8.1f}" for v in values))
+    cmd = "python benchmarks/batch_sweep.py"
+    for flag, value, default in (("--scenarios", args.scenarios, ",".join(built_in_scenarios())),
+                                 ("--values", args.values, VALUES_MS), ("--duration", args.duration, 0.5),
+                                 ("--size", args.size, "240x180"), ("--seed", args.seed, 0),
+                                 ("--workers", args.workers, "1,2")):
+        if value != default:
+            cmd += f" {flag} {value}"
+    print(f"\nreproduce: {cmd}{' --serial' if args.serial else ''}   (outputs in {out})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
