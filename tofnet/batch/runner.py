@@ -29,9 +29,14 @@ from tofnet.batch.table import plot, sort_rows, write_table
 from tofnet.batch.tasks import Task, expand
 from tofnet.batch.worker import ROW_FILE, base_row, is_complete, one_line, run_task, simulate_scenario, warm_up, \
     write_json
+from tofnet.errors import TofnetError
 
 #: Seconds between progress lines on a terminal (a log gets one line every ``LOG_EVERY``).
 TTY_EVERY, LOG_EVERY = 0.5, 10.0
+#: Seconds to reach a scheduler, and to wait for its first worker.
+CONNECT_TIMEOUT_S, WAIT_FOR_WORKERS_S = 10, 60
+#: Seconds to fetch a finished task's row from its worker.
+RESULT_TIMEOUT_S = 10
 
 
 @dataclass
@@ -100,6 +105,22 @@ def _sigint_ignored():
         signal.signal(signal.SIGINT, previous)
 
 
+@contextlib.contextmanager
+def _connect(scheduler: str | None, workers: int | None, memory_limit):
+    """A client of the scheduler at ``scheduler``, or of a new local cluster closed on exit."""
+    if scheduler is not None:
+        try:
+            client = Client(scheduler, set_as_default=False, timeout=f"{CONNECT_TIMEOUT_S}s")
+        except (OSError, TimeoutError, ValueError) as err:
+            raise TofnetError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler there "
+                              f"({one_line(str(err)) or type(err).__name__})") from None
+        with client:
+            yield client
+        return
+    with local_cluster(workers, memory_limit) as cluster, Client(cluster, set_as_default=False) as client:
+        yield client
+
+
 def run_batch(plan: Plan, *, scheduler: str | None = None, workers: int | None = None,
               memory_limit: str | float | None = "auto", resume: bool = False, client: Client | None = None,
               progress: Callable[[dict], None] | None = None) -> BatchResult:
@@ -120,23 +141,19 @@ def run_batch(plan: Plan, *, scheduler: str | None = None, workers: int | None =
     resumed = len(done)
     n_workers, tasks_time = 0, 0.0
     if todo:
-        cluster = None
-        if client is None:
-            cluster = None if scheduler else local_cluster(workers, memory_limit)
-            own_client = Client(scheduler or cluster, set_as_default=False, timeout="30s")
-        try:
-            active = client or own_client
+        with contextlib.ExitStack() as stack:
+            active = client or stack.enter_context(_connect(scheduler, workers, memory_limit))
+            try:
+                active.wait_for_workers(1, timeout=WAIT_FOR_WORKERS_S)
+            except TimeoutError:
+                raise TofnetError(f"no Dask worker joined the scheduler at {active.scheduler.address} within "
+                                  f"{WAIT_FOR_WORKERS_S:g} s; start some with: dask worker ADDRESS") from None
             backends = tuple(sorted({t.backend or "fixed" for t in todo}))
-            active.register_plugin(WarmUp(backends, ignore_sigint=cluster is not None))
+            active.register_plugin(WarmUp(backends, ignore_sigint=client is None and scheduler is None))
             n_workers = len(active.scheduler_info()["workers"])
             execution = _Execution(active, todo, done, progress, len(tasks))
             execution.run()
             tasks_time = time.perf_counter() - execution.started
-        finally:
-            if client is None:
-                own_client.close()
-                if cluster is not None:
-                    cluster.close()
     rows = sort_rows(done.values())
     parameters = list(plan.grid)
     files = write_table(rows, parameters, plan.output)
@@ -179,8 +196,10 @@ class _Execution:
             while pending:
                 finished = [f for f in pending if f.done()]
                 for future in finished:
+                    row = self.collect(future, pending[future])
+                    if row is None:  # its result was lost with a worker: the scheduler computes it again
+                        continue
                     task = pending.pop(future)
-                    row = self.collect(future, task)
                     failed += row.get("status") != "ok"
                     self.events += row.get("events_in") or 0
                     self.done[task.number] = row
@@ -192,10 +211,17 @@ class _Execution:
             self.client.cancel(list(pending), force=True)
             raise
 
-    def collect(self, future, task: Task) -> dict:
-        if future.status == "finished":
-            return future.result()
-        if future.status == "cancelled":
+    def collect(self, future, task: Task) -> dict | None:
+        """The row of a done future, or ``None`` when its result is being computed again."""
+        status = future.status
+        if status == "finished":
+            try:
+                return future.result(timeout=RESULT_TIMEOUT_S)
+            except Exception:  # lost with its worker after done(): the scheduler reruns the task
+                return None
+        if status not in ("error", "cancelled"):
+            return None
+        if status == "cancelled":
             error = "cancelled by the scheduler"
         else:
             exc = future.exception()
@@ -217,7 +243,9 @@ class _Execution:
     def report(self, pending: dict, failed: int, final: bool) -> None:
         try:
             keys = {f.key for f in pending}
-            running = sum(1 for ks in self.client.processing().values() for k in ks if k in keys)
+            threads = self.client.nthreads()
+            running = sum(min(threads.get(worker, 1), sum(k in keys for k in ks))
+                          for worker, ks in self.client.processing().items())
         except Exception:  # the scheduler is busy or gone: progress is not worth failing for
             running = 0
         elapsed = time.perf_counter() - self.started

@@ -22,7 +22,7 @@ COUNT_COLUMNS = ("events_in", "accepted", "dropped", *(f"dropped_{r}" for r in D
 METRIC_COLUMNS = ("matched", "coverage_pct", "mean_abs_m", "median_abs_m", "mean_rel_pct", "median_rel_pct",
                   "bias_rel_pct")
 #: Columns that change from run to run of the same plan.
-TIMING_COLUMNS = ("wall_time_s", "task_time_s", "events_per_s", "worker")
+TIMING_COLUMNS = ("wall_time_s", "task_time_s", "cpu_time_s", "events_per_s", "worker")
 OUTPUT_COLUMNS = ("depth_file", "summary_file")
 #: Metrics the plot draws against each swept parameter (when any row has them).
 PLOTTED = ("median_rel_pct", "mean_rel_pct", "bias_rel_pct", "coverage_pct", "depth_out")

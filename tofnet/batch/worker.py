@@ -75,7 +75,7 @@ def run_task(task: Task, recording_path: str | None = None) -> dict[str, Any]:
     Never raises for a bad recording, spec or parameter, or for running out of
     memory: the row then has ``status`` ``failed`` and the one-line ``error``.
     """
-    started = time.perf_counter()
+    started, cpu_started = time.perf_counter(), time.thread_time()
     row = {**base_row(task), "status": "failed", "error": None, "worker": worker_name()}
     folder = Path(task.folder)
     try:
@@ -88,6 +88,7 @@ def run_task(task: Task, recording_path: str | None = None) -> dict[str, Any]:
     except Exception as err:  # a bug or an unreadable file: the batch goes on, the row says what happened
         row["error"] = one_line(f"{type(err).__name__}: {err}")
     row["task_time_s"] = time.perf_counter() - started
+    row["cpu_time_s"] = time.thread_time() - cpu_started  # below task_time_s when the machine is busy
     row["keep"] = list(task.keep)
     write_json(folder / ROW_FILE, row)
     return row
