@@ -13,7 +13,8 @@ the table and the plot, and the total, then the speed-up of the tasks and of the
 total against the first count, the
 load average before and after (the machine may be shared), whether the tables are
 identical apart from timing columns, and the median relative error per scenario and
-period. ``--serial`` adds the same tasks run one by one in this process, without Dask.
+period. ``--serial`` adds the same tasks run one by one in this process, without Dask;
+``--cold`` the time a new process takes to warm up with and without numba's disk cache.
 """
 
 from __future__ import annotations
@@ -80,6 +81,19 @@ def serial(text: str) -> dict:
             "total_s": finished - started}
 
 
+def fresh_warm_up(cold: bool) -> float:
+    """Seconds a new process takes to import tofnet and warm its kernels up, from numba's disk cache or cold."""
+    import subprocess
+    env = dict(os.environ)
+    with tempfile.TemporaryDirectory(prefix="tofnet-numba-") as empty:
+        if cold:
+            env["NUMBA_CACHE_DIR"] = empty  # nothing cached: every kernel compiles
+        code = ("import time; t = time.perf_counter(); from tofnet.batch.worker import warm_up; warm_up(); "
+                "print(time.perf_counter() - t)")
+        done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    return float(done.stdout.split()[-1])
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenarios", default=",".join(built_in_scenarios()))
@@ -91,6 +105,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeat", type=int, default=2,
                         help="runs per worker count, in the order 1,2,2,1,...; the fastest counts (default 2)")
     parser.add_argument("--serial", action="store_true", help="also run the tasks in this process without Dask")
+    parser.add_argument("--cold", action="store_true",
+                        help="also time a new process's warm-up with numba's disk cache and without it")
     parser.add_argument("--cache", default=str(Path(tempfile.gettempdir()) / "tofnet-batch-sweep"))
     args = parser.parse_args(argv)
     scenarios = [s for s in args.scenarios.split(",") if s]
@@ -136,15 +152,23 @@ def main(argv: list[str] | None = None) -> int:
     print(f"load average before {' '.join(f'{x:.2f}' for x in load_before)}, "
           f"after {' '.join(f'{x:.2f}' for x in load_after)} (1, 5, 15 min)")
     print()
+    if args.cold:
+        cached, cold = fresh_warm_up(False), fresh_warm_up(True)
+        print(f"new process, import + warm-up: {cached:.2f} s from numba's disk cache, {cold:.2f} s compiling "
+              f"(empty NUMBA_CACHE_DIR)")
     each = "; ".join(f"{n} worker(s) " + ", ".join(f"{r['batch_s']:.1f}" for r in every[n]) for n in counts)
     print(f"fastest of {args.repeat} run(s) per worker count (tasks s of every run: {each})")
     print()
-    print(f"{'workers':>8} {'start-up s':>11} {'tasks s':>9} {'task CPU s':>11} {'table+plot s':>13} {'total s':>9} "
-          f"{'tasks speed-up':>15} {'total speed-up':>15} {'warm-up s per worker':>22} {'first / median task s':>22}")
+    print("(task CPU share: the tasks' CPU time over tasks s x workers, below 100 % when other processes "
+          "hold the cores)")
+    print(f"{'workers':>8} {'start-up s':>11} {'tasks s':>9} {'task CPU s':>11} {'CPU share':>10} {'table+plot s':>13} "
+          f"{'total s':>9} {'tasks speed-up':>15} {'total speed-up':>15} {'warm-up s per worker':>22} "
+          f"{'first / median task s':>22}")
     for r in runs:
         warm = " ".join(f"{w:.2f}" for w in r.get("warm_up_s", [])) or "-"
         tasks = f"{r['first_task_s']:.2f} / {r['median_task_s']:.2f}" if "first_task_s" in r else "-"
-        cpu = f"{r['cpu_s']:11.2f}" if "cpu_s" in r else f"{'-':>11}"
+        cpu = f"{r['cpu_s']:11.2f} {100 * r['cpu_s'] / (r['batch_s'] * r['workers']):9.0f}%" if "cpu_s" in r \
+            else f"{'-':>11} {'-':>10}"
         print(f"{r['workers']!s:>8} {r['startup_s']:11.2f} {r['batch_s']:9.2f} {cpu} {r['table_s']:13.2f} "
               f"{r['total_s']:9.2f} {base['batch_s'] / r['batch_s']:14.2f}x {base['total_s'] / r['total_s']:14.2f}x "
               f"{warm:>22} {tasks:>22}")
@@ -167,7 +191,8 @@ def main(argv: list[str] | None = None) -> int:
                                  ("--workers", args.workers, "1,2"), ("--repeat", args.repeat, 2)):
         if value != default:
             cmd += f" {flag} {value}"
-    print(f"\nreproduce: {cmd}{' --serial' if args.serial else ''}   (outputs in {out})")
+    cmd += " --serial" * args.serial + " --cold" * args.cold
+    print(f"\nreproduce: {cmd}   (outputs in {out})")
     return 0
 
 

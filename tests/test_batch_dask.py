@@ -1,4 +1,7 @@
-"""`tofnet batch` on a local Dask cluster (loopback, 2 workers): equal to `tofnet run`, deterministic, faults, resume."""
+"""`tofnet batch` on a local Dask cluster (loopback, 2 workers).
+
+Equal to `tofnet run` one by one, deterministic, failed rows, killed workers, resume, Ctrl-C.
+"""
 
 import json
 import os
@@ -36,7 +39,8 @@ def cache(tmp_path_factory):
 
 def plan_file(folder, cache, recordings, grid, keep="[summary, metrics, depth]"):
     path = folder / "plan.yaml"
-    path.write_text(f"name: test\noutput: out\ncache: {cache}\nrecordings:\n{recordings}\ngrid:\n{grid}\nkeep: {keep}\n")
+    path.write_text(f"name: test\noutput: out\ncache: {cache}\nrecordings:\n{recordings}\n"
+                    f"grid:\n{grid}\nkeep: {keep}\n")
     return path
 
 

@@ -103,3 +103,10 @@ def test_without_dask_the_command_says_which_extra_to_install(folder, capsys, mo
     assert main(["batch", str(write(folder, "recordings: [a.npy]\n"))]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and 'pip install "tofnet[batch]"' in err
+
+
+def test_the_example_plan_is_valid():
+    from pathlib import Path
+    path = Path(__file__).resolve().parents[1] / "examples" / "batch" / "refractory_sweep.yaml"
+    plan = load_plan(path)
+    assert plan.size() == 40 and plan.output == path.parent / "refractory-sweep-results"

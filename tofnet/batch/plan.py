@@ -342,7 +342,8 @@ class _PlanReader:
         for key, values in section.items():
             path = f"grid.{key}"
             if key not in options:
-                raise self.fail(section, key, path, f"unknown option; expected one of {', '.join(sorted(set(options.values())))}")
+                known = ", ".join(sorted(set(options.values())))
+                raise self.fail(section, key, path, f"unknown option; expected one of {known}")
             if options[key] in out:
                 raise self.fail(section, key, path, f"{options[key]} is given twice")
             values = values if isinstance(values, list) else [values]

@@ -89,7 +89,7 @@ def local_cluster(workers: int | None = None, memory_limit: str | float | None =
     n = workers or os.cpu_count() or 1
     with _sigint_ignored():  # inherited by the worker processes: Ctrl-C reaches the client only
         return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, memory_limit=memory_limit,
-                            host="127.0.0.1", dashboard_address=None, silence_logs=logging.CRITICAL)
+                            host="127.0.0.1", dashboard_address=":0", silence_logs=logging.CRITICAL)
 
 
 @contextlib.contextmanager

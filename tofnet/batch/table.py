@@ -110,7 +110,7 @@ def _column(values: list[Any]) -> list[Any]:
 # ---------------------------------------------------------------- the plot
 
 def numeric(value: Any, option: str) -> float | None:
-    """A grid value on a numeric axis: durations in milliseconds (``20ms`` and ``0.02`` -> 20), other numbers as they are."""
+    """A grid value on a numeric axis: durations in ms (``20ms`` and ``0.02`` -> 20), other numbers as they are."""
     if isinstance(value, bool) or value is None:
         return None
     if option in DURATIONS:
@@ -125,8 +125,8 @@ def numeric(value: Any, option: str) -> float | None:
 def plot(rows: list[dict], parameters: list[str], path: Path) -> Path | None:
     """A grid of panels: one row per metric, one column per swept parameter; a line per other setting.
 
-    Lines join the tasks that differ only in the panel's parameter; categorical
-    parameters (``velocity_per``) sit at evenly spaced positions. ``None`` when nothing
+    Lines join the tasks that differ only in the panel's parameter; durations sit at
+    their value in ms, categorical parameters (``velocity_per``) at even spacing. ``None`` when nothing
     was swept or no task succeeded.
     """
     swept = [p for p in parameters if len({repr(r.get(p)) for r in rows}) > 1]
@@ -149,24 +149,23 @@ def plot(rows: list[dict], parameters: list[str], path: Path) -> Path | None:
         if any(p is None for p in positions):
             positions = list(range(len(values)))
         where = {repr(v): p for v, p in zip(values, positions)}
-        groups: dict[tuple, list[dict]] = {}
+        # one line per recording, network and value of the other swept parameters
+        distinct = [p for p in ("network", *swept) if p != option and len({repr(r.get(p)) for r in ok}) > 1]
+        groups: dict[str, list[dict]] = {}
         for r in ok:
-            others = tuple((p, repr(r.get(p))) for p in parameters if p != option)
-            groups.setdefault((r["recording_name"], r["network"], others), []).append(r)
+            label = " ".join([r["recording_name"], *(f"{p}={r.get(p)}" for p in distinct)])
+            groups.setdefault(label, []).append(r)
         for i, metric in enumerate(metrics):
             ax = axes[i][j]
-            for (recording, network, others), members in groups.items():
+            for label, members in groups.items():
                 members = sorted(members, key=lambda r: where[repr(r[option])])
-                label = " ".join([recording, *([network] if len({r['network'] for r in ok}) > 1 else []),
-                                  *(f"{p}={v.strip(chr(39))}" for p, v in others if len({repr(r.get(p)) for r in ok}) > 1)])
                 ax.plot([where[repr(r[option])] for r in members], [_value(r.get(metric)) for r in members],
                         marker="o", ms=3, lw=1, label=label)
-            if positions == list(range(len(values))):
-                ax.set_xticks(positions, [str(v) for v in values])
-            ax.set_xlabel(option + (" [ms]" if option in DURATIONS else ""))
+            ax.set_xticks(positions, [str(v) for v in values])  # the values as the plan wrote them
+            ax.set_xlabel(option)
             ax.set_ylabel(metric)
             ax.grid(alpha=0.3)
-            if i == 0 and j == 0 and len(groups) <= 12:
+            if i == 0 and len(groups) <= 12:
                 ax.legend(fontsize=6)
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:

@@ -148,7 +148,9 @@ def is_complete(task: Task) -> dict | None:
         row = json.loads((folder / ROW_FILE).read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
-    if row.get("status") != "ok" or row.get("task_id") != task.task_id or not set(task.keep) <= set(row.get("keep", ())):
+    if row.get("status") != "ok" or row.get("task_id") != task.task_id:
+        return None
+    if not set(task.keep) <= set(row.get("keep", ())):  # the plan now keeps more than that run did
         return None
     files = {"depth": DEPTH_FILE, "summary": SUMMARY_FILE}
     if any(not (folder / files[k]).is_file() for k in task.keep if k in files):

@@ -45,8 +45,9 @@ def handle(args) -> int:
         return 0
     from tofnet.batch.runner import Progress, run_batch
     try:
-        result = run_batch(plan, scheduler=args.scheduler, workers=args.workers, memory_limit=_memory(args.memory_limit),
-                           resume=args.resume, progress=None if args.quiet else Progress())
+        result = run_batch(plan, scheduler=args.scheduler, workers=args.workers,
+                           memory_limit=_memory(args.memory_limit), resume=args.resume,
+                           progress=None if args.quiet else Progress())
     except KeyboardInterrupt:
         print(f"tofnet batch: interrupted; finished tasks are kept in {plan.output}; "
               f"run again with --resume for the rest", file=sys.stderr)
