@@ -5,16 +5,20 @@
 
 Does what ``refractory_sweep.py`` does (every built-in scenario x refractory periods,
 the paper's network, metrics against the simulated depth) as one ``tofnet batch``
-plan, once per worker count (``--workers``, default ``1,2``), each on a fresh local
-cluster. The scenarios are simulated first into a shared cache, outside the timings.
-For each worker count it prints the cluster start-up (processes, imports and the
-numba warm-up of each worker), the tasks (first submission to last row), writing
-the table and the plot, and the total, then the speed-up of the tasks and of the
-total against the first count, the
-load average before and after (the machine may be shared), whether the tables are
-identical apart from timing columns, and the median relative error per scenario and
-period. ``--serial`` adds the same tasks run one by one in this process, without Dask;
-``--cold`` the time a new process takes to warm up with and without numba's disk cache.
+plan, on fresh local clusters of each worker count (``--workers``, default ``1,2``),
+``--repeat`` times in the order 1, 2, 2, 1, keeping each count's fastest run. The
+scenarios are simulated first into a shared cache, outside the timings.
+
+It prints, per worker count: the cluster start-up (processes, imports and each
+worker's numba warm-up), the tasks (first submission to last row), the tasks' CPU
+time and CPU share, writing the table and the plot, the total, and the speed-ups
+against the first count; then the load average before and after and how many cores
+1 and 2 busy-looping processes get at those moments (on a shared machine, 2 workers
+cannot go faster than the cores they get), whether the tables are identical apart
+from timing columns, and the median relative error per scenario and period.
+``--serial`` adds the same tasks one by one in this process without Dask (interleaved
+like the others); ``--cold`` the time a new process takes to warm up with and without
+numba's disk cache.
 """
 
 from __future__ import annotations
@@ -81,6 +85,23 @@ def serial(text: str) -> dict:
             "total_s": finished - started}
 
 
+def _spin(seconds: float) -> float:
+    started, cpu = time.perf_counter(), time.process_time()
+    while time.perf_counter() - started < seconds:
+        pass
+    return time.process_time() - cpu
+
+
+def free_cores(seconds: float = 3.0) -> list[float]:
+    """Cores the machine gives 1, then 2, busy-looping processes now (2.0 on an idle 2-core machine)."""
+    from multiprocessing import get_context
+    shares = []
+    for n in (1, 2):
+        with get_context("spawn").Pool(n) as pool:
+            shares.append(sum(pool.map(_spin, [seconds] * n)) / seconds)
+    return shares
+
+
 def fresh_warm_up(cold: bool) -> float:
     """Seconds a new process takes to import tofnet and warm its kernels up, from numba's disk cache or cold."""
     import subprocess
@@ -131,19 +152,20 @@ def main(argv: list[str] | None = None) -> int:
     log(f"  scenarios ready in {cache} ({time.perf_counter() - primed:.1f} s)")
 
     load_before = os.getloadavg()
-    order = [counts[i] if (i // len(counts)) % 2 == 0 else counts[::-1][i % len(counts)]
-             for i in range(len(counts) * args.repeat)]  # 1, 2, 2, 1: load that drifts hits both alike
-    every: dict[int, list[dict]] = {n: [] for n in counts}
-    for n in order:
-        r = timed_batch(texts[n], n)
-        every[n].append(r)
-        log(f"  {n} worker(s): start-up {r['startup_s']:.1f} s, tasks {r['batch_s']:.1f} s, "
-            f"task CPU {r['cpu_s']:.1f} s, load {os.getloadavg()[0]:.2f}")
-    runs = [min(every[n], key=lambda r: r["batch_s"]) for n in counts]
-    if args.serial:
-        runs.append(serial(texts["serial"]))
-        log(f"  serial: tasks {runs[-1]['batch_s']:.1f} s")
+    cores_before = free_cores()
+    configs: list = [*counts, *(["serial"] if args.serial else [])]
+    # 1, 2, serial, serial, 2, 1, ...: a load that drifts during the runs hits every configuration alike
+    order = [c for i in range(args.repeat) for c in (configs if i % 2 == 0 else configs[::-1])]
+    every: dict = {c: [] for c in configs}
+    for c in order:
+        r = serial(texts["serial"]) if c == "serial" else timed_batch(texts[c], c)
+        every[c].append(r)
+        cpu = f", task CPU {r['cpu_s']:.1f} s" if "cpu_s" in r else ""
+        log(f"  {c if c == 'serial' else f'{c} worker(s)'}: start-up {r['startup_s']:.1f} s, tasks {r['batch_s']:.1f} s{cpu}, "
+            f"load {os.getloadavg()[0]:.2f}")
+    runs = [min(every[c], key=lambda r: r["batch_s"]) for c in configs]
     load_after = os.getloadavg()
+    cores_after = free_cores()
 
     base = runs[0]
     print(f"Refractory sweep through tofnet batch: {len(scenarios)} scenarios x {len(values)} periods "
@@ -151,13 +173,15 @@ def main(argv: list[str] | None = None) -> int:
           f"{os.cpu_count()} cores")
     print(f"load average before {' '.join(f'{x:.2f}' for x in load_before)}, "
           f"after {' '.join(f'{x:.2f}' for x in load_after)} (1, 5, 15 min)")
+    print(f"cores that 1 and 2 busy-looping processes got (3 s each): before {cores_before[0]:.2f} and "
+          f"{cores_before[1]:.2f}, after {cores_after[0]:.2f} and {cores_after[1]:.2f}")
     print()
     if args.cold:
         cached, cold = fresh_warm_up(False), fresh_warm_up(True)
         print(f"new process, import + warm-up: {cached:.2f} s from numba's disk cache, {cold:.2f} s compiling "
               f"(empty NUMBA_CACHE_DIR)")
-    each = "; ".join(f"{n} worker(s) " + ", ".join(f"{r['batch_s']:.1f}" for r in every[n]) for n in counts)
-    print(f"fastest of {args.repeat} run(s) per worker count (tasks s of every run: {each})")
+    each = "; ".join(f"{c}: " + ", ".join(f"{r['batch_s']:.1f}" for r in every[c]) for c in configs)
+    print(f"fastest of {args.repeat} run(s) per configuration (tasks s of every run: {each})")
     print()
     print("(task CPU share: the tasks' CPU time over tasks s x workers, below 100 % when other processes "
           "hold the cores)")

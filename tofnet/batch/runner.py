@@ -35,6 +35,8 @@ from tofnet.errors import TofnetError
 TTY_EVERY, LOG_EVERY = 0.5, 10.0
 #: Seconds to reach a scheduler, and to wait for its first worker.
 CONNECT_TIMEOUT_S, WAIT_FOR_WORKERS_S = 10, 60
+#: Seconds between two counts of running tasks (each asks the scheduler).
+REPORT_EVERY_S = 0.25
 #: Seconds to fetch a finished task's row from its worker.
 RESULT_TIMEOUT_S = 10
 
@@ -64,11 +66,11 @@ class BatchResult:
 class WarmUp(WorkerPlugin):
     """Loads the numba kernels when a worker starts (and when a dead one is replaced), not in its first task."""
 
-    idempotent = True
-    name = "tofnet-warm-up"
+    idempotent = True  # registered again by the next batch on the same cluster: nothing to do
 
     def __init__(self, backends: tuple[str, ...], ignore_sigint: bool = False):
         self.backends, self.ignore_sigint = backends, ignore_sigint
+        self.name = "tofnet-warm-up-" + "-".join(backends)
 
     def setup(self, worker) -> None:
         if self.ignore_sigint and threading.current_thread() is threading.main_thread():
@@ -171,6 +173,7 @@ class _Execution:
         self.events = 0
         self.simulations: dict[int, Any] = {}  # task number -> the future simulating its scenario
         self.started = time.perf_counter()
+        self.reported = -1e9
 
     def submit(self) -> dict[Any, Task]:
         simulations = {}
@@ -203,7 +206,7 @@ class _Execution:
                     failed += row.get("status") != "ok"
                     self.events += row.get("events_in") or 0
                     self.done[task.number] = row
-                if self.progress is not None:
+                if self.progress is not None and (not pending or time.perf_counter() - self.reported >= REPORT_EVERY_S):
                     self.report(pending, failed, final=not pending)
                 if not finished:
                     time.sleep(0.1)
@@ -248,7 +251,8 @@ class _Execution:
                           for worker, ks in self.client.processing().items())
         except Exception:  # the scheduler is busy or gone: progress is not worth failing for
             running = 0
-        elapsed = time.perf_counter() - self.started
+        self.reported = time.perf_counter()
+        elapsed = self.reported - self.started
         self.progress({"done": len(self.done), "failed": failed, "running": running, "total": self.total,
                        "waiting": len(pending) - running, "events": self.events, "elapsed_s": elapsed,
                        "events_per_s": self.events / elapsed if elapsed > 0 else 0.0, "final": final})
