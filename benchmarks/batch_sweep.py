@@ -11,7 +11,8 @@ scenarios are simulated first into a shared cache, outside the timings.
 
 It prints, per worker count: the cluster start-up (processes, imports and each
 worker's numba warm-up), the tasks (first submission to last row), the tasks' CPU
-time and CPU share, writing the table and the plot, the total, and the speed-ups
+time, CPU share and CPU bound (the tasks' CPU time over the busiest worker's: the
+speed-up the division of the work allows when each worker has a core), writing the table and the plot, the total, and the speed-ups
 against the first count; then the load average before and after and how many cores
 1 and 2 busy-looping processes get at those moments (on a shared machine, 2 workers
 cannot go faster than the cores they get), whether the tables are identical apart
@@ -68,6 +69,8 @@ def timed_batch(text: str, workers: int) -> dict:
             "table_s": finished - ready - result.tasks_time_s,
             "total_s": finished - started, "warm_up_s": sorted(warm.values()), "result": result,
             "first_task_s": result.rows[0]["task_time_s"], "cpu_s": sum(r["cpu_time_s"] for r in result.rows),
+            "busiest_cpu_s": max(sum(r["cpu_time_s"] for r in result.rows if r["worker"] == w)
+                                 for w in {r["worker"] for r in result.rows}),
             "median_task_s": statistics.median(r["task_time_s"] for r in result.rows)}
 
 
@@ -183,18 +186,20 @@ def main(argv: list[str] | None = None) -> int:
     each = "; ".join(f"{c}: " + ", ".join(f"{r['batch_s']:.1f}" for r in every[c]) for c in configs)
     print(f"fastest of {args.repeat} run(s) per configuration (tasks s of every run: {each})")
     print()
-    print("(task CPU share: the tasks' CPU time over tasks s x workers, below 100 % when other processes "
-          "hold the cores)")
+    print("(CPU share: the tasks' CPU time over tasks s x workers, below 100 % when other processes hold the "
+          "cores; CPU bound: the tasks' CPU time over the busiest worker's, the speed-up the split of the work "
+          "allows when every worker has a core of its own)")
     print(f"{'workers':>8} {'start-up s':>11} {'tasks s':>9} {'task CPU s':>11} {'CPU share':>10} {'table+plot s':>13} "
-          f"{'total s':>9} {'tasks speed-up':>15} {'total speed-up':>15} {'warm-up s per worker':>22} "
+          f"{'total s':>9} {'CPU bound':>10} {'tasks speed-up':>15} {'total speed-up':>15} {'warm-up s per worker':>22} "
           f"{'first / median task s':>22}")
     for r in runs:
         warm = " ".join(f"{w:.2f}" for w in r.get("warm_up_s", [])) or "-"
         tasks = f"{r['first_task_s']:.2f} / {r['median_task_s']:.2f}" if "first_task_s" in r else "-"
+        bound = f"{r['cpu_s'] / r['busiest_cpu_s']:9.2f}x" if "cpu_s" in r else f"{'-':>10}"
         cpu = f"{r['cpu_s']:11.2f} {100 * r['cpu_s'] / (r['batch_s'] * r['workers']):9.0f}%" if "cpu_s" in r \
             else f"{'-':>11} {'-':>10}"
         print(f"{r['workers']!s:>8} {r['startup_s']:11.2f} {r['batch_s']:9.2f} {cpu} {r['table_s']:13.2f} "
-              f"{r['total_s']:9.2f} {base['batch_s'] / r['batch_s']:14.2f}x {base['total_s'] / r['total_s']:14.2f}x "
+              f"{r['total_s']:9.2f} {bound} {base['batch_s'] / r['batch_s']:14.2f}x {base['total_s'] / r['total_s']:14.2f}x "
               f"{warm:>22} {tasks:>22}")
     tables = [[{k: v for k, v in row.items() if k not in TIMING_COLUMNS} for row in read_csv(r["result"].files[0])]
               for r in runs if "result" in r]
