@@ -9,7 +9,8 @@ import sys
 from tofnet.errors import TofnetError
 
 #: Subcommand modules, in the order ``tofnet --help`` lists them.
-SUBCOMMANDS = ("demo", "run", "simulate", "eval", "plot", "compile", "conformance", "info", "convert", "export")
+SUBCOMMANDS = ("demo", "run", "simulate", "eval", "plot", "compile", "conformance", "info", "convert", "export",
+               "batch")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,383 @@
+"""Batch plans: which recordings, which networks, which parameter grid, what to keep.
+
+``load_plan`` reads a YAML plan (docs/batch.md) and validates all of it before anything
+runs: every path and glob must exist, every spec must load, every scenario must be a
+built-in one, and every grid value must be accepted by every network. Errors name the
+file, the line and the key, in one line.
+"""
+
+from __future__ import annotations
+
+import glob as globbing
+import itertools
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+from tofnet.errors import SpecError, TofnetError, located
+from tofnet.io.spec import _line, _parse_yaml
+
+TOP_KEYS = ("name", "description", "output", "cache", "recordings", "networks", "grid", "backend", "keep")
+PATH_KEYS = ("path", "name")
+GLOB_KEYS = ("glob",)
+SCENARIO_KEYS = ("scenario", "name", "duration", "seed", "sensor_size")
+NETWORK_KEYS = ("spec", "name", "backend", "estimator")
+KEEP = ("summary", "metrics", "depth")
+DEFAULT_KEEP = ("summary", "metrics")
+PAPER = "paper"
+
+
+class PlanError(TofnetError):
+    """A batch plan that cannot run: unknown key, missing file, bad value."""
+
+
+@dataclass(frozen=True)
+class RecordingSource:
+    """One recording of a plan: a file or folder (``path``), or a built-in scenario to simulate.
+
+    ``duration`` is in seconds and ``sensor_size`` in pixels (``None``: the scenario's).
+    """
+
+    name: str
+    path: str | None = None
+    scenario: str | None = None
+    duration: float = 1.0
+    seed: int = 0
+    sensor_size: tuple[int, int] | None = None
+
+    @property
+    def label(self) -> str:
+        """What the table's ``recording`` column shows: the path, or ``scenario:NAME``."""
+        return self.path if self.path is not None else f"scenario:{self.scenario}"
+
+
+@dataclass(frozen=True)
+class NetworkChoice:
+    """One network of a plan: a YAML spec (``spec``; ``None``: the paper's network) and a backend."""
+
+    name: str
+    spec: str | None = None
+    backend: str | None = None
+
+
+@dataclass
+class Plan:
+    """A validated plan; ``grid`` maps an option name of ``tofnet run`` to its values, in plan order."""
+
+    recordings: list[RecordingSource]
+    networks: list[NetworkChoice]
+    grid: dict[str, list[Any]]
+    output: Path
+    cache: Path
+    keep: tuple[str, ...] = DEFAULT_KEEP
+    backend: str | None = None
+    name: str = "batch"
+    description: str | None = None
+    source: str = "<string>"
+    base: Path = field(default_factory=Path.cwd)
+
+    def combinations(self) -> list[dict[str, Any]]:
+        """Every point of the grid (the Cartesian product, first key varying slowest)."""
+        keys = list(self.grid)
+        return [dict(zip(keys, values)) for values in itertools.product(*(self.grid[k] for k in keys))]
+
+    def size(self) -> int:
+        """Number of tasks: recordings x networks x grid points."""
+        return len(self.recordings) * len(self.networks) * len(self.combinations())
+
+
+def load_plan(path_or_text: str | Path, *, output: str | Path | None = None) -> Plan:
+    """Read and validate a plan from a YAML file (a ``Path`` or a one-line ``.yaml`` name) or YAML text.
+
+    Relative paths in the plan are relative to the plan file's folder (the working
+    directory for text). ``output`` overrides the plan's ``output``.
+    """
+    text, source, base = _read_source(path_or_text)
+    try:
+        tree = _parse_yaml(text, source, empty="empty plan; expected a mapping with recordings (and networks, grid)")
+    except SpecError as err:  # the spec reader's YAML errors, already located
+        raise PlanError(str(err)) from None
+    return _PlanReader(tree, source, base).read(output)
+
+
+def _read_source(path_or_text: str | Path) -> tuple[str, str, Path]:
+    if isinstance(path_or_text, Path) or ("\n" not in path_or_text and (
+            path_or_text.endswith((".yaml", ".yml")) or Path(path_or_text).is_file())):
+        path = Path(path_or_text)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as err:
+            raise PlanError(f"{path}: cannot read the plan: {getattr(err, 'strerror', None) or err}") from None
+        return text, str(path), path.resolve().parent
+    return str(path_or_text), "<string>", Path.cwd()
+
+
+def _grid_options() -> dict[str, str]:
+    """Grid keys: the ``tofnet run`` options ``tofnet.api.apply_overrides`` knows, with - or _."""
+    from tofnet.api import OVERRIDES
+    return {**{k.replace("_", "-"): k for k in OVERRIDES}, **{k: k for k in OVERRIDES}}
+
+
+class _PlanReader:
+    """Turns a line-annotated YAML tree into a ``Plan``; every error names line and key."""
+
+    def __init__(self, tree: Any, source: str, base: Path):
+        self.tree, self.source, self.base = tree, source, base
+        self.names: dict[str, int | None] = {}
+
+    def fail(self, container: Any, key: Any, path: str, message: str) -> PlanError:
+        return PlanError(located(self.source, _line(container, key), f"{path}: {message}"))
+
+    def resolve(self, value: str) -> Path:
+        path = Path(value).expanduser()
+        return path if path.is_absolute() else self.base / path
+
+    def text(self, container: Mapping, key: str, path: str, default: str | None = None) -> str | None:
+        value = container.get(key, default)
+        if value is not None and (not isinstance(value, str) or not value.strip()):
+            raise self.fail(container, key, path, f"expected a non-empty string, got {value!r}")
+        return value
+
+    def read(self, output: str | Path | None) -> Plan:
+        tree = self.tree
+        if not isinstance(tree, Mapping):
+            raise PlanError(located(self.source, _line(tree), f"expected a mapping with keys {', '.join(TOP_KEYS)}; "
+                                    f"got {type(tree).__name__}"))
+        for key in tree:
+            if key not in TOP_KEYS:
+                raise self.fail(tree, key, str(key), f"unknown key; expected one of {', '.join(TOP_KEYS)}")
+        name = self.text(tree, "name", "name", default=Path(self.source).stem if self.source != "<string>" else "batch")
+        description = self.text(tree, "description", "description")
+        out = Path(output) if output is not None else self.resolve(self.text(tree, "output", "output",
+                                                                             default=f"{name}-results"))
+        cache = self.resolve(self.text(tree, "cache", "cache")) if "cache" in tree else out / "scenarios"
+        backend = self.backend(tree, "backend", "backend")
+        keep = self.keep(tree)
+        recordings = self.recordings(tree)
+        networks = self.networks(tree)
+        grid = self.grid(tree)
+        plan = Plan(recordings, networks, grid, out, cache, keep, backend, name, description, self.source, self.base)
+        self.check_grid(plan)
+        return plan
+
+    # ------------------------------------------------------------ sections
+
+    def backend(self, container: Mapping, key: str, path: str) -> str | None:
+        name = self.text(container, key, path)
+        if name is not None:
+            from tofnet.backends.registry import available_backends
+            known = available_backends()
+            if name not in known:
+                raise self.fail(container, key, path, f"unknown backend {name!r}; expected one of {', '.join(known)}")
+        return name
+
+    def keep(self, tree: Mapping) -> tuple[str, ...]:
+        if "keep" not in tree:
+            return DEFAULT_KEEP
+        value = tree["keep"]
+        items = [value] if isinstance(value, str) else value
+        if not isinstance(items, list):
+            raise self.fail(tree, "keep", "keep", f"expected a list of {', '.join(KEEP)}, got {value!r}")
+        for i, item in enumerate(items):
+            if item not in KEEP:
+                where = items if isinstance(value, list) else tree
+                raise self.fail(where, i if isinstance(value, list) else "keep", f"keep[{i}]",
+                                f"expected one of {', '.join(KEEP)}, got {item!r}")
+        return tuple(k for k in KEEP if k in items)
+
+    def recordings(self, tree: Mapping) -> list[RecordingSource]:
+        if "recordings" not in tree:
+            raise PlanError(located(self.source, _line(tree), "recordings: missing; expected a list of paths, "
+                                    "globs or {scenario: NAME}"))
+        section = tree["recordings"]
+        if not isinstance(section, list) or not section:
+            raise self.fail(tree, "recordings", "recordings", "expected a non-empty list of paths, globs or "
+                            "{scenario: NAME}")
+        out: list[RecordingSource] = []
+        for i, entry in enumerate(section):
+            path = f"recordings[{i}]"
+            if isinstance(entry, str):
+                found = self.glob(section, i, path, entry) if globbing.has_magic(entry) else \
+                    [self.path(section, i, path, entry, None)]
+            elif isinstance(entry, Mapping) and "scenario" in entry:
+                found = self.scenarios(entry, path)
+            elif isinstance(entry, Mapping) and "glob" in entry:
+                self.only(entry, GLOB_KEYS, path, "a glob")
+                found = self.glob(entry, "glob", f"{path}.glob", self.text(entry, "glob", f"{path}.glob"))
+            elif isinstance(entry, Mapping) and "path" in entry:
+                self.only(entry, PATH_KEYS, path, "a path")
+                found = [self.path(entry, "path", f"{path}.path", self.text(entry, "path", f"{path}.path"),
+                                   self.text(entry, "name", f"{path}.name"))]
+            else:
+                raise self.fail(section, i, path, f"expected a path, a glob, {{path: P, name: N}}, {{glob: G}} or "
+                                f"{{scenario: NAME, duration: S, seed: N, sensor_size: WxH}}; got {entry!r}")
+            for recording in found:
+                self.unique(recording.name, section, i, path)
+            out.extend(found)
+        return out
+
+    def only(self, entry: Mapping, keys: tuple[str, ...], path: str, what: str) -> None:
+        for key in entry:
+            if key not in keys:
+                raise self.fail(entry, key, f"{path}.{key}", f"unknown key for {what}; expected {', '.join(keys)}")
+
+    def unique(self, name: str, container: Any, key: Any, path: str) -> None:
+        if name in self.names:
+            first = self.names[name]
+            raise self.fail(container, key, path, f"recording name {name!r} is already used"
+                            f"{f' (line {first})' if first else ''}; give this one a name:")
+        self.names[name] = _line(container, key)
+
+    def path(self, container: Any, key: Any, path: str, value: str, name: str | None) -> RecordingSource:
+        if not isinstance(value, str) or not value.strip():
+            raise self.fail(container, key, path, f"expected a path, got {value!r}")
+        resolved = self.resolve(value)
+        if not resolved.exists():
+            raise self.fail(container, key, path, f"{resolved}: no such file or folder")
+        return RecordingSource(name=name or _recording_name(resolved), path=str(resolved))
+
+    def glob(self, container: Any, key: Any, path: str, pattern: str) -> list[RecordingSource]:
+        full = self.resolve(pattern)
+        matches = sorted(Path(m) for m in globbing.glob(str(full), recursive=True))
+        if not matches:
+            raise self.fail(container, key, path, f"{pattern!r} matches nothing (looked for {full})")
+        return [RecordingSource(name=_recording_name(m), path=str(m)) for m in matches]
+
+    def scenarios(self, entry: Mapping, path: str) -> list[RecordingSource]:
+        from tofnet.core.params import parse_size
+        from tofnet.sim import built_in_scenarios
+        self.only(entry, SCENARIO_KEYS, path, "a scenario")
+        known = list(built_in_scenarios())
+        names = entry["scenario"]
+        names = known if names == "all" else [names] if isinstance(names, str) else names
+        if not isinstance(names, list) or not names:
+            raise self.fail(entry, "scenario", f"{path}.scenario", f"expected a name, a list of names or 'all'; "
+                            f"got {entry['scenario']!r}")
+        for j, name in enumerate(names):
+            if name not in known:
+                where = (entry["scenario"], j) if isinstance(entry["scenario"], list) else (entry, "scenario")
+                raise self.fail(*where, f"{path}.scenario", f"unknown scenario {name!r}; expected one of "
+                                f"{', '.join(known)} or all")
+        duration = entry.get("duration", 1.0)
+        if isinstance(duration, str):
+            from tofnet.units import seconds
+            try:
+                duration = seconds(duration, f"{path}.duration")
+            except TofnetError as err:
+                raise self.fail(entry, "duration", f"{path}.duration", str(err).split(": ", 1)[-1]) from None
+        if isinstance(duration, bool) or not isinstance(duration, (int, float)) or not math.isfinite(duration) \
+                or duration <= 0:
+            raise self.fail(entry, "duration", f"{path}.duration", f"expected a positive number of seconds, "
+                            f"got {entry.get('duration')!r}")
+        seeds = entry.get("seed", 0)
+        seeds = seeds if isinstance(seeds, list) else [seeds]
+        if not seeds or any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in seeds):
+            raise self.fail(entry, "seed", f"{path}.seed", f"expected a non-negative integer or a list of them, "
+                            f"got {entry.get('seed')!r}")
+        size = None
+        if "sensor_size" in entry:
+            try:
+                size = parse_size(entry["sensor_size"], f"{path}.sensor_size")
+            except TofnetError as err:
+                raise self.fail(entry, "sensor_size", f"{path}.sensor_size", str(err).split(": ", 1)[-1]) from None
+        name = self.text(entry, "name", f"{path}.name")
+        if name is not None and len(names) * len(seeds) > 1:
+            raise self.fail(entry, "name", f"{path}.name", "a name fits one scenario and one seed; "
+                            "several are named after the scenario (and -seedN)")
+        return [RecordingSource(name=name or (s if len(seeds) == 1 else f"{s}-seed{seed}"), scenario=s,
+                                duration=float(duration), seed=int(seed), sensor_size=size)
+                for s in names for seed in seeds]
+
+    def networks(self, tree: Mapping) -> list[NetworkChoice]:
+        section = tree.get("networks", [PAPER])
+        if not isinstance(section, list) or not section:
+            raise self.fail(tree, "networks", "networks", f"expected a non-empty list of spec files or {PAPER!r}")
+        out, names = [], {}
+        for i, entry in enumerate(section):
+            path = f"networks[{i}]"
+            container, key = section, i
+            if isinstance(entry, str):
+                entry = {"spec": entry}
+            elif not isinstance(entry, Mapping):
+                raise self.fail(section, i, path, f"expected a spec file, {PAPER!r} or {{spec: FILE, name: N, "
+                                f"backend: B}}; got {entry!r}")
+            else:
+                self.only(entry, NETWORK_KEYS, path, "a network")
+                if "estimator" in entry:
+                    raise self.fail(entry, "estimator", f"{path}.estimator", "not available in this version; "
+                                    "networks are spec files or 'paper'")
+                container, key = entry, "spec"
+            spec = entry.get("spec", PAPER)
+            if not isinstance(spec, str) or not spec.strip():
+                raise self.fail(container, key, path, f"expected a spec file or {PAPER!r}, got {spec!r}")
+            resolved = None
+            if spec != PAPER:
+                resolved = self.resolve(spec)
+                self.load_spec(resolved, container, key, f"{path}.spec" if container is entry else path)
+            name = self.text(entry, "name", f"{path}.name") if container is entry else None
+            name = name or (PAPER if resolved is None else resolved.stem)
+            if name in names:
+                raise self.fail(container, key, path, f"network name {name!r} is already used (line {names[name]}); "
+                                "give this one a name:")
+            names[name] = _line(container, key)
+            backend = self.backend(entry, "backend", f"{path}.backend") if container is entry else None
+            out.append(NetworkChoice(name=name, spec=None if resolved is None else str(resolved), backend=backend))
+        return out
+
+    def load_spec(self, spec: Path, container: Any, key: Any, path: str) -> None:
+        from tofnet.io.spec import load_spec
+        if not spec.is_file():
+            raise self.fail(container, key, path, f"{spec}: no such spec file")
+        load_spec(spec)  # a SpecError names the spec's own file, line and key
+
+    def grid(self, tree: Mapping) -> dict[str, list[Any]]:
+        section = tree.get("grid", {})
+        if section is None:
+            section = {}
+        if not isinstance(section, Mapping):
+            raise self.fail(tree, "grid", "grid", "expected a mapping option: [values]")
+        options = _grid_options()
+        out: dict[str, list[Any]] = {}
+        for key, values in section.items():
+            path = f"grid.{key}"
+            if key not in options:
+                known = ", ".join(sorted(set(options.values())))
+                raise self.fail(section, key, path, f"unknown option; expected one of {known}")
+            if options[key] in out:
+                raise self.fail(section, key, path, f"{options[key]} is given twice")
+            values = values if isinstance(values, list) else [values]
+            if not values:
+                raise self.fail(section, key, path, "expected at least one value")
+            if len(set(map(repr, values))) != len(values):
+                raise self.fail(section, key, path, f"a value is repeated in {values!r}")
+            out[options[key]] = list(values)
+        return out
+
+    def check_grid(self, plan: Plan) -> None:
+        """Apply every grid value, then every grid point, to every network (sized 240x180)."""
+        from tofnet.api import apply_overrides, load_network
+        section = self.tree.get("grid") or {}
+        keys = {_grid_options()[k]: k for k in section}
+        for network in plan.networks:
+            def fresh():
+                return load_network(network.spec, sensor_size=None if network.spec else (240, 180))[0]
+            for option, values in plan.grid.items():
+                for j, value in enumerate(values):
+                    try:
+                        apply_overrides(fresh(), **{option: value})
+                    except TofnetError as err:
+                        raise self.fail(section[keys[option]], j, f"grid.{keys[option]}[{j}]",
+                                        f"{value!r} for network {network.name!r}: {err}") from None
+            if len(plan.grid) > 1:
+                for point in plan.combinations():
+                    try:
+                        apply_overrides(fresh(), **point)
+                    except TofnetError as err:
+                        raise self.fail(self.tree, "grid", "grid", f"the point {point} for network "
+                                        f"{network.name!r}: {err}") from None
+
+
+def _recording_name(path: Path) -> str:
+    """A recording's default name: its folder name, or its file name without the suffix."""
+    return path.name if path.is_dir() else path.stem

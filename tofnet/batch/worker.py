@@ -1,0 +1,214 @@
+"""What runs on a worker: simulate a scenario into the cache, run one task, warm the kernels up.
+
+Nothing here needs Dask: ``run_task`` is a plain function of a ``Task`` and a path, so
+a worker reads its recording itself (the client never ships events). A task writes
+its files to a hidden temporary name and renames them when whole, and writes its
+``row.json`` last: a task folder with a ``row.json`` of status ``ok`` is complete.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import socket
+import time
+import uuid
+from pathlib import Path
+from typing import Any
+
+from tofnet.backends.base import DROP_REASONS, REJECT_REASONS
+from tofnet.batch.table import atomic_path
+from tofnet.batch.tasks import Task
+from tofnet.errors import TofnetError
+
+ROW_FILE = "row.json"
+DEPTH_FILE = "depth.npz"
+SUMMARY_FILE = "summary.json"
+SCENARIO_FILE = "scenario.json"
+
+
+def simulate_scenario(task: Task) -> str:
+    """Simulate ``task``'s scenario into its cache folder unless it is there; the folder.
+
+    The simulation goes to a temporary folder renamed into place when complete, so
+    two workers racing on one scenario, or a worker killed half-way, leave either
+    nothing or a whole recording under the final name.
+    """
+    from tofnet.sim.run import simulate
+
+    final = Path(task.scenario_folder)
+    if (final / SCENARIO_FILE).is_file():
+        return str(final)
+    source = task.recording
+    tmp = final.with_name(f".{final.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}")
+    try:
+        summary = simulate(source.scenario, tmp, duration=source.duration, seed=source.seed,
+                           sensor_size=source.sensor_size)
+        (tmp / SCENARIO_FILE).write_text(json.dumps(summary, indent=2, default=str) + "\n", encoding="utf-8")
+        try:
+            os.rename(tmp, final)
+        except OSError:
+            if not (final / SCENARIO_FILE).is_file():  # not another worker's finished copy: a real error
+                raise
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return str(final)
+
+
+def base_row(task: Task) -> dict[str, Any]:
+    """The input columns of ``task``'s row."""
+    from tofnet.batch.tasks import _plain
+    source = task.recording
+    return {"task": task.number, "task_id": task.task_id, "recording": source.label,
+            "recording_name": source.name, "scenario": source.scenario,
+            "seed": source.seed if source.scenario else None,
+            "duration_s": source.duration if source.scenario else None,
+            "network": task.network.name, "backend": task.backend,
+            **{k: _plain(v) for k, v in task.params}}
+
+
+def run_task(task: Task, recording_path: str | None = None) -> dict[str, Any]:
+    """Run one task (as ``tofnet run`` would) and write its outputs; its table row.
+
+    Never raises for a bad recording, spec or parameter, or for running out of
+    memory: the row then has ``status`` ``failed`` and the one-line ``error``.
+    """
+    started, cpu_started = time.perf_counter(), time.thread_time()
+    row = {**base_row(task), "status": "failed", "error": None, "worker": worker_name()}
+    folder = Path(task.folder)
+    try:
+        row.update(_run(task, recording_path or task.recording_path, folder))
+        row["status"] = "ok"
+    except MemoryError:
+        row["error"] = "out of memory while running the task"
+    except TofnetError as err:
+        row["error"] = one_line(str(err))
+    except Exception as err:  # a bug or an unreadable file: the batch goes on, the row says what happened
+        row["error"] = one_line(f"{type(err).__name__}: {err}")
+    row["task_time_s"] = time.perf_counter() - started
+    row["cpu_time_s"] = time.thread_time() - cpu_started  # below task_time_s when the machine is busy
+    row["keep"] = list(task.keep)
+    write_json(folder / ROW_FILE, row)
+    return row
+
+
+def _run(task: Task, recording_path: str, folder: Path) -> dict[str, Any]:
+    from tofnet.api import DEFAULT_BACKEND, apply_overrides, load_network, run
+    from tofnet.io import read_recording
+
+    recording = read_recording(recording_path)
+    # The same network `tofnet run RECORDING [--spec S] [--refractory R ...]` builds.
+    network, compile_options, spec_backend, backend_options = load_network(
+        task.network.spec, sensor_size=None if task.network.spec else recording.sensor_size)
+    apply_overrides(network, **task.parameters)
+    backend = task.backend or spec_backend or DEFAULT_BACKEND
+    if task.backend and task.backend != spec_backend:
+        backend_options = {}  # the spec's options belong to the spec's backend
+    result, _ = run(recording, network, backend=backend, backend_options=backend_options,
+                    compile_options=compile_options)
+    summary = result.summary()
+    summary["recording"] = recording_path
+    out: dict[str, Any] = {
+        "backend": backend, "events_in": summary["events_in"], "accepted": summary["accepted"],
+        "dropped": sum(summary["dropped"].values()),
+        **{f"dropped_{r}": summary["dropped"].get(r, 0) for r in DROP_REASONS},
+        "tot_spikes": summary["tot_spikes"], "depth_out": summary.get("depth_out"),
+        **{f"rejected_{r}": summary.get("rejected", {}).get(r) for r in REJECT_REASONS},
+        "steps": summary["steps"], "latency_steps": summary["latency_steps"],
+        "wall_time_s": summary["wall_time_s"],
+        "events_per_s": summary["events_in"] / summary["wall_time_s"] if summary["wall_time_s"] > 0 else None,
+    }
+    meta = {"t0_us": result.t0_us, "timestep_us": result.timestep_us, "latency_steps": result.latency_steps}
+    if "metrics" in task.keep and recording.gt_depth is not None:
+        from tofnet.eval.metrics import evaluate
+        evaluation = evaluate(recording, result.depth, meta)
+        e = evaluation.errors
+        out.update(matched=e.n, coverage_pct=_pct(evaluation.coverage), mean_abs_m=_num(e.mean_abs_m),
+                   median_abs_m=_num(e.median_abs_m), mean_rel_pct=_num(e.mean_rel_pct),
+                   median_rel_pct=_num(e.median_rel_pct), bias_rel_pct=_num(e.bias_rel_pct))
+        summary["evaluation"] = evaluation.to_dict()
+    if "depth" in task.keep:
+        from tofnet.io.depth import write_depth
+        with atomic_path(folder / DEPTH_FILE) as tmp:
+            write_depth(tmp, result.depth, summary=summary, **meta)
+        out["depth_file"] = str(folder / DEPTH_FILE)
+    if "summary" in task.keep:
+        summary["parameters"] = task.parameters
+        write_json(folder / SUMMARY_FILE, summary)
+        out["summary_file"] = str(folder / SUMMARY_FILE)
+    return out
+
+
+def is_complete(task: Task) -> dict | None:
+    """``task``'s row when its outputs are all there from an earlier, successful run; else ``None``."""
+    folder = Path(task.folder)
+    try:
+        row = json.loads((folder / ROW_FILE).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if row.get("status") != "ok" or row.get("task_id") != task.task_id:
+        return None
+    if not set(task.keep) <= set(row.get("keep", ())):  # the plan now keeps more than that run did
+        return None
+    files = {"depth": DEPTH_FILE, "summary": SUMMARY_FILE}
+    if any(not (folder / files[k]).is_file() for k in task.keep if k in files):
+        return None
+    return {**row, "task": task.number}
+
+
+def warm_up(backends: tuple[str, ...] = ("fixed",)) -> float:
+    """Load (or compile) the numba kernels of a task in this process: read, run and score a tiny recording; seconds."""
+    import tempfile
+
+    import numpy as np
+
+    from tofnet.api import run
+    from tofnet.eval.metrics import evaluate
+    from tofnet.io import read_recording
+    from tofnet.io.ecd import write_ecd
+    from tofnet.io.recording import Intrinsics
+    from tofnet.networks import depth_network
+    from tofnet.testing import moving_edge
+
+    started = time.perf_counter()
+    size = (16, 12)
+    events = moving_edge(size, -50.0, "u")
+    with tempfile.TemporaryDirectory(prefix="tofnet-warm-up-") as folder:
+        write_ecd(folder, events, intrinsics=Intrinsics(20.0, 20.0, 7.5, 5.5), times=np.array([0.0, 1.0]),
+                  positions=np.array([[0.0, 0, 0], [0.5, 0, 0]]), quaternions=np.array([[0.0, 0, 0, 1]] * 2),
+                  sensor_size=size, gt_depth=np.full(len(events), 0.2))
+        recording = read_recording(folder)
+    for backend in backends:
+        result, _ = run(recording, depth_network(size), backend=backend)
+    evaluate(recording, result.depth, {"t0_us": result.t0_us, "timestep_us": result.timestep_us,
+                                       "latency_steps": result.latency_steps})
+    return time.perf_counter() - started
+
+
+def write_json(path: Path, data: dict) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(data, indent=2, default=str, allow_nan=False) + "\n", encoding="utf-8")
+
+
+def worker_name() -> str:
+    """The Dask worker's address, or ``host:pid`` outside Dask."""
+    try:
+        from distributed import get_worker
+        return get_worker().address
+    except (ImportError, ValueError):
+        return f"{socket.gethostname()}:{os.getpid()}"
+
+
+def one_line(message: str) -> str:
+    lines = [line.strip() for line in message.strip().splitlines() if line.strip()]
+    return lines[0] if lines else "error without a message"
+
+
+def _num(value: float) -> float | None:
+    return None if value is None or not math.isfinite(value) else float(value)
+
+
+def _pct(share: float) -> float | None:
+    return None if share is None or not math.isfinite(share) else 100.0 * share
