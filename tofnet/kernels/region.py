@@ -212,7 +212,7 @@ class TimeOfTravelKernel:
         self._rec[:] = NEVER
         self._stamp = self._rec.view(np.int32)
         self._stamp.reshape(-1, 2 * stride)[:, :4] = tt.IDLE
-        self.rejected = self._counts[tt.REJECTED:tt.REJECTED + 3]  # REJECT_REASONS order (a view)
+        self.rejected = self._counts[tt.REJECTED:tt.EMITTED]  # REJECT_REASONS order (a view)
         self._out, self._raw, self._tot = np.empty(0, DEPTH_DTYPE), np.empty(0, np.int64), np.empty(0, TOT_DTYPE)
         self._broken = False
         # Scalars and empty arrays the per-packet path needs, looked up once.
@@ -450,7 +450,7 @@ class TimeOfTravelKernel:
     @property
     def outcomes(self) -> np.ndarray:
         """Depth neurons reached so far by outcome: REJECT_REASONS, then emitted (a view)."""
-        return self._counts[tt.REJECTED:tt.REJECTED + 4]
+        return self._counts[tt.REJECTED:tt.EMITTED + 1]
 
     def unit_state(self) -> tuple[np.ndarray, np.ndarray]:
         """Per unit of the region (``[H, W, 4]``): step of its last facilitation (-1: idle) and polarity.
