@@ -56,8 +56,8 @@ def _rotation_source_text(process: AngularVelocityProcess) -> str:
     if process.source == "groundtruth":
         return "the ground-truth poses"
     if process.source == "gyro":
-        turned = ", rotated to the camera frame" if process.rotation_cam_imu is not None else ""
-        return f"the gyroscope ({process.imu or 'imu.txt'}{turned})"
+        turned = " with its camera-IMU rotation" if process.rotation_cam_imu is not None else ""
+        return f"the gyroscope ({process.imu or 'imu.txt'}){turned}"
     if process.source == "samples":
         return f"samples ({process.samples})"
     return f"a constant ω = {list(process.omega)} rad/s"
