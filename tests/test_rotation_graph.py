@@ -207,3 +207,22 @@ def test_a_spec_with_rotation_runs_and_no_rotation_refuses_it(tmp_path, events, 
     assert main(["run", str(tmp_path / "rec"), "--spec", str(spec), "--out", str(out), "--quiet",
                  "--no-rotation"]) == 2
     assert "remove it from the spec" in capsys.readouterr().err
+
+
+def test_tofnet_eval_splits_the_error_by_the_true_share(events, tmp_path, capsys):
+    import json
+    for kind in ("poses", "gyro"):
+        write_recording(tmp_path / kind, events, poses=kind == "poses", imu=kind == "gyro")
+    out = tmp_path / "depth.npz"
+    assert main(["run", str(tmp_path / "poses"), "--out", str(out), "--refractory", "0", "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["eval", str(tmp_path / "poses"), str(out), "--window", "0", "--json", str(tmp_path / "e.json")]) == 0
+    printed = capsys.readouterr().out
+    assert "error by translational share r (true share along the true image motion" in printed
+    split = json.loads((tmp_path / "e.json").read_text())["share_split"]
+    filled = [row for row in split if row["n"]]
+    # every estimate sees the same motion: one bin, at the scene's share (x²/f adds up to 1 % to B ω)
+    assert len(filled) == 1 and filled[0]["share"] == pytest.approx(share(), rel=0.02)
+    assert filled[0]["lo"] <= share() < filled[0]["hi"]
+    assert main(["eval", str(tmp_path / "gyro"), str(out), "--window", "0"]) == 0
+    assert "not available (needs ground-truth poses" in capsys.readouterr().out
