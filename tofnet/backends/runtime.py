@@ -143,6 +143,10 @@ class UpdateRows:
         self._cached = (first, table)
         return table, first
 
+    def clear(self) -> None:
+        """Forget the cached rows (the source changed): the next request computes them anew."""
+        self._cached = (0, np.zeros((0, 3)))
+
     def slice(self, first: int, count: int) -> np.ndarray:
         """Rows ``first .. first+count-1`` exactly."""
         table, start = self.rows(first, count)

@@ -163,7 +163,10 @@ def format_summary(summary: dict, result, written: dict, network_width) -> str:
     if len(depth_names) == 1:
         lines.append(f"tot spikes     {summary['tot_spikes']:>12,}")
         lines.append(f"depth out      {summary['depth_out']:>12,}  -> {written[depth_names[0]]}")
+        rotating = str(summary.get("rotation") or "").startswith("eq. 7")
         for reason, count in summary["rejected"].items():
+            if reason == "rotation_dominated" and not (rotating or count):
+                continue  # eq. 8 never rejects for rotation
             lines.append(f"  rejected     {count:>12,}  {reason.replace('_', ' ')}")
     else:
         for process, counts in summary["counts"].items():

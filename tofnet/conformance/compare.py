@@ -14,7 +14,11 @@ and which depth neurons were reached. Depth outputs then compare by mode:
            time-of-travel process feeding it; the largest counts when not probed); an
            estimate may be missing on one side only when its depth is within that
            tolerance of its process's ``min_depth`` or ``max_depth``, and that process's
-           rejection counts must differ by exactly those estimates. Depth outputs of other
+           rejection counts must differ by exactly those estimates. A depth process with
+           ``b_w`` connected (eq. 7) is held to ``rotation_depth_tolerance`` instead, its
+           share computed from the counts and the probed angular velocity updates (the
+           runner probes them; ``recording`` gives the intrinsics); estimates may then also
+           flip at ``min_share``. Depth outputs of other
            processes (e.g. a user's filter downstream) have no stated bound and are listed
            in ``Comparison.notes`` instead; their counts may differ.
 
