@@ -144,3 +144,47 @@ def test_the_cases_exercise_what_they_are_named_for():
     assert np.unique(conflict.tot["direction"]).tolist() == [0, 1, 2, 3]
     depth_range = run("depth-range")
     assert depth_range.rejected["too_near"] > 0 and depth_range.rejected["too_far"] > 0
+
+
+def _rotation_runs(name):
+    from tofnet.conformance.runner import rotation_probes
+    scene = next(c for c in CASES if c.name == name).build()
+    probes = rotation_probes(scene.network)
+    return scene, ReferenceBackend().run(scene.network, scene.recording, record_tot=True, probes=probes), probes
+
+
+def test_the_rotation_cases_compensate_and_reject_rotation_dominated_estimates():
+    for name, depth_m in (("rotation-texture", 1.0), ("rotation-poses", 1.5)):
+        _, result, probes = _rotation_runs(name)
+        assert probes == ["angular_velocity.b_w"]
+        assert np.median(result.depth["z"]) == pytest.approx(depth_m, rel=0.06)
+    _, dominated, _ = _rotation_runs("rotation-dominated")
+    assert dominated.rejected["rotation_dominated"] > len(dominated.depth) / 4
+
+
+def test_quantised_comparison_uses_the_eq7_bound():
+    from tofnet.conformance.compare import rotation_of, shares, signed_counts
+    from tofnet.kernels.fixed_point import rotation_depth_tolerance
+    scene, base, _ = _rotation_runs("rotation-texture")
+    rotation = rotation_of(scene.network, "depth", base.outputs, scene.recording)
+    sx, sy = signed_counts(base.tot, base.depth, *scene.network.sensor_size)
+    _, share_q = shares(rotation, base.depth, sx, sy, 1e-3, 16, 24)
+    bound = rotation_depth_tolerance(sx, sy, np.abs(base.depth["z"]), share_q, 16)
+    assert np.median(bound / depth_tolerance_of(sx, sy)) > 1.5  # eq. 7's bound is wider than eq. 8's where r < 1
+    fixed = dataclasses.replace(base, extra={"frac_bits": 16, "payload_bits": 24})
+    near = dataclasses.replace(fixed, outputs=dict(base.outputs))
+    near.depth = base.depth.copy()
+    near.depth["z"] += 0.9 * bound
+    assert compare(near, base, "quantised", scene.network, scene.recording).ok
+    far = dataclasses.replace(fixed, outputs=dict(base.outputs))
+    far.depth = base.depth.copy()
+    far.depth["z"][7] += 1.1 * bound[7]  # (the bound at the larger depth grows by c / r per metre: ~1e-4)
+    assert "tolerance" in compare(far, base, "quantised", scene.network, scene.recording).first
+    unprobed = dataclasses.replace(fixed, outputs={k: v for k, v in base.outputs.items() if k != "angular_velocity.b_w"})
+    comparison = compare(unprobed, dataclasses.replace(unprobed, extra={}), "quantised", scene.network)
+    assert comparison.ok and "compensates rotation" in comparison.notes[0]
+
+
+def depth_tolerance_of(sx, sy):
+    from tofnet.kernels.fixed_point import depth_tolerance
+    return depth_tolerance(sx, sy)

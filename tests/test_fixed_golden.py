@@ -69,7 +69,7 @@ def test_fixed_backend_reproduces_the_golden_case(name):
     assert depth[["step", "x", "y"]].tolist() == [(d["step"], d["x"], d["y"]) for d in expected]
     assert depth["t"].tolist() == [(d["step"] + 1) * 1000 for d in expected]
     assert depth["z"].tolist() == [d["z"] for d in expected]  # exact: z = Z_raw / 2**F
-    assert result.rejected == case["rejected"]
+    assert result.rejected == {**case["rejected"], "rotation_dominated": 0}  # eq. 8: never rotation-dominated
     assert result.extra == {"frac_bits": case["frac_bits"], "payload_bits": case["payload_bits"]}
 
 
@@ -91,4 +91,4 @@ def test_float_backend_on_the_golden_case(name):
     result = FloatBackend().run(network(case), recording(case))
     kept = [d for d in case["depth"] if d["z_float"] is not None]
     assert sorted(result.depth["z"].tolist()) == pytest.approx(sorted(d["z_float"] for d in kept), rel=1e-12)
-    assert result.rejected == case.get("float_rejected", case["rejected"])
+    assert result.rejected == {**case.get("float_rejected", case["rejected"]), "rotation_dominated": 0}

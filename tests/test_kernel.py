@@ -93,7 +93,7 @@ def test_opposite_directions_keep_the_smaller_count_and_a_tie_measures_nothing()
     assert depth["z"].tolist() == pytest.approx([100 * 3e-3])  # +u wins with count 3
     depth, tot, kernel = run([(6, 0, 0, 1), (6, 2, 0, 1), (10, 1, 0, 1)], (3, 1))
     assert len(tot) == 2 and len(depth) == 0
-    assert kernel.rejected.tolist() == [1, 0, 0]  # no_measurement
+    assert kernel.rejected.tolist() == [1, 0, 0, 0]  # no_measurement
 
 
 @pytest.mark.parametrize("facilitator,velocity", [
@@ -116,9 +116,9 @@ def test_distance_two():
 
 
 def test_depth_outside_the_range_is_rejected_by_reason():
-    assert run([(0, 0, 0, 1), (2, 1, 0, 1)], min_depth=0.5)[2].rejected.tolist() == [0, 1, 0]
-    assert run([(0, 0, 0, 1), (30, 1, 0, 1)], max_depth=2.0)[2].rejected.tolist() == [0, 0, 1]
-    assert run([(0, 0, 0, 1), (5, 1, 0, 1)], velocity=(0.5, 0, 0))[2].rejected.tolist() == [0, 1, 0]
+    assert run([(0, 0, 0, 1), (2, 1, 0, 1)], min_depth=0.5)[2].rejected.tolist() == [0, 1, 0, 0]
+    assert run([(0, 0, 0, 1), (30, 1, 0, 1)], max_depth=2.0)[2].rejected.tolist() == [0, 0, 1, 0]
+    assert run([(0, 0, 0, 1), (5, 1, 0, 1)], velocity=(0.5, 0, 0))[2].rejected.tolist() == [0, 1, 0, 0]
 
 
 def test_velocity_update_held_by_the_depth_neuron():
@@ -153,7 +153,7 @@ def test_regions_tiling_the_sensor_equal_the_full_sensor(distance):
     cfg = config(sensor, distance=distance, counter_bits=5, per_pixel=False, patch_size=6,
                  intrinsics=(200.0, 190.0, 11.0, 8.0))
     full = TimeOfTravelKernel(cfg).process(*spikes, table, 0, record_tot=True)
-    depth, tot, rejected = [], [], np.zeros(3, np.int64)
+    depth, tot, rejected = [], [], np.zeros(4, np.int64)
     for y0 in range(0, 17, 5):
         for x0 in range(0, 23, 7):
             region = Region(x0, min(x0 + 7, 23), y0, min(y0 + 5, 17))

@@ -2,16 +2,17 @@
 
 import numpy as np
 
+from tofnet.backends.base import REJECT_REASONS
 from tofnet.backends.graph import canonical
 import pytest
 
 from tofnet.errors import BackendError
 from tofnet.events import make_events
-from tofnet.kernels.depth import EMITTED, classify, signed_axis_count
+from tofnet.kernels.depth import EMITTED, ROTATION_DOMINATED, classify, signed_axis_count
 from tofnet.kernels.fixed_point import FixedPointFormat
 from tofnet.kernels.input_filter import InputFilter
 from tofnet.kernels.region import KernelConfig, TimeOfTravelKernel
-from tofnet.kernels.time_of_travel import axis_count, outcome
+from tofnet.kernels.time_of_travel import N_REASONS, axis_count, outcome
 
 SENSOR = (19, 14)
 T0 = 3_000
@@ -141,12 +142,16 @@ def test_branchless_depth_rules_equal_the_depth_neuron():
         for measured in (False, True):
             for z in (-1.0, 0.05, 0.06, 19.9, 20.0, 25.0):
                 slot = outcome(fired, measured, z, 0.05, 20.0)
-                expected = 4 if not fired else (3 if classify(measured, z, 0.05, 20.0) == EMITTED
-                                                 else classify(measured, z, 0.05, 20.0))
+                # slots: REJECT_REASONS indices, then emitted, then no unit fired
+                expected = N_REASONS + 1 if not fired else (N_REASONS if classify(measured, z, 0.05, 20.0) == EMITTED
+                                                            else classify(measured, z, 0.05, 20.0))
                 assert slot == expected
                 reasons[slot] = True
-            assert outcome(fired, measured, 3277, 3277, 1310720) == (1 if fired and measured else 0 if fired else 4)
-    assert sorted(reasons) == [0, 1, 2, 3, 4]
+            assert outcome(fired, measured, 3277, 3277, 1310720) == (1 if fired and measured else 0 if fired
+                                                                     else N_REASONS + 1)
+    # every eq. 8 outcome; never rotation_dominated (slot 3), which only eq. 7 gives
+    assert sorted(reasons) == [0, 1, 2, N_REASONS, N_REASONS + 1]
+    assert N_REASONS == len(REJECT_REASONS) and REJECT_REASONS[ROTATION_DOMINATED] == "rotation_dominated"
 
 
 def test_process_events_needs_the_whole_sensor():

@@ -13,8 +13,8 @@ from tofnet.core.process import Process
 from tofnet.errors import SpecError
 from tofnet.io.spec import (default_spec_path, dump_spec, load_budget, load_spec, network_from_dict,
                             network_to_dict, networks_equal, spec_from_dict, spec_to_dict)
-from tofnet.processes import (BackgroundActivityFilterProcess, DepthProcess, InputProcess, TimeOfTravelProcess,
-                              VelocityProcess)
+from tofnet.processes import (AngularVelocityProcess, BackgroundActivityFilterProcess, DepthProcess, InputProcess,
+                              TimeOfTravelProcess, VelocityProcess)
 
 PAPER = """\
 name: paper
@@ -54,14 +54,19 @@ def every_parameter_changed() -> Network:
                        refractory_per_polarity=True, t0=1.5)
     baf = BackgroundActivityFilterProcess(name="baf", radius=2, window="12ms")
     tot = TimeOfTravelProcess(name="tot", distance=3, counter_bits=12)
-    dep = DepthProcess(name="z", min_depth="10cm", max_depth=7.5)
+    dep = DepthProcess(name="z", min_depth="10cm", max_depth=7.5, min_share=0.25)
     vel = VelocityProcess(name="v", source="samples", velocity=[0.1, -0.2, 0.3], samples="vel.txt", per="pixel",
                           patch_size=16, update_every=5, intrinsics=[200.0, 201.5, 31.5, 23.5])
+    rot = AngularVelocityProcess(name="w", source="gyro", omega=[0.01, -0.02, 0.03], samples="w.txt", imu="imu.txt",
+                                 rotation_cam_imu=[0.0, 0.0, 0.7071067811865476, 0.7071067811865476],
+                                 time_shift="-2.5ms", bias=[0.001, 0.002, -0.003], update_every=3,
+                                 intrinsics=[200.0, 201.5, 31.5, 23.5])
     inp.events.connect(baf.events)
     baf.passed.connect(tot.events)
     tot.counts.connect(dep.counts)
     vel.a_t.connect(dep.a_t)
-    return Network([inp, baf, tot, dep, vel], name="everything")
+    rot.b_w.connect(dep.b_w)
+    return Network([inp, baf, tot, dep, vel, rot], name="everything")
 
 
 def test_every_process_type_and_parameter_round_trips():

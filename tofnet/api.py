@@ -10,23 +10,76 @@ from tofnet.core.network import Network
 from tofnet.errors import NetworkError
 from tofnet.io.recording import Recording
 from tofnet.networks import depth_network
-from tofnet.processes import InputProcess, TimeOfTravelProcess, VelocityProcess
+from tofnet.processes import AngularVelocityProcess, InputProcess, TimeOfTravelProcess, VelocityProcess
 
 DEFAULT_BACKEND = "fixed"
 
 
-def load_network(spec: str | Path | None = None, *, sensor_size: tuple[int, int] | None = None):
-    """The network of a YAML spec (or the paper's default) and the spec's compile/backend settings.
+def rotation_source_of(recording: Recording | None) -> str | None:
+    """The ``AngularVelocityProcess`` source for a recording's rotation information: ``"groundtruth"``
+    for ground-truth poses that turn, else ``"gyro"`` for an IMU; None when it has neither
+    (``tofnet.io.rotation.angular_velocity_of``)."""
+    from tofnet.io.rotation import PoseAngularVelocity, angular_velocity_of
+
+    found = angular_velocity_of(recording) if recording is not None else None
+    if found is None:
+        return None
+    return "groundtruth" if isinstance(found, PoseAngularVelocity) else "gyro"
+
+
+def default_network(recording: Recording | None = None, *, sensor_size: tuple[int, int] | None = None,
+                    rotation: bool = True) -> Network:
+    """The paper's network sized to ``sensor_size``, else the recording's, else 240x180.
+
+    When the recording has rotation information (``rotation_source_of``) and ``rotation`` is
+    True, an angular velocity process feeds the depth neurons, which then compensate the
+    camera's rotation (paper eq. 7); otherwise it is the paper's eq. 8 network exactly.
+    """
+    size = sensor_size or (recording.sensor_size if recording is not None else None) or (240, 180)
+    source = rotation_source_of(recording) if rotation else None
+    return depth_network(size, rotation=None if source is None else {"source": source})
+
+
+def rotation_summary(network: Network) -> str | None:
+    """One line on where the depth neurons take the camera's rotation from; None when they compute eq. 8."""
+    described = []
+    for process in network.of_type(AngularVelocityProcess):
+        if not process.b_w.targets:
+            continue
+        where = _rotation_source_text(process)
+        targets = ", ".join(port.process.name for port in process.b_w.targets)
+        described.append(f"{where} -> {targets}")
+    return ("eq. 7, ω from " + "; ".join(described)) if described else None
+
+
+def _rotation_source_text(process: AngularVelocityProcess) -> str:
+    if process.source == "groundtruth":
+        return "the ground-truth poses"
+    if process.source == "gyro":
+        turned = " with its camera-IMU rotation" if process.rotation_cam_imu is not None else ""
+        return f"the gyroscope ({process.imu or 'imu.txt'}){turned}"
+    if process.source == "samples":
+        return f"samples ({process.samples})"
+    return f"a constant ω = {list(process.omega)} rad/s"
+
+
+def load_network(spec: str | Path | None = None, *, sensor_size: tuple[int, int] | None = None,
+                 recording: Recording | None = None, rotation: bool = True):
+    """The network of a YAML spec (or the default network) and the spec's compile/backend settings.
 
     Returns ``(network, compile_options, backend_name_or_None, backend_options)``.
-    ``sensor_size`` overrides the spec's (or the default 240x180).
+    ``sensor_size`` overrides the spec's (or the default's). Without a spec the network is
+    ``default_network(recording, rotation=rotation)``; a spec decides for itself whether
+    its depth neurons compensate rotation (``rotation=False`` refuses one that does).
     """
     if spec is None:
-        network = depth_network(sensor_size or (240, 180))
-        return network, {}, None, {}
+        return default_network(recording, sensor_size=sensor_size, rotation=rotation), {}, None, {}
     from tofnet.io.spec import load_spec
     loaded = load_spec(spec)
     network = loaded.network
+    if not rotation and rotation_summary(network) is not None:
+        raise NetworkError(f"{spec}: the spec connects an angular velocity process to its depth neurons (eq. 7); "
+                           "remove it from the spec to compute eq. 8")
     if sensor_size is not None and network.sensor_size != tuple(sensor_size):
         resize(network, sensor_size)
     return network, dict(loaded.compile or {}), loaded.backend, dict(loaded.backend_options or {})
@@ -70,18 +123,20 @@ def run(recording: Recording, network: Network | None = None, *, backend: str = 
         backend_options: dict | None = None, compile_options: dict | None = None, record_tot: bool = False,
         probes: tuple[str, ...] | list[str] = (), monitors: list | tuple = (),
         progress: ProgressCallback | None = None) -> tuple[RunResult, Any]:
-    """Compile ``network`` (default: the paper's, sized to the recording) and run it on ``recording``.
+    """Compile ``network`` and run it on ``recording``.
 
-    ``probes`` names output ports (``"process.port"``) to return besides the sinks.
-    ``monitors`` (``tofnet.Monitor`` or ``"process.var@x,y"`` strings) are recorded while it runs,
-    through a ``Session`` (model by model); ``result.extra["monitors"]`` holds them.
-    Returns ``(result, compiled)``.
+    The default network is ``default_network(recording)``: the paper's, sized to the
+    recording, compensating the camera's rotation when the recording has rotation
+    information. ``probes`` names output ports (``"process.port"``) to return besides the
+    sinks. ``monitors`` (``tofnet.Monitor`` or ``"process.var@x,y"`` strings) are recorded
+    while it runs, through a ``Session`` (model by model); ``result.extra["monitors"]``
+    holds them. Returns ``(result, compiled)``.
     """
     from tofnet.backends.registry import get_backend
     from tofnet.compiler import compile_network
 
     if network is None:
-        network = depth_network(recording.sensor_size or (240, 180))
+        network = default_network(recording)
     compiled = compile_network(network, **(compile_options or {}))
     if monitors:
         from tofnet.session import Session

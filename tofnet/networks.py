@@ -5,17 +5,21 @@ from __future__ import annotations
 from typing import Any, Iterable
 
 from tofnet.core.network import Network
-from tofnet.processes import (BackgroundActivityFilterProcess, DepthProcess, InputProcess, TimeOfTravelProcess,
-                              VelocityProcess)
+from tofnet.processes import (AngularVelocityProcess, BackgroundActivityFilterProcess, DepthProcess, InputProcess,
+                              TimeOfTravelProcess, VelocityProcess)
 
 
 def depth_network(sensor_size: tuple[int, int] = (240, 180), *, name: str = "depth",
                   input: dict[str, Any] | None = None, time_of_travel: dict[str, Any] | None = None,
-                  depth: dict[str, Any] | None = None, velocity: dict[str, Any] | None = None) -> Network:
+                  depth: dict[str, Any] | None = None, velocity: dict[str, Any] | None = None,
+                  rotation: dict[str, Any] | None = None) -> Network:
     """The paper's network: input -> time_of_travel -> depth <- velocity.
 
     Each dict overrides that process's parameters, e.g.
     ``depth_network(time_of_travel={"distance": 2}, velocity={"source": "constant", "velocity": [0.5, 0, 0]})``.
+    ``rotation`` (a dict, ``{}`` for the defaults) adds an ``AngularVelocityProcess`` called
+    ``angular_velocity`` feeding ``depth.b_w``: the depth neurons then compensate the camera's
+    rotation (paper eq. 7), e.g. ``rotation={"source": "gyro"}``. None: the paper's eq. 8.
     """
     inp = InputProcess(name="input", sensor_size=sensor_size, **(input or {}))
     tot = TimeOfTravelProcess(name="time_of_travel", **(time_of_travel or {}))
@@ -24,7 +28,12 @@ def depth_network(sensor_size: tuple[int, int] = (240, 180), *, name: str = "dep
     inp.events.connect(tot.events)
     tot.counts.connect(dep.counts)
     vel.a_t.connect(dep.a_t)
-    return Network([inp, tot, dep, vel], name=name)
+    processes = [inp, tot, dep, vel]
+    if rotation is not None:
+        rot = AngularVelocityProcess(name="angular_velocity", **rotation)
+        rot.b_w.connect(dep.b_w)
+        processes.append(rot)
+    return Network(processes, name=name)
 
 
 def multi_distance_network(sensor_size: tuple[int, int] = (240, 180), distances: Iterable[int] = (1, 2), *,

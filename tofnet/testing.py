@@ -109,6 +109,22 @@ def moving_pattern(sensor_size: tuple[int, int], velocity_px_s: tuple[float, flo
     # the texture point seen by pixel (x, y) at time t is (x - vu t, y - vv t)
     lo_u, lo_v = -shift_u.max() - 2, -shift_v.max() - 2
     hi_u, hi_v = width - shift_u.min() + 2, height - shift_v.min() + 2
+    value = _texture(kind, (lo_u, hi_u, lo_v, hi_v), scale_px, rng)
+    y, x = np.mgrid[0:height, 0:width].astype(np.float64)
+    previous = value(x - shift_u[0], y - shift_v[0])
+    parts = []
+    for t, su, sv in zip(times[1:], shift_u[1:], shift_v[1:]):
+        current = value(x - su, y - sv)
+        ey, ex = np.nonzero(current != previous)
+        if len(ex):
+            parts.append(make_events(np.full(len(ex), start_us + t), ex, ey, current[ey, ex] > previous[ey, ex]))
+        previous = current
+    return np.concatenate(parts) if parts else np.empty(0, dtype=EVENT_DTYPE)
+
+
+def _texture(kind: str, bounds: tuple[float, float, float, float], scale_px: float, rng: np.random.Generator):
+    """A binary texture over ``bounds`` ``(lo_u, hi_u, lo_v, hi_v)`` (px): ``value(a, b)`` at texture points."""
+    lo_u, hi_u, lo_v, hi_v = bounds
     if kind == "checker":
         def value(a, b):
             return ((np.floor(a / scale_px) + np.floor(b / scale_px)) % 2).astype(np.int8)
@@ -129,16 +145,90 @@ def moving_pattern(sensor_size: tuple[int, int], velocity_px_s: tuple[float, flo
                          np.clip(((a - lo_u) * res).astype(np.int64), 0, gu - 1)]
     else:
         raise ValueError(f"moving_pattern: unknown kind {kind!r}; expected 'blobs' or 'checker'")
+    return value
+
+
+# -- a turning camera (paper eq. 7) ---------------------------------------------------------------
+
+
+def camera_flow(intrinsics: Intrinsics, depth_m: float, velocity, omega):
+    """The image flow ``A t / Z + B ω`` (px/s) of a camera moving at ``velocity`` (m/s) and turning at
+    ``omega`` (rad/s), both in the camera frame, for points at camera-frame depth ``depth_m``.
+
+    Returns ``flow(u, v) -> (flow_u, flow_v)`` on arrays. A synthetic world in which every
+    point keeps its depth: the flow does not change with time and eq. 7 holds exactly at
+    every pixel (``tofnet.kernels.rotation`` has ``B ω``, ``tofnet.kernels.velocity`` ``A t``).
+    """
+    from tofnet.kernels.rotation import rotational_flow
+    from tofnet.kernels.velocity import velocity_term
+
+    k = intrinsics
+    tx, ty, tz = (float(v) for v in velocity)
+    wx, wy, wz = (float(w) for w in omega)
+
+    def flow(u, v):
+        at_u, at_v = velocity_term(tx, ty, tz, u, v, k.fx, k.fy, k.cx, k.cy)
+        bw_u, bw_v = rotational_flow(wx, wy, wz, u, v, k.fx, k.fy, k.cx, k.cy)
+        return at_u / depth_m + bw_u, at_v / depth_m + bw_v
+    return flow
+
+
+def flowing_pattern(sensor_size: tuple[int, int], flow, duration_us: int, *, kind: str = "blobs",
+                    scale_px: float = 4.0, seed: int = 0, sample_us: int = 250, start_us: int = 0) -> np.ndarray:
+    """Events of a binary texture carried by a stationary image flow ``flow(u, v)`` (px/s; ``camera_flow``).
+
+    Like ``moving_pattern`` for a flow that varies across the image: the texture point pixel
+    (x, y) sees at time ``t`` is where the flow, run backwards for ``t``, takes (x, y)
+    (fourth-order Runge-Kutta, one step per ``sample_us``; the flow does not depend on time,
+    so steps compose). A pixel whose value changed at a sample fires one event then.
+    """
+    width, height = sensor_size
+    rng = np.random.default_rng(seed)
+    n = duration_us // sample_us + 1
+    h = -sample_us * 1e-6  # backwards
     y, x = np.mgrid[0:height, 0:width].astype(np.float64)
-    previous = value(x - shift_u[0], y - shift_v[0])
+    a, b = np.empty((n, height, width)), np.empty((n, height, width))
+    a[0], b[0] = x, y
+    for i in range(1, n):
+        k1 = flow(a[i - 1], b[i - 1])
+        k2 = flow(a[i - 1] + 0.5 * h * k1[0], b[i - 1] + 0.5 * h * k1[1])
+        k3 = flow(a[i - 1] + 0.5 * h * k2[0], b[i - 1] + 0.5 * h * k2[1])
+        k4 = flow(a[i - 1] + h * k3[0], b[i - 1] + h * k3[1])
+        a[i] = a[i - 1] + h / 6 * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0])
+        b[i] = b[i - 1] + h / 6 * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1])
+    value = _texture(kind, (a.min() - 2, a.max() + 2, b.min() - 2, b.max() + 2), scale_px, rng)
+    previous = value(a[0], b[0])
     parts = []
-    for t, su, sv in zip(times[1:], shift_u[1:], shift_v[1:]):
-        current = value(x - su, y - sv)
+    for i in range(1, n):
+        current = value(a[i], b[i])
         ey, ex = np.nonzero(current != previous)
         if len(ex):
-            parts.append(make_events(np.full(len(ex), start_us + t), ex, ey, current[ey, ex] > previous[ey, ex]))
+            parts.append(make_events(np.full(len(ex), start_us + i * sample_us), ex, ey, current[ey, ex] > previous[ey, ex]))
         previous = current
     return np.concatenate(parts) if parts else np.empty(0, dtype=EVENT_DTYPE)
+
+
+def turning_trajectory(velocity, omega, duration_s: float, rate_hz: float = 1000.0):
+    """Ground-truth poses (a ``Trajectory``, as ``groundtruth.txt`` holds them) of a camera moving at a
+    constant ``velocity`` (m/s) and turning at a constant ``omega`` (rad/s), both in the camera frame.
+
+    The orientation is ``exp(t [ω]×)`` from the identity; the position integrates the
+    world-frame velocity ``R(t) velocity`` (16 sub-steps per pose). Poses at ``rate_hz``
+    from 0 to ``duration_s`` + one pose.
+    """
+    from tofnet.io.groundtruth import Trajectory, quaternion_to_matrix
+
+    omega = np.asarray(omega, dtype=np.float64)
+    rate = float(np.linalg.norm(omega))
+    axis = omega / rate if rate > 0 else np.array([0.0, 0.0, 1.0])
+    n = int(np.ceil(duration_s * rate_hz)) + 2
+    fine = np.arange((n - 1) * 16 + 1) / (16 * rate_hz)
+    half = 0.5 * rate * fine
+    quaternions = np.column_stack([np.outer(np.sin(half), axis), np.cos(half)])
+    world = quaternion_to_matrix(quaternions) @ np.asarray(velocity, dtype=np.float64)
+    steps = 0.5 * (world[1:] + world[:-1]) * np.diff(fine)[:, None]
+    positions = np.vstack([np.zeros(3), np.cumsum(steps, axis=0)])
+    return Trajectory(fine[::16], positions[::16], quaternions[::16])
 
 
 def noise_events(sensor_size: tuple[int, int], rate_hz_per_px: float, duration_us: int, *, seed: int = 0,

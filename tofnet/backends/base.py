@@ -13,8 +13,9 @@ from tofnet.events import DEPTH_DTYPE
 
 #: Reasons the input process drops an event, in report order.
 DROP_REASONS = ("out_of_bounds", "before_t0", "refractory", "same_step")
-#: Reasons the depth process rejects an estimate, in report order.
-REJECT_REASONS = ("no_measurement", "too_near", "too_far")
+#: Reasons the depth process rejects an estimate, in report order (``rotation_dominated``: eq. 7's
+#: translational share at or below ``min_share``; only with an angular velocity input).
+REJECT_REASONS = ("no_measurement", "too_near", "too_far", "rotation_dominated")
 
 #: ``progress(done, total)``: called now and then with events processed so far.
 ProgressCallback = Callable[[int, int], None]

@@ -17,9 +17,9 @@ import numpy as np
 
 from tofnet.backends.base import DROP_REASONS, RunResult
 from tofnet.backends.graph import canonical
-from tofnet.backends.runtime import velocity_table
+from tofnet.backends.runtime import UpdateRows, velocity_table
 from tofnet.core.network import Network
-from tofnet.errors import BackendError, DataError
+from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, TOT_DTYPE
 from tofnet.io.recording import VelocitySource
 from tofnet.kernels.region import KernelConfig, KernelOutput, TimeOfTravelKernel, copy_records
@@ -149,24 +149,15 @@ class FusedStream:
         self._events_in = 0
         self._latest_us: int | None = None  # no later packet may start before this (µs)
         self._last_event_us: int | None = None
-        self._table: tuple[int, np.ndarray] = (0, np.zeros((0, 3)))
+        p = pipeline
+        self._updates = UpdateRows(lambda first, count: velocity_table(
+            self.velocity_source, self.t0_us, p.timestep_us, p.update_every, count, first), VELOCITY_LOOKAHEAD)
         self._started = time.perf_counter()
         self._closed = False
 
     def _rows(self, first: int, count: int) -> tuple[np.ndarray, int]:
-        """Velocity updates ``first .. first+count-1`` (``VelocityRows``): the cached table when it
-        covers them, else a new one computed ``VELOCITY_LOOKAHEAD`` updates ahead."""
-        start, table = self._table
-        if start <= first and first + count <= start + len(table):
-            return table, start
-        p = self.pipeline
-        try:
-            table = velocity_table(self.velocity_source, self.t0_us, p.timestep_us, p.update_every,
-                                   max(count, VELOCITY_LOOKAHEAD), first)
-        except (BackendError, DataError):  # e.g. not finite beyond the rows asked for: compute only those
-            table = velocity_table(self.velocity_source, self.t0_us, p.timestep_us, p.update_every, count, first)
-        self._table = (first, table)
-        return table, first
+        """Velocity updates ``first .. first+count-1`` (``VelocityRows``), computed ``VELOCITY_LOOKAHEAD`` ahead."""
+        return self._updates.rows(first, count)
 
     def _start(self, events: np.ndarray, until_us: int | None) -> bool:
         """Checks and counting before any state changes; False for an empty packet."""

@@ -275,6 +275,9 @@ class MultiprocSession:
         result = stream.close()
         collected.add(result.outputs)
         result.outputs = collected.joined(result.payloads, stream._empty)
+        # Chunks end past the run's last step; what host fields sent there is not the run's (as on the other backends).
+        result.outputs = {name: r[r["step"] < result.steps] if len(r) and r["step"][-1] >= result.steps else r
+                          for name, r in result.outputs.items()}
         result.wall_time = time.perf_counter() - started
         return result
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -83,19 +84,70 @@ def velocity_source_of(source: str, constant, samples: str | None, recording: Re
     return recording.trajectory
 
 
-def velocity_table(source: VelocitySource, t0_us: int, timestep_us: int, update_every: int,
-                   n_updates: int, first_update: int = 0) -> np.ndarray:
-    """Camera velocity (m/s, shape ``(n_updates, 3)``) of updates ``first_update ...``.
+def update_times(t0_us: int, timestep_us: int, update_every: int, n_updates: int, first_update: int = 0) -> np.ndarray:
+    """Seconds at which updates ``first_update ...`` of a host field sample their source.
 
-    Update j is sent in step ``j * update_every`` and samples the velocity at that
-    step's start, ``t0 + j * update_every * timestep``.
+    Update j is sent in step ``j * update_every`` and samples its source at that step's
+    start, ``t0 + j * update_every * timestep``.
     """
     j = np.arange(first_update, first_update + n_updates, dtype=np.int64)
-    t = (t0_us + j * update_every * timestep_us) * 1e-6
-    table = np.ascontiguousarray(source.velocity_at(t), dtype=np.float64)
-    if table.shape != (n_updates, 3):
-        raise BackendError(f"velocity source returned shape {table.shape}, expected ({n_updates}, 3)")
+    return (t0_us + j * update_every * timestep_us) * 1e-6
+
+
+def _checked_table(values, t: np.ndarray, what: str, where: str) -> np.ndarray:
+    table = np.ascontiguousarray(values, dtype=np.float64)
+    if table.shape != (len(t), 3):
+        raise BackendError(f"{what} source returned shape {table.shape}, expected ({len(t)}, 3)")
     if not np.all(np.isfinite(table)):
         bad = t[~np.all(np.isfinite(table), axis=1)][0]
-        raise DataError(f"camera velocity is not finite at t = {bad:.6f} s (check the poses or samples)")
+        raise DataError(f"{what} is not finite at t = {bad:.6f} s (check the {where})")
     return table
+
+
+def velocity_table(source: VelocitySource, t0_us: int, timestep_us: int, update_every: int,
+                   n_updates: int, first_update: int = 0) -> np.ndarray:
+    """Camera velocity (m/s, shape ``(n_updates, 3)``) of updates ``first_update ...`` (``update_times``)."""
+    t = update_times(t0_us, timestep_us, update_every, n_updates, first_update)
+    return _checked_table(source.velocity_at(t), t, "camera velocity", "poses or samples")
+
+
+def angular_velocity_table(source, t0_us: int, timestep_us: int, update_every: int,
+                           n_updates: int, first_update: int = 0) -> np.ndarray:
+    """Angular velocity (rad/s, camera frame, ``(n_updates, 3)``) of updates ``first_update ...`` (``update_times``)."""
+    t = update_times(t0_us, timestep_us, update_every, n_updates, first_update)
+    return _checked_table(source.angular_velocity_at(t), t, "angular velocity", "poses, samples or IMU")
+
+
+class UpdateRows:
+    """The updates of a host field, computed ``lookahead`` updates ahead of the clock and cached.
+
+    ``table(first, count)`` computes rows ``first .. first+count-1``; when the rows past the
+    ones asked for cannot be computed (e.g. not finite beyond the recording), only those asked
+    for are. Shared by the velocity and angular velocity models and the fused stream.
+    """
+
+    def __init__(self, table: Callable[[int, int], np.ndarray], lookahead: int = 1024):
+        self._table = table
+        self.lookahead = lookahead
+        self._cached: tuple[int, np.ndarray] = (0, np.zeros((0, 3)))
+
+    def rows(self, first: int, count: int) -> tuple[np.ndarray, int]:
+        """A table whose row ``i`` is update ``start + i``, covering ``first .. first+count-1``; and ``start``."""
+        start, table = self._cached
+        if start <= first and first + count <= start + len(table):
+            return table, start
+        try:
+            table = self._table(first, max(count, self.lookahead))
+        except (BackendError, DataError):
+            table = self._table(first, count)
+        self._cached = (first, table)
+        return table, first
+
+    def clear(self) -> None:
+        """Forget the cached rows (the source changed): the next request computes them anew."""
+        self._cached = (0, np.zeros((0, 3)))
+
+    def slice(self, first: int, count: int) -> np.ndarray:
+        """Rows ``first .. first+count-1`` exactly."""
+        table, start = self.rows(first, count)
+        return table[first - start:first - start + count]

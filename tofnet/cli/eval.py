@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -85,15 +86,24 @@ def handle(args) -> int:
     recording, depth, meta = load_inputs(args.recording, args.depth, timestep=args.timestep,
                                          latency_steps=args.latency_steps)
     result = evaluate(recording, depth, meta, window_s=window_s)
+    from tofnet.eval.rotation import format_share_split, split_by_true_share
+    shares, what = split_by_true_share(recording, depth, result)
+    data = result.to_dict()
+    data["share_split"] = None if shares is None else [{k: (v if np.isfinite(v) else None) for k, v in row.items()}
+                                                       for row in shares]
+    data["share_split_note"] = what
+    text = json.dumps(data, indent=2, allow_nan=False)
     if args.json == "-":
-        print(result.to_json())
+        print(text)
         return 0
     print(result.table())
+    print()
+    print(format_share_split(shares, what) if shares is not None else f"error by translational share: not available ({what})")
     if args.json:
         out = Path(args.json)
         try:
             out.parent.mkdir(parents=True, exist_ok=True)
-            out.write_text(result.to_json() + "\n", encoding="utf-8")
+            out.write_text(text + "\n", encoding="utf-8")
         except OSError as err:
             raise DataError(f"{out}: cannot write JSON: {err.strerror or err}") from None
         print(f"wrote {out}", file=sys.stderr)

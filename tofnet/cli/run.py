@@ -49,16 +49,20 @@ def add_network_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--velocity", metavar="TX,TY,TZ",
                    help="constant camera velocity in m/s (camera frame) instead of the ground-truth poses")
     g.add_argument("--patch", metavar="WxH|auto", help="core patch size for the compiler (default: the spec's or auto)")
+    g.add_argument("--no-rotation", action="store_true",
+                   help="keep the paper's eq. 8 even when the recording has rotation information (turning poses "
+                        "or imu.txt), which the default network compensates (eq. 7)")
 
 
-def build_network(args, recording_sensor_size):
+def build_network(args, recording_sensor_size, recording=None):
     """The network the options describe, and the compile options and backend it names."""
     from tofnet.api import apply_overrides, constant_velocity, load_network
     from tofnet.core.params import parse_size  # the same WxH parsing as the spec
 
     sensor = parse_size(args.sensor_size, "--sensor-size") if args.sensor_size else None
     network, compile_options, spec_backend, backend_options = load_network(
-        args.spec, sensor_size=sensor or (None if args.spec else recording_sensor_size))
+        args.spec, sensor_size=sensor or (None if args.spec else recording_sensor_size), recording=recording,
+        rotation=not getattr(args, "no_rotation", False))
     apply_overrides(network, timestep=args.timestep, refractory=args.refractory, distance=args.distance,
                     counter_bits=args.counter_bits, velocity_per=args.velocity_per,
                     update_every=args.update_every)
@@ -77,7 +81,7 @@ def handle(args) -> int:
     started = time.perf_counter()
     from tofnet.cli.inputs import input_options
     recording = read_recording(args.recording, **input_options(args))
-    network, compile_options, spec_backend, backend_options = build_network(args, recording.sensor_size)
+    network, compile_options, spec_backend, backend_options = build_network(args, recording.sensor_size, recording)
     backend = args.backend or spec_backend or DEFAULT_BACKEND
     if args.backend and args.backend != spec_backend:
         backend_options = {}  # the spec's options belong to the spec's backend
@@ -92,6 +96,7 @@ def handle(args) -> int:
     out = Path(args.out)
     summary = result.summary()
     summary["recording"] = str(args.recording)
+    summary["rotation"] = rotation_line(network, recording, args)
     summary["total_time_s"] = time.perf_counter() - started
     written = write_outputs(out, result, summary, args.record_tot)
     summary["files"] = {name: str(path) for name, path in written.items()}
@@ -99,6 +104,21 @@ def handle(args) -> int:
     if args.json:
         Path(args.json).write_text(json.dumps(summary, indent=2) + "\n")
     return 0
+
+
+def rotation_line(network, recording, args) -> str | None:
+    """Where the depth neurons take the camera's rotation from, or why they do not (None: nothing to say)."""
+    from tofnet.api import rotation_source_of, rotation_summary
+
+    used = rotation_summary(network)
+    if used is not None:
+        return used
+    found = rotation_source_of(recording)
+    if found is None:
+        return None
+    why = "--no-rotation" if getattr(args, "no_rotation", False) else "the spec has no angular velocity process"
+    return (f"not compensated (eq. 8: {why}), although the recording has "
+            f"{'turning poses' if found == 'groundtruth' else 'a gyroscope (imu.txt)'}")
 
 
 def write_outputs(out: Path, result, summary: dict, record_tot: bool) -> dict[str, Path]:
@@ -137,6 +157,7 @@ def format_summary(summary: dict, result, written: dict, network_width) -> str:
     lines = [f"recording      {summary['recording']}  ({width}x{height} px, {summary['steps']} steps of "
              f"{summary['timestep_s'] * 1e3:g} ms)",
              f"backend        {summary['backend']}",
+             *([f"rotation       {summary['rotation']}"] if summary.get("rotation") else []),
              f"events in      {summary['events_in']:>12,}",
              f"  accepted     {summary['accepted']:>12,}"]
     for reason, count in summary["dropped"].items():
@@ -145,7 +166,10 @@ def format_summary(summary: dict, result, written: dict, network_width) -> str:
     if len(depth_names) == 1:
         lines.append(f"tot spikes     {summary['tot_spikes']:>12,}")
         lines.append(f"depth out      {summary['depth_out']:>12,}  -> {written[depth_names[0]]}")
+        rotating = str(summary.get("rotation") or "").startswith("eq. 7")
         for reason, count in summary["rejected"].items():
+            if reason == "rotation_dominated" and not (rotating or count):
+                continue  # eq. 8 never rejects for rotation
             lines.append(f"  rejected     {count:>12,}  {reason.replace('_', ' ')}")
     else:
         for process, counts in summary["counts"].items():

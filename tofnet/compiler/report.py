@@ -75,6 +75,9 @@ def format_report(compiled: CompiledNetwork) -> str:
     if compiled.host:
         hosted = ", ".join(f"{name} ({type(net.process(name)).__name__})" for name in compiled.host)
         lines.append(f"host      {hosted}")
+    notes = [(p.name, note) for p in net.processes for note in p.compiler_notes()]
+    if notes:
+        lines += ["", "notes"] + [f"  {name}: {note}" for name, note in notes]
     if compiled.traffic:
         lines += ["", "traffic (every pixel equally likely to spike; each delivery to a core is one message)"]
         for t in compiled.traffic:

@@ -19,8 +19,8 @@ from tofnet.events import EVENT_DTYPE, make_events
 from tofnet.io.recording import Intrinsics, Recording
 from tofnet.networks import denoised_network, depth_network, multi_distance_network
 from tofnet.processes import DepthProcess, InputProcess, TimeOfTravelProcess, VelocityProcess
-from tofnet.testing import (TEST_INTRINSICS, LinearVelocity, directed_edge, merge_events, moving_edge,
-                            moving_pattern, noise_events)
+from tofnet.testing import (TEST_INTRINSICS, LinearVelocity, camera_flow, directed_edge, flowing_pattern,
+                            merge_events, moving_edge, moving_pattern, noise_events, turning_trajectory)
 
 F = TEST_INTRINSICS.fx
 
@@ -269,6 +269,61 @@ def _user_process() -> Scene:
     vel.a_t.connect(dep.a_t)
     network = Network([inp, gate, tot, dep, vel], name="user-process")
     return Scene(network, rec(moving_pattern(size, flow, 200_000, seed=11)), (7, 5))
+
+
+# -- a turning camera (paper eq. 7) ----------------------------------------------------------
+ROTATION_INTRINSICS = Intrinsics(F, F, 11.5, 7.5)  # principal point inside the sensor: B ω varies across it
+
+
+def turning_net(size: tuple[int, int], velocity, omega=None, *, per: str = "pixel", patch_size: int = 30,
+                update_every: int = 1, rotation_every: int = 1, source: str = "constant",
+                min_share: float = 0.1, **depth: Any) -> Network:
+    """The paper's network with an angular velocity process feeding the depth neurons (eq. 7)."""
+    vel = {"source": source, "per": per, "patch_size": patch_size, "update_every": update_every}
+    rot = {"source": source, "update_every": rotation_every}
+    if source == "constant":
+        vel["velocity"], rot["omega"] = list(velocity), list(omega)
+    return depth_network(size, input={"refractory": 0, "t0": 0}, depth={"min_share": min_share, **depth},
+                         velocity=vel, rotation=rot)
+
+
+@case("rotation-texture", "a camera moving and turning about all three axes (constant ω) over a texture at 1 m; "
+      "A t and B ω per pixel")
+def _rotation_texture() -> Scene:
+    size, velocity, omega = (24, 16), (-0.3, 0.15, 0.1), (0.1, -0.25, 0.15)
+    flow = camera_flow(ROTATION_INTRINSICS, 1.0, velocity, omega)
+    return Scene(turning_net(size, velocity, omega),
+                 rec(flowing_pattern(size, flow, 250_000, seed=12), intrinsics=ROTATION_INTRINSICS))
+
+
+@case("rotation-edges", "straight edges (a checkerboard) under pitch and a slide at 2 m; A t per 5x5 patch, "
+      "ω updated every 3 steps, on 8x8 cores")
+def _rotation_edges() -> Scene:
+    size, velocity, omega = (24, 16), (-0.6, 0.2, 0.0), (0.3, 0.0, 0.0)
+    flow = camera_flow(ROTATION_INTRINSICS, 2.0, velocity, omega)
+    return Scene(turning_net(size, velocity, omega, per="patch", patch_size=5, rotation_every=3),
+                 rec(flowing_pattern(size, flow, 300_000, kind="checker", scale_px=6.0), intrinsics=ROTATION_INTRINSICS),
+                 (8, 8))
+
+
+@case("rotation-poses", "velocity and ω from ground-truth poses of a camera sliding and yawing (1 kHz poses), "
+      "on 7x5 cores")
+def _rotation_poses() -> Scene:
+    size, velocity, omega = (20, 14), (-0.4, 0.0, 0.05), (0.0, -0.2, 0.05)
+    flow = camera_flow(ROTATION_INTRINSICS, 1.5, velocity, omega)
+    return Scene(turning_net(size, velocity, omega, source="groundtruth"),
+                 rec(flowing_pattern(size, flow, 250_000, seed=13), intrinsics=ROTATION_INTRINSICS,
+                     trajectory=turning_trajectory(velocity, omega, 0.3)), (7, 5))
+
+
+@case("rotation-dominated", "a pan (60 px/s of rotational flow) on a slow slide (10 px/s at 1 m): shares near "
+      "min_share = 0.15, many rejected rotation_dominated, on 8x8 cores")
+def _rotation_dominated() -> Scene:
+    size, velocity, omega = (24, 16), (-0.05, 0.0, 0.0), (0.0, -0.3, 0.0)
+    flow = camera_flow(ROTATION_INTRINSICS, 1.0, velocity, omega)
+    return Scene(turning_net(size, velocity, omega, min_share=0.15),
+                 rec(flowing_pattern(size, flow, 400_000, seed=14, scale_px=3.0), intrinsics=ROTATION_INTRINSICS),
+                 (8, 8))
 
 
 # -- state variables read mid-run (sessions) ------------------------------------------------

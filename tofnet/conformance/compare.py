@@ -14,7 +14,11 @@ and which depth neurons were reached. Depth outputs then compare by mode:
            time-of-travel process feeding it; the largest counts when not probed); an
            estimate may be missing on one side only when its depth is within that
            tolerance of its process's ``min_depth`` or ``max_depth``, and that process's
-           rejection counts must differ by exactly those estimates. Depth outputs of other
+           rejection counts must differ by exactly those estimates. A depth process with
+           ``b_w`` connected (eq. 7) is held to ``rotation_depth_tolerance`` instead, its
+           share computed from the counts and the probed angular velocity updates (the
+           runner probes them; ``recording`` gives the intrinsics); estimates may then also
+           flip at ``min_share``. Depth outputs of other
            processes (e.g. a user's filter downstream) have no stated bound and are listed
            in ``Comparison.notes`` instead; their counts may differ.
 
@@ -30,7 +34,8 @@ import numpy as np
 from numpy.lib.recfunctions import repack_fields
 
 from tofnet.core.network import Network
-from tofnet.kernels.fixed_point import DEFAULT_FRAC_BITS, depth_tolerance
+from tofnet.kernels.fixed_point import DEFAULT_FRAC_BITS, depth_tolerance, quantize, rotation_depth_tolerance
+from tofnet.kernels.rotation import rotational_flow
 
 #: Relative tolerance on float fields between two float backends.
 FLOAT_RTOL = 1e-9
@@ -74,8 +79,12 @@ def sort_tot(tot: np.ndarray) -> np.ndarray:
     return tot[np.lexsort((tot["direction"], tot["x"], tot["y"], tot["step"]))]
 
 
-def compare(result, baseline, mode: str, network: Network) -> Comparison:
-    """Compare ``result`` with ``baseline`` (``RunResult``s of one case on ``network``) in ``mode``."""
+def compare(result, baseline, mode: str, network: Network, recording=None) -> Comparison:
+    """Compare ``result`` with ``baseline`` (``RunResult``s of one case on ``network``) in ``mode``.
+
+    ``recording``: the case's recording, whose intrinsics a depth process with ``b_w``
+    needs in ``quantised`` mode when its angular velocity process does not give them.
+    """
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
     depth_names = [n for n in baseline.outputs if baseline.payloads.get(n) == "depth"]
@@ -89,23 +98,34 @@ def compare(result, baseline, mode: str, network: Network) -> Comparison:
     if set(result.outputs) != set(baseline.outputs):
         diff.append(f"outputs: {sorted(result.outputs)} vs {sorted(baseline.outputs)}")
     shifts: dict[str, dict[str, int]] = {}
+    slack: dict[str, int] = {}
     unbounded: set[str] = set()
     for name in sorted(set(result.outputs) & set(baseline.outputs)):
         a, b = result.outputs[name], baseline.outputs[name]
         if baseline.payloads.get(name) == "depth":
-            if mode == "quantised" and _counts_feeding(network, name.split(".")[0], {})[1] is None:
-                out.notes.append(f"{name}: not compared between float and fixed arithmetic: its process does not "
-                                 "read counter spikes, so no quantisation bound is stated for it")
-                unbounded.add(name.split(".")[0])
+            process = name.split(".")[0]
+            why = None
+            if mode == "quantised" and _counts_feeding(network, process, {})[1] is None:
+                why = "its process does not read counter spikes, so no quantisation bound is stated for it"
+            elif mode == "quantised" and rotation_of(network, process, baseline.outputs, recording) is False:
+                why = ("its process compensates rotation (b_w) and the bound needs the angular velocity updates "
+                       "(probe the port feeding b_w) and the intrinsics")
+            if why is not None:
+                out.notes.append(f"{name}: not compared between float and fixed arithmetic: {why}")
+                unbounded.add(process)
                 continue
-            _compare_depth(name, a, b, mode, result, baseline, network, diff, shifts)
+            _compare_depth(name, a, b, mode, result, baseline, network, diff, shifts, slack, recording)
         else:
             _compare_records(name, a, b, mode, diff)
-    _compare_counts(result.counts, baseline.counts, shifts, diff, unbounded)
+    _compare_counts(result.counts, baseline.counts, shifts, diff, unbounded, slack)
     return out
 
 
-def _compare_counts(ra: dict, rb: dict, shifts: dict, diff: list[str], skip: set[str]) -> None:
+#: Rejections decided on the depth or the share, between which quantisation may move an estimate.
+VALUE_REASONS = ("too_near", "too_far", "rotation_dominated")
+
+
+def _compare_counts(ra: dict, rb: dict, shifts: dict, diff: list[str], skip: set[str], slack: dict) -> None:
     if set(ra) != set(rb):
         diff.append(f"counts of processes {sorted(ra)} vs {sorted(rb)}")
         return
@@ -115,8 +135,14 @@ def _compare_counts(ra: dict, rb: dict, shifts: dict, diff: list[str], skip: set
         a, b = dict(ra[process]), dict(rb[process])
         for reason, delta in shifts.get(process, {}).items():  # boundary estimates explain these
             a[reason] = a.get(reason, 0) + delta
-            if reason in ("too_near", "too_far"):
+            if reason in VALUE_REASONS:
                 a["emitted"] = a.get("emitted", 0) - delta
+        if process in slack:
+            # Neurons whose share lies within the tolerance of min_share may be rejected for another
+            # reason on the other side (rotation_dominated vs too_near/too_far): each moves one count.
+            moved = sum(abs(a.get(r, 0) - b.get(r, 0)) for r in VALUE_REASONS)
+            if moved <= 2 * slack[process]:
+                a.update({r: b.get(r, 0) for r in VALUE_REASONS})
         if a != b:
             explained = f" (boundary estimates explain {shifts[process]})" if process in shifts else ""
             diff.append(f"counts of {process}: {ra[process]} vs {rb[process]}{explained}")
@@ -154,7 +180,45 @@ def _counts_feeding(network: Network, depth_process: str, outputs: dict):
     return outputs.get(source.qualified_name), (None if bits is None else (1 << int(bits)) - 1)
 
 
-def _compare_depth(name, a, b, mode, result, baseline, network, diff, shifts) -> None:
+@dataclass
+class Rotation:
+    """What the eq. 7 bound of one depth process needs: the angular velocity updates it received
+    (``step``, ``wx``, ``wy``, ``wz``), the intrinsics of ``B ω`` and its ``min_share``."""
+
+    updates: np.ndarray
+    intrinsics: tuple[float, float, float, float]
+    min_share: float
+
+    def flow(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``B ω`` (px/s) the depth neurons of ``rows`` (``step``, ``x``, ``y``) held: the latest update
+        sent before their step (docs/semantics.md), zero before the first."""
+        i = np.searchsorted(self.updates["step"], rows["step"].astype(np.int64) - 1, side="right") - 1
+        w = np.zeros((len(rows), 3))
+        held = i >= 0
+        for k, field in enumerate(("wx", "wy", "wz")):
+            w[held, k] = self.updates[field][i[held]]
+        return rotational_flow(w[:, 0], w[:, 1], w[:, 2], rows["x"].astype(np.float64), rows["y"].astype(np.float64),
+                               *self.intrinsics)
+
+
+def rotation_of(network: Network, depth_process: str, outputs: dict, recording=None):
+    """The ``Rotation`` of a depth process with ``b_w`` connected, None without, False when the
+    angular velocity updates (a probe of the port feeding ``b_w``) or the intrinsics are missing."""
+    port = network.process(depth_process).ports.get("b_w")
+    source = getattr(port, "source", None)
+    if source is None:
+        return None
+    updates = outputs.get(source.qualified_name)
+    given = source.process.values.get("intrinsics")
+    if given is None and recording is not None and recording.intrinsics is not None:
+        k = recording.intrinsics
+        given = (k.fx, k.fy, k.cx, k.cy)
+    if updates is None or given is None:
+        return False
+    return Rotation(updates, tuple(float(v) for v in given), float(network.process(depth_process).min_share))
+
+
+def _compare_depth(name, a, b, mode, result, baseline, network, diff, shifts, slack, recording) -> None:
     for label, d, res in (("result", a, result), ("baseline", b, baseline)):
         if len(d) and np.any((np.diff(d["step"]) == 0) & (np.diff(d["y"]) == 0) & (np.diff(d["x"]) == 0)):
             diff.append(f"{name}: {label}: two estimates for one pixel in one step")
@@ -180,33 +244,80 @@ def _compare_depth(name, a, b, mode, result, baseline, network, diff, shifts) ->
     width, height = process.sensor_size
     lo, hi = process.values.get("min_depth", -np.inf), process.values.get("max_depth", np.inf)
     tot, counter_max = _counts_feeding(network, process_name, baseline.outputs)
+    rotation = rotation_of(network, process_name, baseline.outputs, recording)
+    payload_bits = int(fixed.extra.get("payload_bits", 24))
+    spc = result.timestep_us * 1e-6 / _distance_feeding(network, process_name)
+    half = 2.0 ** -(frac_bits + 1)
 
-    def tolerance(rows: np.ndarray) -> np.ndarray:
+    def tolerance(rows: np.ndarray, z: np.ndarray) -> np.ndarray:
         if tot is None:  # no spikes to read the counts from: the largest counts possible
             return np.full(len(rows), depth_tolerance(counter_max, counter_max, frac_bits))
         sx, sy = signed_counts(tot, rows, width, height)
+        if rotation:  # eq. 7 (docs/fixed_point.md): the share of the fixed-point neuron
+            _, share_q = shares(rotation, rows, sx, sy, spc, frac_bits, payload_bits)
+            return rotation_depth_tolerance(sx, sy, z, share_q, frac_bits) + 1e-12 * np.abs(z)
         return depth_tolerance(sx, sy, frac_bits) + 1e-12 * np.abs(rows["z"])  # + float64 rounding of z
 
-    tol = tolerance(keys)
+    tol = tolerance(keys, np.maximum(np.abs(za), np.abs(zb)))
     bad = np.abs(za - zb) > tol
     if bad.any():
         i = int(np.argmax(bad))
         diff.append(f"depth z at {_where(keys[i])}: {za[i]!r} vs {zb[i]!r} (tolerance {tol[i]:.3g} m)")
-    shift = {"too_near": 0, "too_far": 0}  # result's counts + shift == baseline's
+    shift = {"too_near": 0, "too_far": 0, "rotation_dominated": 0}  # result's counts + shift == baseline's
     for rows, sign, side in ((a[only_a], 1, "result"), (b[only_b], -1, "baseline")):
         if not len(rows):
             continue
         # The thresholds are quantised too (round half away), which moves them by up to half an LSB.
-        t = tolerance(rows) + 2.0 ** -(frac_bits + 1)
+        t = tolerance(rows, np.abs(rows["z"])) + half
         near, far = np.abs(rows["z"] - lo) <= t, np.abs(rows["z"] - hi) <= t
-        if not np.all(near | far):
-            i = int(np.argmax(~(near | far)))
+        share_edge = np.zeros(len(rows), dtype=bool)
+        if rotation:  # kept by one side, rotation_dominated on the other: the share within its error of min_share
+            sx, sy = signed_counts(tot, rows, width, height)
+            share, _ = shares(rotation, rows, sx, sy, spc, frac_bits, payload_bits)
+            share_edge = np.abs(share - rotation.min_share) <= (np.abs(sx) + np.abs(sy)) * half + half
+        if not np.all(near | far | share_edge):
+            i = int(np.argmax(~(near | far | share_edge)))
+            limits = "min/max depth" + (" or of min_share" if rotation else "")
             diff.append(f"depth: {_where(rows[i])} z {rows['z'][i]:.6g} only in the {side}, "
-                        f"not within {t[i]:.3g} m of min/max depth")
-        shift["too_near"] += sign * int(np.count_nonzero(near))
-        shift["too_far"] += sign * int(np.count_nonzero(far & ~near))
+                        f"not within {t[i]:.3g} m of {limits}")
+        shift["rotation_dominated"] += sign * int(np.count_nonzero(share_edge))
+        shift["too_near"] += sign * int(np.count_nonzero(near & ~share_edge))
+        shift["too_far"] += sign * int(np.count_nonzero(far & ~near & ~share_edge))
     if any(shift.values()):
         shifts[process_name] = shift
+    if rotation and tot is not None:
+        slack[process_name] = _near_min_share(rotation, tot, width, height, spc, frac_bits, payload_bits)
+
+
+def _distance_feeding(network: Network, depth_process: str) -> int:
+    source = getattr(network.process(depth_process).ports.get("counts"), "source", None)
+    return int(source.process.values.get("distance", 1)) if source is not None else 1
+
+
+def shares(rotation: Rotation, rows: np.ndarray, sx: np.ndarray, sy: np.ndarray, spc: float, frac_bits: int,
+           payload_bits: int) -> tuple[np.ndarray, np.ndarray]:
+    """The translational share of each estimate's neuron: float ``1 − (B ω)·td`` and the fixed-point
+    ``r_raw 2**-F`` (``V = quantize(B ω dt / distance)``, docs/fixed_point.md)."""
+    bw_x, bw_y = rotation.flow(rows)
+    share = 1.0 - (bw_x * sx + bw_y * sy) * spc
+    v_x = np.array([quantize(v * spc, frac_bits, payload_bits) for v in bw_x], dtype=np.int64)
+    v_y = np.array([quantize(v * spc, frac_bits, payload_bits) for v in bw_y], dtype=np.int64)
+    return share, ((1 << frac_bits) - sx * v_x - sy * v_y) * 2.0 ** -frac_bits
+
+
+def _near_min_share(rotation: Rotation, tot: np.ndarray, width: int, height: int, spc: float, frac_bits: int,
+                    payload_bits: int) -> int:
+    """Depth neurons reached whose share lies within its quantisation error of ``min_share``."""
+    if not len(tot):
+        return 0
+    key = ((tot["step"].astype(np.int64) + 1) * height + tot["y"]) * width + tot["x"]
+    first = np.unique(key, return_index=True)[1]
+    neurons = np.zeros(len(first), dtype=[("step", "<i8"), ("x", "<u2"), ("y", "<u2"), ("z", "<f8")])
+    neurons["step"], neurons["x"], neurons["y"] = tot["step"][first] + 1, tot["x"][first], tot["y"][first]
+    sx, sy = signed_counts(tot, neurons, width, height)
+    share, _ = shares(rotation, neurons, sx, sy, spc, frac_bits, payload_bits)
+    half = 2.0 ** -(frac_bits + 1)
+    return int(np.count_nonzero(np.abs(share - rotation.min_share) <= (np.abs(sx) + np.abs(sy)) * half + half))
 
 
 def signed_counts(tot: np.ndarray, depth: np.ndarray, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:

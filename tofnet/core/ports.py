@@ -40,6 +40,7 @@ class Payload:
     POLARITY: ClassVar["Payload"]
     COUNT: ClassVar["Payload"]
     VELOCITY_TERM: ClassVar["Payload"]
+    ROTATION_TERM: ClassVar["Payload"]
     DEPTH: ClassVar["Payload"]
 
     def __post_init__(self) -> None:
@@ -79,6 +80,10 @@ Payload.VELOCITY_TERM = Payload(
     "velocity_term", (("tx", "<f8"), ("ty", "<f8"), ("tz", "<f8")),
     "A t (px*m/s): each update carries the camera velocity t (m/s, camera frame); the value at a pixel is "
     "A(u, v) t evaluated where the sender's sampling says (per pixel or at patch centres)", kind="field")
+Payload.ROTATION_TERM = Payload(
+    "rotation_term", (("wx", "<f8"), ("wy", "<f8"), ("wz", "<f8")),
+    "B ω (px/s): each update carries the camera's angular velocity ω (rad/s, camera frame); the value at a "
+    "pixel is the rotational flow B(u, v) ω at that pixel (paper eq. 7)", kind="field")
 Payload.DEPTH = Payload("depth", doc="depth estimates: z metres, t = end of the step in µs", layout=_layout(DEPTH_DTYPE))
 
 

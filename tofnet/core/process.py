@@ -129,6 +129,11 @@ class Process:
         of the port from it. Default: a value per pixel, every step."""
         return (1, 1)
 
+    def compiler_notes(self) -> tuple[str, ...]:
+        """What the compiler report says about this process's layer besides its resources (e.g. an
+        operation the paper's Loihi 2 mapping avoided), one line each. Default: nothing."""
+        return ()
+
     def set_param(self, name: str, value: Any) -> None:
         """Change one parameter, with the same conversion and checks as the constructor."""
         declared = {p.name: p for p in self.all_params()}

@@ -11,8 +11,9 @@ can be recomputed with any velocity and angular velocity, sampled when wanted:
   facilitating input step to the centre of the triggering one (``A t`` and ``B ω``
   are linear in ``t`` and ``ω``, so averaging those averages the flow).
 
-Used by ``benchmarks/rotation_study.py`` to size eq. 7 before it is in the depth neurons;
-``share_split`` is the error-by-translational-share table (``e / r`` law, docs/rotation.md).
+Used by ``benchmarks/rotation_study.py`` (the study behind eq. 7 in the depth neurons);
+``share_split`` is the error-by-translational-share table (``e / r`` law, docs/rotation.md)
+and ``split_by_true_share`` gives it for a run's estimates (``tofnet eval``).
 """
 
 from __future__ import annotations
@@ -167,3 +168,60 @@ def share_split(share: np.ndarray, rel: np.ndarray, edges=SHARE_EDGES) -> list[d
                      "median_rel": float(np.median(np.abs(rel[sel]))), "bias": float(np.median(rel[sel])),
                      "rel_times_share": float(np.median(np.abs(rel[sel] * share[sel])))})
     return rows
+
+
+def true_share(x, y, z_gt, times, intrinsics, velocity, angular) -> np.ndarray:
+    """The true translational share of the image motion at each estimate (dimensionless).
+
+    ``r = ((A t / Z)·f) / (f·f)`` with ``f = A t / Z + B ω`` the true image motion (px/s)
+    at pixel ``(x, y)``, true depth ``z_gt`` (m) and time ``times`` (s): the share a depth
+    neuron computes when its ``td`` lies along ``f`` (where translation and rotation move
+    the image the same way, as in a slide with a pan, for any edge). NaN where the image
+    does not move.
+    """
+    at, bw = _motion(np.asarray(times, dtype=np.float64), np.asarray(x), np.asarray(y), intrinsics, velocity, angular)
+    translation = at / np.asarray(z_gt, dtype=np.float64)[:, None]
+    flow = translation + bw
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.sum(translation * flow, axis=1) / np.sum(flow * flow, axis=1)
+
+
+def split_by_true_share(recording, depth: np.ndarray, evaluation) -> tuple[list[dict] | None, str]:
+    """``share_split`` of an evaluation's matched estimates by their ``true_share``; or None and why not.
+
+    Needs the camera's true motion with its orientation (ground-truth poses, or a simulated
+    camera's) and the intrinsics; a camera that does not turn has a share of 1 everywhere.
+    """
+    from tofnet.io.groundtruth import Trajectory
+    from tofnet.io.rotation import PoseAngularVelocity
+
+    motion = recording.trajectory
+    if motion is None or recording.intrinsics is None:
+        return None, "needs ground-truth poses (groundtruth.txt) and the calibration: the true share needs the motion"
+    if hasattr(motion, "angular_velocity_at"):
+        angular = motion
+    elif isinstance(motion, Trajectory):
+        angular = PoseAngularVelocity(motion)
+        if not angular.rotates:
+            return None, "the camera does not turn: every share is 1"
+    else:
+        return None, "the ground truth has velocities but no orientations: the true share needs the rotation"
+    matches = evaluation.matches
+    valid = matches.valid
+    times = (evaluation.t0_us + (matches.input_step[valid] + 0.5) * evaluation.timestep_us) * 1e-6
+    gt = matches.gt[valid]
+    kept = depth[valid]
+    share = true_share(kept["x"], kept["y"], gt, times, recording.intrinsics, motion, angular)
+    return share_split(share, (kept["z"] - gt) / gt), "true share along the true image motion"
+
+
+def format_share_split(rows: list[dict], what: str) -> str:
+    """The text table ``tofnet eval`` prints: one row per share bin with estimates."""
+    lines = [f"error by translational share r ({what}; if a timing error e becomes e / r,",
+             "|rel| * r stays flat while |rel| grows as r falls; eq. 8's bias would be r - 1)",
+             f"{'r':>14} {'estim.':>8} {'median r':>9} {'med |rel| %':>12} {'bias %':>8} {'|rel|*r %':>10}"]
+    for row in rows:
+        if row["n"]:
+            lines.append(f"{row['lo']:>6g} .. {row['hi']:<4g} {row['n']:8d} {row['share']:9.2f} "
+                         f"{100 * row['median_rel']:12.1f} {100 * row['bias']:+8.1f} {100 * row['rel_times_share']:10.1f}")
+    return "\n".join(lines)

@@ -15,7 +15,7 @@ from typing import Protocol
 import numpy as np
 
 from tofnet.errors import DataError, located
-from tofnet.io.groundtruth import Trajectory, _check_times, _first, _write_rows, read_table
+from tofnet.io.groundtruth import Trajectory, _check_times, _first, _write_rows, quaternion_to_matrix, read_table
 
 #: Below this half-angle sine, ``2 atan2(s, w) / s`` is replaced by its limit ``2 / w``
 #: (relative error below 1e-16 there); it avoids 0/0 for two equal orientations.
@@ -170,9 +170,7 @@ class Gyroscope(AngularVelocitySamples):
         if rotation.shape != (3, 3) or not np.all(np.isfinite(rotation)):
             raise DataError(located(source, None, f"rotation_cam_imu: expected a finite 3x3 matrix, "
                                                   f"got shape {rotation.shape}"))
-        if not np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-6) or np.linalg.det(rotation) < 0:
-            raise DataError(located(source, None, "rotation_cam_imu: expected a rotation matrix "
-                                                  "(orthonormal, determinant +1)"))
+        _check_rotation(rotation, located(source, None, "rotation_cam_imu"))
         bias = np.asarray(bias, dtype=np.float64)
         if bias.shape != (3,) or not np.all(np.isfinite(bias)):
             raise DataError(located(source, None, f"gyroscope bias: expected 3 finite rad/s values, got {bias!r}"))
@@ -188,6 +186,33 @@ class Gyroscope(AngularVelocitySamples):
         t = np.atleast_1d(np.asarray(t, dtype=np.float64))
         imu = super().angular_velocity_at(t + self.time_shift) - self.bias
         return imu @ self.rotation_cam_imu.T
+
+
+def _check_rotation(matrix: np.ndarray, what: str) -> None:
+    if not np.allclose(matrix @ matrix.T, np.eye(3), atol=1e-6) or np.linalg.det(matrix) < 0:
+        raise DataError(f"{what}: expected a rotation matrix (orthonormal, determinant +1)")
+
+
+def rotation_matrix(values, what: str = "rotation_cam_imu") -> np.ndarray:
+    """A 3x3 rotation from 9 numbers (the matrix row by row) or 4 (a unit quaternion ``qx qy qz qw``).
+
+    The quaternion's order is ``groundtruth.txt``'s and ROS's; it may be off unit length by
+    1e-6 (it is normalised). Anything else is a ``DataError`` naming ``what``.
+    """
+    v = np.asarray(values, dtype=np.float64).ravel()
+    if not np.all(np.isfinite(v)):
+        raise DataError(f"{what}: expected finite numbers, got {list(values)}")
+    if v.shape == (4,):
+        norm = float(np.linalg.norm(v))
+        if abs(norm - 1.0) > 1e-6:
+            raise DataError(f"{what}: a quaternion qx qy qz qw must have unit length, got |q| = {norm:.6g}")
+        return quaternion_to_matrix(v / norm)[0]
+    if v.shape == (9,):
+        matrix = v.reshape(3, 3)
+        _check_rotation(matrix, what)
+        return matrix
+    raise DataError(f"{what}: expected 9 numbers (a 3x3 rotation, row by row) or 4 (a quaternion qx qy qz qw), "
+                    f"got {v.size}")
 
 
 def gyroscope_from_imu(imu: np.ndarray, *, source: object = "<memory>", **options) -> Gyroscope:

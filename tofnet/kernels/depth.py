@@ -45,8 +45,7 @@ def classify(measured: bool, z: float, min_depth: float, max_depth: float) -> in
 # --- rotation (paper eq. 7; docs/rotation.md) ------------------------------------------------------------
 
 #: Rejected because translation explains too small a share of the measured image motion
-#: (``translational_share <= min_share``); to be appended to REJECT_REASONS as
-#: ``"rotation_dominated"``.
+#: (``translational_share <= min_share``): ``"rotation_dominated"`` in REJECT_REASONS.
 ROTATION_DOMINATED = 3
 
 

@@ -56,7 +56,10 @@ class KernelConfig:
     ``timestep`` seconds, depths metres, ``intrinsics`` (fx, fy, cx, cy) pixels;
     ``fixed`` the fixed-point format, or None for float64 arithmetic; the input filter's
     ``refractory_us`` (µs) and ``refractory_per_polarity`` for ``process_events``;
-    ``emit_depth`` False runs the time-of-travel units alone (no velocity needed).
+    ``emit_depth`` False runs the time-of-travel units alone (no velocity needed);
+    ``min_share`` (dimensionless) makes the depth layer alone (``process_counts``) compute
+    eq. 7 from angular velocity updates, ``B ω`` evaluated with ``rotation_intrinsics``
+    (``intrinsics`` when None); None keeps eq. 8.
     """
 
     sensor_size: tuple[int, int]
@@ -73,6 +76,8 @@ class KernelConfig:
     refractory_us: int = 0
     refractory_per_polarity: bool = False
     emit_depth: bool = True
+    min_share: float | None = None
+    rotation_intrinsics: tuple[float, float, float, float] | None = None
 
     @classmethod
     def from_pipeline(cls, pipeline, intrinsics, fixed: FixedPointFormat | None = None) -> "KernelConfig":
@@ -212,7 +217,7 @@ class TimeOfTravelKernel:
         self._rec[:] = NEVER
         self._stamp = self._rec.view(np.int32)
         self._stamp.reshape(-1, 2 * stride)[:, :4] = tt.IDLE
-        self.rejected = self._counts[tt.REJECTED:tt.REJECTED + 3]  # REJECT_REASONS order (a view)
+        self.rejected = self._counts[tt.REJECTED:tt.EMITTED]  # REJECT_REASONS order (a view)
         self._out, self._raw, self._tot = np.empty(0, DEPTH_DTYPE), np.empty(0, np.int64), np.empty(0, TOT_DTYPE)
         self._broken = False
         # Scalars and empty arrays the per-packet path needs, looked up once.
@@ -221,6 +226,11 @@ class TimeOfTravelKernel:
         self._full = self.region == Region.full(config.sensor_size)
         self._no_raw, self._no_velocity = np.empty(0, np.int64), np.zeros((0, 3))
         self._held_velocity = np.zeros(4)
+        self._held_omega = np.zeros(3)  # rad/s: no rotation before the first angular velocity update
+        # eq. 7: (min_share, min_share_raw, fx, fy, cx, cy of B ω); empty for eq. 8
+        self._rotation = np.zeros(0) if config.min_share is None else np.array(
+            [config.min_share, float(fmt.quantize(config.min_share) if fmt is not None else 0),
+             *(config.rotation_intrinsics or config.intrinsics)])
         self._scratch, self._row_start = np.empty(0, DEPTH_DTYPE), np.zeros(config.sensor_size[1] + 1, np.int64)  # depth layer alone: the velocity update its neurons hold
 
     @property
@@ -422,12 +432,15 @@ class TimeOfTravelKernel:
         self._raise_for(status, table, first)
         return n_out2, n_tot2
 
-    def process_counts(self, counts: np.ndarray, velocity: np.ndarray) -> np.ndarray:
+    def process_counts(self, counts: np.ndarray, velocity: np.ndarray, rotation: np.ndarray | None = None
+                       ) -> np.ndarray:
         """Depth estimates (``DEPTH_DTYPE``, a copy) of counter spikes, the depth layer alone.
 
         ``counts`` (``TOT_DTYPE``) sorted by step with each pixel's spikes of a step together;
         ``velocity`` the ``velocity_term`` updates (``step``, ``tx``, ``ty``, ``tz``) sent over
-        the same steps, sorted by step. See ``depth_counts.depth_from_counts``.
+        the same steps, sorted by step; ``rotation`` likewise the ``rotation_term`` updates
+        (``step``, ``wx``, ``wy``, ``wz``) when the config has ``min_share`` (eq. 7). See
+        ``depth_counts.depth_from_counts``.
         """
         from tofnet.kernels.depth_counts import depth_from_counts
 
@@ -438,11 +451,20 @@ class TimeOfTravelKernel:
         v_t = np.empty((len(velocity), 3))
         if len(velocity):
             v_t[:, 0], v_t[:, 1], v_t[:, 2] = velocity["tx"], velocity["ty"], velocity["tz"]
+        if (rotation is not None) != (self.config.min_share is not None):
+            raise BackendError("angular velocity updates need a kernel configured with min_share (eq. 7), "
+                               "and such a kernel needs them" if rotation is not None else
+                               "this kernel computes eq. 7 (min_share is set): pass the angular velocity updates")
+        w_omega = np.empty((0 if rotation is None else len(rotation), 3))
+        w_step = np.zeros(0, np.int64) if rotation is None else np.ascontiguousarray(rotation["step"])
+        if rotation is not None and len(rotation):
+            w_omega[:, 0], w_omega[:, 1], w_omega[:, 2] = rotation["wx"], rotation["wy"], rotation["wz"]
         n_out, status = depth_from_counts(
             np.ascontiguousarray(counts["step"]), np.ascontiguousarray(counts["x"]),
             np.ascontiguousarray(counts["y"]), np.ascontiguousarray(counts["direction"]),
             np.ascontiguousarray(counts["count"]), np.ascontiguousarray(velocity["step"]), v_t,
-            self._held_velocity, self._ints, self._floats, self._out, self._raw, 0)
+            self._held_velocity, w_step, w_omega, self._held_omega, self._rotation, self._ints, self._floats,
+            self._out, self._raw, 0)
         if status:
             raise BackendError("counter spikes are not sorted by step")
         return copy_records(self._out[:n_out])
@@ -450,7 +472,7 @@ class TimeOfTravelKernel:
     @property
     def outcomes(self) -> np.ndarray:
         """Depth neurons reached so far by outcome: REJECT_REASONS, then emitted (a view)."""
-        return self._counts[tt.REJECTED:tt.REJECTED + 4]
+        return self._counts[tt.REJECTED:tt.EMITTED + 1]
 
     def unit_state(self) -> tuple[np.ndarray, np.ndarray]:
         """Per unit of the region (``[H, W, 4]``): step of its last facilitation (-1: idle) and polarity.

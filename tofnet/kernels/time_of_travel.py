@@ -67,9 +67,13 @@ OK, UNSORTED, PENDING_FULL, NO_VELOCITY = 0, 1, 2, 3
 # seen by the fused path, and the step range a call needs velocities for (NO_VELOCITY).
 N_PEND, CURRENT, BASE, T_HI, NEED_FIRST, NEED_LAST = range(6)
 N_CURSOR = 6
-# Count slots: input_filter's drop reasons and ACCEPTED (0-4), depth outcomes (5-9:
-# REJECT_REASONS, emitted, no unit fired), time-of-travel spikes.
-REJECTED, EMITTED, INACTIVE, TOT_SPIKES, N_COUNTS = 5, 8, 9, 10, 11
+# Count slots: input_filter's drop reasons and ACCEPTED (0-4), depth outcomes (5-10:
+# the N_REASONS of REJECT_REASONS, emitted, no unit fired), time-of-travel spikes. The
+# fused kernel computes eq. 8 only, so it never counts ``rotation_dominated`` (slot 8).
+N_REASONS = 4
+REJECTED = 5
+EMITTED = REJECTED + N_REASONS
+INACTIVE, TOT_SPIKES, N_COUNTS = EMITTED + 1, EMITTED + 2, EMITTED + 3
 # The state travels in two arrays (each array argument costs ~0.1 µs per call): ``ints``
 # holds the integer parameters ``ip`` (these slots), then at the offsets they give the
 # cursor, the counts, the sample tables, the caches, the facilitation buffer and the
@@ -125,11 +129,11 @@ def axis_count(m_positive: int, m_negative: int) -> int:
 @njit(cache=True)
 def outcome(fired: int, measured: bool, z, min_depth, max_depth) -> int:
     """``depth.classify`` without branches, as a count slot offset: REJECT_REASONS index,
-    3 emitted, 4 no unit fired (the depth neuron received nothing)."""
+    N_REASONS emitted, N_REASONS + 1 no unit fired (the depth neuron received nothing)."""
     near = np.int64(z <= min_depth)
     far = np.int64(z >= max_depth) & (1 - near)
-    slot = np.int64(measured) * (3 - 2 * near - far)
-    return slot if fired else 4
+    slot = np.int64(measured) * (N_REASONS - (N_REASONS - 1) * near - (N_REASONS - 2) * far)
+    return slot if fired else N_REASONS + 1
 
 
 @njit(cache=True, inline="always")

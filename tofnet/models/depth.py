@@ -1,4 +1,4 @@
-"""The depth process (paper eq. 8): dense per step (reference) and event-driven (float, fixed)."""
+"""The depth process (paper eq. 8; eq. 7 with ``b_w``): dense per step (reference) and event-driven (float, fixed)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,8 @@ from numba import njit
 
 from tofnet.backends.base import REJECT_REASONS
 from tofnet.core.ports import Payload
-from tofnet.kernels.depth import EMITTED, classify, float_depth, signed_axis_count
+from tofnet.kernels.depth import (EMITTED, classify, classify_rotation, float_depth, float_depth_rotation,
+                                  signed_axis_count, translational_share)
 from tofnet.kernels.region import KernelConfig, TimeOfTravelKernel
 from tofnet.models.base import Model, ModelContext, StepModel, records
 from tofnet.processes import DepthProcess
@@ -26,8 +27,25 @@ def _depth_neurons(counts, at_x, at_y, seconds_per_count, min_depth, max_depth, 
         out_reason[i] = classify(sx != 0 or sy != 0, z, min_depth, max_depth)
 
 
+@njit(cache=True)
+def _depth_neurons_rotation(counts, at_x, at_y, bw_x, bw_y, seconds_per_count, min_share, min_depth, max_depth,
+                            out_z, out_reason):
+    for i in range(counts.shape[1]):
+        sx = signed_axis_count(counts[0, i], counts[1, i])
+        sy = signed_axis_count(counts[2, i], counts[3, i])
+        share = translational_share(sx, sy, bw_x[i], bw_y[i], seconds_per_count)
+        z = float_depth_rotation(sx, sy, at_x[i], at_y[i], bw_x[i], bw_y[i], seconds_per_count)
+        out_z[i] = z
+        out_reason[i] = classify_rotation(sx != 0 or sy != 0, share, z, min_share, min_depth, max_depth)
+
+
+def rotating(ctx: ModelContext) -> bool:
+    """True when something feeds the depth process's ``b_w`` (eq. 7), from the descriptions of its inputs."""
+    return bool(ctx.inputs.get("b_w"))
+
+
 class DepthStepModel(StepModel):
-    """Holds the latest ``A t`` as dense arrays; turns the counters of a step into depths (float)."""
+    """Holds the latest ``A t`` (and ``B ω``) as dense arrays; turns the counters of a step into depths (float)."""
 
     def __init__(self, process: DepthProcess, ctx: ModelContext):
         super().__init__(process, ctx)
@@ -35,6 +53,8 @@ class DepthStepModel(StepModel):
         self.field = ctx.input_meta(process, "a_t")
         self.seconds_per_count = ctx.input_meta(process, "counts").seconds_per_count
         self.at_x, self.at_y = np.zeros((height, width)), np.zeros((height, width))
+        self.rotation = ctx.input_meta(process, "b_w") if rotating(ctx) else None
+        self.bw_x, self.bw_y = np.zeros((height, width)), np.zeros((height, width))
         self.outcomes = dict.fromkeys(OUTCOMES, 0)
         self.width = width
         self._dtype = Payload.DEPTH.dtype
@@ -44,6 +64,10 @@ class DepthStepModel(StepModel):
         if velocity is not None:  # applied before this step's counters; the last update of a step wins
             last = velocity[-1]
             self.at_x, self.at_y = self.field.dense((last["tx"], last["ty"], last["tz"]))
+        rotation = inbox.get("b_w")
+        if rotation is not None:  # likewise
+            last = rotation[-1]
+            self.bw_x, self.bw_y = self.rotation.dense((last["wx"], last["wy"], last["wz"]))
         spikes = inbox.get("counts")
         if spikes is None:
             return {"depth": None}
@@ -54,8 +78,13 @@ class DepthStepModel(StepModel):
         px, py = pixels % self.width, pixels // self.width
         z = np.empty(len(pixels))
         reason = np.empty(len(pixels), dtype=np.int64)
-        _depth_neurons(counts, self.at_x[py, px], self.at_y[py, px], self.seconds_per_count,
-                       self.process.min_depth, self.process.max_depth, z, reason)
+        if self.rotation is None:  # eq. 8
+            _depth_neurons(counts, self.at_x[py, px], self.at_y[py, px], self.seconds_per_count,
+                           self.process.min_depth, self.process.max_depth, z, reason)
+        else:  # eq. 7
+            _depth_neurons_rotation(counts, self.at_x[py, px], self.at_y[py, px], self.bw_x[py, px],
+                                    self.bw_y[py, px], self.seconds_per_count, self.process.min_share,
+                                    self.process.min_depth, self.process.max_depth, z, reason)
         for code, name in enumerate(REJECT_REASONS):
             self.outcomes[name] += int(np.count_nonzero(reason == code))
         keep = reason == EMITTED
@@ -81,9 +110,11 @@ class DepthEventModel(Model):
         super().__init__(process, ctx)
         field = ctx.input_meta(process, "a_t")
         counts = ctx.input_meta(process, "counts")
+        self.rotating = rotating(ctx)
         config = KernelConfig(tuple(ctx.sensor_size), ctx.timestep_s, counts.distance, 1, process.min_depth,
                               process.max_depth, 1, field.per_pixel, field.patch_size, field.intrinsics,
-                              ctx.fixed_format)
+                              ctx.fixed_format, min_share=process.min_share if self.rotating else None,
+                              rotation_intrinsics=ctx.input_meta(process, "b_w").intrinsics if self.rotating else None)
         self.kernel = TimeOfTravelKernel(config, ctx.region, ctx.t0_us)
         self.field = field
 
@@ -93,7 +124,8 @@ class DepthEventModel(Model):
         return super().get_var(name, step)
 
     def run(self, first: int, end: int, inputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        return {"depth": self.kernel.process_counts(inputs["counts"], inputs["a_t"])}
+        rotation = inputs["b_w"] if self.rotating else None
+        return {"depth": self.kernel.process_counts(inputs["counts"], inputs["a_t"], rotation)}
 
     def counts(self) -> dict[str, int]:
         return {name: int(c) for name, c in zip(OUTCOMES, self.kernel.outcomes)}

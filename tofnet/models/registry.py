@@ -28,6 +28,7 @@ _BUILTIN: dict[tuple[str, str], str] = {}
 for _family in _ALL:
     _BUILTIN[("InputProcess", _family)] = "tofnet.models.input:InputModel"
     _BUILTIN[("VelocityProcess", _family)] = "tofnet.models.velocity:VelocityModel"
+    _BUILTIN[("AngularVelocityProcess", _family)] = "tofnet.models.angular_velocity:AngularVelocityModel"
 for _family, _suffix in (("reference", "StepModel"), ("float", "EventModel"), ("fixed", "EventModel")):
     _BUILTIN[("TimeOfTravelProcess", _family)] = f"tofnet.models.time_of_travel:TimeOfTravel{_suffix}"
     _BUILTIN[("DepthProcess", _family)] = f"tofnet.models.depth:Depth{_suffix}"

@@ -6,15 +6,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tofnet.backends.runtime import intrinsics_of, velocity_source_of, velocity_table
+from tofnet.backends.runtime import UpdateRows, intrinsics_of, velocity_source_of, velocity_table
 from tofnet.core.ports import Payload
-from tofnet.errors import BackendError, DataError
 from tofnet.kernels.velocity import sample_grid, velocity_term
 from tofnet.models.base import Model, ModelContext, records
 from tofnet.processes import VelocityProcess
 
 #: Updates computed ahead of the clock, so that a short run rarely asks the source.
 LOOKAHEAD = 1024
+
+
+def updates_between(first: int, end: int, update_every: int) -> tuple[int, int]:
+    """``(j0, j1)``: the updates ``j`` whose step ``j * update_every`` lies in ``[first, end)``."""
+    return -(-first // update_every), -(-end // update_every)
 
 
 @dataclass(frozen=True)
@@ -46,7 +50,8 @@ class VelocityModel(Model):
         self.source = velocity_source_of(process.source, process.velocity, process.samples, ctx.recording,
                                          process.name)
         self.update_every = int(process.update_every)
-        self._table: tuple[int, np.ndarray] = (0, np.zeros((0, 3)))
+        self.updates = UpdateRows(lambda first, count: velocity_table(
+            self.source, ctx.t0_us, ctx.timestep_us, self.update_every, count, first), LOOKAHEAD)
         self._dtype = Payload.VELOCITY_TERM.dtype
         self._last = np.full(3, np.nan)
 
@@ -56,27 +61,13 @@ class VelocityModel(Model):
         return {"a_t": VelocityField(process.per == "pixel", int(process.patch_size),
                                      (intr.fx, intr.fy, intr.cx, intr.cy), tuple(ctx.sensor_size))}
 
-    def _rows(self, first: int, count: int) -> np.ndarray:
-        start, table = self._table
-        if not (start <= first and first + count <= start + len(table)):
-            try:
-                table = velocity_table(self.source, self.ctx.t0_us, self.ctx.timestep_us, self.update_every,
-                                       max(count, LOOKAHEAD), first)
-            except (BackendError, DataError):  # e.g. not finite beyond the rows asked for: compute only those
-                table = velocity_table(self.source, self.ctx.t0_us, self.ctx.timestep_us, self.update_every,
-                                       count, first)
-            start = first
-            self._table = (start, table)
-        return table[first - start:first - start + count]
-
     def run(self, first: int, end: int, inputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        u = self.update_every
-        j0, j1 = -(-first // u), -(-end // u)  # updates whose step j*u lies in [first, end)
+        j0, j1 = updates_between(first, end, self.update_every)
         if j1 <= j0:
             return {"a_t": np.empty(0, self._dtype)}
-        t = self._rows(j0, j1 - j0)
+        t = self.updates.slice(j0, j1 - j0)
         self._last = t[-1].copy()
-        return {"a_t": records(self._dtype, step=np.arange(j0, j1, dtype=np.int64) * u,
+        return {"a_t": records(self._dtype, step=np.arange(j0, j1, dtype=np.int64) * self.update_every,
                                tx=t[:, 0], ty=t[:, 1], tz=t[:, 2])}
 
     def get_var(self, name: str, step: int) -> np.ndarray:
@@ -87,6 +78,6 @@ class VelocityModel(Model):
     def set_param(self, name: str, value) -> None:
         if name == "velocity" and self.process.source == "constant":  # updates sent from now on
             self.source = velocity_source_of("constant", value, None, None, self.process.name)
-            self._table = (0, np.zeros((0, 3)))
+            self.updates.clear()
             return
         super().set_param(name, value)

@@ -1,5 +1,6 @@
 """The processes tofnet ships, as declarations (ports, parameters, docs): no execution code."""
 
+from tofnet.processes.angular_velocity import AngularVelocityProcess
 from tofnet.processes.background_filter import BackgroundActivityFilterProcess
 from tofnet.processes.depth import DepthProcess
 from tofnet.processes.input import InputProcess
@@ -7,4 +8,4 @@ from tofnet.processes.time_of_travel import TimeOfTravelProcess
 from tofnet.processes.velocity import VelocityProcess
 
 __all__ = ["InputProcess", "TimeOfTravelProcess", "DepthProcess", "VelocityProcess",
-           "BackgroundActivityFilterProcess"]
+           "BackgroundActivityFilterProcess", "AngularVelocityProcess"]
