@@ -328,7 +328,7 @@ def _rotation_dominated() -> Scene:
 
 # -- state variables read mid-run (sessions) ------------------------------------------------
 for _base, _steps in (("texture-blobs", (9, 60, 171)), ("patch-d2-ragged", (25, 90)), ("graph-denoised", (40, 120)),
-                      ("update-every", (33, 150))):
+                      ("update-every", (33, 150)), ("rotation-poses", (30, 110))):
     _found = next(c for c in CASES if c.name == _base)
     CASES.append(Case(f"variables-{_base}", f"{_found.doc}; every variable compared at steps "
                       f"{', '.join(map(str, _steps))}", _found.build, _steps))

@@ -74,6 +74,7 @@ class AngularVelocityModel(Model):
         self.updates = UpdateRows(lambda first, count: angular_velocity_table(
             self.source, ctx.t0_us, ctx.timestep_us, self.update_every, count, first), LOOKAHEAD)
         self._dtype = Payload.ROTATION_TERM.dtype
+        self._last = np.full(3, np.nan)
 
     @classmethod
     def output_meta(cls, process: AngularVelocityProcess, ctx: ModelContext) -> dict:
@@ -85,5 +86,18 @@ class AngularVelocityModel(Model):
         if j1 <= j0:
             return {"b_w": np.empty(0, self._dtype)}
         w = self.updates.slice(j0, j1 - j0)
+        self._last = w[-1].copy()
         return {"b_w": records(self._dtype, step=np.arange(j0, j1, dtype=np.int64) * self.update_every,
                                wx=w[:, 0], wy=w[:, 1], wz=w[:, 2])}
+
+    def get_var(self, name: str, step: int) -> np.ndarray:
+        if name == "last_omega":
+            return self._last.copy()
+        return super().get_var(name, step)
+
+    def set_param(self, name: str, value) -> None:
+        if name == "omega" and self.process.source == "constant":  # updates sent from now on
+            self.source = angular_velocity_source_of(self.process, self.ctx.recording)
+            self.updates.clear()
+            return
+        super().set_param(name, value)

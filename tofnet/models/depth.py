@@ -98,6 +98,8 @@ class DepthStepModel(StepModel):
     def get_var(self, name: str, step: int) -> np.ndarray:
         if name == "a_t":
             return np.stack([self.at_x, self.at_y])
+        if name == "b_w":
+            return np.stack([self.bw_x, self.bw_y])
         return super().get_var(name, step)
 
 
@@ -117,10 +119,16 @@ class DepthEventModel(Model):
                               rotation_intrinsics=ctx.input_meta(process, "b_w").intrinsics if self.rotating else None)
         self.kernel = TimeOfTravelKernel(config, ctx.region, ctx.t0_us)
         self.field = field
+        self.rotation = ctx.input_meta(process, "b_w") if self.rotating else None
 
     def get_var(self, name: str, step: int) -> np.ndarray:
         if name == "a_t":  # the velocity update the neurons hold, as A t at every pixel
             return self.region_view(np.stack(self.field.dense(self.kernel._held_velocity[:3])))
+        if name == "b_w":  # likewise the rotation update, as B ω (0 without rotation)
+            if not self.rotating:
+                width, height = self.ctx.sensor_size
+                return self.region_view(np.zeros((2, height, width)))
+            return self.region_view(np.stack(self.rotation.dense(self.kernel._held_omega)))
         return super().get_var(name, step)
 
     def run(self, first: int, end: int, inputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from tofnet.core.params import Param
 from tofnet.core.ports import Payload, PortSpec
 from tofnet.core.process import Process
+from tofnet.core.vars import Var
 from tofnet.errors import DataError, NetworkError
 from tofnet.io.rotation import rotation_matrix
 
@@ -49,6 +50,8 @@ class AngularVelocityProcess(Process):
         Param("intrinsics", "floats", None, unit="px", optional=True,
               doc="[fx, fy, cx, cy]; from the recording's calibration when omitted"),
     )
+    vars = (Var("last_omega", "vector", "float64", "rad/s", "angular velocity of the last update sent (NaN before "
+                "the first)", channels=3),)
     placement = "host"
 
     def field_layout(self, port: str) -> tuple[int, int]:

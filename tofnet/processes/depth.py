@@ -40,7 +40,9 @@ class DepthProcess(Process):
               "at or below are rejected (rotation_dominated)", minimum=0.0),
     )
     vars = (Var("a_t", "channels", "float64", "px*m/s", "A t each neuron holds: the last update that arrived "
-                "(0 before the first)", channels=2),)
+                "(0 before the first)", channels=2),
+            Var("b_w", "channels", "float64", "px/s", "B ω each neuron holds: the last rotation update that arrived "
+                "(0 before the first, and without rotation)", channels=2))
     @property
     def resources_per_pixel(self) -> dict[str, int]:  # type: ignore[override]
         """4 time differences + 2 velocity terms (paper §4.2), + 2 rotation terms with ``b_w``; one neuron."""
