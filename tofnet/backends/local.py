@@ -122,18 +122,20 @@ class LocalBackend(Backend):
         total = len(events)
         depth = _Collector(DEPTH_DTYPE, min(total, RESULT_CAPACITY))
         tot = _Collector(TOT_DTYPE, 0)
+        seams = []  # where one packet's estimates end: a step may go on in the next packet's
         for lo in range(0, total, self.packet_events):
             packet = events[lo:lo + self.packet_events]
             buffer, offset = depth.reserve(len(packet))
             out = stream.feed_into(packet, buffer, offset)  # the kernel writes the estimates in place
             if out is not None:
+                seams.append(offset)
                 depth.commit(len(out.depth))
                 if stream.record_tot:
                     tot.add(out.tot)
             if progress is not None:
                 progress(min(lo + self.packet_events, total), total)
         result = stream.close()
-        result.outputs[stream.depth_name] = canonical(depth.array())
+        result.outputs[stream.depth_name] = stream.kernel.join_packets(depth.array(), seams)
         if stream.record_tot:
             result.outputs[stream.tot_name] = canonical(tot.array())
         result.wall_time = time.perf_counter() - started

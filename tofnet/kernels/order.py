@@ -3,50 +3,67 @@
 The fused kernel writes estimates in the order of the events that triggered them; this puts
 each step's estimates in pixel order in place, in time linear in the estimates plus the
 sensor's rows (a counting sort by row, then an insertion sort by column within rows, which
-hold one or two estimates each).
+hold one or two estimates each). Records move as raw 32-bit words: a depth record
+(``DEPTH_DTYPE``: t i8, x u2, y u2, z f8, step i8; 28 bytes, packed) is 7 words, and its
+word 2 is ``(y << 16) | x`` on little-endian machines, the sort key itself.
 """
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 from numba import njit
 
+from tofnet.events import DEPTH_DTYPE
+
+#: 32-bit words per depth record, and the word holding ``(y << 16) | x``; the step is words 5-6.
+WORDS, KEY = 7, 2
+assert DEPTH_DTYPE.itemsize == 4 * WORDS and DEPTH_DTYPE.fields["x"][1] == 4 * KEY
+assert DEPTH_DTYPE.fields["y"][1] == 4 * KEY + 2 and DEPTH_DTYPE.fields["step"][1] == 20
+assert sys.byteorder == "little", "the canonical sort reads records as little-endian words"
+
 
 @njit(cache=True)
-def sort_steps_by_pixel(out, lo, hi, height, scratch, row_start):
-    """Sort ``out[lo:hi]`` (records with ``step``, ``y``, ``x``, sorted by step) by (step, y, x).
-
-    ``scratch`` holds at least ``hi - lo`` records; ``row_start`` at least ``height + 1`` ints.
-    Records of one step and pixel keep their order (stable).
-    """
+def _sort_words(words, lo, hi, height, scratch, row_start):
     i = lo
     while i < hi:
-        step = out[i].step
+        step_lo, step_hi = words[i, 5], words[i, 6]
         j = i + 1
         ordered = True
-        while j < hi and out[j].step == step:
-            if out[j].y < out[j - 1].y or (out[j].y == out[j - 1].y and out[j].x < out[j - 1].x):
-                ordered = False
+        while j < hi and words[j, 5] == step_lo and words[j, 6] == step_hi:
+            ordered &= words[j, KEY] >= words[j - 1, KEY]
             j += 1
         if not ordered:
             row_start[:height + 1] = 0
             for q in range(i, j):
-                row_start[out[q].y + 1] += 1
+                row_start[(words[q, KEY] >> 16) + 1] += 1
             for r in range(height):
                 row_start[r + 1] += row_start[r]
             for q in range(i, j):
-                y = out[q].y
-                scratch[row_start[y]] = out[q]
-                row_start[y] += 1
+                y = words[q, KEY] >> 16
+                at = row_start[y]
+                for w in range(WORDS):
+                    scratch[at, w] = words[q, w]
+                row_start[y] = at + 1
             n = j - i
-            for q in range(1, n):  # within a row, by x (stable); records are views: move a copy
-                if scratch[q].y == scratch[q - 1].y and scratch[q].x < scratch[q - 1].x:
-                    moving = scratch[q:q + 1].copy()
-                    p = q - 1
-                    while p >= 0 and scratch[p].y == moving[0].y and scratch[p].x > moving[0].x:
-                        scratch[p + 1] = scratch[p]
-                        p -= 1
-                    scratch[p + 1] = moving[0]
+            for q in range(1, n):  # within a row, by x (stable): rows hold a few estimates
+                p = q
+                while p > 0 and scratch[p, KEY] < scratch[p - 1, KEY]:
+                    for w in range(WORDS):
+                        scratch[p, w], scratch[p - 1, w] = scratch[p - 1, w], scratch[p, w]
+                    p -= 1
             for q in range(n):
-                out[i + q] = scratch[q]
+                for w in range(WORDS):
+                    words[i + q, w] = scratch[q, w]
         i = j
+
+
+def sort_steps_by_pixel(out: np.ndarray, lo: int, hi: int, height: int, scratch: np.ndarray,
+                        row_start: np.ndarray) -> None:
+    """Sort depth records ``out[lo:hi]`` (sorted by step) by (step, y, x), in place.
+
+    ``scratch``: ``(at least hi - lo, 7)`` uint32; ``row_start``: at least ``height + 1`` int64.
+    Estimates of one step and pixel keep their order (stable).
+    """
+    _sort_words(out.view(np.uint32).reshape(-1, WORDS), lo, hi, height, scratch, row_start)

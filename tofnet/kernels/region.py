@@ -17,7 +17,7 @@ from tofnet.kernels import time_of_travel as tt
 from tofnet.kernels.kernel_config import (MAX_VELOCITY_ROWS, KernelConfig, KernelOutput, Region,  # noqa: F401
                                           VelocityRows, _sample_tables, copy_records, velocity_rows)
 from tofnet.kernels.input_filter import ACCEPTED, NEVER
-from tofnet.kernels.order import sort_steps_by_pixel
+from tofnet.kernels.order import WORDS as ORDER_WORDS, sort_steps_by_pixel
 
 
 class TimeOfTravelKernel:
@@ -84,7 +84,8 @@ class TimeOfTravelKernel:
         self._rotation = np.zeros(0) if config.min_share is None else np.array(
             [config.min_share, float(fmt.quantize(config.min_share) if fmt is not None else 0),
              *(config.rotation_intrinsics or config.intrinsics)])
-        self._scratch, self._row_start = np.empty(0, DEPTH_DTYPE), np.zeros(config.sensor_size[1] + 1, np.int64)  # depth layer alone: the velocity update its neurons hold
+        self._scratch = np.empty((0, ORDER_WORDS), np.uint32)  # the canonical sort's (kernels/order.py)
+        self._row_start = np.zeros(config.sensor_size[1] + 1, np.int64)
 
     @property
     def t0_us(self) -> int:
@@ -243,8 +244,19 @@ class TimeOfTravelKernel:
             out[lo:hi], raw[lo:hi] = out[lo:hi][order], raw[lo:hi][order]
             return
         if len(self._scratch) < hi - lo:
-            self._scratch = np.empty(max(hi - lo, 2 * len(self._scratch)), DEPTH_DTYPE)
+            self._scratch = np.empty((max(hi - lo, 2 * len(self._scratch)), ORDER_WORDS), np.uint32)
         sort_steps_by_pixel(out, lo, hi, self.config.sensor_size[1], self._scratch, self._row_start)
+
+    def join_packets(self, depth: np.ndarray, seams: list[int]) -> np.ndarray:
+        """Estimates of consecutive calls (each in canonical order), put in canonical order in place:
+        only a step that runs across a seam (the offset where a call's estimates began) is sorted."""
+        step = depth["step"]
+        for seam in seams:
+            if 0 < seam < len(depth) and step[seam - 1] == step[seam]:
+                s = step[seam]
+                lo, hi = int(np.searchsorted(step, s, "left")), int(np.searchsorted(step, s, "right"))
+                self._order(depth, self._no_raw, lo, hi)
+        return depth
 
     def buffers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The internal output buffers: estimates, their fixed-point values, time-of-travel spikes."""
