@@ -67,16 +67,15 @@ def test_a_straight_edge_gives_its_depth_exactly(model, direction):
     assert np.all(quality["rms_px"] < 1e-3)
 
 
-@pytest.mark.parametrize("model", ["curved", "rows"])
-def test_a_curved_edge_gives_its_depth_exactly(model):
+def test_a_curved_edge_gives_its_depth_exactly():
     events, velocity = edge_events((1, 0), speed=40.0, depth=1.5, shape=lambda w: 0.04 * w * w)
-    depth, _, _ = run(events, velocity, model=model, outlier_px=0.05)
+    depth, _, _ = run(events, velocity, model="rows", outlier_px=0.05)
     assert len(depth) > 100
     np.testing.assert_allclose(depth["z"], 1.5, rtol=1e-4)
 
 
 def test_the_plane_model_is_bent_by_a_curved_edge():
-    """A plane fitted across a curved edge picks up its curvature: the reason for the other models."""
+    """A plane fitted across a curved edge picks up its curvature: one reason for the rows model."""
     events, velocity = edge_events((1, 0), speed=40.0, depth=1.5, shape=lambda w: 0.04 * w * w)
     depth, _, _ = run(events, velocity, model="plane", outlier_px=10.0, max_rms_px=10.0)
     assert np.max(np.abs(depth["z"] / 1.5 - 1)) > 0.01
@@ -192,12 +191,10 @@ def test_same_polarity_fits_ignore_the_other_polarity():
     off = off[off["t"] > 0]
     events = np.concatenate([on, off])
     events = events[np.argsort(events["t"], kind="stable")]
-    depth, quality, _ = run(events, velocity, polarity="same")
+    depth, quality, _ = run(events, velocity)
     is_on = events["p"][quality["index"]] == 1
+    assert is_on.sum() > 100
     np.testing.assert_allclose(depth["z"][is_on], 2.0, rtol=1e-4)
-    depth_both, quality_both, _ = run(events, velocity, polarity="both", outlier_px=100.0, max_rms_px=100.0)
-    on_both = events["p"][quality_both["index"]] == 1
-    assert np.max(np.abs(depth_both["z"][on_both] / 2.0 - 1)) > 0.05
 
 
 def test_the_hold_follows_the_measured_time_per_pixel():
@@ -271,7 +268,7 @@ def test_eq7_with_a_rotation_recovers_the_depth():
 
 
 def test_a_bad_configuration_is_one_error_naming_the_fields():
-    with pytest.raises(BackendError, match="polarity.*radius"):
-        TimeSurfaceConfig(SENSOR, INTRINSICS, polarity="any", radius=0)
+    with pytest.raises(BackendError, match="model.*radius"):
+        TimeSurfaceConfig(SENSOR, INTRINSICS, model="cubic", radius=0)
     with pytest.raises(BackendError, match="max_depth"):
         TimeSurfaceConfig(SENSOR, INTRINSICS, min_depth=5.0, max_depth=1.0)

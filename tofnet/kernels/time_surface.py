@@ -1,22 +1,21 @@
 """Depth from the local slope of the time surface (beyond the paper; DESIGN "Beyond the paper").
 
-The numba core of the time-surface estimator; the streaming API and the parameters'
-meaning are in ``tofnet.kernels.time_surface_estimator``, the method and the measurements
-behind the defaults in docs/time_surface.md. Per pixel and polarity the state holds the
-time (µs) of the last *first event* of an edge: the surface ``T(u, v)``. Per event:
+The numba core of the time-surface estimator; the streaming API and the parameters are in
+``tofnet.kernels.time_surface_estimator``, the method and the measurements behind the
+defaults in docs/time_surface.md. Per pixel and polarity the state holds the time (µs) of
+the last *first event* of an edge: the surface ``T(u, v)``. Per event:
 
-1. first-event rule: an event of a pixel and polarity whose last first event is more
-   recent than its hold (``hold_px`` times the time per pixel the last fit there
-   measured, else the refractory period) is part of the same edge's burst: dropped;
-2. gather the first events of the same polarity (or both) within ``radius`` pixels that
-   the edge has already crossed (at most ``ahead_px`` along the image motion ``A t``), no
-   older than the window nor than the camera's last turn;
-3. fit ``t = a u + b v + c`` by least squares (µs, pixels), dropping the point farthest
-   from the plane while it is more than ``outlier_px`` pixels away (along the gradient),
-   at most ``iterations`` times; optionally drop the points the plane puts within
-   ``trim_px`` pixels of the window's ends and refit; check points, spread and rms;
-4. ``∇T = (a, b)`` s/px is the time of travel (DESIGN eq. 8: ``td = dT/du``, positive for
-   motion towards +u): ``Z = (A t)·∇T``, or ``(A t)·∇T / (1 − (B ω)·∇T)`` with a rotation.
+1. first-event rule: an event of a pixel and polarity whose last first event is more recent
+   than its hold (``hold_px`` times the time per pixel the last fit there measured, else the
+   refractory period) is part of the same edge's burst: dropped;
+2. gather the first events of the same polarity within ``radius`` pixels that the edge has
+   already crossed (at most ``ahead_px`` along the image motion ``A t``), no older than the
+   window nor than the camera's last turn;
+3. fit the time along the motion, per line of pixels parallel to it (``fit_rows``) or as a
+   plane (``fit_plane``), dropping the farthest point while it is more than ``outlier_px``
+   pixels off, at most ``iterations`` times; check points, spread and rms;
+4. ``∇T`` (s/px) is the time of travel (DESIGN eq. 8: ``td = dT/du``, positive for motion
+   towards +u): ``Z = (A t)·∇T``, or ``(A t)·∇T / (1 − (B ω)·∇T)`` with a rotation.
 
 Every event ends in exactly one count slot (``COUNT_NAMES``).
 """
@@ -41,15 +40,20 @@ DROP_SLOTS = (OUT_OF_BOUNDS, BEFORE_T0, BURST)  # not the first event of an edge
 REJECT_SLOTS = tuple(range(NO_MOTION, EMITTED))  # a first event whose estimate was rejected
 
 # Integer parameters (``ip``) and float parameters (``fp``), by slot.
-(I_WIDTH, I_HEIGHT, I_RADIUS, I_T0, I_DT, I_LATENCY, I_UPDATE_EVERY, I_BOTH, I_MIN_POINTS, I_ITERATIONS,
- I_REFRACTORY, I_BURST_GAP, I_WINDOW, I_CONSISTENCY_WINDOW, I_MAX_HOLD, I_RECORD_REJECTED, I_MODEL, N_IP) = range(18)
+(I_WIDTH, I_HEIGHT, I_RADIUS, I_T0, I_DT, I_LATENCY, I_UPDATE_EVERY, I_MIN_POINTS, I_ITERATIONS,
+ I_REFRACTORY, I_WINDOW, I_CONSISTENCY_WINDOW, I_MAX_HOLD, I_RECORD_REJECTED, I_MODEL, N_IP) = range(16)
 (F_FX, F_FY, F_CX, F_CY, F_OUTLIER, F_MAX_RMS, F_MIN_SPREAD, F_MIN_DEPTH, F_MAX_DEPTH, F_MIN_DENOMINATOR,
  F_WINDOW_DEPTH, F_REFRACTORY_DEPTH, F_CONSISTENCY, F_HOLD_PX, F_AHEAD_PX, F_TURN, F_TRIM_PX, N_FP) = range(18)
 # Motion state: the velocity the current epoch started with, its start (µs), the last update seen.
 M_VX, M_VY, M_VZ, M_SINCE, M_UPDATE, N_MOTION = range(6)
-# Fit models (``I_MODEL``): a plane, a surface curved across the motion, lines along the motion.
-MODEL_PLANE, MODEL_CURVED, MODEL_ROWS = range(3)
-MODELS = ("plane", "curved", "rows")
+# Per sample of ``A t`` and velocity update: A t (px*m/s), |A t|, its direction, the refractory
+# period and the window it implies (µs).
+A_X, A_Y, A_SPEED, A_FU, A_FV, A_REFRACTORY, A_WINDOW, N_A = range(8)
+# Per line of a ``fit_rows`` fit: raw sums (count, s, t, s², s t), means of s and t, centred sums.
+L_M, L_S, L_T, L_SS, L_ST, L_MEAN_S, L_MEAN_T, L_CSS, L_CST, N_L = range(10)
+# Fit models (``I_MODEL``): a plane, or lines along the motion with a shared slope.
+MODEL_PLANE, MODEL_ROWS = range(2)
+MODELS = ("plane", "rows")
 # Status of a call.
 OK, UNSORTED, NO_VELOCITY = range(3)
 
@@ -81,101 +85,55 @@ def follow_motion(motion, row, update: int, update_start_us: int, turn: float) -
 
 
 @njit(cache=True)
-def _solve(k, sums, beta, ridge):
-    """Least squares on the accumulated ``sums`` (``_accumulate``) of ``k`` points: the coefficients
-    of ``t = b0 + b1 w + b2 w² + b3 s`` into ``beta``; returns the variance of ``s`` left after
-    regressing it on (1, w, w²) (px², the spread that determines b3), or -1 when singular.
+def fit_plane(ps, pw, pt, n, min_points, min_spread, outlier_px, iterations):
+    """Least-squares plane ``t = c + τ_s s + τ_w w`` through the first ``n`` points, robustly.
 
-    ``ridge`` (times k) on the w and w² terms lets a row of points along s, or the plane model
-    (w² terms all 0), solve with those coefficients near 0 instead of failing.
+    ``ps`` pixels along the image motion, ``pw`` across it, ``pt`` µs (Benosman et al. 2014's
+    local plane, in the motion's frame). While the farthest point is more than ``outlier_px``
+    pixels from the plane (its time error over the gradient's magnitude), it is dropped (moved
+    past the kept ones) and the plane refitted, at most ``iterations`` times: one at a time,
+    since a first fit pulled by several outliers would make good points look bad too. Returns
+    ``(slot, τ_s, τ_w, c, kept, rms_px)``: ``EMITTED`` when a plane stands (µs/px, µs; the
+    first ``kept`` points are the ones it fits, ``rms_px`` their rms distance from it in
+    pixels), else ``TOO_FEW_POINTS`` or ``ILL_CONDITIONED`` (the variance of ``s`` that ``w``
+    leaves unexplained is below ``min_spread`` px²: the points do not extend along the motion).
     """
-    # Normal matrix (symmetric) and right-hand side, regressors ordered (1, w, w², s).
-    n00, n01, n02, n03 = float(k), sums[0], sums[1], sums[2]
-    n11, n12, n13 = sums[3] + ridge * k, sums[4], sums[5]
-    n22, n23 = sums[6] + ridge * k, sums[7]
-    n33 = sums[8]
-    r0, r1, r2, r3 = sums[9], sums[10], sums[11], sums[12]
-    # Cholesky N = L Lᵀ.
-    l00 = math.sqrt(n00)
-    l10, l20, l30 = n01 / l00, n02 / l00, n03 / l00
-    d11 = n11 - l10 * l10
-    if d11 <= 0.0:
-        return -1.0
-    l11 = math.sqrt(d11)
-    l21, l31 = (n12 - l20 * l10) / l11, (n13 - l30 * l10) / l11
-    d22 = n22 - l20 * l20 - l21 * l21
-    if d22 <= 0.0:
-        return -1.0
-    l22 = math.sqrt(d22)
-    l32 = (n23 - l30 * l20 - l31 * l21) / l22
-    d33 = n33 - l30 * l30 - l31 * l31 - l32 * l32
-    if d33 <= 0.0:
-        return -1.0
-    l33 = math.sqrt(d33)
-    # L y = r, then Lᵀ beta = y.
-    y0 = r0 / l00
-    y1 = (r1 - l10 * y0) / l11
-    y2 = (r2 - l20 * y0 - l21 * y1) / l22
-    y3 = (r3 - l30 * y0 - l31 * y1 - l32 * y2) / l33
-    beta[3] = y3 / l33
-    beta[2] = (y2 - l32 * beta[3]) / l22
-    beta[1] = (y1 - l21 * beta[2] - l31 * beta[3]) / l11
-    beta[0] = (y0 - l10 * beta[1] - l20 * beta[2] - l30 * beta[3]) / l00
-    return d33 / k
-
-
-@njit(cache=True, inline="always")
-def _accumulate(sums, s, w, q, t, sign):
-    sums[0] += sign * w
-    sums[1] += sign * q
-    sums[2] += sign * s
-    sums[3] += sign * w * w
-    sums[4] += sign * w * q
-    sums[5] += sign * w * s
-    sums[6] += sign * q * q
-    sums[7] += sign * q * s
-    sums[8] += sign * s * s
-    sums[9] += sign * t
-    sums[10] += sign * w * t
-    sums[11] += sign * q * t
-    sums[12] += sign * s * t
-
-
-@njit(cache=True)
-def fit_surface(ps, pw, pt, n, curved, min_points, min_spread, outlier_px, iterations, sums, beta):
-    """Least-squares surface ``t = c + τ_s s + τ_w w (+ e w²)`` through the first ``n`` points, robustly.
-
-    ``ps`` pixels along the image motion, ``pw`` across it, ``pt`` µs. ``curved`` adds the
-    ``w²`` term: under a pure translation the time surface is ``τ_s s + h(w)`` whatever the
-    edge's shape, so a curved edge bends it across the motion only. While the farthest point
-    is more than ``outlier_px`` pixels from the surface (its time error over the gradient's
-    magnitude at the event), it is dropped (moved past the kept ones) and the surface refitted,
-    at most ``iterations`` times: one at a time, since a first fit pulled by several outliers
-    would make good points look bad too. Returns ``(slot, τ_s, τ_w, c, kept, rms_px)``:
-    ``EMITTED`` when a surface stands (µs/px, µs; the first ``kept`` points are the ones it
-    fits, ``rms_px`` their rms distance from it), else ``TOO_FEW_POINTS`` or
-    ``ILL_CONDITIONED`` (the variance of ``s`` the other terms leave is below ``min_spread``
-    px²: the points do not extend along the motion).
-    """
-    sums[:] = 0.0
-    for i in range(n):
-        w = pw[i]
-        _accumulate(sums, ps[i], w, w * w if curved else 0.0, pt[i], 1.0)
     k = n
+    ss = sw = st = sss = ssw = sww = sst = swt = 0.0
+    for i in range(k):
+        s, w, t = ps[i], pw[i], pt[i]
+        ss += s
+        sw += w
+        st += t
+        sss += s * s
+        ssw += s * w
+        sww += w * w
+        sst += s * t
+        swt += w * t
     tau_s = tau_w = c = rms_px = 0.0
     for _ in range(iterations + 1):
         if k < min_points:
             return TOO_FEW_POINTS, tau_s, tau_w, c, k, rms_px
-        spread = _solve(k, sums, beta, 1e-6)
-        if spread < min_spread:
-            return ILL_CONDITIONED, tau_s, tau_w, c, k, rms_px
-        c, tau_w, e, tau_s = beta[0], beta[1], beta[2], beta[3]
+        ms, mw, mt = ss / k, sw / k, st / k
+        css, csw, cww = sss / k - ms * ms, ssw / k - ms * mw, sww / k - mw * mw
+        cst, cwt = sst / k - ms * mt, swt / k - mw * mt
+        if cww > 1e-9:  # points across the motion too: the full plane
+            spread = css - csw * csw / cww
+            if spread < min_spread:
+                return ILL_CONDITIONED, tau_s, tau_w, c, k, rms_px
+            det = css * cww - csw * csw
+            tau_s = (cst * cww - cwt * csw) / det
+            tau_w = (cwt * css - cst * csw) / det
+        else:  # one line along the motion: its slope, nothing across
+            if css < min_spread:
+                return ILL_CONDITIONED, tau_s, tau_w, c, k, rms_px
+            tau_s, tau_w = cst / css, 0.0
+        c = mt - tau_s * ms - tau_w * mw
         slope = math.sqrt(tau_s * tau_s + tau_w * tau_w)
         sq = 0.0
         worst, worst_r = 0, 0.0
         for i in range(k):
-            w = pw[i]
-            r = abs(pt[i] - c - tau_s * ps[i] - (tau_w + e * w) * w)
+            r = abs(pt[i] - c - tau_s * ps[i] - tau_w * pw[i])
             sq += r * r
             if r > worst_r:
                 worst, worst_r = i, r
@@ -183,130 +141,191 @@ def fit_surface(ps, pw, pt, n, curved, min_points, min_spread, outlier_px, itera
         if worst_r <= outlier_px * slope:
             break
         s, w, t = ps[worst], pw[worst], pt[worst]
-        _accumulate(sums, s, w, w * w if curved else 0.0, t, -1.0)
         k -= 1
         ps[worst], pw[worst], pt[worst] = ps[k], pw[k], pt[k]
         ps[k], pw[k], pt[k] = s, w, t
-    # When the iterations run out with an outlier left, the last surface stands and the rms
+        ss -= s
+        sw -= w
+        st -= t
+        sss -= s * s
+        ssw -= s * w
+        sww -= w * w
+        sst -= s * t
+        swt -= w * t
+    # When the iterations run out with an outlier left, the last plane stands and the rms
     # check judges it.
     return EMITTED, tau_s, tau_w, c, k, rms_px
 
 
+@njit(cache=True, inline="always")
+def _line_stats(lines, g):
+    """Means and centred sums of line ``g`` from its raw sums (NaN means: fewer than 2 points)."""
+    m = lines[g, L_M]
+    if m >= 2.0:
+        inv = 1.0 / m
+        lines[g, L_MEAN_S], lines[g, L_MEAN_T] = lines[g, L_S] * inv, lines[g, L_T] * inv
+        lines[g, L_CSS] = lines[g, L_SS] - lines[g, L_S] * lines[g, L_MEAN_S]
+        lines[g, L_CST] = lines[g, L_ST] - lines[g, L_S] * lines[g, L_MEAN_T]
+    else:
+        lines[g, L_MEAN_S] = lines[g, L_MEAN_T] = math.nan
+        lines[g, L_CSS] = lines[g, L_CST] = 0.0
+
+
 @njit(cache=True)
-def fit_rows(ps, pw, pt, n, min_points, min_spread, outlier_px, iterations, groups):
+def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, lines, used):
     """Time per pixel along the image motion from lines of pixels parallel to it, robustly.
 
     Under a pure translation a pixel sees the signal of the pixel behind it along the motion,
     shifted by the time the image takes to move between them; with equal thresholds even
     their reference levels stay in step, so their first events differ by exactly that time,
-    while pixels on different lines see different signals and fire at unrelated phases.
-    So each line (points with the same ``round(pw)``) gets its own offset and only the
-    slope along ``ps`` is shared: ``t = c_line + τ_s s``. Outliers go one at a time as in
-    ``fit_surface``. Returns ``(slot, τ_s, τ_w, c, kept, rms_px)`` like ``fit_surface``:
+    while pixels on different lines see different signals and fire at unrelated phases, and
+    a curved edge bends the surface across the motion only. So each line (``pg``: index of
+    the point's line across the motion, the event's is ``middle``) gets its own offset and
+    only the slope along ``ps`` is shared: ``t = c_line + τ_s s``. Outliers go one at a time
+    as in ``fit_plane``. ``lines`` (``N_L`` columns, zero on entry and on return) and
+    ``used`` are scratch. Returns ``(slot, τ_s, τ_w, c, kept, rms_px)`` like ``fit_plane``:
     ``kept`` counts the points on lines of two or more (the others carry no slope), the
-    spread is their variance along ``s`` within their lines, ``τ_w`` the slope of the line
-    offsets across the motion (for a rotation term) and ``c`` the offset of the event's line.
+    spread is their variance along ``s`` within their lines, ``τ_w`` the slope of the lines'
+    offsets across the motion and ``c`` the offset of the event's line.
     """
-    middle = (groups.shape[0] - 1) // 2
-    groups[:] = 0.0
+    middle = (lines.shape[0] - 1) // 2
+    n_used = 0
     for i in range(n):
-        g = middle + np.int64(math.floor(pw[i] + 0.5))
+        g = pg[i]
+        if lines[g, L_M] == 0.0:
+            used[n_used] = g
+            n_used += 1
         s, t = ps[i], pt[i]
-        groups[g, 0] += 1.0
-        groups[g, 1] += s
-        groups[g, 2] += t
-        groups[g, 3] += s * s
-        groups[g, 4] += s * t
+        lines[g, L_M] += 1.0
+        lines[g, L_S] += s
+        lines[g, L_T] += t
+        lines[g, L_SS] += s * s
+        lines[g, L_ST] += s * t
+    sxx = sxy = 0.0
+    kept = 0
+    for j in range(n_used):
+        g = used[j]
+        _line_stats(lines, g)
+        sxx += lines[g, L_CSS]
+        sxy += lines[g, L_CST]
+        if lines[g, L_M] >= 2.0:
+            kept += np.int64(lines[g, L_M])
     k = n
     tau_s = tau_w = c = rms_px = 0.0
-    kept = 0
+    slot = EMITTED
     for _ in range(iterations + 1):
-        sxx = sxy = 0.0
-        kept = 0
-        for g in range(groups.shape[0]):
-            m = groups[g, 0]
-            if m >= 2.0:
-                kept += np.int64(m)
-                sxx += groups[g, 3] - groups[g, 1] * groups[g, 1] / m
-                sxy += groups[g, 4] - groups[g, 1] * groups[g, 2] / m
         if kept < min_points:
-            return TOO_FEW_POINTS, tau_s, tau_w, c, kept, rms_px
+            slot = TOO_FEW_POINTS
+            break
         if sxx < min_spread * kept:
-            return ILL_CONDITIONED, tau_s, tau_w, c, kept, rms_px
+            slot = ILL_CONDITIONED
+            break
         tau_s = sxy / sxx
         sq = 0.0
         worst, worst_r = 0, 0.0
         for i in range(k):
-            g = middle + np.int64(math.floor(pw[i] + 0.5))
-            m = groups[g, 0]
-            if m < 2.0:
-                continue
-            r = abs(pt[i] - (groups[g, 2] - tau_s * groups[g, 1]) / m - tau_s * ps[i])
-            sq += r * r
-            if r > worst_r:
+            g = pg[i]
+            r = abs(pt[i] - lines[g, L_MEAN_T] - tau_s * (ps[i] - lines[g, L_MEAN_S]))
+            if r > worst_r:  # False for NaN: a line of one point carries no slope
                 worst, worst_r = i, r
+            if r == r:
+                sq += r * r
         slope = abs(tau_s)
         rms_px = math.sqrt(sq / kept) / slope if slope > 0.0 else math.inf
         if worst_r <= outlier_px * slope:
             break
-        s, w, t = ps[worst], pw[worst], pt[worst]
-        g = middle + np.int64(math.floor(w + 0.5))
-        groups[g, 0] -= 1.0
-        groups[g, 1] -= s
-        groups[g, 2] -= t
-        groups[g, 3] -= s * s
-        groups[g, 4] -= s * t
+        s, t, g = ps[worst], pt[worst], pg[worst]
+        sxx -= lines[g, L_CSS]
+        sxy -= lines[g, L_CST]
+        kept -= np.int64(lines[g, L_M]) if lines[g, L_M] >= 2.0 else 0
+        lines[g, L_M] -= 1.0
+        lines[g, L_S] -= s
+        lines[g, L_T] -= t
+        lines[g, L_SS] -= s * s
+        lines[g, L_ST] -= s * t
+        _line_stats(lines, g)
+        sxx += lines[g, L_CSS]
+        sxy += lines[g, L_CST]
+        kept += np.int64(lines[g, L_M]) if lines[g, L_M] >= 2.0 else 0
         k -= 1
-        ps[worst], pw[worst], pt[worst] = ps[k], pw[k], pt[k]
-        ps[k], pw[k], pt[k] = s, w, t
-    # Offsets of the lines against their position across the motion: τ_w (weighted by points).
-    sw = so = sww = swo = total = 0.0
-    for g in range(groups.shape[0]):
-        m = groups[g, 0]
-        if m >= 1.0:
-            w, offset = float(g - middle), (groups[g, 2] - tau_s * groups[g, 1]) / m
-            total += m
-            sw += m * w
-            so += m * offset
-            sww += m * w * w
-            swo += m * w * offset
-    spread_w = sww - sw * sw / total
-    tau_w = (swo - sw * so / total) / spread_w if spread_w > 0.0 else 0.0
-    if groups[middle, 0] > 0.0:
-        c = (groups[middle, 2] - tau_s * groups[middle, 1]) / groups[middle, 0]
-    else:
-        c = so / total - tau_w * sw / total
-    return EMITTED, tau_s, tau_w, c, kept, rms_px
+        ps[worst], pt[worst], pg[worst] = ps[k], pt[k], pg[k]
+        ps[k], pt[k], pg[k] = s, t, g
+    if slot == EMITTED:
+        # The lines' offsets against their position across the motion: τ_w (weighted by points).
+        sw = so = sww = swo = total = 0.0
+        for j in range(n_used):
+            g = used[j]
+            m = lines[g, L_M]
+            if m >= 1.0:
+                w, offset = float(g - middle), (lines[g, L_T] - tau_s * lines[g, L_S]) / m
+                total += m
+                sw += m * w
+                so += m * offset
+                sww += m * w * w
+                swo += m * w * offset
+        spread_w = sww - sw * sw / total
+        tau_w = (swo - sw * so / total) / spread_w if spread_w > 0.0 else 0.0
+        if lines[middle, L_M] > 0.0:
+            c = (lines[middle, L_T] - tau_s * lines[middle, L_S]) / lines[middle, L_M]
+        else:
+            c = so / total - tau_w * sw / total
+    for j in range(n_used):  # leave the table empty for the next fit
+        g = used[j]
+        lines[g, L_M] = lines[g, L_S] = lines[g, L_T] = lines[g, L_SS] = lines[g, L_ST] = 0.0
+    return slot, tau_s, tau_w, c, kept, rms_px
 
 
 @njit(cache=True)
-def process(ts, xs, ys, ps, ip, fp, surface, hold, last, prev, motion, sample_of, points, at_cache, at_update,
-            velocity, first_update, ps_, pw, pt, sums, beta, groups, counts, out, quality, n_out, index0, t_hi):
+def _sample(at_cache, sample, velocity, j, points, fx, fy, cx, cy, refractory_us, refractory_depth, window_us,
+            window_depth, radius):
+    """Fill ``at_cache[sample]`` for velocity row ``j`` (``A_*`` columns)."""
+    at_x, at_y = velocity_term(velocity[j, 0], velocity[j, 1], velocity[j, 2], points[sample, 0], points[sample, 1],
+                               fx, fy, cx, cy)
+    speed = math.sqrt(at_x * at_x + at_y * at_y)
+    row = at_cache[sample]
+    row[A_X], row[A_Y], row[A_SPEED] = at_x, at_y, speed
+    row[A_FU], row[A_FV] = (at_x / speed, at_y / speed) if speed > 0.0 else (0.0, 0.0)
+    # The time the image of a surface that deep takes per pixel (refractory) and per radius (window).
+    refractory, window = float(refractory_us), float(window_us)
+    if speed > 0.0:
+        if refractory_depth > 0.0:
+            refractory = max(refractory, math.floor(refractory_depth / speed * 1e6))
+        if window_depth > 0.0:
+            window = max(window, math.floor(window_depth * radius / speed * 1e6))
+    row[A_REFRACTORY], row[A_WINDOW] = refractory, window
+
+
+@njit(cache=True)
+def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, motion, sample_of, points, at_cache, at_update,
+            velocity, first_update, ps_, pw, pt, pg, lines, used, counts, out, quality, n_out, index0, t_hi):
     """Run time-ordered events through the estimator; returns ``(n_out, status, t_hi)``.
 
     ``surface[p, (y + r) * (w + 2r) + x + r]`` is the last first event (µs) of pixel (x, y) and
-    polarity p (one plane per polarity: a fit reads one cache line per row) (a border of ``r = radius`` pixels stays ``NEVER``); ``hold[y * w + x, p]`` its
-    measured hold (µs, 0 = none yet); ``last`` its last event of any kind (used with a burst
-    gap); ``prev[y * w + x]`` the pixel's last estimate (z, t) for the consistency rule.
+    polarity p (one plane per polarity, so a fit reads one cache line per row; a border of
+    ``r = radius`` pixels stays ``NEVER``); ``hold[y * w + x, p]`` its measured hold (µs, 0 =
+    none yet); ``prev[y * w + x]`` the pixel's last estimate (z, t) for the consistency rule.
     ``A t`` of pixel ``(x, y)`` is taken at ``points[sample_of[y * w + x]]`` and cached per
-    sample and update. ``velocity[j - first_update]`` is (tx, ty, tz[, wx, wy, wz]) of update
-    j. Estimates go to ``out[n_out:]`` (``DEPTH_DTYPE``) and ``quality[n_out:]``. ``t_hi`` is
-    the latest time seen before; an earlier event stops the call with ``UNSORTED`` before
-    it changes any state (``n_out`` and ``counts`` then cover the events before it).
+    sample and update (``at_cache``, ``at_update``). ``velocity[j - first_update]`` is (tx, ty,
+    tz[, wx, wy, wz]) of update j. ``ps_``, ``pw``, ``pt``, ``pg``, ``lines``, ``used`` are the
+    fits' scratch. Estimates go to ``out[n_out:]`` (``DEPTH_DTYPE``) and ``quality[n_out:]``.
+    ``t_hi`` is the latest time seen before; an earlier event stops the call with
+    ``UNSORTED`` before it changes any state (``n_out`` and ``counts`` cover the events
+    before it).
     """
     width, height, radius = ip[I_WIDTH], ip[I_HEIGHT], ip[I_RADIUS]
     t0, dt, latency, update_every = ip[I_T0], ip[I_DT], ip[I_LATENCY], ip[I_UPDATE_EVERY]
-    both, min_points, iterations = ip[I_BOTH] != 0, ip[I_MIN_POINTS], ip[I_ITERATIONS]
-    refractory_us, burst_gap_us, window_us = ip[I_REFRACTORY], ip[I_BURST_GAP], ip[I_WINDOW]
+    min_points, iterations = ip[I_MIN_POINTS], ip[I_ITERATIONS]
+    refractory_us, window_us = ip[I_REFRACTORY], ip[I_WINDOW]
     consistency_us, max_hold, record_rejected = ip[I_CONSISTENCY_WINDOW], ip[I_MAX_HOLD], ip[I_RECORD_REJECTED] != 0
+    rows_model = ip[I_MODEL] == MODEL_ROWS
     fx, fy, cx, cy = fp[F_FX], fp[F_FY], fp[F_CX], fp[F_CY]
     outlier_px, max_rms, min_spread = fp[F_OUTLIER], fp[F_MAX_RMS], fp[F_MIN_SPREAD]
     min_depth, max_depth, min_denominator = fp[F_MIN_DEPTH], fp[F_MAX_DEPTH], fp[F_MIN_DENOMINATOR]
     window_depth, refractory_depth, consistency = fp[F_WINDOW_DEPTH], fp[F_REFRACTORY_DEPTH], fp[F_CONSISTENCY]
     hold_px, ahead_px, turn, trim_px = fp[F_HOLD_PX], fp[F_AHEAD_PX], fp[F_TURN], fp[F_TRIM_PX]
-    model = ip[I_MODEL]
     rotation = velocity.shape[1] >= 6
     row = width + 2 * radius
+    middle = (lines.shape[0] - 1) // 2
     step, step_start, step_end, update = np.int64(0), np.int64(1), np.int64(0), np.int64(0)
     j = 0
     for i in range(ts.shape[0]):
@@ -335,86 +354,75 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, last, prev, motion, sample_of
         pixel = y * width + x
         sample = sample_of[pixel]
         if at_update[sample] != update:
-            at_x, at_y = velocity_term(velocity[j, 0], velocity[j, 1], velocity[j, 2], points[sample, 0],
-                                       points[sample, 1], fx, fy, cx, cy)
-            at_cache[sample, 0], at_cache[sample, 1] = at_x, at_y
-            at_cache[sample, 2] = math.sqrt(at_x * at_x + at_y * at_y)  # px*m/s
+            _sample(at_cache, sample, velocity, j, points, fx, fy, cx, cy, refractory_us, refractory_depth,
+                    window_us, window_depth, radius)
             at_update[sample] = update
-        at_x, at_y, speed = at_cache[sample, 0], at_cache[sample, 1], at_cache[sample, 2]
-        # 1. First-event rule.
+        a_t = at_cache[sample]
+        # 1. First-event rule: a hold measured by the last fit here, else the refractory period.
         held = np.int64(hold[pixel, polarity])
-        if held == 0:  # no fit measured this pixel's edges yet
-            held = refractory_us
-            if refractory_depth > 0.0 and speed > 0.0:  # the time a surface that deep takes per pixel
-                held = max(held, np.int64(refractory_depth / speed * 1e6))
+        if held == 0:
+            held = np.int64(a_t[A_REFRACTORY])
         cell = (y + radius) * row + x + radius
-        if burst_gap_us > 0:
-            gap = t - last[pixel, polarity]
-            last[pixel, polarity] = t
-            if gap < burst_gap_us:
-                counts[BURST] += 1
-                continue
         if t - surface[polarity, cell] < held:
             counts[BURST] += 1
             continue
         surface[polarity, cell] = t
+        speed = a_t[A_SPEED]
         if speed <= 0.0:
             counts[NO_MOTION] += 1
             continue
-        # 2. Gather the recent first events the edge has crossed.
-        window = window_us
-        if window_depth > 0.0:
-            window = max(window, np.int64(window_depth * radius / speed * 1e6))
+        at_x, at_y, fu, fv = a_t[A_X], a_t[A_Y], a_t[A_FU], a_t[A_FV]
+        # 2. Gather the recent first events of the pixels the edge has crossed: at most
+        # ``ahead_px`` along the motion (the pixels ahead still hold an older edge's times).
+        window = np.int64(a_t[A_WINDOW])
         if turn > 0.0:  # nothing from before the camera's last turn: another motion made it
             window = min(window, t - np.int64(motion[M_SINCE]))
-        fu, fv = at_x / speed, at_y / speed
-        plane, other = surface[polarity], surface[1 - polarity]
+        plane = surface[polarity]
+        inverse_fu = 1.0 / fu if abs(fu) > 1e-9 else 0.0
         n = 0
         for dv in range(-radius, radius + 1):
-            # The columns the edge has crossed in this row: du * fu + dv * fv <= ahead_px.
-            lo, hi = -radius, radius
+            lo, hi = -radius, radius  # the columns with du * fu + dv * fv <= ahead_px
+            limit = ahead_px - dv * fv
             if fu > 1e-9:
-                hi = min(hi, np.int64(math.floor((ahead_px - dv * fv) / fu)))
+                hi = min(hi, np.int64(math.floor(limit * inverse_fu)))
             elif fu < -1e-9:
-                lo = max(lo, np.int64(math.ceil((ahead_px - dv * fv) / fu)))
-            elif dv * fv > ahead_px:
+                lo = max(lo, np.int64(math.ceil(limit * inverse_fu)))
+            elif limit < 0.0:
                 hi = lo - 1
             base = cell + dv * row
+            along0, across0 = dv * fv, dv * fu
             for du in range(lo, hi + 1):
-                along, across = du * fu + dv * fv, dv * fu - du * fv
                 age = t - plane[base + du]
-                ps_[n], pw[n], pt[n] = along, across, -age
-                n += age <= window
-                if both:
-                    age = t - other[base + du]
-                    ps_[n], pw[n], pt[n] = along, across, -age
-                    n += age <= window
+                if age <= window:
+                    across = across0 - du * fv
+                    ps_[n], pw[n], pt[n] = along0 + du * fu, across, -age
+                    pg[n] = middle + np.int64(math.floor(across + 0.5))
+                    n += 1
             if dv == 0 and not lo <= 0 <= hi:  # the event itself always counts
-                ps_[n], pw[n], pt[n] = 0.0, 0.0, 0.0
+                ps_[n], pw[n], pt[n], pg[n] = 0.0, 0.0, 0.0, middle
                 n += 1
         # 3. Fit and check.
-        if model == MODEL_ROWS:
-            slot, tau_s, tau_w, c, kept, rms = fit_rows(ps_, pw, pt, n, min_points, min_spread, outlier_px, iterations,
-                                                        groups)
+        if rows_model:
+            slot, tau_s, tau_w, c, kept, rms = fit_rows(ps_, pt, pg, n, min_points, min_spread, outlier_px,
+                                                        iterations, lines, used)
         else:
-            slot, tau_s, tau_w, c, kept, rms = fit_surface(ps_, pw, pt, n, model == MODEL_CURVED, min_points,
-                                                           min_spread, outlier_px, iterations, sums, beta)
-        if trim_px > 0.0 and slot == EMITTED and model != MODEL_ROWS:
-            # The window cuts on measured times: near its ends only the points that fired late
-            # (old end) or early (the present) are in, which flattens the surface. Cutting on
-            # the fitted times is unbiased: drop the points the fit puts within ``trim_px``
-            # pixels of either end, and refit.
-            margin = trim_px * math.sqrt(tau_s * tau_s + tau_w * tau_w)
-            e = beta[2]
-            m = 0
-            for i2 in range(kept):
-                fitted = c + tau_s * ps_[i2] + (tau_w + e * pw[i2]) * pw[i2]
-                if -window + margin <= fitted <= -margin:
-                    ps_[m], pw[m], pt[m] = ps_[i2], pw[i2], pt[i2]
-                    m += 1
-            if m < kept:
-                slot, tau_s, tau_w, c, kept, rms = fit_surface(ps_, pw, pt, m, model == MODEL_CURVED, min_points,
-                                                               min_spread, outlier_px, iterations, sums, beta)
+            slot, tau_s, tau_w, c, kept, rms = fit_plane(ps_, pw, pt, n, min_points, min_spread, outlier_px,
+                                                         iterations)
+            if trim_px > 0.0 and slot == EMITTED:
+                # The window cuts on measured times: near its ends only the points that fired
+                # late (old end) or early (the present) are in, which flattens the plane.
+                # Cutting on the fitted times is unbiased: drop the points the plane puts
+                # within ``trim_px`` pixels of either end, and refit.
+                margin = trim_px * math.sqrt(tau_s * tau_s + tau_w * tau_w)
+                m = 0
+                for i2 in range(kept):
+                    fitted = c + tau_s * ps_[i2] + tau_w * pw[i2]
+                    if -window + margin <= fitted <= -margin:
+                        ps_[m], pw[m], pt[m] = ps_[i2], pw[i2], pt[i2]
+                        m += 1
+                if m < kept:
+                    slot, tau_s, tau_w, c, kept, rms = fit_plane(ps_, pw, pt, m, min_points, min_spread, outlier_px,
+                                                                 iterations)
         a, b = tau_s * fu - tau_w * fv, tau_s * fv + tau_w * fu  # ∇T at the event, µs/px along u and v
         if slot == EMITTED:
             if hold_px > 0.0:  # this edge's burst lasts about its ramp's width: hold_px pixels

@@ -28,7 +28,6 @@ QUALITY_DTYPE = np.dtype([("t_event", "<i8"), ("points", "<u2"), ("rms_px", "<f4
 #: is update ``table_first + i``; 3 columns (tx, ty, tz m/s) or 6 (+ wx, wy, wz rad/s, camera frame).
 VelocityRows = Callable[[int, int], tuple[np.ndarray, int]]
 MAX_VELOCITY_ROWS = 1 << 16
-POLARITY_MODES = ("same", "both")
 
 
 @dataclass(frozen=True)
@@ -60,21 +59,19 @@ class TimeSurfaceConfig:
     intrinsics: tuple[float, float, float, float]
     radius: int = 3
     window: float = 0.0
-    window_depth: float = 10.0
-    min_points: int = 6
-    outlier_px: float = 0.5
+    window_depth: float = 5.0
+    min_points: int = 8
+    outlier_px: float = 0.25
     iterations: int = 3
-    max_rms_px: float = 0.5
+    max_rms_px: float = 0.25
     min_spread: float = 0.5
     refractory: float = 0.0
     refractory_depth: float = 10.0
     hold_px: float = 3.0
     max_hold: float = 1.0
-    burst_gap: float = 0.0
     ahead_px: float = -0.5
     turn: float = 0.2
     trim_px: float = 0.0
-    polarity: str = "same"
     model: str = "rows"
     consistency: float = 0.0
     consistency_window: float = 0.25
@@ -84,15 +81,13 @@ class TimeSurfaceConfig:
     timestep: float = 1e-3
     latency_steps: int = 1
     update_every: int = 1
-    per_pixel: bool = False
+    per_pixel: bool = True
     patch_size: int = 30
 
     def __post_init__(self) -> None:
         problems = []
         if self.model not in ts.MODELS:
             problems.append(f"model: expected one of {ts.MODELS}, got {self.model!r}")
-        if self.polarity not in POLARITY_MODES:
-            problems.append(f"polarity: expected one of {POLARITY_MODES}, got {self.polarity!r}")
         for name in ("radius", "min_points", "update_every", "patch_size", "latency_steps"):
             if int(getattr(self, name)) < 1:
                 problems.append(f"{name}: expected an integer >= 1, got {getattr(self, name)!r}")
@@ -100,7 +95,7 @@ class TimeSurfaceConfig:
             if int(getattr(self, name)) < 0:
                 problems.append(f"{name}: expected an integer >= 0, got {getattr(self, name)!r}")
         for name in ("window", "window_depth", "outlier_px", "max_rms_px", "min_spread", "refractory",
-                     "refractory_depth", "burst_gap", "consistency", "consistency_window", "min_depth", "hold_px",
+                     "refractory_depth", "consistency", "consistency_window", "min_depth", "hold_px",
                      "max_hold"):
             if not float(getattr(self, name)) >= 0:
                 problems.append(f"{name}: expected a number >= 0, got {getattr(self, name)!r}")
@@ -137,12 +132,10 @@ class TimeSurfaceEstimator:
         self.config = c = config
         width, height = (int(s) for s in c.sensor_size)
         self._ip = np.zeros(ts.N_IP, np.int64)
-        self._ip[[ts.I_WIDTH, ts.I_HEIGHT, ts.I_RADIUS, ts.I_DT, ts.I_LATENCY, ts.I_UPDATE_EVERY, ts.I_BOTH,
-                  ts.I_MIN_POINTS, ts.I_ITERATIONS, ts.I_REFRACTORY, ts.I_BURST_GAP, ts.I_WINDOW,
-                  ts.I_CONSISTENCY_WINDOW, ts.I_MAX_HOLD]] = (
-            width, height, c.radius, c.timestep_us, c.latency_steps, c.update_every, c.polarity == "both",
-            c.min_points, c.iterations, _us(c.refractory), _us(c.burst_gap), _us(c.window),
-            _us(c.consistency_window), _us(c.max_hold))
+        self._ip[[ts.I_WIDTH, ts.I_HEIGHT, ts.I_RADIUS, ts.I_DT, ts.I_LATENCY, ts.I_UPDATE_EVERY, ts.I_MIN_POINTS,
+                  ts.I_ITERATIONS, ts.I_REFRACTORY, ts.I_WINDOW, ts.I_CONSISTENCY_WINDOW, ts.I_MAX_HOLD, ts.I_MODEL]] = (
+            width, height, c.radius, c.timestep_us, c.latency_steps, c.update_every, c.min_points, c.iterations,
+            _us(c.refractory), _us(c.window), _us(c.consistency_window), _us(c.max_hold), ts.MODELS.index(c.model))
         self._fp = np.zeros(ts.N_FP, np.float64)
         self._fp[[ts.F_FX, ts.F_FY, ts.F_CX, ts.F_CY, ts.F_OUTLIER, ts.F_MAX_RMS, ts.F_MIN_SPREAD, ts.F_MIN_DEPTH,
                   ts.F_MAX_DEPTH, ts.F_MIN_DENOMINATOR, ts.F_WINDOW_DEPTH, ts.F_REFRACTORY_DEPTH, ts.F_CONSISTENCY,
@@ -152,16 +145,16 @@ class TimeSurfaceEstimator:
         r, pixels = int(c.radius), width * height
         self._surface = np.full((2, (height + 2 * r) * (width + 2 * r)), ts.NEVER, np.int64)
         self._hold = np.zeros((pixels, 2), np.int32)
-        self._last = np.full((pixels if c.burst_gap > 0 else 1, 2), ts.NEVER, np.int64)
         self._prev = np.zeros((pixels if c.consistency > 0 else 1, 2), np.float64)
         self._motion = np.zeros(ts.N_MOTION)
         self._motion[ts.M_UPDATE] = -1
         self._sample_of, self._points = sample_tables(c.per_pixel, c.patch_size, width, height)
-        self._at_cache = np.zeros((len(self._points), 3))
+        self._at_cache = np.zeros((len(self._points), ts.N_A))
         self._at_update = np.full(len(self._points), -(1 << 62), np.int64)
         size = 2 * (2 * r + 1) ** 2
-        self._scratch = (np.empty(size + 1), np.empty(size + 1), np.empty(size + 1), np.zeros(13), np.zeros(4),
-                         np.zeros((4 * r + 3, 5)))
+        lines = 4 * r + 3  # lines across the motion within the square (|w| <= r * sqrt(2)), centred
+        self._scratch = (np.empty(size + 1), np.empty(size + 1), np.empty(size + 1), np.zeros(size + 1, np.int64),
+                         np.zeros((lines, ts.N_L)), np.zeros(lines, np.int64))
         self._counts = np.zeros(ts.N_COUNTS, np.int64)
         self._t0 = None if t0_us is None else int(t0_us)
         self._ip[ts.I_T0] = 0 if t0_us is None else int(t0_us)
@@ -218,13 +211,12 @@ class TimeSurfaceEstimator:
         y = np.ascontiguousarray(events["y"])
         p = np.ascontiguousarray(events["p"])
         self._ip[ts.I_RECORD_REJECTED] = record_rejected
-        self._ip[ts.I_MODEL] = ts.MODELS.index(self.config.model)
         n_out, lo = 0, 0
         while lo < n:
             hi = self._piece_end(t, lo)
             table, first = self._table(velocity, int(t[lo]), int(t[hi - 1]))
             n_out, status, self._t_hi = ts.process(
-                t[lo:hi], x[lo:hi], y[lo:hi], p[lo:hi], self._ip, self._fp, self._surface, self._hold, self._last,
+                t[lo:hi], x[lo:hi], y[lo:hi], p[lo:hi], self._ip, self._fp, self._surface, self._hold,
                 self._prev, self._motion, self._sample_of, self._points, self._at_cache, self._at_update, table,
                 first, *self._scratch, self._counts, depth, quality, n_out, self.events_in + lo, self._t_hi)
             if status == ts.UNSORTED:
