@@ -17,6 +17,7 @@ import numpy as np
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE
 from tofnet.kernels import time_surface as ts
+from tofnet.kernels.time_surface_fit import N_L
 from tofnet.kernels.velocity import sample_grid
 
 #: Per estimate, aligned with the depth records: event time µs, points kept by the fit,
@@ -32,27 +33,38 @@ MAX_VELOCITY_ROWS = 1 << 16
 
 @dataclass(frozen=True)
 class TimeSurfaceConfig:
-    """Parameters of the estimator (plain data). Times in seconds, lengths in pixels, depths in metres.
+    """Parameters of the estimator (plain data; docs/time_surface.md has what each default was chosen on).
 
-    ``radius`` px: the fit uses the ``(2 radius + 1)²`` square around the event.
-    ``window`` s: oldest first event the fit uses; with ``window_depth`` m > 0 it is at
-    least the time a surface at that depth takes to move ``radius`` px under the current
-    ``A t`` (``window_depth * radius / |A t|``).
-    ``min_points``: fewer kept points reject the fit (``too_few_points``).
-    ``outlier_px``: points farther from the plane (along its gradient) are dropped and the
-    plane refitted, at most ``iterations`` times. ``max_rms_px``: larger rms residual of the
-    kept points is ``bad_fit``. ``min_spread`` px²: smallest eigenvalue of the kept points'
-    (u, v) covariance (points on a line cannot give a slope), else ``ill_conditioned``.
-    ``refractory`` s: a pixel's polarity had a first event this recently: not a new edge;
-    with ``refractory_depth`` m > 0 at least ``refractory_depth / |A t|``. ``burst_gap`` s:
-    any event of the pixel's polarity this recently: still the same burst.
-    ``polarity``: ``"same"`` fits the event's polarity's surface, ``"both"`` both surfaces.
-    ``consistency`` (fraction, 0 = off): emit only when the pixel's previous estimate, at
-    most ``consistency_window`` s older, agrees within this relative difference.
-    ``min_denominator``: with a rotation, ``1 − (B ω)·∇T`` below it is ``rotation_dominated``.
-    ``A t`` is sampled per pixel or at the centre of ``patch_size`` patches, as the paper's
-    depth layer (``tofnet.kernels.velocity.sample_point``), from the velocity update the
-    output step holds: update ``(step - 1) // update_every`` (docs/semantics.md).
+    Times in seconds, lengths in pixels (px), depths in metres; "the time a surface at depth
+    D takes per pixel" is ``D / |A t|`` seconds at the event's pixel.
+
+    - ``model``: ``"rows"`` (each line of pixels parallel to the motion has its own offset,
+      one shared slope along it) or ``"plane"`` (Benosman et al. 2014's plane).
+    - ``radius`` px: the fit looks at the ``(2 radius + 1)²`` square around the event, at
+      the pixels at most ``ahead_px`` ahead along the image motion (the pixels the edge has
+      crossed; the event itself always counts).
+    - ``window`` s, ``window_depth`` m: the oldest first event used is the larger of
+      ``window`` and the time a surface at ``window_depth`` takes to move ``radius`` px;
+      never one from before the camera's last turn (``turn``: a change of velocity larger
+      than that fraction of the speed; 0 = never).
+    - ``min_points``, ``min_spread`` px², ``max_rms_px`` px: a fit needs that many points on
+      lines of two or more, that variance along the motion within the lines (the plane: left
+      over by the position across it), and at most that rms distance from the fit.
+    - ``outlier_px`` px, ``iterations``: while the farthest point is more than ``outlier_px``
+      from the fit, drop it and refit, at most ``iterations`` times.
+    - ``trim_px`` px (plane only): drop the points the plane puts within that distance of
+      the window's ends and refit (``0``: off).
+    - First events: ``hold_px`` times the time per pixel the last fit at a pixel measured is
+      its hold; before a fit, the larger of ``refractory`` and the time a surface at
+      ``refractory_depth`` takes per pixel; never above ``max_hold``.
+    - ``consistency`` (fraction, 0 = off): emit only when the pixel's previous estimate, at
+      most ``consistency_window`` s older, agrees within this relative difference.
+    - ``min_depth``, ``max_depth`` m: kept when strictly between. ``min_denominator``: with
+      a rotation, ``1 − (B ω)·∇T`` below it is ``rotation_dominated``.
+    - ``timestep`` s, ``latency_steps``: an estimate's ``step`` is its event's input step
+      plus ``latency_steps``; ``A t`` (per pixel with ``per_pixel``, else at the centre of
+      ``patch_size`` px patches, as ``tofnet.kernels.velocity.sample_point``) comes from the
+      velocity update that step holds, ``(step - 1) // update_every`` (docs/semantics.md).
     """
 
     sensor_size: tuple[int, int]
@@ -154,7 +166,7 @@ class TimeSurfaceEstimator:
         size = 2 * (2 * r + 1) ** 2
         lines = 4 * r + 3  # lines across the motion within the square (|w| <= r * sqrt(2)), centred
         self._scratch = (np.empty(size + 1), np.empty(size + 1), np.empty(size + 1), np.zeros(size + 1, np.int64),
-                         np.zeros((lines, ts.N_L)), np.zeros(lines, np.int64))
+                         np.zeros((lines, N_L)), np.zeros(lines, np.int64))
         self._counts = np.zeros(ts.N_COUNTS, np.int64)
         self._t0 = None if t0_us is None else int(t0_us)
         self._ip[ts.I_T0] = 0 if t0_us is None else int(t0_us)
