@@ -27,6 +27,7 @@ import math
 import numpy as np
 from numba import njit
 
+from tofnet.kernels.time_of_travel import prefetch
 from tofnet.kernels.time_surface_fit import FIT_ILL_CONDITIONED, FIT_TOO_FEW, fit_plane, fit_rows
 from tofnet.kernels.velocity import velocity_term
 
@@ -42,19 +43,18 @@ REJECT_SLOTS = tuple(range(NO_MOTION, EMITTED))  # a first event whose estimate 
 
 # Integer parameters (``ip``) and float parameters (``fp``), by slot.
 (I_WIDTH, I_HEIGHT, I_RADIUS, I_T0, I_DT, I_LATENCY, I_UPDATE_EVERY, I_MIN_POINTS, I_ITERATIONS,
- I_REFRACTORY, I_WINDOW, I_CONSISTENCY_WINDOW, I_MAX_HOLD, I_RECORD_REJECTED, I_MODEL, N_IP) = range(16)
+ I_REFRACTORY, I_WINDOW, I_CONSISTENCY_WINDOW, I_MAX_HOLD, I_RECORD_REJECTED, I_MODEL, I_PER_PIXEL, N_IP) = range(17)
 (F_FX, F_FY, F_CX, F_CY, F_OUTLIER, F_MAX_RMS, F_MIN_SPREAD, F_MIN_DEPTH, F_MAX_DEPTH, F_MIN_DENOMINATOR,
  F_WINDOW_DEPTH, F_REFRACTORY_DEPTH, F_CONSISTENCY, F_HOLD_PX, F_AHEAD_PX, F_TURN, F_TRIM_PX, N_FP) = range(18)
 # Motion state: the velocity the current epoch started with, its start (µs), the last update seen.
 M_VX, M_VY, M_VZ, M_SINCE, M_UPDATE, N_MOTION = range(6)
-# Per sample of ``A t`` and velocity update: A t (px*m/s), |A t|, its direction, the refractory
-# period and the window it implies (µs).
-A_X, A_Y, A_SPEED, A_FU, A_FV, A_REFRACTORY, A_WINDOW, N_A = range(8)
 # Fit models (``I_MODEL``): a plane, or lines along the motion with a shared slope.
 MODEL_PLANE, MODEL_ROWS = range(2)
 MODELS = ("plane", "rows")
 # Status of a call.
 OK, UNSORTED, NO_VELOCITY = range(3)
+#: Events between a prefetch of a pixel's hold and surface rows and their use.
+PREFETCH = 8
 
 
 @njit(cache=True)
@@ -83,38 +83,29 @@ def follow_motion(motion, row, update: int, update_start_us: int, turn: float) -
     motion[M_UPDATE] = update
 
 
-@njit(cache=True)
-def _sample(at_cache, sample, velocity, j, points, fx, fy, cx, cy, refractory_us, refractory_depth, window_us,
-            window_depth, radius):
-    """Fill ``at_cache[sample]`` for velocity row ``j`` (``A_*`` columns)."""
-    at_x, at_y = velocity_term(velocity[j, 0], velocity[j, 1], velocity[j, 2], points[sample, 0], points[sample, 1],
-                               fx, fy, cx, cy)
-    speed = math.sqrt(at_x * at_x + at_y * at_y)
-    row = at_cache[sample]
-    row[A_X], row[A_Y], row[A_SPEED] = at_x, at_y, speed
-    row[A_FU], row[A_FV] = (at_x / speed, at_y / speed) if speed > 0.0 else (0.0, 0.0)
-    # The time the image of a surface that deep takes per pixel (refractory) and per radius (window).
-    refractory, window = float(refractory_us), float(window_us)
-    if speed > 0.0:
-        if refractory_depth > 0.0:
-            refractory = max(refractory, math.floor(refractory_depth / speed * 1e6))
-        if window_depth > 0.0:
-            window = max(window, math.floor(window_depth * radius / speed * 1e6))
-    row[A_REFRACTORY], row[A_WINDOW] = refractory, window
+@njit(cache=True, inline="always")
+def _velocity_term_at(x, y, pixel, per_pixel, sample_of, points, velocity, j, fx, fy, cx, cy):
+    """``A t`` (px*m/s) and ``|A t|`` for pixel (x, y) under velocity row ``j``."""
+    if per_pixel:
+        u, v = float(x), float(y)
+    else:
+        sample = sample_of[pixel]
+        u, v = points[sample, 0], points[sample, 1]
+    at_x, at_y = velocity_term(velocity[j, 0], velocity[j, 1], velocity[j, 2], u, v, fx, fy, cx, cy)
+    return at_x, at_y, math.sqrt(at_x * at_x + at_y * at_y)
 
 
 @njit(cache=True)
-def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, motion, sample_of, points, at_cache, at_update,
-            velocity, first_update, ps_, pw, pt, pg, lines, used, counts, out, quality, n_out, index0, t_hi):
+def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, motion, sample_of, points, velocity, first_update, ps_, pw, pt, pg, lines, used, counts, out, quality, n_out, index0, t_hi):
     """Run time-ordered events through the estimator; returns ``(n_out, status, t_hi)``.
 
     ``surface[p, (y + r) * (w + 2r) + x + r]`` is the last first event (µs) of pixel (x, y) and
     polarity p (one plane per polarity, so a fit reads one cache line per row; a border of
     ``r = radius`` pixels stays ``NEVER``); ``hold[y * w + x, p]`` its measured hold (µs, 0 =
     none yet); ``prev[y * w + x]`` the pixel's last estimate (z, t) for the consistency rule.
-    ``A t`` of pixel ``(x, y)`` is taken at ``points[sample_of[y * w + x]]`` and cached per
-    sample and update (``at_cache``, ``at_update``). ``velocity[j - first_update]`` is (tx, ty,
-    tz[, wx, wy, wz]) of update j. ``ps_``, ``pw``, ``pt``, ``pg``, ``lines``, ``used`` are the
+    ``A t`` of pixel ``(x, y)`` is taken at the pixel (``I_PER_PIXEL``) or at
+    ``points[sample_of[y * w + x]]``, computed only for events that need it (a pixel's first
+    hold, first events). ``velocity[j - first_update]`` is (tx, ty, tz[, wx, wy, wz]) of update j. ``ps_``, ``pw``, ``pt``, ``pg``, ``lines``, ``used`` are the
     fits' scratch. Estimates go to ``out[n_out:]`` (``DEPTH_DTYPE``) and ``quality[n_out:]``.
     ``t_hi`` is the latest time seen before; an earlier event stops the call with
     ``UNSORTED`` before it changes any state (``n_out`` and ``counts`` cover the events
@@ -125,7 +116,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, motion, sample_of, poin
     min_points, iterations = ip[I_MIN_POINTS], ip[I_ITERATIONS]
     refractory_us, window_us = ip[I_REFRACTORY], ip[I_WINDOW]
     consistency_us, max_hold, record_rejected = ip[I_CONSISTENCY_WINDOW], ip[I_MAX_HOLD], ip[I_RECORD_REJECTED] != 0
-    rows_model = ip[I_MODEL] == MODEL_ROWS
+    rows_model, per_pixel = ip[I_MODEL] == MODEL_ROWS, ip[I_PER_PIXEL] != 0
     fx, fy, cx, cy = fp[F_FX], fp[F_FY], fp[F_CX], fp[F_CY]
     outlier_px, max_rms, min_spread = fp[F_OUTLIER], fp[F_MAX_RMS], fp[F_MIN_SPREAD]
     min_depth, max_depth, min_denominator = fp[F_MIN_DEPTH], fp[F_MAX_DEPTH], fp[F_MIN_DENOMINATOR]
@@ -136,7 +127,17 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, motion, sample_of, poin
     middle = (lines.shape[0] - 1) // 2
     step, step_start, step_end, update = np.int64(0), np.int64(1), np.int64(0), np.int64(0)
     j = 0
-    for i in range(ts.shape[0]):
+    n_events, plane_size = ts.shape[0], surface.shape[1]
+    flat_surface, flat_hold = surface.reshape(-1), hold.reshape(-1)
+    for i in range(n_events):
+        if i + PREFETCH < n_events:  # the lines a first event would read (the rows of its square)
+            xq, yq = np.int64(xs[i + PREFETCH]), np.int64(ys[i + PREFETCH])
+            if xq < width and yq < height:
+                pq = 1 if ps[i + PREFETCH] != 0 else 0
+                prefetch(flat_hold, 2 * (yq * width + xq) + pq)
+                cq = pq * plane_size + (yq + radius) * row + xq + radius
+                for dq in range(-radius, radius + 1):
+                    prefetch(flat_surface, cq + dq * row)
         t = ts[i]
         if t < t_hi:
             return n_out, UNSORTED, t_hi
@@ -160,29 +161,33 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, motion, sample_of, poin
                 follow_motion(motion, velocity[j], update, t0 + update * update_every * dt, turn)
         polarity = 1 if ps[i] != 0 else 0
         pixel = y * width + x
-        sample = sample_of[pixel]
-        if at_update[sample] != update:
-            _sample(at_cache, sample, velocity, j, points, fx, fy, cx, cy, refractory_us, refractory_depth,
-                    window_us, window_depth, radius)
-            at_update[sample] = update
-        a_t = at_cache[sample]
-        # 1. First-event rule: a hold measured by the last fit here, else the refractory period.
+        # 1. First-event rule: a hold measured by the last fit here, else the refractory period:
+        # the time a surface at ``refractory_depth`` takes per pixel.
         held = np.int64(hold[pixel, polarity])
+        speed = -1.0  # A t not computed yet
         if held == 0:
-            held = np.int64(a_t[A_REFRACTORY])
+            at_x, at_y, speed = _velocity_term_at(x, y, pixel, per_pixel, sample_of, points, velocity, j, fx, fy, cx,
+                                                  cy)
+            held = refractory_us
+            if refractory_depth > 0.0 and speed > 0.0:
+                held = max(held, np.int64(math.floor(refractory_depth / speed * 1e6)))
         cell = (y + radius) * row + x + radius
         if t - surface[polarity, cell] < held:
             counts[BURST] += 1
             continue
         surface[polarity, cell] = t
-        speed = a_t[A_SPEED]
+        if speed < 0.0:
+            at_x, at_y, speed = _velocity_term_at(x, y, pixel, per_pixel, sample_of, points, velocity, j, fx, fy, cx,
+                                                  cy)
         if speed <= 0.0:
             counts[NO_MOTION] += 1
             continue
-        at_x, at_y, fu, fv = a_t[A_X], a_t[A_Y], a_t[A_FU], a_t[A_FV]
+        fu, fv = at_x / speed, at_y / speed
         # 2. Gather the recent first events of the pixels the edge has crossed: at most
         # ``ahead_px`` along the motion (the pixels ahead still hold an older edge's times).
-        window = np.int64(a_t[A_WINDOW])
+        window = window_us  # the time a surface at ``window_depth`` takes to move ``radius`` pixels
+        if window_depth > 0.0:
+            window = max(window, np.int64(math.floor(window_depth * radius / speed * 1e6)))
         if turn > 0.0:  # nothing from before the camera's last turn: another motion made it
             window = min(window, t - np.int64(motion[M_SINCE]))
         plane = surface[polarity]

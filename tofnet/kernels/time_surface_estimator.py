@@ -145,9 +145,11 @@ class TimeSurfaceEstimator:
         width, height = (int(s) for s in c.sensor_size)
         self._ip = np.zeros(ts.N_IP, np.int64)
         self._ip[[ts.I_WIDTH, ts.I_HEIGHT, ts.I_RADIUS, ts.I_DT, ts.I_LATENCY, ts.I_UPDATE_EVERY, ts.I_MIN_POINTS,
-                  ts.I_ITERATIONS, ts.I_REFRACTORY, ts.I_WINDOW, ts.I_CONSISTENCY_WINDOW, ts.I_MAX_HOLD, ts.I_MODEL]] = (
+                  ts.I_ITERATIONS, ts.I_REFRACTORY, ts.I_WINDOW, ts.I_CONSISTENCY_WINDOW, ts.I_MAX_HOLD, ts.I_MODEL,
+                  ts.I_PER_PIXEL]] = (
             width, height, c.radius, c.timestep_us, c.latency_steps, c.update_every, c.min_points, c.iterations,
-            _us(c.refractory), _us(c.window), _us(c.consistency_window), _us(c.max_hold), ts.MODELS.index(c.model))
+            _us(c.refractory), _us(c.window), _us(c.consistency_window), _us(c.max_hold), ts.MODELS.index(c.model),
+            c.per_pixel)
         self._fp = np.zeros(ts.N_FP, np.float64)
         self._fp[[ts.F_FX, ts.F_FY, ts.F_CX, ts.F_CY, ts.F_OUTLIER, ts.F_MAX_RMS, ts.F_MIN_SPREAD, ts.F_MIN_DEPTH,
                   ts.F_MAX_DEPTH, ts.F_MIN_DENOMINATOR, ts.F_WINDOW_DEPTH, ts.F_REFRACTORY_DEPTH, ts.F_CONSISTENCY,
@@ -161,8 +163,6 @@ class TimeSurfaceEstimator:
         self._motion = np.zeros(ts.N_MOTION)
         self._motion[ts.M_UPDATE] = -1
         self._sample_of, self._points = sample_tables(c.per_pixel, c.patch_size, width, height)
-        self._at_cache = np.zeros((len(self._points), ts.N_A))
-        self._at_update = np.full(len(self._points), -(1 << 62), np.int64)
         size = 2 * (2 * r + 1) ** 2
         lines = 4 * r + 3  # lines across the motion within the square (|w| <= r * sqrt(2)), centred
         self._scratch = (np.empty(size + 1), np.empty(size + 1), np.empty(size + 1), np.zeros(size + 1, np.int64),
@@ -229,7 +229,7 @@ class TimeSurfaceEstimator:
             table, first = self._table(velocity, int(t[lo]), int(t[hi - 1]))
             n_out, status, self._t_hi = ts.process(
                 t[lo:hi], x[lo:hi], y[lo:hi], p[lo:hi], self._ip, self._fp, self._surface, self._hold,
-                self._prev, self._motion, self._sample_of, self._points, self._at_cache, self._at_update, table,
+                self._prev, self._motion, self._sample_of, self._points, table,
                 first, *self._scratch, self._counts, depth, quality, n_out, self.events_in + lo, self._t_hi)
             if status == ts.UNSORTED:
                 done = lo + int(np.argmax(t[lo:hi] < self._t_hi))
