@@ -35,22 +35,21 @@ SECTIONS = ("steps", "time", "truncation")
 SCENES = ("slider", "all_axes", "room_slider", "paper_slider")
 NEARER = ("slider", "all_axes", "room_slider")
 
-#: The issue's plain prototype: a plane over the whole neighbourhood, a fixed refractory period.
+#: The issue's plain prototype: a plane over the whole neighbourhood, Benosman-style outlier
+#: rejection, no rms check, a fixed refractory period of 60 ms (the paper network's).
 PLAIN = {"model": "plane", "ahead_px": 100.0, "refractory": 0.06, "refractory_depth": 0.0, "hold_px": 0.0,
-         "turn": 0.0}
-#: One change at a time from PLAIN towards the defaults (the label says what it removes).
+         "turn": 0.0, "outlier_px": 0.5, "max_rms_px": 100.0, "min_points": 6, "window_depth": 10.0}
+#: One change at a time from PLAIN towards the defaults, each keeping the ones before it.
 STEPS = [
-    ("plain plane fit (radius 3, window 10 m / |A t| x 3 px, refractory 60 ms)", {}),
-    ("+ only pixels the edge has crossed (ahead_px -0.5): no stale points ahead of it",
-     {"ahead_px": -0.5}),
-    ("+ burst hold from the fit (3 px x time per px; 10 m / |A t| before a fit): no late burst events",
-     {"ahead_px": -0.5, "refractory": 0.0, "refractory_depth": 10.0, "hold_px": 3.0}),
-    ("+ nothing from before a turn (turn 0.2)",
-     {"ahead_px": -0.5, "refractory": 0.0, "refractory_depth": 10.0, "hold_px": 3.0, "turn": 0.2}),
-    ("+ trim the window's ends on fitted times (trim_px 0.5): no truncation",
-     {"ahead_px": -0.5, "refractory": 0.0, "refractory_depth": 10.0, "hold_px": 3.0, "turn": 0.2,
-      "trim_px": 0.5}),
-    ("defaults: lines along the motion (model rows)", None),
+    ("plain plane fit (radius 3, window 10 m / abs(A t) x 3 px, refractory 60 ms, no rms check)", {}),
+    ("+ only pixels the edge has crossed (ahead_px -0.5): no stale points ahead of it", {"ahead_px": -0.5}),
+    ("+ burst hold from the fit (hold_px 3, refractory_depth 10 m): no late burst events",
+     {"refractory": 0.0, "refractory_depth": 10.0, "hold_px": 3.0}),
+    ("+ nothing from before a turn (turn 0.2)", {"turn": 0.2}),
+    ("+ fit checks (max_rms_px 0.25, outlier_px 0.25, min_points 8, window_depth 5 m)",
+     {"max_rms_px": 0.25, "outlier_px": 0.25, "min_points": 8, "window_depth": 5.0}),
+    ("+ trim the window's ends on fitted times (trim_px 0.5): no truncation", {"trim_px": 0.5}),
+    ("defaults: lines along the motion (model rows, no trim)", None),
 ]
 
 
@@ -62,8 +61,12 @@ def nearer(name: str, duration: float, cache) -> object:
 
 def section_steps(args) -> None:
     rows = []
+    config = dict(PLAIN)
     for label, changes in STEPS:
-        config = {} if changes is None else {**PLAIN, **changes}
+        if changes is None:
+            config = {}
+        else:
+            config.update(changes)
         row = [label]
         for name in SCENES:
             m = run_time_surface(recording_for(scenario_config(name, args.duration), 0, args.cache, quiet=True),
