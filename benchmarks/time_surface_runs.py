@@ -15,7 +15,6 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
@@ -79,6 +78,3 @@ def paper_metrics(name: str, duration: float, cache: Path | None, seed: int = 0)
         tmp.replace(path)
     return m
 
-
-def share(values: np.ndarray, total: int) -> float:
-    return 100.0 * float(np.sum(values)) / total if total else float("nan")

@@ -114,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
         for v in values.get(factor, FACTORS.get(factor)):
             configs.append((f"{factor}={v}", {**base, factor: v}))
 
-    rows, md_rows = [], []
+    rows = []
     header = ["configuration", "mean median %", "mean mean %", "objective", "worst median / paper's",
               "worst |bias| %", "mean coverage %", "M ev/s (cpu)"] + [f"{n} med/bias/cov" for n in names]
     seen = {}
