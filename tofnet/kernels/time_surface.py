@@ -1,0 +1,277 @@
+"""Depth from the local slope of the time surface (beyond the paper; DESIGN "Beyond the paper").
+
+The numba core of the time-surface estimator; the streaming API and the parameters are in
+``tofnet.kernels.time_surface_estimator``, the method and the measurements behind the
+defaults in docs/time_surface.md. Per pixel and polarity the state holds the time (µs) of
+the last *first event* of an edge: the surface ``T(u, v)``. Per event:
+
+1. first-event rule: an event of a pixel and polarity whose last first event is more recent
+   than its hold (``hold_px`` times the time per pixel the last fit there measured, else the
+   refractory period) is part of the same edge's burst: dropped;
+2. gather the first events of the same polarity within ``radius`` pixels that the edge has
+   already crossed (at most ``ahead_px`` along the image motion ``A t``), no older than the
+   window nor than the camera's last turn;
+3. fit the time along the motion, per line of pixels parallel to it (``fit_rows``) or as a
+   plane (``fit_plane``), dropping the farthest point while it is more than ``outlier_px``
+   pixels off, at most ``iterations`` times; check points, spread and rms;
+4. ``∇T`` (s/px) is the time of travel (DESIGN eq. 8: ``td = dT/du``, positive for motion
+   towards +u): ``Z = (A t)·∇T``, or ``(A t)·∇T / (1 − (B ω)·∇T)`` with a rotation.
+
+Every event ends in exactly one count slot (``COUNT_NAMES``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from tofnet.kernels.time_of_travel import prefetch
+from tofnet.kernels.time_surface_fit import FIT_ILL_CONDITIONED, FIT_TOO_FEW, fit_plane, fit_rows
+from tofnet.kernels.velocity import velocity_term
+
+NEVER = -(1 << 62)  # "no first event yet" (µs)
+
+#: Count slots: where each event ended. Drops of events, rejections of estimates, emitted.
+(OUT_OF_BOUNDS, BEFORE_T0, BURST, NO_MOTION, TOO_FEW_POINTS, ILL_CONDITIONED, BAD_FIT, ROTATION_DOMINATED,
+ TOO_NEAR, TOO_FAR, INCONSISTENT, EMITTED, N_COUNTS) = range(13)
+COUNT_NAMES = ("out_of_bounds", "before_t0", "burst", "no_motion", "too_few_points", "ill_conditioned",
+               "bad_fit", "rotation_dominated", "too_near", "too_far", "inconsistent", "emitted")
+DROP_SLOTS = (OUT_OF_BOUNDS, BEFORE_T0, BURST)  # not the first event of an edge
+REJECT_SLOTS = tuple(range(NO_MOTION, EMITTED))  # a first event whose estimate was rejected
+
+# Integer parameters (``ip``) and float parameters (``fp``), by slot.
+(I_WIDTH, I_HEIGHT, I_RADIUS, I_T0, I_DT, I_LATENCY, I_UPDATE_EVERY, I_MIN_POINTS, I_ITERATIONS,
+ I_REFRACTORY, I_WINDOW, I_CONSISTENCY_WINDOW, I_MAX_HOLD, I_RECORD_REJECTED, I_MODEL, I_PER_PIXEL, N_IP) = range(17)
+(F_FX, F_FY, F_CX, F_CY, F_OUTLIER, F_MAX_RMS, F_MIN_SPREAD, F_MIN_DEPTH, F_MAX_DEPTH, F_MIN_DENOMINATOR,
+ F_WINDOW_DEPTH, F_REFRACTORY_DEPTH, F_CONSISTENCY, F_HOLD_PX, F_AHEAD_PX, F_TURN, F_TRIM_PX, N_FP) = range(18)
+# Motion state: the velocity the current epoch started with, its start (µs), the last update seen.
+M_VX, M_VY, M_VZ, M_SINCE, M_UPDATE, N_MOTION = range(6)
+# Fit models (``I_MODEL``): a plane, or lines along the motion with a shared slope.
+MODEL_PLANE, MODEL_ROWS = range(2)
+MODELS = ("plane", "rows")
+# Status of a call.
+OK, UNSORTED, NO_VELOCITY = range(3)
+#: Events between a prefetch of a pixel's hold and surface rows and their use.
+PREFETCH = 8
+
+
+@njit(cache=True)
+def rotational_flow(wx: float, wy: float, wz: float, u: float, v: float,
+                    fx: float, fy: float, cx: float, cy: float) -> tuple[float, float]:
+    """``B ω`` in px/s at image point (u, v) for angular velocity (wx, wy, wz) rad/s (DESIGN, Rotation).
+
+    The rotation issue (12) owns this formula; this copy serves the estimator's hook until
+    that one is merged (then import it instead).
+    """
+    x, y = u - cx, v - cy
+    return (x * y / fy * wx - (fx + x * x / fx) * wy + fx / fy * y * wz,
+            (fy + y * y / fy) * wx - x * y / fx * wy - fy / fx * x * wz)
+
+
+@njit(cache=True)
+def follow_motion(motion, row, update: int, update_start_us: int, turn: float) -> None:
+    """Start a new motion epoch at ``update`` when its velocity differs from the epoch's by more
+    than ``turn`` times the epoch's speed (a turn, a start or a stop); ``turn = 0``: never."""
+    dx, dy, dz = row[0] - motion[M_VX], row[1] - motion[M_VY], row[2] - motion[M_VZ]
+    change = math.sqrt(dx * dx + dy * dy + dz * dz)
+    speed = math.sqrt(motion[M_VX] ** 2 + motion[M_VY] ** 2 + motion[M_VZ] ** 2)
+    if motion[M_UPDATE] < 0 or (turn > 0.0 and change > turn * speed):
+        motion[M_VX], motion[M_VY], motion[M_VZ] = row[0], row[1], row[2]
+        motion[M_SINCE] = update_start_us
+    motion[M_UPDATE] = update
+
+
+@njit(cache=True, inline="always")
+def _velocity_term_at(x, y, pixel, per_pixel, sample_of, points, velocity, j, fx, fy, cx, cy):
+    """``A t`` (px*m/s) and ``|A t|`` for pixel (x, y) under velocity row ``j``."""
+    if per_pixel:
+        u, v = float(x), float(y)
+    else:
+        sample = sample_of[pixel]
+        u, v = points[sample, 0], points[sample, 1]
+    at_x, at_y = velocity_term(velocity[j, 0], velocity[j, 1], velocity[j, 2], u, v, fx, fy, cx, cy)
+    return at_x, at_y, math.sqrt(at_x * at_x + at_y * at_y)
+
+
+@njit(cache=True)
+def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, motion, sample_of, points, velocity, first_update, ps_, pw, pt, pg, lines, used, counts, out, quality, n_out, index0, t_hi):
+    """Run time-ordered events through the estimator; returns ``(n_out, status, t_hi)``.
+
+    ``surface[p, (y + r) * (w + 2r) + x + r]`` is the last first event (µs) of pixel (x, y) and
+    polarity p (one plane per polarity, so a fit reads one cache line per row; a border of
+    ``r = radius`` pixels stays ``NEVER``); ``hold[y * w + x, p]`` its measured hold (µs, 0 =
+    none yet); ``prev[y * w + x]`` the pixel's last estimate (z, t) for the consistency rule.
+    ``A t`` of pixel ``(x, y)`` is taken at the pixel (``I_PER_PIXEL``) or at
+    ``points[sample_of[y * w + x]]``, computed only for events that need it (a pixel's first
+    hold, first events). ``velocity[j - first_update]`` is (tx, ty, tz[, wx, wy, wz]) of update j. ``ps_``, ``pw``, ``pt``, ``pg``, ``lines``, ``used`` are the
+    fits' scratch. Estimates go to ``out[n_out:]`` (``DEPTH_DTYPE``) and ``quality[n_out:]``.
+    ``t_hi`` is the latest time seen before; an earlier event stops the call with
+    ``UNSORTED`` before it changes any state (``n_out`` and ``counts`` cover the events
+    before it).
+    """
+    width, height, radius = ip[I_WIDTH], ip[I_HEIGHT], ip[I_RADIUS]
+    t0, dt, latency, update_every = ip[I_T0], ip[I_DT], ip[I_LATENCY], ip[I_UPDATE_EVERY]
+    min_points, iterations = ip[I_MIN_POINTS], ip[I_ITERATIONS]
+    refractory_us, window_us = ip[I_REFRACTORY], ip[I_WINDOW]
+    consistency_us, max_hold, record_rejected = ip[I_CONSISTENCY_WINDOW], ip[I_MAX_HOLD], ip[I_RECORD_REJECTED] != 0
+    rows_model, per_pixel = ip[I_MODEL] == MODEL_ROWS, ip[I_PER_PIXEL] != 0
+    fx, fy, cx, cy = fp[F_FX], fp[F_FY], fp[F_CX], fp[F_CY]
+    outlier_px, max_rms, min_spread = fp[F_OUTLIER], fp[F_MAX_RMS], fp[F_MIN_SPREAD]
+    min_depth, max_depth, min_denominator = fp[F_MIN_DEPTH], fp[F_MAX_DEPTH], fp[F_MIN_DENOMINATOR]
+    window_depth, refractory_depth, consistency = fp[F_WINDOW_DEPTH], fp[F_REFRACTORY_DEPTH], fp[F_CONSISTENCY]
+    hold_px, ahead_px, turn, trim_px = fp[F_HOLD_PX], fp[F_AHEAD_PX], fp[F_TURN], fp[F_TRIM_PX]
+    rotation = velocity.shape[1] >= 6
+    row = width + 2 * radius
+    middle = (lines.shape[0] - 1) // 2
+    step, step_start, step_end, update = np.int64(0), np.int64(1), np.int64(0), np.int64(0)
+    j = 0
+    n_events, plane_size = ts.shape[0], surface.shape[1]
+    flat_surface, flat_hold = surface.reshape(-1), hold.reshape(-1)
+    for i in range(n_events):
+        if i + PREFETCH < n_events:  # the lines a first event would read (the rows of its square)
+            xq, yq = np.int64(xs[i + PREFETCH]), np.int64(ys[i + PREFETCH])
+            if xq < width and yq < height:
+                pq = 1 if ps[i + PREFETCH] != 0 else 0
+                prefetch(flat_hold, 2 * (yq * width + xq) + pq)
+                cq = pq * plane_size + (yq + radius) * row + xq + radius
+                for dq in range(-radius, radius + 1):
+                    prefetch(flat_surface, cq + dq * row)
+        t = ts[i]
+        if t < t_hi:
+            return n_out, UNSORTED, t_hi
+        t_hi = t
+        x, y = np.int64(xs[i]), np.int64(ys[i])
+        if x >= width or y >= height:
+            counts[OUT_OF_BOUNDS] += 1
+            continue
+        if t < t0:
+            counts[BEFORE_T0] += 1
+            continue
+        if t >= step_end or t < step_start:  # divisions only when the step changes
+            k = (t - t0) // dt
+            step_start, step_end = t0 + k * dt, t0 + (k + 1) * dt
+            step = k + latency  # the output step; it holds update (step - 1) // U (docs/semantics.md)
+            update = (step - 1) // update_every
+            j = update - first_update
+            if j < 0 or j >= velocity.shape[0]:
+                return n_out, NO_VELOCITY, t_hi
+            if update != motion[M_UPDATE]:
+                follow_motion(motion, velocity[j], update, t0 + update * update_every * dt, turn)
+        polarity = 1 if ps[i] != 0 else 0
+        pixel = y * width + x
+        # 1. First-event rule: a hold measured by the last fit here, else the refractory period:
+        # the time a surface at ``refractory_depth`` takes per pixel.
+        held = np.int64(hold[pixel, polarity])
+        speed = -1.0  # A t not computed yet
+        if held == 0:
+            at_x, at_y, speed = _velocity_term_at(x, y, pixel, per_pixel, sample_of, points, velocity, j, fx, fy, cx,
+                                                  cy)
+            held = refractory_us
+            if refractory_depth > 0.0 and speed > 0.0:
+                held = max(held, np.int64(math.floor(refractory_depth / speed * 1e6)))
+        cell = (y + radius) * row + x + radius
+        if t - surface[polarity, cell] < held:
+            counts[BURST] += 1
+            continue
+        surface[polarity, cell] = t
+        if speed < 0.0:
+            at_x, at_y, speed = _velocity_term_at(x, y, pixel, per_pixel, sample_of, points, velocity, j, fx, fy, cx,
+                                                  cy)
+        if speed <= 0.0:
+            counts[NO_MOTION] += 1
+            continue
+        fu, fv = at_x / speed, at_y / speed
+        # 2. Gather the recent first events of the pixels the edge has crossed: at most
+        # ``ahead_px`` along the motion (the pixels ahead still hold an older edge's times).
+        window = window_us  # the time a surface at ``window_depth`` takes to move ``radius`` pixels
+        if window_depth > 0.0:
+            window = max(window, np.int64(math.floor(window_depth * radius / speed * 1e6)))
+        if turn > 0.0:  # nothing from before the camera's last turn: another motion made it
+            window = min(window, t - np.int64(motion[M_SINCE]))
+        plane = surface[polarity]
+        inverse_fu = 1.0 / fu if abs(fu) > 1e-9 else 0.0
+        n = 0
+        for dv in range(-radius, radius + 1):
+            lo, hi = -radius, radius  # the columns with du * fu + dv * fv <= ahead_px
+            limit = ahead_px - dv * fv
+            if fu > 1e-9:
+                hi = min(hi, np.int64(math.floor(limit * inverse_fu)))
+            elif fu < -1e-9:
+                lo = max(lo, np.int64(math.ceil(limit * inverse_fu)))
+            elif limit < 0.0:
+                hi = lo - 1
+            base = cell + dv * row
+            along0, across0 = dv * fv, dv * fu
+            for du in range(lo, hi + 1):
+                age = t - plane[base + du]
+                if age <= window:
+                    across = across0 - du * fv
+                    ps_[n], pw[n], pt[n] = along0 + du * fu, across, -age
+                    pg[n] = middle + np.int64(math.floor(across + 0.5))
+                    n += 1
+            if dv == 0 and not lo <= 0 <= hi:  # the event itself always counts
+                ps_[n], pw[n], pt[n], pg[n] = 0.0, 0.0, 0.0, middle
+                n += 1
+        # 3. Fit and check.
+        if rows_model:
+            fit, tau_s, tau_w, c, kept, rms = fit_rows(ps_, pt, pg, n, min_points, min_spread, outlier_px,
+                                                        iterations, lines, used)
+        else:
+            fit, tau_s, tau_w, c, kept, rms = fit_plane(ps_, pw, pt, n, min_points, min_spread, outlier_px,
+                                                        iterations)
+            if trim_px > 0.0 and fit == 0:
+                # The window cuts on measured times: near its ends only the points that fired
+                # late (old end) or early (the present) are in, which flattens the plane.
+                # Cutting on the fitted times is unbiased: drop the points the plane puts
+                # within ``trim_px`` pixels of either end, and refit.
+                margin = trim_px * math.sqrt(tau_s * tau_s + tau_w * tau_w)
+                m = 0
+                for i2 in range(kept):
+                    fitted = c + tau_s * ps_[i2] + tau_w * pw[i2]
+                    if -window + margin <= fitted <= -margin:
+                        ps_[m], pw[m], pt[m] = ps_[i2], pw[i2], pt[i2]
+                        m += 1
+                if m < kept:
+                    fit, tau_s, tau_w, c, kept, rms = fit_plane(ps_, pw, pt, m, min_points, min_spread, outlier_px,
+                                                                iterations)
+        slot = TOO_FEW_POINTS if fit == FIT_TOO_FEW else ILL_CONDITIONED if fit == FIT_ILL_CONDITIONED else EMITTED
+        a, b = tau_s * fu - tau_w * fv, tau_s * fv + tau_w * fu  # ∇T at the event, µs/px along u and v
+        if slot == EMITTED:
+            if hold_px > 0.0:  # this edge's burst lasts about its ramp's width: hold_px pixels
+                hold[pixel, polarity] = min(max_hold, np.int64(hold_px * math.sqrt(a * a + b * b)) + 1)
+            if rms > max_rms:
+                slot = BAD_FIT
+        z = 0.0
+        gx, gy = a * 1e-6, b * 1e-6  # s/px
+        if slot == EMITTED:
+            z = at_x * gx + at_y * gy
+            if rotation:
+                bw_x, bw_y = rotational_flow(velocity[j, 3], velocity[j, 4], velocity[j, 5], float(x), float(y),
+                                             fx, fy, cx, cy)
+                denominator = 1.0 - (bw_x * gx + bw_y * gy)
+                if denominator < min_denominator:
+                    slot = ROTATION_DOMINATED
+                else:
+                    z /= denominator
+        if slot == EMITTED:
+            if z <= min_depth:
+                slot = TOO_NEAR
+            elif z >= max_depth:
+                slot = TOO_FAR
+        if slot == EMITTED and consistency > 0.0:
+            before, when = prev[pixel, 0], prev[pixel, 1]
+            prev[pixel, 0], prev[pixel, 1] = z, t
+            if t - when > consistency_us or abs(z - before) > consistency * before:
+                slot = INCONSISTENT
+        counts[slot] += 1
+        if slot != EMITTED:
+            if not record_rejected:
+                continue
+            z = math.nan
+        estimate, q = out[n_out], quality[n_out]
+        estimate.t, estimate.x, estimate.y, estimate.z, estimate.step = step_end + latency * dt, x, y, z, step
+        q.t_event, q.points, q.rms_px, q.gx, q.gy, q.index, q.reason = t, kept, rms, gx, gy, index0 + i, slot
+        n_out += 1
+    return n_out, OK, t_hi

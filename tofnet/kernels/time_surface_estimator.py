@@ -1,0 +1,283 @@
+"""Streaming time-surface depth estimator: configuration, state and packet API (numba core: ``time_surface``).
+
+Feed time-ordered event packets, split anywhere; the output does not depend on the split.
+Each emitted estimate is a ``DEPTH_DTYPE`` record stamped like every depth record
+(``step`` = the event's input step + ``latency_steps``, ``t`` = end of that step, µs) plus
+a ``QUALITY_DTYPE`` record with the event's own time (µs, unquantised), the fit's points,
+rms residual and gradient, and the index of the event in the stream.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Callable
+
+import numpy as np
+
+from tofnet.errors import BackendError
+from tofnet.events import DEPTH_DTYPE
+from tofnet.kernels import time_surface as ts
+from tofnet.kernels.time_surface_fit import N_L
+from tofnet.kernels.velocity import sample_grid
+
+#: Per estimate, aligned with the depth records: event time µs, points kept by the fit,
+#: their rms distance from the plane (px), the gradient ∇T (s/px), the event's index in the stream.
+QUALITY_DTYPE = np.dtype([("t_event", "<i8"), ("points", "<u2"), ("rms_px", "<f4"), ("gx", "<f4"), ("gy", "<f4"),
+                          ("index", "<i8"), ("reason", "u1")])
+
+#: ``rows(first_update, n_updates) -> (table, table_first)``: camera velocity per update, row ``i``
+#: is update ``table_first + i``; 3 columns (tx, ty, tz m/s) or 6 (+ wx, wy, wz rad/s, camera frame).
+VelocityRows = Callable[[int, int], tuple[np.ndarray, int]]
+MAX_VELOCITY_ROWS = 1 << 16
+
+
+@dataclass(frozen=True)
+class TimeSurfaceConfig:
+    """Parameters of the estimator (plain data; docs/time_surface.md has what each default was chosen on).
+
+    Times in seconds, lengths in pixels (px), depths in metres; "the time a surface at depth
+    D takes per pixel" is ``D / |A t|`` seconds at the event's pixel.
+
+    - ``model``: ``"rows"`` (each line of pixels parallel to the motion has its own offset,
+      one shared slope along it) or ``"plane"`` (Benosman et al. 2014's plane).
+    - ``radius`` px: the fit looks at the ``(2 radius + 1)²`` square around the event, at
+      the pixels at most ``ahead_px`` ahead along the image motion (the pixels the edge has
+      crossed; the event itself always counts).
+    - ``window`` s, ``window_depth`` m: the oldest first event used is the larger of
+      ``window`` and the time a surface at ``window_depth`` takes to move ``radius`` px;
+      never one from before the camera's last turn (``turn``: a change of velocity larger
+      than that fraction of the speed; 0 = never).
+    - ``min_points``, ``min_spread`` px², ``max_rms_px`` px: a fit needs that many points on
+      lines of two or more, that variance along the motion within the lines (the plane: left
+      over by the position across it), and at most that rms distance from the fit.
+    - ``outlier_px`` px, ``iterations``: while the farthest point is more than ``outlier_px``
+      from the fit, drop it and refit, at most ``iterations`` times.
+    - ``trim_px`` px (plane only): drop the points the plane puts within that distance of
+      the window's ends and refit (``0``: off).
+    - First events: ``hold_px`` times the time per pixel the last fit at a pixel measured is
+      its hold; before a fit, the larger of ``refractory`` and the time a surface at
+      ``refractory_depth`` takes per pixel; never above ``max_hold``.
+    - ``consistency`` (fraction, 0 = off): emit only when the pixel's previous estimate, at
+      most ``consistency_window`` s older, agrees within this relative difference.
+    - ``min_depth``, ``max_depth`` m: kept when strictly between. ``min_denominator``: with
+      a rotation, ``1 − (B ω)·∇T`` below it is ``rotation_dominated``.
+    - ``timestep`` s, ``latency_steps``: an estimate's ``step`` is its event's input step
+      plus ``latency_steps``; ``A t`` (per pixel with ``per_pixel``, else at the centre of
+      ``patch_size`` px patches, as ``tofnet.kernels.velocity.sample_point``) comes from the
+      velocity update that step holds, ``(step - 1) // update_every`` (docs/semantics.md).
+    """
+
+    sensor_size: tuple[int, int]
+    intrinsics: tuple[float, float, float, float]
+    radius: int = 3
+    window: float = 0.0
+    window_depth: float = 5.0
+    min_points: int = 8
+    outlier_px: float = 0.25
+    iterations: int = 3
+    max_rms_px: float = 0.25
+    min_spread: float = 0.5
+    refractory: float = 0.0
+    refractory_depth: float = 10.0
+    hold_px: float = 3.0
+    max_hold: float = 1.0
+    ahead_px: float = -0.5
+    turn: float = 0.2
+    trim_px: float = 0.0
+    model: str = "rows"
+    consistency: float = 0.0
+    consistency_window: float = 0.25
+    min_depth: float = 0.05
+    max_depth: float = 20.0
+    min_denominator: float = 0.1
+    timestep: float = 1e-3
+    latency_steps: int = 1
+    update_every: int = 1
+    per_pixel: bool = True
+    patch_size: int = 30
+
+    def __post_init__(self) -> None:
+        problems = []
+        if self.model not in ts.MODELS:
+            problems.append(f"model: expected one of {ts.MODELS}, got {self.model!r}")
+        for name in ("radius", "min_points", "update_every", "patch_size", "latency_steps"):
+            if int(getattr(self, name)) < 1:
+                problems.append(f"{name}: expected an integer >= 1, got {getattr(self, name)!r}")
+        for name in ("iterations",):
+            if int(getattr(self, name)) < 0:
+                problems.append(f"{name}: expected an integer >= 0, got {getattr(self, name)!r}")
+        for name in ("window", "window_depth", "outlier_px", "max_rms_px", "min_spread", "refractory",
+                     "refractory_depth", "consistency", "consistency_window", "min_depth", "hold_px",
+                     "max_hold"):
+            if not float(getattr(self, name)) >= 0:
+                problems.append(f"{name}: expected a number >= 0, got {getattr(self, name)!r}")
+        if not self.timestep > 0:
+            problems.append(f"timestep: expected seconds > 0, got {self.timestep!r}")
+        if not self.max_depth > self.min_depth:
+            problems.append(f"max_depth ({self.max_depth:g} m) must exceed min_depth ({self.min_depth:g} m)")
+        if self.window <= 0 and self.window_depth <= 0:
+            problems.append("window: give window (s) or window_depth (m) > 0")
+        if problems:
+            raise BackendError("time surface: " + "; ".join(problems))
+
+    def replace(self, **changes) -> "TimeSurfaceConfig":
+        return TimeSurfaceConfig(**{**asdict(self), **changes})
+
+    @property
+    def timestep_us(self) -> int:
+        return int(round(self.timestep * 1e6))
+
+
+def _us(seconds: float) -> int:
+    return int(round(seconds * 1e6))
+
+
+class TimeSurfaceEstimator:
+    """One sensor's time-surface state; ``feed`` packets of ``EVENT_DTYPE`` events in time order.
+
+    ``t0_us`` is the start of input step 0 (µs); None takes the first event's time.
+    Memory is fixed by the sensor (about 48 B per pixel) plus output buffers as large as
+    the largest packet.
+    """
+
+    def __init__(self, config: TimeSurfaceConfig, t0_us: int | None = None):
+        self.config = c = config
+        width, height = (int(s) for s in c.sensor_size)
+        self._ip = np.zeros(ts.N_IP, np.int64)
+        self._ip[[ts.I_WIDTH, ts.I_HEIGHT, ts.I_RADIUS, ts.I_DT, ts.I_LATENCY, ts.I_UPDATE_EVERY, ts.I_MIN_POINTS,
+                  ts.I_ITERATIONS, ts.I_REFRACTORY, ts.I_WINDOW, ts.I_CONSISTENCY_WINDOW, ts.I_MAX_HOLD, ts.I_MODEL,
+                  ts.I_PER_PIXEL]] = (
+            width, height, c.radius, c.timestep_us, c.latency_steps, c.update_every, c.min_points, c.iterations,
+            _us(c.refractory), _us(c.window), _us(c.consistency_window), _us(c.max_hold), ts.MODELS.index(c.model),
+            c.per_pixel)
+        self._fp = np.zeros(ts.N_FP, np.float64)
+        self._fp[[ts.F_FX, ts.F_FY, ts.F_CX, ts.F_CY, ts.F_OUTLIER, ts.F_MAX_RMS, ts.F_MIN_SPREAD, ts.F_MIN_DEPTH,
+                  ts.F_MAX_DEPTH, ts.F_MIN_DENOMINATOR, ts.F_WINDOW_DEPTH, ts.F_REFRACTORY_DEPTH, ts.F_CONSISTENCY,
+                  ts.F_HOLD_PX, ts.F_AHEAD_PX, ts.F_TURN, ts.F_TRIM_PX]] = (
+            *c.intrinsics, c.outlier_px, c.max_rms_px, c.min_spread, c.min_depth, c.max_depth, c.min_denominator,
+            c.window_depth, c.refractory_depth, c.consistency, c.hold_px, c.ahead_px, c.turn, c.trim_px)
+        r, pixels = int(c.radius), width * height
+        self._surface = np.full((2, (height + 2 * r) * (width + 2 * r)), ts.NEVER, np.int64)
+        self._hold = np.zeros((pixels, 2), np.int32)
+        self._prev = np.zeros((pixels if c.consistency > 0 else 1, 2), np.float64)
+        self._motion = np.zeros(ts.N_MOTION)
+        self._motion[ts.M_UPDATE] = -1
+        self._sample_of, self._points = sample_tables(c.per_pixel, c.patch_size, width, height)
+        size = 2 * (2 * r + 1) ** 2
+        lines = 4 * r + 3  # lines across the motion within the square (|w| <= r * sqrt(2)), centred
+        self._scratch = (np.empty(size + 1), np.empty(size + 1), np.empty(size + 1), np.zeros(size + 1, np.int64),
+                         np.zeros((lines, N_L)), np.zeros(lines, np.int64))
+        self._counts = np.zeros(ts.N_COUNTS, np.int64)
+        self._t0 = None if t0_us is None else int(t0_us)
+        self._ip[ts.I_T0] = 0 if t0_us is None else int(t0_us)
+        self._t_hi = ts.NEVER
+        self.events_in = 0
+
+    @property
+    def t0_us(self) -> int | None:
+        """Start of input step 0 (µs); set by the first event when not given."""
+        return self._t0
+
+    @property
+    def counts(self) -> dict[str, int]:
+        """Where every event fed so far ended (``time_surface.COUNT_NAMES``); they sum to ``events_in``."""
+        return {name: int(v) for name, v in zip(ts.COUNT_NAMES, self._counts)}
+
+    @property
+    def emitted(self) -> int:
+        return int(self._counts[ts.EMITTED])
+
+    @property
+    def first_events(self) -> int:
+        """Events taken as the first event of an edge (emitted or rejected)."""
+        return int(self._counts[list(ts.REJECT_SLOTS)].sum() + self._counts[ts.EMITTED])
+
+    def _updates(self, t_first: int, t_last: int) -> tuple[int, int]:
+        """``(first_update, n_updates)`` the output steps of events at ``t_first .. t_last`` µs hold."""
+        c, t0 = self.config, self._t0
+        steps = (max(t_first, t0) - t0) // c.timestep_us + c.latency_steps, (t_last - t0) // c.timestep_us + \
+            c.latency_steps
+        first, last = ((s - 1) // c.update_every for s in steps)
+        return first, max(last - first + 1, 1)
+
+    def feed(self, events: np.ndarray, velocity: VelocityRows, *,
+             record_rejected: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Estimates of one packet: ``(depth DEPTH_DTYPE, quality QUALITY_DTYPE)``, in event order.
+
+        ``record_rejected`` also returns the first events whose estimate was rejected, with
+        ``z`` NaN and ``quality["reason"]`` the slot in ``time_surface.COUNT_NAMES`` (for
+        diagnosis; emitted ones have ``EMITTED``).
+
+        ``events`` must continue the previous packets in time order (a ``BackendError``
+        otherwise, with the state of the events before the offending one kept).
+        """
+        n = len(events)
+        depth, quality = np.empty(n, DEPTH_DTYPE), np.empty(n, QUALITY_DTYPE)
+        if n == 0:
+            return depth, quality
+        if self._t0 is None:
+            self._t0 = int(events["t"][0])
+            self._ip[ts.I_T0] = self._t0
+        t = np.ascontiguousarray(events["t"], dtype=np.int64)
+        x = np.ascontiguousarray(events["x"])
+        y = np.ascontiguousarray(events["y"])
+        p = np.ascontiguousarray(events["p"])
+        self._ip[ts.I_RECORD_REJECTED] = record_rejected
+        n_out, lo = 0, 0
+        while lo < n:
+            hi = self._piece_end(t, lo)
+            table, first = self._table(velocity, int(t[lo]), int(t[hi - 1]))
+            n_out, status, self._t_hi = ts.process(
+                t[lo:hi], x[lo:hi], y[lo:hi], p[lo:hi], self._ip, self._fp, self._surface, self._hold,
+                self._prev, self._motion, self._sample_of, self._points, table,
+                first, *self._scratch, self._counts, depth, quality, n_out, self.events_in + lo, self._t_hi)
+            if status == ts.UNSORTED:
+                done = lo + int(np.argmax(t[lo:hi] < self._t_hi))
+                self.events_in += done
+                raise BackendError(f"time surface: event {self.events_in} (t = {int(t[done])} µs) is earlier than "
+                                   f"the one before ({self._t_hi} µs); feed events in time order")
+            if status == ts.NO_VELOCITY:
+                raise BackendError(f"time surface: velocity rows from update {first} ({len(table)} of them) do not "
+                                   f"cover the events at {int(t[lo])}-{int(t[hi - 1])} µs")
+            lo = hi
+        self.events_in += n
+        return depth[:n_out], quality[:n_out]
+
+    def _piece_end(self, t: np.ndarray, lo: int) -> int:
+        """End of the piece from ``lo`` whose events need at most ``MAX_VELOCITY_ROWS`` velocity rows."""
+        c = self.config
+        span = (MAX_VELOCITY_ROWS - 2) * c.update_every * c.timestep_us
+        start = max(int(t[lo]), self._t_hi, self._t0)
+        return max(int(np.searchsorted(t, start + span, side="left")), lo + 1)
+
+    def _table(self, velocity: VelocityRows, t_first: int, t_last: int) -> tuple[np.ndarray, int]:
+        first, count = self._updates(max(t_first, self._t0), max(t_last, self._t0))
+        table, table_first = velocity(first, count)
+        table = np.ascontiguousarray(table, dtype=np.float64)
+        if table.ndim != 2 or table.shape[1] not in (3, 6):
+            raise BackendError(f"time surface: velocity rows must have 3 or 6 columns, got shape {table.shape}")
+        return table, int(table_first)
+
+
+def sample_tables(per_pixel: bool, patch_size: int, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """``sample_of`` (per pixel, row-major: the index of the point its ``A t`` is taken at) and
+    ``points`` (u, v px per sample): each pixel, or the centre of its patch (``velocity.sample_point``)."""
+    su, sv = sample_grid(per_pixel, patch_size, width, height)
+    if per_pixel:
+        sample_of = np.arange(width * height, dtype=np.int64)
+    else:
+        ys, xs = np.mgrid[0:height, 0:width]
+        columns = -(-width // patch_size)
+        sample_of = ((ys // patch_size) * columns + xs // patch_size).ravel().astype(np.int64)
+    first = np.unique(sample_of, return_index=True)[1]
+    return sample_of, np.ascontiguousarray(np.stack([su.ravel()[first], sv.ravel()[first]], axis=1))
+
+
+def constant_velocity(velocity, omega=None) -> VelocityRows:
+    """``VelocityRows`` of a constant camera velocity (m/s) and optional angular velocity (rad/s)."""
+    row = np.asarray(tuple(velocity) + (tuple(omega) if omega is not None else ()), dtype=np.float64)
+
+    def rows(first: int, count: int) -> tuple[np.ndarray, int]:
+        return np.tile(row, (count, 1)), first
+
+    return rows

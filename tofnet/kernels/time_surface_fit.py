@@ -1,0 +1,211 @@
+"""The time-surface estimator's fits (numba; used by ``tofnet.kernels.time_surface``).
+
+Both take points in the frame of the image motion (``s`` pixels along ``A t``, ``w``
+across, ``t`` µs relative to the event), reject outliers one at a time and return
+``(code, τ_s, τ_w, c, kept, rms_px)``: ``FIT_OK``, ``FIT_TOO_FEW`` or ``FIT_ILL_CONDITIONED``,
+the slopes along and across the motion (µs/px), the offset at the event (µs), the points
+kept (the first ``kept`` of the arrays, which the fits reorder) and their rms distance from
+the fit in pixels.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+FIT_OK, FIT_TOO_FEW, FIT_ILL_CONDITIONED = range(3)
+# Per line of a ``fit_rows`` fit: raw sums (count, s, t, s², s t), means of s and t, centred sums.
+L_M, L_S, L_T, L_SS, L_ST, L_MEAN_S, L_MEAN_T, L_CSS, L_CST, N_L = range(10)
+
+
+@njit(cache=True)
+def fit_plane(ps, pw, pt, n, min_points, min_spread, outlier_px, iterations):
+    """Least-squares plane ``t = c + τ_s s + τ_w w`` through the first ``n`` points, robustly.
+
+    ``ps`` pixels along the image motion, ``pw`` across it, ``pt`` µs (Benosman et al. 2014's
+    local plane, in the motion's frame). While the farthest point is more than ``outlier_px``
+    pixels from the plane (its time error over the gradient's magnitude), it is dropped (moved
+    past the kept ones) and the plane refitted, at most ``iterations`` times: one at a time,
+    since a first fit pulled by several outliers would make good points look bad too. Returns
+    ``(code, τ_s, τ_w, c, kept, rms_px)``: ``FIT_OK`` when a plane stands (µs/px, µs; the
+    first ``kept`` points are the ones it fits, ``rms_px`` their rms distance from it in
+    pixels), else ``FIT_TOO_FEW`` or ``FIT_ILL_CONDITIONED`` (the variance of ``s`` that ``w``
+    leaves unexplained is below ``min_spread`` px²: the points do not extend along the motion).
+    """
+    k = n
+    ss = sw = st = sss = ssw = sww = sst = swt = 0.0
+    for i in range(k):
+        s, w, t = ps[i], pw[i], pt[i]
+        ss += s
+        sw += w
+        st += t
+        sss += s * s
+        ssw += s * w
+        sww += w * w
+        sst += s * t
+        swt += w * t
+    tau_s = tau_w = c = rms_px = 0.0
+    for _ in range(iterations + 1):
+        if k < min_points:
+            return FIT_TOO_FEW, tau_s, tau_w, c, k, rms_px
+        ms, mw, mt = ss / k, sw / k, st / k
+        css, csw, cww = sss / k - ms * ms, ssw / k - ms * mw, sww / k - mw * mw
+        cst, cwt = sst / k - ms * mt, swt / k - mw * mt
+        if cww > 1e-9:  # points across the motion too: the full plane
+            spread = css - csw * csw / cww
+            if spread < min_spread:
+                return FIT_ILL_CONDITIONED, tau_s, tau_w, c, k, rms_px
+            det = css * cww - csw * csw
+            tau_s = (cst * cww - cwt * csw) / det
+            tau_w = (cwt * css - cst * csw) / det
+        else:  # one line along the motion: its slope, nothing across
+            if css < min_spread:
+                return FIT_ILL_CONDITIONED, tau_s, tau_w, c, k, rms_px
+            tau_s, tau_w = cst / css, 0.0
+        c = mt - tau_s * ms - tau_w * mw
+        slope = math.sqrt(tau_s * tau_s + tau_w * tau_w)
+        sq = 0.0
+        worst, worst_r = 0, 0.0
+        for i in range(k):
+            r = abs(pt[i] - c - tau_s * ps[i] - tau_w * pw[i])
+            sq += r * r
+            if r > worst_r:
+                worst, worst_r = i, r
+        rms_px = math.sqrt(sq / k) / slope if slope > 0.0 else math.inf
+        if worst_r <= outlier_px * slope:
+            break
+        s, w, t = ps[worst], pw[worst], pt[worst]
+        k -= 1
+        ps[worst], pw[worst], pt[worst] = ps[k], pw[k], pt[k]
+        ps[k], pw[k], pt[k] = s, w, t
+        ss -= s
+        sw -= w
+        st -= t
+        sss -= s * s
+        ssw -= s * w
+        sww -= w * w
+        sst -= s * t
+        swt -= w * t
+    # When the iterations run out with an outlier left, the last plane stands and the rms
+    # check judges it.
+    return FIT_OK, tau_s, tau_w, c, k, rms_px
+
+
+@njit(cache=True, inline="always")
+def _line_stats(lines, g):
+    """Means and centred sums of line ``g`` from its raw sums (NaN means: fewer than 2 points)."""
+    m = lines[g, L_M]
+    if m >= 2.0:
+        inv = 1.0 / m
+        lines[g, L_MEAN_S], lines[g, L_MEAN_T] = lines[g, L_S] * inv, lines[g, L_T] * inv
+        lines[g, L_CSS] = lines[g, L_SS] - lines[g, L_S] * lines[g, L_MEAN_S]
+        lines[g, L_CST] = lines[g, L_ST] - lines[g, L_S] * lines[g, L_MEAN_T]
+    else:
+        lines[g, L_MEAN_S] = lines[g, L_MEAN_T] = math.nan
+        lines[g, L_CSS] = lines[g, L_CST] = 0.0
+
+
+@njit(cache=True)
+def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, lines, used):
+    """Time per pixel along the image motion from lines of pixels parallel to it, robustly.
+
+    Under a pure translation a pixel sees the signal of the pixel behind it along the motion,
+    shifted by the time the image takes to move between them; with equal thresholds even
+    their reference levels stay in step, so their first events differ by exactly that time,
+    while pixels on different lines see different signals and fire at unrelated phases, and
+    a curved edge bends the surface across the motion only. So each line (``pg``: index of
+    the point's line across the motion, the event's is ``middle``) gets its own offset and
+    only the slope along ``ps`` is shared: ``t = c_line + τ_s s``. Outliers go one at a time
+    as in ``fit_plane``. ``lines`` (``N_L`` columns, zero on entry and on return) and
+    ``used`` are scratch. Returns ``(code, τ_s, τ_w, c, kept, rms_px)`` like ``fit_plane``:
+    ``kept`` counts the points on lines of two or more (the others carry no slope), the
+    spread is their variance along ``s`` within their lines, ``τ_w`` the slope of the lines'
+    offsets across the motion and ``c`` the offset of the event's line.
+    """
+    middle = (lines.shape[0] - 1) // 2
+    n_used = 0
+    for i in range(n):
+        g = pg[i]
+        if lines[g, L_M] == 0.0:
+            used[n_used] = g
+            n_used += 1
+        s, t = ps[i], pt[i]
+        lines[g, L_M] += 1.0
+        lines[g, L_S] += s
+        lines[g, L_T] += t
+        lines[g, L_SS] += s * s
+        lines[g, L_ST] += s * t
+    sxx = sxy = 0.0
+    kept = 0
+    for j in range(n_used):
+        g = used[j]
+        _line_stats(lines, g)
+        sxx += lines[g, L_CSS]
+        sxy += lines[g, L_CST]
+        if lines[g, L_M] >= 2.0:
+            kept += np.int64(lines[g, L_M])
+    k = n
+    tau_s = tau_w = c = rms_px = 0.0
+    code = FIT_OK
+    for _ in range(iterations + 1):
+        if kept < min_points:
+            code = FIT_TOO_FEW
+            break
+        if sxx < min_spread * kept:
+            code = FIT_ILL_CONDITIONED
+            break
+        tau_s = sxy / sxx
+        sq = 0.0
+        worst, worst_r = 0, 0.0
+        for i in range(k):
+            g = pg[i]
+            r = abs(pt[i] - lines[g, L_MEAN_T] - tau_s * (ps[i] - lines[g, L_MEAN_S]))
+            if r > worst_r:  # False for NaN: a line of one point carries no slope
+                worst, worst_r = i, r
+            if r == r:
+                sq += r * r
+        slope = abs(tau_s)
+        rms_px = math.sqrt(sq / kept) / slope if slope > 0.0 else math.inf
+        if worst_r <= outlier_px * slope:
+            break
+        s, t, g = ps[worst], pt[worst], pg[worst]
+        sxx -= lines[g, L_CSS]
+        sxy -= lines[g, L_CST]
+        kept -= np.int64(lines[g, L_M]) if lines[g, L_M] >= 2.0 else 0
+        lines[g, L_M] -= 1.0
+        lines[g, L_S] -= s
+        lines[g, L_T] -= t
+        lines[g, L_SS] -= s * s
+        lines[g, L_ST] -= s * t
+        _line_stats(lines, g)
+        sxx += lines[g, L_CSS]
+        sxy += lines[g, L_CST]
+        kept += np.int64(lines[g, L_M]) if lines[g, L_M] >= 2.0 else 0
+        k -= 1
+        ps[worst], pt[worst], pg[worst] = ps[k], pt[k], pg[k]
+        ps[k], pt[k], pg[k] = s, t, g
+    if code == FIT_OK:
+        # The lines' offsets against their position across the motion: τ_w (weighted by points).
+        sw = so = sww = swo = total = 0.0
+        for j in range(n_used):
+            g = used[j]
+            m = lines[g, L_M]
+            if m >= 1.0:
+                w, offset = float(g - middle), (lines[g, L_T] - tau_s * lines[g, L_S]) / m
+                total += m
+                sw += m * w
+                so += m * offset
+                sww += m * w * w
+                swo += m * w * offset
+        spread_w = sww - sw * sw / total
+        tau_w = (swo - sw * so / total) / spread_w if spread_w > 0.0 else 0.0
+        if lines[middle, L_M] > 0.0:
+            c = (lines[middle, L_T] - tau_s * lines[middle, L_S]) / lines[middle, L_M]
+        else:
+            c = so / total - tau_w * sw / total
+    for j in range(n_used):  # leave the table empty for the next fit
+        g = used[j]
+        lines[g, L_M] = lines[g, L_S] = lines[g, L_T] = lines[g, L_SS] = lines[g, L_ST] = 0.0
+    return code, tau_s, tau_w, c, kept, rms_px
