@@ -122,12 +122,16 @@ def sinks_of(network: Network) -> list[str]:
             if isinstance(port, OutPort) and not port.targets]
 
 
-def latencies(network: Network, readers: set[str]) -> dict[str, int]:
-    """Per process: connections on the longest path from an event-reading process (0 if none)."""
+def latencies(network: Network, readers: set[str], extra: dict[str, int] | None = None) -> dict[str, int]:
+    """Per process: steps from an event to its output, on the longest path from an event-reading
+    process: one per connection, plus the steps a model adds itself (``extra``; 0 if none)."""
+    extra = extra or {}
     out = {}
     for name in nx.topological_sort(network.graph):
         preds = [out[p] + 1 for p in network.graph.predecessors(name) if out[p] >= 0]
         out[name] = max(preds, default=0 if name in readers else -1)
+        if out[name] >= 0:
+            out[name] += extra.get(name, 0)
     return {name: max(d, 0) for name, d in out.items()}
 
 
@@ -151,7 +155,8 @@ class GraphExecutor:
         order = network.topological_order()
         classes = {p.name: model_for(p, family, backend, backends_by_family) for p in order}
         self.readers = {name for name, cls in classes.items() if cls.reads_events}
-        self.latency = latencies(network, self.readers)
+        self.latency = latencies(network, self.readers,
+                                 {p.name: classes[p.name].latency_steps(p) for p in order})
         self.edges = [Edge(src.process.name, src.name, dst.process.name, dst.name)
                       for src, dst in network.connections()]
         metas: dict[str, dict[str, Any]] = {}

@@ -84,6 +84,13 @@ class Model:
         self.ctx = ctx
 
     @classmethod
+    def latency_steps(cls, process: Process) -> int:
+        """Steps the model itself adds between what it receives (or reads) and what it sends,
+        beyond the one step of each connection: it stamps its outputs that much later. The
+        executor adds it to the outputs' latency and runs that much longer at the end."""
+        return 0
+
+    @classmethod
     def output_meta(cls, process: Process, ctx: ModelContext) -> dict[str, Any]:
         """Static descriptions of the output ports that receivers need (e.g. sampling, units)."""
         return {}
