@@ -95,3 +95,31 @@ def test_a_packet_going_back_in_time_is_refused():
     stream.feed(events[len(events) // 2:])
     with pytest.raises(BackendError, match="not sorted"):
         stream.feed(events[:len(events) // 2])
+
+
+@pytest.mark.parametrize("fuse", [True, False])
+def test_a_refused_packet_leaves_the_stream_as_it_was(fuse):
+    """Issue 11: after a refusal the stream goes on exactly as if it never saw the packet."""
+    events = recording(120_000, seed=5).events
+    half = len(events) // 2
+
+    def stream_of():
+        return FixedBackend(fuse=fuse).open_stream(network(), intrinsics=INTRINSICS,
+                                                   velocity_source=ConstantVelocity(VELOCITY), t0_us=0)
+    clean = stream_of()
+    expected = [clean.feed_all(events[:half]), clean.feed_all(events[half:])]
+    expected_close = clean.close()
+    stream = stream_of()
+    got = [stream.feed_all(events[:half])]
+    past = events[half - 400:half - 300].copy()  # ~90 ms in the past
+    for bad in (past, events[half:][::-1], events[half:half + 10].astype([("t", "<i8"), ("x", "<i4"), ("y", "<i4"),
+                                                                            ("p", "u1")])):
+        with pytest.raises(BackendError, match="not sorted|dtype"):
+            stream.feed_all(bad)
+    with pytest.raises(BackendError, match="numpy array"):
+        stream.feed_all(list(events[half:half + 3]))
+    got.append(stream.feed_all(events[half:]))
+    closed = stream.close()
+    for a, b in zip(got, expected):
+        assert a.keys() == b.keys() and all(a[k].tobytes() == b[k].tobytes() for k in a)
+    assert closed.counts == expected_close.counts and closed.steps == expected_close.steps

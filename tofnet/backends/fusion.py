@@ -24,7 +24,6 @@ from tofnet.events import DEPTH_DTYPE, TOT_DTYPE
 from tofnet.io.recording import VelocitySource
 from tofnet.kernels.region import KernelConfig, KernelOutput, TimeOfTravelKernel, copy_records
 from tofnet.models.depth import OUTCOMES
-from tofnet.models.input import check_time_order
 from tofnet.models.registry import _registered
 from tofnet.processes import DepthProcess, InputProcess, TimeOfTravelProcess, VelocityProcess
 
@@ -147,11 +146,10 @@ class FusedStream:
         #: Time-of-travel spikes of the latest ``feed`` (``TOT_DTYPE``) when ``record_tot``.
         self.tot: np.ndarray | None = None
         self._events_in = 0
-        self._latest_us: int | None = None  # no later packet may start before this (µs)
         self._last_event_us: int | None = None
         p = pipeline
         self._updates = UpdateRows(lambda first, count: velocity_table(
-            self.velocity_source, self.t0_us, p.timestep_us, p.update_every, count, first), VELOCITY_LOOKAHEAD)
+            self.velocity_source, self.kernel.t0_us, p.timestep_us, p.update_every, count, first), VELOCITY_LOOKAHEAD)
         self._started = time.perf_counter()
         self._closed = False
 
@@ -159,30 +157,43 @@ class FusedStream:
         """Velocity updates ``first .. first+count-1`` (``VelocityRows``), computed ``VELOCITY_LOOKAHEAD`` ahead."""
         return self._updates.rows(first, count)
 
-    def _start(self, events: np.ndarray, until_us: int | None) -> bool:
-        """Checks and counting before any state changes; False for an empty packet."""
+    def _admit(self, events: np.ndarray) -> None:
+        """Checks before anything changes (the kernel checks the time order itself)."""
         from tofnet.backends.stream import check_events
         if self._closed:
             raise BackendError("stream is closed")
         check_events(events)
-        check_time_order(events, self._latest_us, "stream")
-        n = len(events)
-        if n:
-            self._latest_us = self._last_event_us = int(events["t"][-1])
+
+    def _kernel_call(self, events: np.ndarray, until_us: int | None, call):
+        """``call()`` on the kernel; the stream's own state changes only once it succeeded."""
+        first = self.t0_us is None and len(events) > 0
+        if first:
+            self.kernel.t0_us = int(events["t"][0])
+        try:
+            result = call() if len(events) else None
+        except BaseException:
+            if first:
+                self.kernel.t0_us = 0
+            raise
+        if first:
+            self.t0_us = self.kernel.t0_us
+        if len(events):
+            self._last_event_us = int(events["t"][-1])
+            self._events_in += len(events)
         if until_us is not None:
-            self._latest_us = max(self._latest_us or until_us, until_us)
-        self._events_in += n
-        if n and self.t0_us is None:
-            self.t0_us = self.kernel.t0_us = int(events["t"][0])
-        return n > 0
+            self.kernel.promise(until_us)
+        return result
 
     def feed(self, events: np.ndarray, until_us: int | None = None) -> np.ndarray:
         """Depth estimates (``DEPTH_DTYPE``) produced by ``events`` (``EVENT_DTYPE``, time-ordered)."""
-        if not self._start(events, until_us):
+        self._admit(events)
+        into = np.empty(len(events), DEPTH_DTYPE)  # the kernel writes the caller's array: no copy
+        done = self._kernel_call(events, until_us,
+                                 lambda: self.kernel.run_events(events, self._rows, into, 0, self.record_tot))
+        if done is None:
             self.tot = np.empty(0, TOT_DTYPE) if self.record_tot else None
             return np.empty(0, DEPTH_DTYPE)
-        into = np.empty(len(events), DEPTH_DTYPE)  # the kernel writes the caller's array: no copy
-        end, n_tot = self.kernel.run_events(events, self._rows, into, 0, self.record_tot)
+        end, n_tot = done
         self.tot = copy_records(self.kernel.buffers()[2][:n_tot]) if self.record_tot else None
         return into[:end]
 
@@ -196,10 +207,9 @@ class FusedStream:
         Returns the kernel's output (``depth`` a view of ``into``; ``tot`` valid until the next
         call, no ``z_raw``), None for an empty packet. Spares a copy when the caller collects the estimates.
         """
-        if not self._start(events, None):
-            return None
-        return self.kernel.process_events(events, self._rows, record_tot=self.record_tot, into=into, offset=offset,
-                                          copy=False)
+        self._admit(events)
+        return self._kernel_call(events, None, lambda: self.kernel.process_events(
+            events, self._rows, record_tot=self.record_tot, into=into, offset=offset, copy=False))
 
     def close(self) -> RunResult:
         """The counts so far; ``outputs`` are empty (``feed`` returned every estimate)."""

@@ -138,8 +138,8 @@ class TimeOfTravelKernel:
             raise BackendError(f"velocity table holds updates [{first_update}, {first_update + len(table)}); "
                                f"these spikes need [{first}, {last + 1})")
         if status == tt.UNSORTED:
-            raise BackendError("input spikes are not sorted by step (events must be in time order and "
-                               "each packet must follow the previous one)")
+            raise BackendError("events are not sorted by time (input spikes: by step): each packet must be in "
+                               "time order and follow the previous one; it was refused and the state is unchanged")
         if status == tt.PENDING_FULL:
             self._broken = True
             raise BackendError("more than one input spike for one pixel in one step "
@@ -257,6 +257,10 @@ class TimeOfTravelKernel:
                 lo, hi = int(np.searchsorted(step, s, "left")), int(np.searchsorted(step, s, "right"))
                 self._order(depth, self._no_raw, lo, hi)
         return depth
+
+    def promise(self, until_us: int) -> None:
+        """No event before ``until_us`` will come: a later packet that starts earlier is refused."""
+        self._cursor[tt.T_HI] = max(int(self._cursor[tt.T_HI]), int(until_us))
 
     def buffers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The internal output buffers: estimates, their fixed-point values, time-of-travel spikes."""

@@ -215,16 +215,18 @@ def _check(ts, xs, ys, filtering, cursor, ip, n_rows, first_update):
     n = ts.shape[0]
     found = False
     lo = hi = np.int64(0)
-    if filtering:  # events: the ones the filter may accept must be in time order (also after earlier calls)
+    if filtering:  # events: all in time order, also after earlier calls (T_HI: the latest time fed)
         t_hi, t0, width, height = cursor[T_HI], ip[T0], ip[WIDTH], ip[HEIGHT]
+        last = t0
         for i in range(n):
-            if xs[i] < width and ys[i] < height and ts[i] >= t0:
-                if ts[i] < t_hi:
-                    return UNSORTED
+            if ts[i] < t_hi:
+                return UNSORTED
+            t_hi = ts[i]
+            if xs[i] < width and ys[i] < height and ts[i] >= t0:  # the filter may accept it
                 if not found:
                     lo, found = ts[i], True
-                t_hi = ts[i]
-        lo, hi = (lo - t0) // ip[DT], (t_hi - t0) // ip[DT]
+                last = ts[i]
+        lo, hi = (lo - t0) // ip[DT], (last - t0) // ip[DT]
     else:  # spikes: sorted by step, continuing the previous call's
         previous = max(cursor[CURRENT], 0)
         for i in range(n):
@@ -380,11 +382,8 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
         pend[n_pend] = (np.int64(u) << 1) | polarity
         n_pend += 1
     cursor[N_PEND], cursor[CURRENT], cursor[BASE] = n_pend, current, base
-    if filtering:
-        for i in range(n - 1, -1, -1):  # the latest event the filter could accept: later calls must not go back
-            if xs[i] < width and ys[i] < height and ts[i] >= t0:
-                cursor[T_HI] = ts[i]
-                break
+    if filtering and n > 0:
+        cursor[T_HI] = max(cursor[T_HI], ts[n - 1])  # later calls must not go back before it
     return n_out, n_tot, OK
 
 
