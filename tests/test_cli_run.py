@@ -60,7 +60,7 @@ def test_summary_accounts_for_every_event_and_writes_json(edge_folder, tmp_path)
     summary = json.loads(summary_file.read_text())
     assert summary["events_in"] == summary["accepted"] + sum(summary["dropped"].values())
     assert out.read_text().splitlines()[0] == "t,x,y,z,step"
-    assert len(out.read_text().splitlines()) == summary["depth_out"] + 1
+    assert len(out.read_text().splitlines()) == summary["depth_out"] + 2  # header and end line
 
 
 def test_spec_and_overrides_are_applied(edge_folder, tmp_path, capsys):

@@ -31,3 +31,10 @@ def located(path: object, line: int | None, message: str) -> str:
     """Format ``path:line: message`` (line omitted when unknown)."""
     where = f"{path}:{line}" if line is not None else f"{path}"
     return f"{where}: {message}"
+
+
+def quote(value: object, limit: int = 40) -> str:
+    """``repr(value)`` cut to ``limit`` characters: error messages never echo more of a
+    user's file than the offending field, and never a whole binary blob."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."

@@ -66,8 +66,9 @@ def read_recording(path: str | Path, sensor_size: tuple[int, int] | None = None)
     if path.is_dir():
         recording = read_ecd(path)
     elif path.suffix in EVENT_SUFFIXES:
-        events = read_events_txt(path) if path.suffix == ".txt" else read_events_npy(path)
-        recording = attach_sidecars(Recording(events=events, source=str(path)), path.parent,
+        notes: list[str] = []
+        events = read_events_txt(path, notes) if path.suffix == ".txt" else read_events_npy(path)
+        recording = attach_sidecars(Recording(events=events, source=str(path), notes=notes), path.parent,
                                     gt_depth_name=f"{path.stem}_depth.npy")
     else:
         raise DataError(located(path, None, f"unknown recording format {path.suffix!r}; expected an ECD folder "
@@ -75,9 +76,11 @@ def read_recording(path: str | Path, sensor_size: tuple[int, int] | None = None)
     if len(recording.events) == 0:
         raise DataError(located(path, None, "no events"))
     if sensor_size is not None:
+        from tofnet.events import sensor_size_problem
         width, height = (int(v) for v in sensor_size)
-        if width < 1 or height < 1:
-            raise DataError(f"sensor size must be positive, got {width}x{height}")
+        problem = sensor_size_problem(width, height)
+        if problem:
+            raise DataError(f"sensor size: {problem}")
         recording.sensor_size = (width, height)
     return recording
 
