@@ -7,7 +7,7 @@ import json
 import time
 from pathlib import Path
 
-from tofnet.errors import TofnetError
+from tofnet.errors import TofnetError, quote
 
 
 def register(subparsers) -> None:
@@ -22,6 +22,7 @@ def register(subparsers) -> None:
     p.add_argument("--record-tot", action="store_true",
                    help="also save the time-of-travel spikes (next to --out, *_tot.npz)")
     p.add_argument("--json", metavar="FILE", help="write the run summary as JSON")
+    p.add_argument("--force", action="store_true", help="overwrite existing output files (never an input)")
     p.add_argument("--quiet", action="store_true", help="no progress, summary only")
     p.set_defaults(handler=handle)
 
@@ -49,7 +50,7 @@ def build_network(args, recording_sensor_size):
 
     sensor = parse_size(args.sensor_size, "--sensor-size") if args.sensor_size else None
     network, compile_options, spec_backend, backend_options = load_network(
-        args.spec, sensor_size=sensor or (None if args.spec else recording_sensor_size))
+        Path(args.spec) if args.spec else None, sensor_size=sensor or (None if args.spec else recording_sensor_size))
     apply_overrides(network, timestep=args.timestep, refractory=args.refractory, distance=args.distance,
                     counter_bits=args.counter_bits, velocity_per=args.velocity_per,
                     update_every=args.update_every)
@@ -58,7 +59,7 @@ def build_network(args, recording_sensor_size):
         try:
             value = [float(v) for v in args.velocity.split(",")]
         except ValueError:
-            raise TofnetError(f"--velocity: expected TX,TY,TZ in m/s, got {args.velocity!r}") from None
+            raise TofnetError(f"--velocity: expected TX,TY,TZ in m/s, got {quote(args.velocity)}") from None
         for process in network.of_type(VelocityProcess):
             process.set_param("velocity", value)
             process.set_param("source", "constant")
@@ -74,6 +75,9 @@ def handle(args) -> int:
     from tofnet.io.depth import write_depth
 
     started = time.perf_counter()
+    out = Path(args.out)
+    tot_path = out.with_name(out.stem + "_tot.npz") if args.record_tot else None
+    check_outputs(args, {"--out": out, "--json": args.json, "the --record-tot file": tot_path})
     recording = read_recording(args.recording)
     network, compile_options, spec_backend, backend_options = build_network(args, recording.sensor_size)
     backend = args.backend or spec_backend or DEFAULT_BACKEND
@@ -85,21 +89,37 @@ def handle(args) -> int:
                            record_tot=args.record_tot, progress=progress)
     if progress:
         progress.done()
-    out = Path(args.out)
     summary = result.summary()
     summary["recording"] = str(args.recording)
     summary["total_time_s"] = time.perf_counter() - started
     write_depth(out, result.depth, t0_us=result.t0_us, timestep_us=result.timestep_us,
                 latency_steps=result.latency_steps, summary=summary)
-    if args.record_tot:
-        import numpy as np
-        tot_path = out.with_name(out.stem + "_tot.npz")
-        np.savez_compressed(tot_path, **{name: result.tot[name] for name in result.tot.dtype.names})
+    if tot_path is not None:
+        from tofnet.io.npy import write_npz
+        write_npz(tot_path, {name: result.tot[name] for name in result.tot.dtype.names}, compress=True)
         summary["tot_file"] = str(tot_path)
+    if recording.notes:
+        summary["notes"] = list(recording.notes)
     print(format_summary(summary, result, out, network_width=network.sensor_size))
     if args.json:
-        Path(args.json).write_text(json.dumps(summary, indent=2) + "\n")
+        from tofnet.io.files import write_text_atomic
+        write_text_atomic(args.json, json.dumps(summary, indent=2) + "\n")
     return 0
+
+
+def check_outputs(args, outputs: dict) -> None:
+    """Refuse, before any work, outputs that cannot or must not be written (see
+    ``tofnet.io.files.check_output``): the run would otherwise fail only at its end."""
+    from tofnet.io.ecd import recording_files
+    from tofnet.io.files import check_output, distinct_outputs
+
+    distinct_outputs(outputs)
+    inputs = recording_files(args.recording) + ([Path(args.spec)] if args.spec else [])
+    for option, path in outputs.items():
+        if path is not None:
+            check_output(path, force=args.force, inputs=inputs, what=option)
+    if Path(args.out).suffix not in (".npz", ".csv"):
+        raise TofnetError(f"--out: depth output must be a .npz or .csv file, got {quote(Path(args.out).name)}")
 
 
 def format_summary(summary: dict, result, out: Path, network_width) -> str:
@@ -116,6 +136,8 @@ def format_summary(summary: dict, result, out: Path, network_width) -> str:
     lines.append(f"depth out      {summary['depth_out']:>12,}  -> {out}")
     for reason, count in summary["rejected"].items():
         lines.append(f"  rejected     {count:>12,}  {reason.replace('_', ' ')}")
+    for note in summary.get("notes", []):
+        lines.append(f"note           {note}")
     if len(result.depth):
         import numpy as np
         z = result.depth["z"]

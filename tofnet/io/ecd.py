@@ -140,3 +140,17 @@ def write_ecd(folder: str | Path, events: np.ndarray, *, intrinsics: Intrinsics 
         write_text_atomic(folder / SENSOR_SIZE, f"{width} {height}\n")
     if gt_depth is not None:
         write_npy(folder / GT_DEPTH, np.asarray(gt_depth, dtype=np.float64))
+
+
+#: Every file name ``read_ecd`` may read in a recording folder.
+SIDE_FILES = (EVENTS, CALIBRATION, GROUNDTRUTH, IMU, SENSOR_SIZE, GT_DEPTH)
+
+
+def recording_files(path: str | Path) -> list[Path]:
+    """The files a recording at ``path`` is read from (a folder's, or a file and its
+    side files); outputs must not overwrite any of them."""
+    path = Path(path)
+    if path.is_dir():
+        return [path / name for name in SIDE_FILES if _present(path / name)]
+    names = [name for name in SIDE_FILES if name not in (EVENTS, GT_DEPTH)] + [f"{path.stem}_depth.npy"]
+    return [path] + [path.parent / name for name in names if _present(path.parent / name)]
