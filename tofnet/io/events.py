@@ -464,7 +464,7 @@ def events_from_columns(columns: dict[str, np.ndarray], source: object = "<memor
         i = int(back[0]) + 1
         raise fail("t", i, f"time goes back ({t_us[i]} µs after {t_us[i - 1]} µs); events must be sorted by time")
     for name in ("x", "y"):
-        a = arrays[name]
+        a = arrays[name] if arrays[name].dtype.kind != "f" else arrays[name].astype(np.float64)
         checks = [(a < 0, "pixel coordinates must be >= 0"), (a > _MAX_COORD, f"expected at most {_MAX_COORD}")]
         if a.dtype.kind == "f":
             checks.append((a != np.floor(a), "expected a whole number"))
