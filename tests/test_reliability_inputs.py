@@ -64,6 +64,19 @@ def test_cli_values_out_of_range_are_one_line(folder, tmp_path, capsys, option, 
     assert not (tmp_path / "d.npz").exists()
 
 
+@pytest.mark.parametrize("option, value, expected", [("--duration", "1e300", "duration: expected at most 3600 s"),
+                                                     ("--seed", "-1", "seed: expected a whole number >= 0"),
+                                                     ("--sensor-size", "8192x8192", "at most 16,777,216 pixels")])
+def test_simulate_options_out_of_range(tmp_path, capsys, option, value, expected):
+    assert expected in one_line_error(capsys, ["simulate", "slider", str(tmp_path / "s"), option, value, "--quiet"])
+    assert not (tmp_path / "s" / "events.txt").exists()
+
+
+def test_an_overlong_path_is_shortened_in_messages(folder, capsys):
+    err = one_line_error(capsys, ["run", str(folder), "--spec", "9" * 5000])
+    assert len(err) < 400 and "..." in err
+
+
 def test_spec_option_naming_a_missing_file(folder, capsys):
     assert "nosuchfile: cannot read the spec: file not found" in one_line_error(
         capsys, ["run", str(folder), "--spec", "nosuchfile"])

@@ -28,8 +28,12 @@ class BackendError(TofnetError):
 
 
 def located(path: object, line: int | None, message: str) -> str:
-    """Format ``path:line: message`` (line omitted when unknown)."""
-    where = f"{path}:{line}" if line is not None else f"{path}"
+    """Format ``path:line: message`` (line omitted when unknown; an absurdly long path is
+    shortened in the middle so that the message stays one readable line)."""
+    text = str(path)
+    if len(text) > 240:
+        text = f"{text[:100]}...{text[-100:]}"
+    where = f"{text}:{line}" if line is not None else text
     return f"{where}: {message}"
 
 

@@ -411,8 +411,8 @@ def _read_spec_file(path: Path, what: str) -> str:
     try:
         return read_text(path, f"{what} file", limit=MAX_SPEC_BYTES)
     except DataError as err:
-        message = str(err).removeprefix(f"{path}: ")
-        raise SpecError(f"{path}: cannot read the {what}: {message}") from None
+        message = str(err).removeprefix(located(path, None, ""))
+        raise SpecError(located(path, None, f"cannot read the {what}: {message}")) from None
 
 
 def spec_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> Spec:
@@ -574,8 +574,8 @@ def load_budget(path_or_name: str | Path) -> Budget:
         return BUDGETS[path_or_name]
     path = Path(path_or_name)
     if not (path.exists() or path.is_symlink()):
-        raise SpecError(f"{path}: cannot read the budget (no such file); expected a YAML file or one of "
-                        f"{', '.join(BUDGETS)}")
+        raise SpecError(located(path, None, f"cannot read the budget (no such file); expected a YAML file or one "
+                                            f"of {', '.join(BUDGETS)}"))
     text = _read_spec_file(path, "budget")
     tree = _parse_yaml(text, str(path), "empty budget file; expected a mapping with core, chip, max_chips")
     reader = _Reader(tree, str(path))
