@@ -125,3 +125,18 @@ def test_specs_of_any_yaml_value(tree, value, field):
     body = dict(base["processes"][process])
     body["timestep" if isinstance(value, (int, float)) else "sensor_size"] = value
     assert_clean("spec", yaml.safe_dump({**base, "processes": {**base["processes"], process: body}}).encode())
+
+
+_decimal_time = st.builds(
+    lambda sign, whole, fraction, exponent: f"{sign}{whole}{'.' + fraction if fraction is not None else ''}"
+                                            f"{'e' + str(exponent) if exponent is not None else ''}",
+    st.sampled_from(["", "-", "+"]), st.text("0123456789", min_size=1, max_size=22),
+    st.none() | st.text("0123456789", max_size=30), st.none() | st.integers(-30, 14))
+
+
+@FUZZ
+@given(times=st.lists(_decimal_time, min_size=1, max_size=6))
+def test_events_txt_times_equal_the_exact_decimal_value(times):
+    from decimal import Decimal
+    times = sorted(times, key=Decimal)
+    assert_clean("events.txt", "".join(f"{t} 1 2 1\n" for t in times).encode())

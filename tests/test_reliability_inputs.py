@@ -77,6 +77,10 @@ def test_an_overlong_path_is_shortened_in_messages(folder, capsys):
     assert len(err) < 400 and "..." in err
 
 
+def test_a_newline_in_a_path_stays_on_one_line(folder, capsys):
+    assert "\\r\\n: cannot read the spec" in one_line_error(capsys, ["run", str(folder), "--spec", "\r\n"])
+
+
 def test_spec_option_naming_a_missing_file(folder, capsys):
     assert "nosuchfile: cannot read the spec: file not found" in one_line_error(
         capsys, ["run", str(folder), "--spec", "nosuchfile"])
@@ -203,6 +207,18 @@ def test_truncated_npz_and_bad_crc_are_refused(tmp_path):
     (tmp_path / "crc.npz").write_bytes(bytes(flipped))
     with pytest.raises(DataError, match="Bad CRC-32"):
         read_events_npy(tmp_path / "crc.npz")
+
+
+def test_zip_errors_do_not_quote_the_archive(tmp_path):
+    # Found by benchmarks/fuzz.py: zipfile's message quoted a whole local header.
+    np.savez(tmp_path / "ev.npz", t=np.arange(3), x=np.zeros(3), y=np.zeros(3), p=np.ones(3))
+    raw = bytearray((tmp_path / "ev.npz").read_bytes())
+    local = raw.index(b"x.npy")  # the local header's name of member x
+    raw[local] = ord("q")
+    (tmp_path / "ev.npz").write_bytes(bytes(raw))
+    with pytest.raises(DataError, match="File name in directory") as info:
+        read_events_npy(tmp_path / "ev.npz")
+    assert len(str(info.value)) < 250
 
 
 def test_zip_bomb_is_refused_by_its_declared_size(tmp_path, monkeypatch):

@@ -111,7 +111,28 @@ def _write(folder: Path, name: str, data: bytes) -> Path:
 
 def _events_txt(data: bytes, folder: Path):
     from tofnet.io.events import read_events_txt
-    return read_events_txt(_write(folder, "events.txt", data))
+    return read_events_txt(_write(folder, "events.txt", data)), data
+
+
+def decimal_times_us(data: bytes) -> list[int]:
+    """The oracle of the ``events.txt`` parser: each line's ``t`` as µs via Python's
+    ``Decimal`` at full precision, rounded half away from zero."""
+    import decimal
+    context = decimal.Context(prec=60_000, Emax=10**6, Emin=-(10**6), rounding=decimal.ROUND_HALF_UP)
+    out = []
+    for line in data.split(b"\n"):
+        fields = [f for f in re.split(rb"[ \t\r]+", line) if f]
+        if fields and not fields[0].startswith(b"#"):
+            value = context.multiply(decimal.Decimal(fields[0].decode()), decimal.Decimal(1_000_000))
+            out.append(int(value.to_integral_value(rounding=decimal.ROUND_HALF_UP, context=context)))
+    return out
+
+
+def check_events_txt(result) -> None:
+    """The parser's events, and its times equal to the exact decimal oracle."""
+    events, data = result
+    check_events(events)
+    require(events["t"].tolist() == decimal_times_us(data), "times equal the exact decimal value rounded to µs")
 
 
 def _events_numpy(suffix: str) -> Callable[[bytes, Path], Any]:
@@ -174,7 +195,7 @@ class Target:
 
 
 TARGETS: dict[str, Target] = {t.name: t for t in (
-    Target("events.txt", _events_txt, check_events),
+    Target("events.txt", _events_txt, check_events_txt),
     Target("events.npy", _events_numpy(".npy"), check_events),
     Target("events.npz", _events_numpy(".npz"), check_events),
     Target("calib.txt", _side_file("calib.txt"), check_recording),

@@ -25,7 +25,7 @@ from typing import IO, Iterable
 
 import numpy as np
 
-from tofnet.errors import DataError, located
+from tofnet.errors import DataError, located, reason
 from tofnet.io.files import open_regular
 
 MAGIC = b"\x93NUMPY"
@@ -125,7 +125,7 @@ def load_npy(path: str | Path, what: str = ".npy file") -> np.ndarray:
         try:
             return _read_array(handle, size, path)
         except _ERRORS as err:
-            raise DataError(located(path, None, f"cannot read the array: {err}")) from None
+            raise DataError(located(path, None, f"cannot read the array: {reason(err)}")) from None
 
 
 def load_npz(path: str | Path, wanted: Iterable[str] | None = None,
@@ -136,7 +136,7 @@ def load_npz(path: str | Path, wanted: Iterable[str] | None = None,
         try:
             archive = zipfile.ZipFile(handle)
         except _ERRORS as err:
-            raise DataError(located(path, None, f"not a readable .npz (zip) file, or truncated ({err})")) from None
+            raise DataError(located(path, None, f"not a readable .npz (zip) file, or truncated ({reason(err)})")) from None
         with archive:
             members = {info.filename[:-4]: info for info in archive.infolist() if info.filename.endswith(".npy")}
             keys = list(members)
@@ -158,7 +158,7 @@ def _read_member(archive: zipfile.ZipFile, info: zipfile.ZipInfo, source: str) -
             if stream.read(1):  # also completes zip's CRC-32 check
                 raise DataError(located(source, None, "holds more bytes than the zip directory declares"))
     except _ERRORS as err:
-        raise DataError(located(source, None, f"cannot read the array: {err}")) from None
+        raise DataError(located(source, None, f"cannot read the array: {reason(err)}")) from None
     return array
 
 
