@@ -70,14 +70,13 @@ def build_network(args, recording_sensor_size):
 
 def handle(args) -> int:
     from tofnet.api import DEFAULT_BACKEND, run
+    from tofnet.cli.outputs import check_run_outputs
     from tofnet.cli.progress import Progress
     from tofnet.io import read_recording
     from tofnet.io.depth import write_depth
 
     started = time.perf_counter()
-    out = Path(args.out)
-    tot_path = out.with_name(out.stem + "_tot.npz") if args.record_tot else None
-    check_outputs(args, {"--out": out, "--json": args.json, "the --record-tot file": tot_path})
+    check_run_outputs(args)
     recording = read_recording(args.recording)
     network, compile_options, spec_backend, backend_options = build_network(args, recording.sensor_size)
     backend = args.backend or spec_backend or DEFAULT_BACKEND
@@ -89,37 +88,25 @@ def handle(args) -> int:
                            record_tot=args.record_tot, progress=progress)
     if progress:
         progress.done()
+    out = Path(args.out)
     summary = result.summary()
     summary["recording"] = str(args.recording)
+    summary["notes"] = list(recording.notes)
     summary["total_time_s"] = time.perf_counter() - started
     write_depth(out, result.depth, t0_us=result.t0_us, timestep_us=result.timestep_us,
                 latency_steps=result.latency_steps, summary=summary)
-    if tot_path is not None:
+    if args.record_tot:
         from tofnet.io.npy import write_npz
+        tot_path = out.with_name(out.stem + "_tot.npz")
         write_npz(tot_path, {name: result.tot[name] for name in result.tot.dtype.names}, compress=True)
         summary["tot_file"] = str(tot_path)
-    if recording.notes:
-        summary["notes"] = list(recording.notes)
     print(format_summary(summary, result, out, network_width=network.sensor_size))
+    for note in summary["notes"]:
+        print(f"note           {note}")
     if args.json:
         from tofnet.io.files import write_text_atomic
         write_text_atomic(args.json, json.dumps(summary, indent=2) + "\n")
     return 0
-
-
-def check_outputs(args, outputs: dict) -> None:
-    """Refuse, before any work, outputs that cannot or must not be written (see
-    ``tofnet.io.files.check_output``): the run would otherwise fail only at its end."""
-    from tofnet.io.ecd import recording_files
-    from tofnet.io.files import check_output, distinct_outputs
-
-    distinct_outputs(outputs)
-    inputs = recording_files(args.recording) + ([Path(args.spec)] if args.spec else [])
-    for option, path in outputs.items():
-        if path is not None:
-            check_output(path, force=args.force, inputs=inputs, what=option)
-    if Path(args.out).suffix not in (".npz", ".csv"):
-        raise TofnetError(f"--out: depth output must be a .npz or .csv file, got {quote(Path(args.out).name)}")
 
 
 def format_summary(summary: dict, result, out: Path, network_width) -> str:
@@ -136,8 +123,6 @@ def format_summary(summary: dict, result, out: Path, network_width) -> str:
     lines.append(f"depth out      {summary['depth_out']:>12,}  -> {out}")
     for reason, count in summary["rejected"].items():
         lines.append(f"  rejected     {count:>12,}  {reason.replace('_', ' ')}")
-    for note in summary.get("notes", []):
-        lines.append(f"note           {note}")
     if len(result.depth):
         import numpy as np
         z = result.depth["z"]

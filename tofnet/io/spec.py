@@ -288,7 +288,7 @@ class _Reader:
                 if candidate in Process._registry:
                     return Process._registry[candidate]
         raise self.fail(body, "type", f"{path}.type",
-                        f"unknown process type {quote(type_name)}; expected one of {', '.join(_known_types())}")
+                        f"unknown process type {type_name!r}; expected one of {', '.join(_known_types())}")
 
     def connections(self, tree: Mapping, processes: dict[str, Process]) -> None:
         section = tree.get("connections") or []
