@@ -7,7 +7,7 @@ written; errors name the file, the line and the key. The format is in docs/spec.
 YAML is read with a bounded safe loader: at most ``MAX_SPEC_BYTES`` of text,
 ``MAX_NESTING`` levels, ``MAX_ALIASES`` alias uses and ``MAX_VALUES`` values after
 expanding aliases (a "billion laughs" file is refused, not expanded); recursive
-aliases and tags other than YAML's plain types are refused; no code ever runs.
+aliases and tags other than YAML's plain types are refused; no tag runs code.
 """
 
 from __future__ import annotations
