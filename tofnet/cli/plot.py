@@ -33,6 +33,7 @@ def register(subparsers) -> None:
     p.add_argument("--reduce", choices=("latest", "median"), default="latest",
                    help="depth map: each pixel's latest or median depth in the window (default latest)")
     p.add_argument("--no-gt", action="store_true", help="leave out the ground truth panels and overlays")
+    p.add_argument("--force", action="store_true", help="overwrite existing PNG files")
     add_timing_options(p)
     p.set_defaults(handler=handle)
 
@@ -40,6 +41,8 @@ def register(subparsers) -> None:
 def handle(args) -> int:
     from tofnet.eval.metrics import require_timing
     from tofnet.eval.plots import available_kinds, figure, save_figure
+    from tofnet.io.ecd import recording_files
+    from tofnet.io.files import check_output
     from tofnet.units import seconds
 
     window_s = seconds(args.error_window, "--error-window")
@@ -63,13 +66,13 @@ def handle(args) -> int:
         if out.suffix.lower() != ".png":
             raise TofnetError(f"--out: figures are written as PNG, got {out.name!r}")
         targets = [(args.kind, out)]
+    inputs = [*recording_files(args.recording), depth_path]
+    for kind, path in targets:
+        if support[kind] is None:
+            check_output(path, force=args.force, inputs=inputs, what=f"the {kind} figure")
     for kind, path in targets:
         if support[kind] is not None:
             print(f"skipped {kind}: it {support[kind]}", file=sys.stderr)
             continue
-        try:
-            written = save_figure(figure(kind, recording, depth, meta, **options), path)
-        except OSError as err:
-            raise DataError(f"{path}: cannot write the figure: {err.strerror or err}") from None
-        print(written)
+        print(save_figure(figure(kind, recording, depth, meta, **options), path))
     return 0

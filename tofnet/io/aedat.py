@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tofnet.errors import DataError, located
+from tofnet.errors import DataError, located, quote, reason
 from tofnet.io.source import EventSource
 
 #: Standard gravity, m/s² per g (DV's accelerometer unit).
@@ -42,11 +42,12 @@ class AedatSource(EventSource):
                 except RuntimeError:
                     counts = {}  # no index table (an interrupted recording): counts unknown
         except RuntimeError as err:
-            raise DataError(located(self.path, None, f"not a readable AEDAT4 file ({err})")) from None
+            raise DataError(located(self.path, None, f"not a readable AEDAT4 file ({reason(err)})")) from None
         events = [track for track in tracks if track.data_type == "events"]
         if not events:
             raise DataError(located(self.path, None, "the file has no event track; found "
-                                                     + (", ".join(t.data_type for t in tracks) or "no tracks")))
+                                                     + (", ".join(quote(t.data_type, 20) for t in tracks[:10])
+                                                        or "no tracks")))
         self.track_id = events[0].id
         self.sensor_size = tuple(events[0].dimensions)
         self.n_events = counts.get(self.track_id)
@@ -72,7 +73,7 @@ class AedatSource(EventSource):
                     elif track.data_type == "imus" and len(packet):
                         imu.append(imu_to_ecd(packet))
             except RuntimeError as err:
-                raise DataError(located(self.path, None, f"cannot decode ({err})")) from None
+                raise DataError(located(self.path, None, f"cannot decode ({reason(err)})")) from None
         if imu:
             self.imu = np.concatenate(imu)
 

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tofnet.errors import DataError, located
+from tofnet.errors import DataError, located, quote, reason
 from tofnet.io.extras import require
 from tofnet.io.recording import Intrinsics
 from tofnet.io.source import EventSource
@@ -37,7 +37,7 @@ def open_hdf5(path: Path) -> EventSource:
     try:
         handle = h5py.File(path, "r")
     except OSError as err:
-        raise DataError(located(path, None, f"not a readable HDF5 file ({err})")) from None
+        raise DataError(located(path, None, f"not a readable HDF5 file ({reason(err)})")) from None
     try:
         if _has(handle, "events", ("x", "y", "t", "p")):
             return DsecSource(path, handle)
@@ -47,7 +47,8 @@ def open_hdf5(path: Path) -> EventSource:
         if _has(handle, "prophesee/left", ("x", "y", "t", "p")):
             from tofnet.io.hdf5_datasets import M3edSource
             return M3edSource(path, handle)
-        found = ", ".join(sorted(handle.keys())) or "nothing"
+        keys = sorted(handle.keys())
+        found = ", ".join(quote(key, 20) for key in keys[:10]) + (", ..." if len(keys) > 10 else "") or "nothing"
         raise DataError(located(path, None, f"no event datasets; expected events/{{x,y,t,p}} (DSEC, TUM-VIE), "
                                             f"davis/left/events (MVSEC) or prophesee/left/{{x,y,t,p}} (M3ED); "
                                             f"found {found}"))
@@ -140,17 +141,18 @@ class DsecSource(ColumnsSource):
         # DSEC: <sequence>/events/{left,right}/events.h5 and <sequence>/calibration/cam_to_cam.yaml.
         side = self.path.parent.name
         yaml_path = self.path.parent.parent.parent / "calibration" / "cam_to_cam.yaml"
-        if side not in ("left", "right") or not yaml_path.is_file():
+        if side not in ("left", "right") or not (yaml_path.exists() or yaml_path.is_symlink()):
             return
-        import yaml
+        from tofnet.io.spec import read_yaml_file
+        data = read_yaml_file(yaml_path, "calibration")  # bounded (size, nesting, aliases)
         try:
-            camera = yaml.safe_load(yaml_path.read_text())["intrinsics"]["cam0" if side == "left" else "cam3"]
+            camera = data["intrinsics"]["cam0" if side == "left" else "cam3"]
             self.intrinsics = intrinsics_from(camera["camera_matrix"], camera.get("distortion_coeffs", ()),
                                               camera.get("distortion_model", "radtan"))
             self.sensor_size = self.sensor_size or tuple(int(v) for v in camera["resolution"])
-        except (KeyError, TypeError, ValueError, yaml.YAMLError) as err:
+        except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as err:
             raise DataError(located(yaml_path, None, f"expected intrinsics/cam0 (or cam3) with camera_matrix "
-                                                     f"[fx, fy, cx, cy] ({err})")) from None
+                                                     f"[fx, fy, cx, cy] ({reason(err, 40)})")) from None
         self.notes.append(f"intrinsics from {yaml_path}")
 
 
@@ -166,7 +168,8 @@ def intrinsics_from(matrix, coefficients, model: str) -> Intrinsics:
     """
     model_name = MODEL_NAMES.get(str(model).lower().strip())
     if model_name is None:
-        raise ValueError(f"unknown distortion model {model!r}; expected one of {', '.join(sorted(MODEL_NAMES))}")
+        raise ValueError(f"unknown distortion model {quote(str(model), 20)}; expected one of "
+                         f"{', '.join(sorted(MODEL_NAMES))}")
     coefficients = tuple(float(c) for c in np.ravel(coefficients))
     if model_name == "radtan" and len(coefficients) == 4:
         coefficients = coefficients + (0.0,)

@@ -5,6 +5,7 @@ from __future__ import annotations
 from tofnet.core.params import Param
 from tofnet.core.ports import Payload, PortSpec
 from tofnet.core.process import Process
+from tofnet.processes.input import MAX_PERIOD_S
 
 
 class BackgroundActivityFilterProcess(Process):
@@ -29,7 +30,7 @@ class BackgroundActivityFilterProcess(Process):
         Param("radius", "int", 1, unit="px", doc="neighbourhood (Chebyshev distance) that supports a spike",
               minimum=1, maximum=16),
         Param("window", "duration", "30ms", unit="s", doc="how recent a neighbour's spike must be (jAER's default)",
-              minimum=0.0),
+              minimum=0.0, maximum=MAX_PERIOD_S),
     )
     resources_per_pixel = {"accumulators": 2, "neurons": 2}
 
