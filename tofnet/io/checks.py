@@ -34,12 +34,22 @@ def decode_errors(kind: str) -> tuple[type[BaseException], ...]:
         return ()
     errors = _LIBRARY_ERRORS
     if kind == "rosbag1":
+        errors += (AssertionError,)  # rosbags checks some record fields with assert
         try:
             from rosbags.rosbag1 import ReaderError
             errors += (ReaderError,)
         except ImportError:
             pass
     return errors
+
+
+def is_decode_error(err: BaseException, kind: str) -> bool:
+    """Whether ``err``, raised while the library of format ``kind`` read a file, means
+    "bad file": one of ``decode_errors(kind)``, or a Rust panic of faery surfacing as
+    pyo3's ``PanicException`` (a ``BaseException``, importable only once raised)."""
+    if kind in OWN_FORMATS:
+        return False
+    return isinstance(err, decode_errors(kind)) or type(err).__name__ == "PanicException"
 
 
 def check_packet(packet: np.ndarray, first_index: int, path: object) -> None:

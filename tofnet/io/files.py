@@ -41,6 +41,12 @@ def open_regular(path: str | Path, what: str = "file") -> IO[bytes]:
     except IsADirectoryError:
         raise DataError(located(path, None, f"is a folder, expected a {what}")) from None
     except OSError as err:
+        try:  # a socket cannot be opened at all (ENXIO): say what it is
+            mode = os.stat(path).st_mode
+        except OSError:
+            mode = stat.S_IFREG
+        if not stat.S_ISREG(mode):
+            raise DataError(located(path, None, f"is {_kind(mode)}, expected a regular {what}")) from None
         raise DataError(located(path, None, f"cannot open the {what}: {_reason(err)}")) from None
     try:
         mode = os.fstat(fd).st_mode

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from tofnet.errors import DataError, located, quote, reason
+from tofnet.events import MAX_TIME_US
 from tofnet.io.extras import require
 from tofnet.io.recording import Intrinsics
 from tofnet.io.source import EventSource
@@ -103,6 +104,8 @@ class ColumnsSource(EventSource):
                                                 f"got {self.columns['t'].dtype}"))
         self.n_events = int(lengths["t"][0])
         self.t_offset = int(t_offset)
+        if abs(self.t_offset) >= MAX_TIME_US:
+            raise DataError(located(path, None, f"t_offset {self.t_offset} µs is out of range (|t| < 2**61 µs)"))
 
     def _packets(self, size_hint: int) -> Iterable[np.ndarray]:
         from tofnet.io.events import events_from_columns
@@ -110,7 +113,14 @@ class ColumnsSource(EventSource):
         for start in range(0, self.n_events, size_hint):
             stop = min(start + size_hint, self.n_events)
             arrays = {name: dataset[start:stop] for name, dataset in self.columns.items()}
-            arrays["t"] = arrays["t"].astype(np.int64) + self.t_offset
+            t = arrays["t"]
+            # In range before the cast and the sum, so neither wraps (uint64 past 2**63).
+            outside = np.flatnonzero((t >= MAX_TIME_US) | ((t <= -MAX_TIME_US) if t.dtype.kind == "i" else False))
+            if outside.size:
+                i = int(outside[0])
+                raise DataError(located(self.path, None, f"event {start + i + 1:,}: t = {int(t[i])} µs is out of "
+                                                         "range (|t| < 2**61 µs)"))
+            arrays["t"] = t.astype(np.int64) + self.t_offset
             yield events_from_columns(arrays, f"{self.path} (events {start}..{stop - 1})")
 
     def close(self) -> None:

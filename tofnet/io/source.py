@@ -26,7 +26,7 @@ from numba import njit
 
 from tofnet.errors import DataError, located, reason
 from tofnet.events import EVENT_DTYPE, sensor_size_problem
-from tofnet.io.checks import OWN_FORMATS, check_metadata, check_packet, decode_errors
+from tofnet.io.checks import OWN_FORMATS, check_metadata, check_packet, is_decode_error
 from tofnet.io.recording import Intrinsics, Recording, VelocitySource
 
 #: Events per chunk unless asked otherwise: 13 MB of ``EVENT_DTYPE``.
@@ -92,7 +92,6 @@ class EventSource:
 
     def _checked_packets(self, size_hint: int) -> Iterator[np.ndarray]:
         """``_packets``, each checked by ``check_packet``; decoding libraries' errors as ``DataError``."""
-        errors = decode_errors(self.format)
         packets = iter(self._packets(size_hint))
         done = 0
         while True:
@@ -100,7 +99,9 @@ class EventSource:
                 packet = next(packets)
             except StopIteration:
                 return
-            except errors as err:
+            except BaseException as err:
+                if not is_decode_error(err, self.format):
+                    raise
                 raise DataError(located(self.path, None, f"cannot decode the events after event {done:,}: "
                                                          f"{reason(err)}")) from None
             check_packet(packet, done, self.path)
@@ -277,7 +278,6 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
         raise DataError(located(path, None, f"--columns applies to plain numpy arrays (.npy/.npz), not {kind} files"))
     if topics and kind != "rosbag1":
         raise DataError(located(path, None, f"topics apply to ROS bags, not {kind} files"))
-    errors = decode_errors(kind)
     try:
         if kind in ("aedat4", "evt", "dat", "es"):
             from tofnet.io.prophesee import open_faery
@@ -290,7 +290,9 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
             source = RosbagSource(path, topics)
         else:
             source = RecordingSource(_read_in_memory(path, kind, columns), kind, path)
-    except errors as err:
+    except BaseException as err:
+        if not is_decode_error(err, kind):
+            raise
         raise DataError(located(path, None, f"not a readable {FORMAT_NAMES.get(kind, kind)} file: "
                                             f"{reason(err)}")) from None
     try:
@@ -303,13 +305,12 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
                 raise DataError(f"sensor size: {problem}")
             source.sensor_size = (width, height)
         check_metadata(source, path)
-    except errors as err:
+    except BaseException as err:
         source.close()
+        if not is_decode_error(err, kind):
+            raise
         raise DataError(located(path, None, f"not a readable {FORMAT_NAMES.get(kind, kind)} file: "
                                             f"{reason(err)}")) from None
-    except BaseException:
-        source.close()
-        raise
     return source
 
 
