@@ -32,7 +32,7 @@ import numpy as np
 
 from tofnet.fuzzing import OPS, TARGETS, TOKENS, _npy, _npz, mutate, mutate_words, outcome, seeds
 
-NUMPY_TARGETS = {"events.npy", "events.npz", "events_depth.npy", "depth.npz"}
+NUMPY_TARGETS = {"events.npy", "events.npz", "events_depth.npy", "depth.npz", "hdf5"}
 DTYPES = ("<i1", "<u1", "<i2", "<u2", "<i4", "<u4", "<i8", "<u8", ">i8", "<f2", "<f4", "<f8", ">f8", "?", "<c16",
           "<U3", "S2", "<M8[us]")
 SPECIAL = (0, 1, -1, 2**15, 2**16 - 1, 2**31, 2**53 + 1, 2**61, 2**62, 2**63 - 1, -(2**63), 2**64 - 1,
@@ -79,6 +79,12 @@ def numpy_case(rng: random.Random, name: str) -> bytes:
         return _npy(random_array(rng, n * width, rng.choice(DTYPES)).reshape(n, width))
     if name == "events.npz":
         return _npz(rng.random() < 0.5, **columns)
+    if name == "hdf5":  # the DSEC layout's datasets, of random dtypes and values
+        arrays = {f"events.{k}": v for k, v in columns.items()}
+        for key, size in (("t_offset", 1), ("calib.resolution", 2), ("calib.intrinsics", 4), ("imu.t", n)):
+            if rng.random() < 0.5:
+                arrays[key] = random_array(rng, size)
+        return _npz(False, **arrays)
     arrays = {k: random_array(rng, n) for k in ("t", "t_us", "x", "y", "z", "step")}
     arrays.update({k: random_array(rng, 1)[0] for k in ("t0_us", "timestep_us", "latency_steps")})
     if rng.random() < 0.5:

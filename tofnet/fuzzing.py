@@ -211,6 +211,16 @@ TARGETS: dict[str, Target] = {t.name: t for t in (
 )}
 
 
+def _format_targets() -> None:
+    """Issue 10's formats, read through ``read_recording`` (``tofnet.fuzzing_formats``)."""
+    from tofnet.fuzzing_formats import FORMAT_FILES, read_format
+    for name in FORMAT_FILES:
+        TARGETS[name] = Target(name, read_format(name), check_recording)
+
+
+_format_targets()
+
+
 def outcome(target: Target, case: Any, folder: Path) -> tuple[str, str]:
     """``("error" | "accepted" | "traceback" | "invalid", detail)`` for one case."""
     try:
@@ -244,7 +254,7 @@ def _npz(compress: bool = False, **arrays) -> bytes:
 
 
 def seeds(name: str) -> list:
-    """Valid cases of target ``name``."""
+    """Valid cases of target ``name`` (none for a format whose library is not installed)."""
     events = np.zeros(3, dtype=EVENT_DTYPE)
     events["t"], events["x"], events["y"], events["p"] = [1000, 2000, 3000], [1, 2, 3], [2, 2, 2], [1, 0, 1]
     depth = np.zeros(2, dtype=DEPTH_DTYPE)
@@ -280,6 +290,9 @@ def seeds(name: str) -> list:
     if name == "cli options":
         return [["--timestep", "1ms"], ["--refractory", "5ms", "--distance", "2", "--sensor-size", "64x48"],
                 ["--velocity", "0.5,0,0", "--patch", "30x30", "--counter-bits", "6", "--update-every", "3"]]
+    from tofnet.fuzzing_formats import FORMAT_FILES, format_seeds
+    if name in FORMAT_FILES:
+        return format_seeds(name)
     raise KeyError(name)
 
 
