@@ -27,7 +27,7 @@ from tofnet.compiler.partition import parse_patch_size, patch_per_layer
 from tofnet.core.network import Network
 from tofnet.core.ports import InPort, OutPort
 from tofnet.core.process import Process
-from tofnet.errors import DataError, SpecError, TofnetError, located, quote
+from tofnet.errors import DataError, SpecError, TofnetError, located, quote, reason
 from tofnet.units import seconds
 
 TOP_KEYS = ("name", "description", "processes", "connections", "compile", "backend")
@@ -293,7 +293,7 @@ class _Reader:
             if found is not None:
                 return found
         raise self.fail(body, "type", f"{path}.type",
-                        f"unknown process type {type_name!r}; expected one of {', '.join(_known_types())}, "
+                        f"unknown process type {quote(type_name)}; expected one of {', '.join(_known_types())}, "
                         "'package.module:ClassName' or a 'tofnet.processes' entry point")
 
     def connections(self, tree: Mapping, processes: dict[str, Process]) -> None:
@@ -309,11 +309,11 @@ class _Reader:
             ends = []
             for proc_name, port_name in (match.group(1, 2), match.group(3, 4)):
                 if proc_name not in processes:
-                    raise self.fail(section, i, path, f"unknown process {proc_name!r}; "
+                    raise self.fail(section, i, path, f"unknown process {quote(proc_name)}; "
                                     f"processes: {', '.join(processes)}")
                 process = processes[proc_name]
                 if port_name not in process.ports:
-                    raise self.fail(section, i, path, f"unknown port {port_name!r} of {proc_name} "
+                    raise self.fail(section, i, path, f"unknown port {quote(port_name)} of {proc_name} "
                                     f"({type(process).__name__}); ports: {_ports(process)}")
                 ends.append(process.ports[port_name])
             source, target = ends
@@ -398,11 +398,11 @@ def process_class(type_name: str) -> type[Process] | None:
         try:
             module = importlib.import_module(module_name)
         except Exception as err:  # the user's module: whatever it raises, one line
-            raise SpecError(f"cannot import {module_name!r} for process type {type_name!r}: "
-                            f"{type(err).__name__}: {err}") from None
+            raise SpecError(f"cannot import {quote(module_name)} for process type {quote(type_name)}: "
+                            f"{type(err).__name__}: {reason(err)}") from None
         found = getattr(module, attr, None)
         if not (isinstance(found, type) and issubclass(found, Process)):
-            raise SpecError(f"{type_name!r} is not a process type (a subclass of tofnet.Process)")
+            raise SpecError(f"{quote(type_name)} is not a process type (a subclass of tofnet.Process)")
         return found
     for candidate in (type_name, type_name + "Process"):
         if candidate in Process._registry:
