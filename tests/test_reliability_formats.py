@@ -307,3 +307,21 @@ def test_errors_are_tofnet_errors_for_every_format(tmp_path):
         with pytest.raises(TofnetError) as err:
             read_recording(tmp_path / name)
         _one_line(err)
+
+
+def test_nul_bytes_in_names_are_one_line(tmp_path, capsys):
+    # Found by benchmarks/fuzz.py (seed 1): main's run passes --spec as a Path, which
+    # reached os.open with the NUL byte.
+    (tmp_path / "d.npz").write_text("old")
+    words = [["run", str(tmp_path), "--spec", "\x00", "--out", str(tmp_path / "x.npz")],
+             ["run", str(tmp_path), "--out", str(tmp_path / "a\x00.npz")],
+             ["run", str(tmp_path), "--spec", "a\x00", "--out", str(tmp_path / "d.npz"), "--force"],
+             ["info", str(tmp_path / "a\x00")], ["convert", str(tmp_path), str(tmp_path / "a\x00.npz")]]
+    for argv in words:
+        assert main(argv) == 2
+        assert capsys.readouterr().err.count("\n") == 1
+    from pathlib import Path
+
+    from tofnet.io.spec import load_spec
+    with pytest.raises(TofnetError, match="not a valid file name"):
+        load_spec(Path("a\x00.yaml"))

@@ -36,7 +36,7 @@ _EXPECTED = ("an ECD folder or an events file (.txt, .npy, .npz, .aedat4, .raw, 
 def detect_format(path: str | Path) -> str:
     """The key of ``FORMATS`` for ``path``; ``DataError`` when it is missing or unknown."""
     path = Path(path)
-    if not path.exists():
+    if "\x00" in str(path) or not path.exists():
         raise DataError(located(path, None, f"no such file or folder; expected {_EXPECTED}"))
     if path.is_dir():
         return "ecd"

@@ -36,6 +36,8 @@ def open_regular(path: str | Path, what: str = "file") -> IO[bytes]:
     path = Path(path)
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    except ValueError:  # a NUL byte in the name
+        raise DataError(located(path, None, f"not a valid file name for the {what}")) from None
     except FileNotFoundError:
         raise DataError(located(path, None, "file not found")) from None
     except IsADirectoryError:
@@ -217,8 +219,9 @@ def check_output(path: str | Path, *, force: bool = False, inputs: Iterable[str 
     one that holds an input.
     """
     path = Path(path)
-    if path.name in ("", ".", ".."):
+    if path.name in ("", ".", "..") or "\x00" in str(path):
         raise DataError(located(path, None, f"{what}: expected a {'folder' if folder else 'file'} name"))
+    inputs = [source for source in inputs if "\x00" not in str(source)]  # such a name cannot exist
     for source in inputs:
         if (path.exists() or path.is_symlink()) and Path(source).exists() and same_file(path, source):
             raise DataError(located(path, None, f"{what} would overwrite the input {source}; choose another name"))
@@ -266,6 +269,8 @@ def distinct_outputs(paths: dict[str, str | Path | None]) -> None:
     for option, path in paths.items():
         if path is None:
             continue
+        if "\x00" in str(path):
+            raise DataError(located(path, None, f"{option}: expected a file name"))
         key = Path(path).resolve()
         if key in seen:
             raise DataError(f"{option} and {seen[key]} name the same file {path}; choose two names")
