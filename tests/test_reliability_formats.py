@@ -325,3 +325,25 @@ def test_nul_bytes_in_names_are_one_line(tmp_path, capsys):
     from tofnet.io.spec import load_spec
     with pytest.raises(TofnetError, match="not a valid file name"):
         load_spec(Path("a\x00.yaml"))
+
+
+def test_a_faery_panic_is_one_line(tmp_path):
+    # A zeroed byte inside an AEDAT4 packet makes faery's flatbuffers code panic; pyo3
+    # raises that as PanicException, a BaseException that `except Exception` misses.
+    pytest.importorskip("faery")
+    from tofnet.fuzzing import seeds
+    data = bytearray(seeds("aedat4")[0])
+    data[1138] = 0
+    (tmp_path / "rec.aedat4").write_bytes(bytes(data))
+    with pytest.raises(DataError) as err:
+        read_recording(tmp_path / "rec.aedat4")
+    _one_line(err)
+
+
+def test_a_long_process_type_in_a_spec_is_cut(tmp_path):
+    from tofnet.errors import SpecError
+    from tofnet.io.spec import load_spec
+    text = "processes:\n  a: {type: Depth" + "9" * 5000 + "}\nconnections: []\n"
+    with pytest.raises(SpecError, match=r"unknown process type 'Depth9+\.\.\.;") as err:
+        load_spec(text)
+    _one_line(err)

@@ -235,6 +235,7 @@ class RecordingSource(EventSource):
         # Attributes set after opening (a sensor size override) win over what was read.
         recording.sensor_size, recording.intrinsics = self.sensor_size, self.intrinsics
         recording.trajectory, recording.imu = self.trajectory, self.imu
+        recording.notes = list(self.notes)  # the file's (rounded times) and any added since
         if progress is not None:
             progress(len(recording.events), len(recording.events))
         return recording
