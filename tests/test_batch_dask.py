@@ -62,7 +62,7 @@ def test_a_sweep_equals_the_same_runs_done_one_by_one_with_tofnet_run(sweep, tmp
         recording = json.loads(open(row["summary_file"]).read())["recording"]
         out, summary_file = tmp_path / "depth.npz", tmp_path / "run.json"
         assert main(["run", recording, "--refractory", row["refractory"], "--out", str(out), "--json",
-                     str(summary_file), "--quiet"]) == 0
+                     str(summary_file), "--quiet", "--force"]) == 0
         alone = json.loads(summary_file.read_text())
         assert (row["events_in"], row["accepted"], row["dropped"], row["tot_spikes"], row["depth_out"]) == \
             (alone["events_in"], alone["accepted"], sum(alone["dropped"].values()), alone["tot_spikes"],

@@ -60,7 +60,7 @@ def test_summary_accounts_for_every_event_and_writes_json(edge_folder, tmp_path)
     summary = json.loads(summary_file.read_text())
     assert summary["events_in"] == summary["accepted"] + sum(summary["dropped"].values())
     assert out.read_text().splitlines()[0] == "t,x,y,z,step"
-    assert len(out.read_text().splitlines()) == summary["depth_out"] + 1
+    assert len(out.read_text().splitlines()) == summary["depth_out"] + 2  # header and end line
 
 
 def test_spec_and_overrides_are_applied(edge_folder, tmp_path, capsys):
@@ -71,7 +71,7 @@ def test_spec_and_overrides_are_applied(edge_folder, tmp_path, capsys):
     # distance 2: the counter spans two pixels (40 steps), td = 40 ms / 2 px
     assert np.all(np.abs(depth["z"] - DEPTH_M) <= depth_tolerance(40, 0) + 1e-12)
     # a constant velocity twice as fast as the truth halves nothing but doubles the depth
-    assert main(["run", str(edge_folder), "--out", str(out), "--velocity", "1.0,0,0", "--quiet"]) == 0
+    assert main(["run", str(edge_folder), "--out", str(out), "--velocity", "1.0,0,0", "--quiet", "--force"]) == 0
     depth, _ = read_depth(out)
     assert np.median(depth["z"]) == pytest.approx(2 * DEPTH_M, rel=1e-3)
 

@@ -66,7 +66,7 @@ def test_chain_through_every_format_is_lossless(tmp_path, original, original_dep
 
 def test_refuses_to_overwrite_and_leaves_no_partial_file(tmp_path, original):
     (tmp_path / "rec.h5").write_text("precious")
-    with open_recording(original[1]) as source, pytest.raises(DataError, match="already exists"):
+    with open_recording(original[1]) as source, pytest.raises(DataError, match="exists; pass --force"):
         convert(source, tmp_path / "rec.h5")
     assert (tmp_path / "rec.h5").read_text() == "precious"
     with pytest.raises(DataError, match="cannot write '.csv'"):
@@ -91,7 +91,7 @@ def test_cli_convert_and_info(tmp_path, original, capsys):
     assert main(["convert", str(original[1]), str(tmp_path / "rec.h5"), "--quiet"]) == 0
     assert "wrote" in capsys.readouterr().out
     assert main(["convert", str(original[1]), str(tmp_path / "rec.h5"), "--quiet"]) == 2
-    assert "already exists (use --force" in capsys.readouterr().err
+    assert "exists; pass --force to overwrite it" in capsys.readouterr().err
     assert main(["info", str(tmp_path / "rec.h5"), "--quiet", "--json", str(tmp_path / "info.json")]) == 0
     out = capsys.readouterr().out
     events = original[0].events

@@ -44,6 +44,7 @@ def test_csv_round_trip(tmp_path):
     lines = (tmp_path / "d.csv").read_text().splitlines()
     assert lines[0] == "t,x,y,z,step"
     assert lines[1] == "1468939993.067417,0,0,0.1,0"
+    assert lines[-1] == "# end: 4 rows"
     back, meta = read_depth(tmp_path / "d.csv")
     assert np.array_equal(back, depth)
     assert meta["t0_us"] is None and meta["summary"] is None
@@ -63,7 +64,7 @@ def test_empty_depth_round_trips(tmp_path, name):
     ("t,x,y,z,step\n0.1,1,2,3.0,0\n0.2,1.5,2,3.0,1\n", ":3: column 'x': expected a whole number"),
 ])
 def test_csv_errors_name_line(tmp_path, text, message):
-    (tmp_path / "d.csv").write_text(text)
+    (tmp_path / "d.csv").write_text(text + "# end: 2 rows\n")
     with pytest.raises(DataError, match=f"d.csv{message}"):
         read_depth(tmp_path / "d.csv")
 

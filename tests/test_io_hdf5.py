@@ -141,7 +141,7 @@ def test_m3ed_layout_with_depth_ground_truth(tmp_path, recording):
 def test_unknown_layout_names_what_it_found(tmp_path):
     with h5py.File(tmp_path / "other.h5", "w") as f:
         f.create_dataset("images", data=np.zeros(3))
-    with pytest.raises(DataError, match="other.h5: no event datasets.*found images"):
+    with pytest.raises(DataError, match="other.h5: no event datasets.*found 'images'"):
         read_recording(tmp_path / "other.h5")
 
 

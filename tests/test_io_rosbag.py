@@ -122,5 +122,5 @@ def test_bag_without_events_lists_its_topics(tmp_path):
     store = typestore()
     with Writer(tmp_path / "empty.bag") as writer:
         writer.add_connection("/chatter", "std_msgs/msg/String", typestore=store)
-    with pytest.raises(DataError, match="no dvs_msgs/EventArray topic; topics: /chatter"):
+    with pytest.raises(DataError, match="no dvs_msgs/EventArray topic; topics: '/chatter'"):
         read_recording(tmp_path / "empty.bag")

@@ -178,7 +178,7 @@ def test_tofnet_run_compensates_rotation_from_poses_or_a_gyro_and_says_so(events
     depth, meta = read_depth(out)
     assert np.median(depth["z"]) == pytest.approx(DEPTH_M, rel=0.05)
     assert main(["run", str(folder), "--out", str(out), "--refractory", "0", "--velocity-per", "pixel", "--quiet",
-                 "--no-rotation", *velocity]) == 0
+                 "--no-rotation", "--force", *velocity]) == 0
     assert "not compensated (eq. 8: --no-rotation)" in capsys.readouterr().out
     depth, _ = read_depth(out)
     assert np.median(depth["z"]) == pytest.approx(DEPTH_M * share(), rel=0.08)
@@ -202,10 +202,10 @@ def test_a_spec_with_rotation_runs_and_no_rotation_refuses_it(tmp_path, events, 
     assert main(["run", str(tmp_path / "rec"), "--spec", str(spec), "--out", str(out), "--quiet"]) == 0
     assert "ω from the gyroscope (imu.txt) with its camera-IMU rotation" in capsys.readouterr().out
     assert main(["run", str(tmp_path / "rec"), "--spec", "examples/paper_240x180.yaml", "--sensor-size", "40x24",
-                 "--out", str(out), "--quiet"]) == 0
+                 "--out", str(out), "--quiet", "--force"]) == 0
     assert "not compensated (eq. 8: the spec has no angular velocity process)" in capsys.readouterr().out
     assert main(["run", str(tmp_path / "rec"), "--spec", str(spec), "--out", str(out), "--quiet",
-                 "--no-rotation"]) == 2
+                 "--no-rotation", "--force"]) == 2
     assert "remove it from the spec" in capsys.readouterr().err
 
 

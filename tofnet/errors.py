@@ -28,6 +28,27 @@ class BackendError(TofnetError):
 
 
 def located(path: object, line: int | None, message: str) -> str:
-    """Format ``path:line: message`` (line omitted when unknown)."""
-    where = f"{path}:{line}" if line is not None else f"{path}"
+    """Format ``path:line: message`` (line omitted when unknown; an absurdly long path is
+    shortened in the middle so that the message stays one readable line)."""
+    text = str(path)
+    if not text.isprintable():  # a newline in a file name must not break the line
+        text = text.encode("unicode_escape", "backslashreplace").decode("ascii")
+    if len(text) > 240:
+        text = f"{text[:100]}...{text[-100:]}"
+    where = f"{text}:{line}" if line is not None else text
     return f"{where}: {message}"
+
+
+def quote(value: object, limit: int = 40) -> str:
+    """``repr(value)`` cut to ``limit`` characters: error messages never echo more of a
+    user's file than the offending field, and never a whole binary blob."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def reason(err: BaseException, limit: int = 80) -> str:
+    """The first line of an exception's text, cut to ``limit`` characters: library
+    messages may quote raw bytes of the file (zipfile quotes whole headers)."""
+    lines = str(err).splitlines()
+    text = lines[0] if lines else type(err).__name__
+    return text if len(text) <= limit else text[: limit - 3] + "..."

@@ -9,6 +9,17 @@ from __future__ import annotations
 
 import numpy as np
 
+#: The documented time range: every time tofnet reads (events, poses, ``t0``) satisfies
+#: ``|t| < MAX_TIME_US`` microseconds (2**61 µs, about 73,000 years), so differences and
+#: sums of two times never overflow int64. Readers refuse times outside it.
+MAX_TIME_US = 2**61
+
+#: Largest sensor side in pixels (coordinates are uint16: 0..65535).
+MAX_SENSOR_SIDE = 65536
+#: Largest sensor in pixels: 2**24 (16.8 M, e.g. 4096x4096), 13x the largest event
+#: sensors sold (1280x960). Bounds the memory and compile time one network needs.
+MAX_SENSOR_PIXELS = 2**24
+
 EVENT_DTYPE = np.dtype([("t", "<i8"), ("x", "<u2"), ("y", "<u2"), ("p", "u1")])
 
 #: Depth estimates: ``t`` stamp in microseconds (end of the output step), ``x``/``y``
@@ -34,3 +45,15 @@ def make_events(t_us, x, y, p) -> np.ndarray:
     events["y"] = np.asarray(y)
     events["p"] = np.asarray(p)
     return events
+
+
+def sensor_size_problem(width: int, height: int) -> str | None:
+    """Why ``width x height`` px is not an accepted sensor size, or None when it is."""
+    if width < 1 or height < 1:
+        return f"width and height must be positive, got {width}x{height}"
+    if width > MAX_SENSOR_SIDE or height > MAX_SENSOR_SIDE:
+        return f"each side must be at most {MAX_SENSOR_SIDE} px, got {width}x{height}"
+    if width * height > MAX_SENSOR_PIXELS:
+        return (f"at most {MAX_SENSOR_PIXELS:,} pixels (e.g. 4096x4096) are supported, got {width}x{height} = "
+                f"{width * height:,}")
+    return None

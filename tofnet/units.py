@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
+import math
 import re
 
-from tofnet.errors import TofnetError
+from tofnet.errors import TofnetError, quote
+from tofnet.events import MAX_TIME_US
+
+#: Largest magnitude of any duration, in seconds: the documented time range (2**61 µs).
+MAX_DURATION_S = MAX_TIME_US * 1e-6
 
 _TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "ns": 1e-9}
 _LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
@@ -12,28 +17,43 @@ _NUMBER_WITH_UNIT = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)
 
 
 def _parse(value: object, units: dict[str, float], default_unit: str, what: str) -> float:
+    """A finite number in the base unit; NaN, infinities and overflowing values are refused."""
     if isinstance(value, bool):
-        raise TofnetError(f"{what}: expected a number or a string like '1{default_unit}', got {value!r}")
+        raise TofnetError(f"{what}: expected a number or a string like '1{default_unit}', got {quote(value)}")
+    number, scale = None, units[default_unit]
     if isinstance(value, (int, float)):
-        return float(value) * units[default_unit]
-    if isinstance(value, str):
+        number = value
+    elif isinstance(value, str) and len(value) <= 100:
         match = _NUMBER_WITH_UNIT.match(value)
-        if match:
-            number, unit = match.groups()
-            unit = unit or default_unit
-            if unit in units:
-                return float(number) * units[unit]
-    names = ", ".join(units)
-    raise TofnetError(f"{what}: expected a number or a string like '1{default_unit}' (units: {names}), got {value!r}")
+        if match and (match.group(2) or default_unit) in units:
+            number, scale = match.group(1), units[match.group(2) or default_unit]
+    if number is None:
+        names = ", ".join(units)
+        raise TofnetError(f"{what}: expected a number or a string like '1{default_unit}' (units: {names}), "
+                          f"got {quote(value)}")
+    try:
+        out = float(number) * scale
+    except OverflowError:
+        out = math.inf
+    if not math.isfinite(out):
+        raise TofnetError(f"{what}: expected a finite number, got {quote(value)}")
+    return out
 
 
-def seconds(value: object, what: str = "duration") -> float:
-    """A duration in seconds from ``0.001``, ``"1ms"``, ``"500us"`` or ``"0.5 s"``."""
-    return _parse(value, _TIME_UNITS, "s", what)
+def seconds(value: object, what: str = "duration", limit: float = MAX_DURATION_S) -> float:
+    """A duration in seconds from ``0.001``, ``"1ms"``, ``"500us"`` or ``"0.5 s"``.
+
+    Finite and ``|value| <= limit`` (default: within the documented time range, 2**61 µs).
+    """
+    out = _parse(value, _TIME_UNITS, "s", what)
+    if abs(out) > min(limit, MAX_DURATION_S * (1 - 1e-15)):
+        raise TofnetError(f"{what}: expected at most {min(limit, MAX_DURATION_S):.6g} s in magnitude, "
+                          f"got {quote(value)}")
+    return out
 
 
 def metres(value: object, what: str = "length") -> float:
-    """A length in metres from ``0.5``, ``"50cm"`` or ``"500mm"``."""
+    """A finite length in metres from ``0.5``, ``"50cm"`` or ``"500mm"``."""
     return _parse(value, _LENGTH_UNITS, "m", what)
 
 

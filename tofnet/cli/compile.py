@@ -24,6 +24,7 @@ def register(subparsers) -> None:
                    help="patch size for every layer, or for one layer (repeatable); default: the spec's, else auto")
     p.add_argument("--sensor-size", metavar="WxH", help="override the spec's sensor size, e.g. 1280x720")
     p.add_argument("--json", metavar="OUT", help="write the compiled network (mapping, cores, halos) as JSON; - for stdout")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --json file")
     p.set_defaults(handler=handle)
 
 
@@ -56,6 +57,9 @@ def handle(args) -> int:
     from tofnet.core.params import parse_size
     from tofnet.io.spec import default_spec_path, load_budget, load_spec
 
+    if args.json and args.json != "-":
+        from tofnet.io.files import check_output
+        check_output(args.json, force=args.force, inputs=[args.spec] if args.spec else [], what="--json")
     spec = load_spec(Path(args.spec) if args.spec else default_spec_path())
     network = spec.network
     if args.sensor_size:
@@ -77,6 +81,7 @@ def handle(args) -> int:
         if args.json == "-":
             sys.stdout.write(text)
         else:
-            Path(args.json).write_text(text)
+            from tofnet.io.files import write_text_atomic
+            write_text_atomic(args.json, text)
             print(f"\nwrote {args.json}")
     return 0

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import sys
-from pathlib import Path
 
 
 def register(subparsers) -> None:
@@ -21,6 +20,7 @@ def register(subparsers) -> None:
                    help="run only this case, or every case starting with it (repeatable)")
     p.add_argument("--list", action="store_true", help="list the cases and the registered backends, run nothing")
     p.add_argument("--json", metavar="FILE", help="also write every case's outcome as JSON")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --json file")
     p.set_defaults(handler=handle)
 
 
@@ -39,6 +39,9 @@ def handle(args) -> int:
             backend = get_backend(name)
             print(f"backend {name:<12} arithmetic {backend.arithmetic}")
         return 0
+    if args.json:
+        from tofnet.io.files import check_output
+        check_output(args.json, force=args.force, what="--json")
     against = args.against or DEFAULT_BASELINE
     backends = args.backend or available_backends()
     outcomes, failed, cache = [], 0, {}
@@ -52,7 +55,8 @@ def handle(args) -> int:
         failed += sum(not r.ok for r in results)
         outcomes.extend(r.to_dict() for r in results)
     if args.json:
-        Path(args.json).write_text(json.dumps(outcomes, indent=2) + "\n")
+        from tofnet.io.files import write_text_atomic
+        write_text_atomic(args.json, json.dumps(outcomes, indent=2) + "\n")
     if failed:
         print(f"tofnet conformance: {failed} case(s) failed", file=sys.stderr)
     return 1 if failed else 0

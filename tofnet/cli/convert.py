@@ -16,7 +16,7 @@ def register(subparsers) -> None:
     p.add_argument("output", help="ECD folder name, or a .npz, .h5/.hdf5 or .aedat4 file")
     add_input_options(p)
     p.add_argument("--sensor-size", metavar="WxH", help="sensor size in pixels (overrides the input's)")
-    p.add_argument("--force", action="store_true", help="replace OUT (and side files) when they exist")
+    p.add_argument("--force", action="store_true", help="replace OUT (and side files) when they exist (never an input)")
     p.add_argument("--quiet", action="store_true", help="no progress")
     p.set_defaults(handler=handle)
 
@@ -24,10 +24,10 @@ def register(subparsers) -> None:
 def handle(args) -> int:
     from tofnet.cli.progress import Progress
     from tofnet.core.params import parse_size
-    from tofnet.io.convert import convert, output_kind
+    from tofnet.io.convert import check_convert_output, convert
     from tofnet.io.source import open_recording
 
-    output_kind(args.output)  # a bad output name fails before reading anything
+    check_convert_output(args.output, args.input, force=args.force)  # before reading anything
     sensor = parse_size(args.sensor_size, "--sensor-size") if args.sensor_size else None
     progress = None if args.quiet else Progress("tofnet convert")
     with open_recording(args.input, sensor_size=sensor, **input_options(args)) as source:

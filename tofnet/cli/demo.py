@@ -5,12 +5,16 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from tofnet.errors import TofnetError
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("demo", help="simulate a scene, estimate depth, score it and draw figures",
                               description="Runs the whole pipeline on a built-in simulated scene "
                                           "(no arguments needed) and tells you where the pictures are.")
-    p.add_argument("--out", default="tofnet-demo", help="output folder (default: ./tofnet-demo)")
+    p.add_argument("--out", default="tofnet-demo",
+                   help="output folder (default: ./tofnet-demo); the demo replaces its own files there "
+                        "(recording/, depth.npz, eval.json, figures/) on every run")
     p.add_argument("--scenario", default="slider", help="built-in scenario (default: slider, the paper's Table 2)")
     p.add_argument("--duration", type=float, default=0.5, help="seconds of camera motion (default: 0.5)")
     p.add_argument("--backend", default=None, help="backend (default: fixed)")
@@ -26,8 +30,15 @@ def handle(args) -> int:
     from tofnet.io.depth import write_depth
     from tofnet.sim.run import simulate
 
+    from tofnet.io.files import check_folder_writable, write_text_atomic
+
     started = time.perf_counter()
     out = Path(args.out)
+    # The demo's folder is its own: its files are replaced on every run, without --force
+    # (docs/reliability.md). Only a folder that cannot be written is refused up front.
+    if out.exists() and not out.is_dir():
+        raise TofnetError(f"{out}: --out exists and is not a folder")
+    check_folder_writable(out, "--out")
     recording_dir = out / "recording"
     backend = args.backend or DEFAULT_BACKEND
     print(f"[1/4] simulating '{args.scenario}' for {args.duration:g} s -> {recording_dir}")
@@ -50,7 +61,7 @@ def handle(args) -> int:
     print("[3/4] scoring against the ground truth")
     evaluation = evaluate(recording, result.depth, meta)
     print(_indent(evaluation.table()))
-    (out / "eval.json").write_text(evaluation.to_json() + "\n")
+    write_text_atomic(out / "eval.json", evaluation.to_json() + "\n")
 
     print("[4/4] drawing figures")
     paths = plot_all(recording, result.depth, meta, out / "figures")

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tofnet.errors import DataError, TofnetError
+from tofnet.errors import DataError, TofnetError, quote
 
 
 def register(subparsers) -> None:
@@ -25,8 +25,13 @@ def register(subparsers) -> None:
     p.add_argument("--window", default="100ms",
                    help="length of the per-window metrics, e.g. 100ms or 0.5 (seconds); 0 for none (default 100ms)")
     p.add_argument("--json", metavar="OUT", help="also write the metrics as JSON to OUT ('-' for stdout only)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --json file")
     add_timing_options(p)
     p.set_defaults(handler=handle)
+
+
+#: Largest ``--latency-steps`` accepted (a network of a million processes in a chain).
+MAX_LATENCY_STEPS = 1_000_000
 
 
 def add_timing_options(p: argparse.ArgumentParser) -> None:
@@ -51,11 +56,14 @@ def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = 
     depth, meta = read_depth(depth_path)
     meta = dict(meta)
     given = {}
+    from tofnet.processes.input import MAX_PERIOD_S
     if timestep is not None:
-        given["timestep_us"] = int(round(seconds(timestep, "--timestep") * 1e6))
+        given["timestep_us"] = int(round(seconds(timestep, "--timestep", limit=MAX_PERIOD_S) * 1e6))
         if given["timestep_us"] <= 0:
-            raise TofnetError(f"--timestep must be positive, got {timestep!r}")
+            raise TofnetError(f"--timestep must be positive, got {quote(timestep)}")
     if latency_steps is not None:
+        if not 0 <= latency_steps <= MAX_LATENCY_STEPS:
+            raise TofnetError(f"--latency-steps: expected 0..{MAX_LATENCY_STEPS}, got {latency_steps}")
         given["latency_steps"] = int(latency_steps)
     for key, value in given.items():
         if meta.get(key) is not None and int(meta[key]) != value:
@@ -82,7 +90,12 @@ def handle(args) -> int:
 
     window_s = seconds(args.window, "--window")
     if window_s < 0:
-        raise TofnetError(f"--window must be 0 or positive, got {args.window!r}")
+        raise TofnetError(f"--window must be 0 or positive, got {quote(args.window)}")
+    if args.json and args.json != "-":
+        from tofnet.io.ecd import recording_files
+        from tofnet.io.files import check_output
+        check_output(args.json, force=args.force, inputs=[*recording_files(args.recording), Path(args.depth)],
+                     what="--json")
     recording, depth, meta = load_inputs(args.recording, args.depth, timestep=args.timestep,
                                          latency_steps=args.latency_steps)
     result = evaluate(recording, depth, meta, window_s=window_s)
@@ -100,11 +113,7 @@ def handle(args) -> int:
     print()
     print(format_share_split(shares, what) if shares is not None else f"error by translational share: not available ({what})")
     if args.json:
-        out = Path(args.json)
-        try:
-            out.parent.mkdir(parents=True, exist_ok=True)
-            out.write_text(text + "\n", encoding="utf-8")
-        except OSError as err:
-            raise DataError(f"{out}: cannot write JSON: {err.strerror or err}") from None
-        print(f"wrote {out}", file=sys.stderr)
+        from tofnet.io.files import write_text_atomic
+        write_text_atomic(args.json, text + "\n")
+        print(f"wrote {args.json}", file=sys.stderr)
     return 0

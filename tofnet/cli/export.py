@@ -29,6 +29,7 @@ def register(subparsers) -> None:
     p.add_argument("--ascii", action="store_true", help="ASCII .ply instead of binary little-endian")
     p.add_argument("--no-color", action="store_true", help="no depth colours in the .ply")
     p.add_argument("--sensor-size", metavar="WxH", help="map size in pixels (default: the recording's)")
+    p.add_argument("--force", action="store_true", help="replace existing maps and .ply (never an input)")
     p.set_defaults(handler=handle)
 
 
@@ -39,6 +40,7 @@ def handle(args) -> int:
 
     if not args.maps and not args.ply:
         raise TofnetError("nothing to do: give --maps DIR and/or --ply FILE")
+    check_export_outputs(args)
     depth, meta = read_depth(args.depth)
     recording_path = args.recording or (meta.get("summary") or {}).get("recording")
     recording = None
@@ -69,3 +71,24 @@ def handle(args) -> int:
         print(f"point cloud    {written:,} points ({args.frame} frame) -> {args.ply}"
               + (f"; {skipped:,} skipped (pixel without undistortion)" if skipped else ""))
     return 0
+
+
+def check_export_outputs(args) -> None:
+    """Before any work: ``--ply`` like every output (``tofnet.io.files.check_output``), and a
+    ``--maps`` folder that can be written and holds no maps yet (unless ``--force``)."""
+    from tofnet.io.ecd import recording_files
+    from tofnet.io.files import check_folder_writable, check_output
+
+    inputs = [Path(args.depth)] + (recording_files(args.recording) if args.recording else [])
+    if args.ply:
+        check_output(args.ply, force=args.force, inputs=inputs, what="--ply")
+    if args.maps:
+        folder = Path(args.maps)
+        if folder.exists() and not folder.is_dir():
+            raise TofnetError(f"--maps: {folder} exists and is not a folder")
+        if folder.is_dir() and not args.force:
+            old = [p.name for p in folder.iterdir() if p.name == "index.csv" or
+                   p.name.startswith(("depth_", "age_")) and p.suffix in (".npy", ".png")]
+            if old:
+                raise TofnetError(f"--maps: {folder} already holds maps ({old[0]}, ...); pass --force to replace them")
+        check_folder_writable(folder, "--maps")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 
@@ -19,6 +18,7 @@ def register(subparsers) -> None:
     add_input_options(p)
     p.add_argument("--sensor-size", metavar="WxH", help="sensor size in pixels, when the file does not say")
     p.add_argument("--json", metavar="FILE", help="also write the facts as JSON")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --json file (never an input)")
     p.add_argument("--quiet", action="store_true", help="no progress")
     p.set_defaults(handler=handle)
 
@@ -130,11 +130,16 @@ def handle(args) -> int:
     from tofnet.core.params import parse_size
 
     sensor = parse_size(args.sensor_size, "--sensor-size") if args.sensor_size else None
+    if args.json:
+        from tofnet.io.ecd import recording_files
+        from tofnet.io.files import check_output
+        check_output(args.json, force=args.force, inputs=recording_files(args.recording), what="--json")
     progress = None if args.quiet else Progress("tofnet info")
     facts = describe(args.recording, sensor_size=sensor, progress=progress, **input_options(args))
     if progress:
         progress.done()
     print(format_facts(facts))
     if args.json:
-        Path(args.json).write_text(json.dumps(facts, indent=2) + "\n")
+        from tofnet.io.files import write_text_atomic
+        write_text_atomic(args.json, json.dumps(facts, indent=2) + "\n")
     return 0

@@ -41,6 +41,7 @@ def register(subparsers) -> None:
     g.add_argument("--spec", help="YAML network spec (default: the paper's network)")
     g.add_argument("--backend", default="fixed", help="backend that runs it (default fixed)")
     g.add_argument("--velocity", metavar="TX,TY,TZ", help="constant camera velocity in m/s instead of the poses")
+    p.add_argument("--force", action="store_true", help="overwrite existing PNG files")
     add_timing_options(p)
     p.set_defaults(handler=handle)
 
@@ -52,6 +53,8 @@ def handle(args) -> int:
         raise TofnetError(f"plot {args.kind}: give the depth file written by `tofnet run` after the recording")
     from tofnet.eval.metrics import require_timing
     from tofnet.eval.plots import available_kinds, figure, save_figure
+    from tofnet.io.ecd import recording_files
+    from tofnet.io.files import check_output
     from tofnet.units import seconds
 
     window_s = seconds(args.error_window, "--error-window")
@@ -75,15 +78,15 @@ def handle(args) -> int:
         if out.suffix.lower() != ".png":
             raise TofnetError(f"--out: figures are written as PNG, got {out.name!r}")
         targets = [(args.kind, out)]
+    inputs = [*recording_files(args.recording), depth_path]
+    for kind, path in targets:
+        if support[kind] is None:
+            check_output(path, force=args.force, inputs=inputs, what=f"the {kind} figure")
     for kind, path in targets:
         if support[kind] is not None:
             print(f"skipped {kind}: it {support[kind]}", file=sys.stderr)
             continue
-        try:
-            written = save_figure(figure(kind, recording, depth, meta, **options), path)
-        except OSError as err:
-            raise DataError(f"{path}: cannot write the figure: {err.strerror or err}") from None
-        print(written)
+        print(save_figure(figure(kind, recording, depth, meta, **options), path))
     return 0
 
 

@@ -7,7 +7,7 @@ import json
 import time
 from pathlib import Path
 
-from tofnet.errors import TofnetError
+from tofnet.errors import TofnetError, quote
 
 
 def register(subparsers) -> None:
@@ -31,6 +31,7 @@ def register(subparsers) -> None:
                         "pixels (next to --out: OUT.monitor.PROCESS.VAR.npz); repeatable; runs model by model")
     p.add_argument("--monitor-every", type=int, default=1, metavar="K", help="sample monitors every K steps")
     p.add_argument("--json", metavar="FILE", help="write the run summary as JSON")
+    p.add_argument("--force", action="store_true", help="overwrite existing output files (never an input)")
     p.add_argument("--quiet", action="store_true", help="no progress, summary only")
     p.set_defaults(handler=handle)
 
@@ -61,8 +62,8 @@ def build_network(args, recording_sensor_size, recording=None):
 
     sensor = parse_size(args.sensor_size, "--sensor-size") if args.sensor_size else None
     network, compile_options, spec_backend, backend_options = load_network(
-        args.spec, sensor_size=sensor or (None if args.spec else recording_sensor_size), recording=recording,
-        rotation=not getattr(args, "no_rotation", False))
+        Path(args.spec) if args.spec else None, sensor_size=sensor or (None if args.spec else recording_sensor_size),
+        recording=recording, rotation=not getattr(args, "no_rotation", False))
     apply_overrides(network, timestep=args.timestep, refractory=args.refractory, distance=args.distance,
                     counter_bits=args.counter_bits, velocity_per=args.velocity_per,
                     update_every=args.update_every)
@@ -75,11 +76,13 @@ def build_network(args, recording_sensor_size, recording=None):
 
 def handle(args) -> int:
     from tofnet.api import DEFAULT_BACKEND, run
+    from tofnet.cli.outputs import check_more_outputs, check_run_outputs
     from tofnet.cli.progress import Progress
     from tofnet.io import read_recording
 
     started = time.perf_counter()
     from tofnet.cli.inputs import input_options
+    check_run_outputs(args)
     recording = read_recording(args.recording, **input_options(args))
     network, compile_options, spec_backend, backend_options = build_network(args, recording.sensor_size, recording)
     backend = args.backend or spec_backend or DEFAULT_BACKEND
@@ -97,12 +100,16 @@ def handle(args) -> int:
     summary = result.summary()
     summary["recording"] = str(args.recording)
     summary["rotation"] = rotation_line(network, recording, args)
+    summary["notes"] = list(recording.notes)
     summary["total_time_s"] = time.perf_counter() - started
-    written = write_outputs(out, result, summary, args.record_tot)
+    written = write_outputs(out, result, summary, args.record_tot, check=lambda paths: check_more_outputs(args, paths))
     summary["files"] = {name: str(path) for name, path in written.items()}
     print(format_summary(summary, result, written, network_width=network.sensor_size))
+    for note in summary["notes"]:
+        print(f"note           {note}")
     if args.json:
-        Path(args.json).write_text(json.dumps(summary, indent=2) + "\n")
+        from tofnet.io.files import write_text_atomic
+        write_text_atomic(args.json, json.dumps(summary, indent=2) + "\n")
     return 0
 
 
@@ -121,34 +128,41 @@ def rotation_line(network, recording, args) -> str | None:
             f"{'turning poses' if found == 'groundtruth' else 'a gyroscope (imu.txt)'}")
 
 
-def write_outputs(out: Path, result, summary: dict, record_tot: bool) -> dict[str, Path]:
+def write_outputs(out: Path, result, summary: dict, record_tot: bool, check=None) -> dict[str, Path]:
     """Write every depth output (``OUT``, or ``OUT.<process>.npz`` when there are several) and every
     probe (``OUT.<process>.<port>.npz``); the time-of-travel spikes of ``--record-tot`` to ``OUT_tot.npz``.
+    ``check(paths)``, when given, sees every file name before anything is written.
     Returns output name -> file."""
-    import numpy as np
     from tofnet.io.depth import write_depth
+    from tofnet.io.npy import write_npz
 
-    written: dict[str, Path] = {}
     depth_names = result.depth_outputs
+    paths: dict[str, Path] = {}
     for name in depth_names:
-        path = out if len(depth_names) == 1 else out.with_name(f"{out.stem}.{name.split('.')[0]}{out.suffix}")
-        write_depth(path, result.outputs[name], t0_us=result.t0_us, timestep_us=result.timestep_us,
-                    latency_steps=result.latency[name], summary=summary)
-        written[name] = path
-    for name, records in result.outputs.items():
-        if name in written:
+        paths[name] = out if len(depth_names) == 1 else out.with_name(f"{out.stem}.{name.split('.')[0]}{out.suffix}")
+    for name in result.outputs:
+        if name in paths:
             continue
-        if record_tot and result.payloads.get(name) == "count" and len(result.depth_outputs) == 1:
-            path = out.with_name(out.stem + "_tot.npz")
+        if record_tot and result.payloads.get(name) == "count" and len(depth_names) == 1:
+            paths[name] = out.with_name(out.stem + "_tot.npz")
         else:
-            path = out.with_name(f"{out.stem}.{name}.npz")
-        np.savez_compressed(path, **{field: records[field] for field in records.dtype.names})
-        written[name] = path
+            paths[name] = out.with_name(f"{out.stem}.{name}.npz")
     for monitor in result.extra.get("monitors", []):
-        path = out.with_name(f"{out.stem}.monitor.{monitor.target}.npz")
-        np.savez_compressed(path, **monitor.arrays())
-        written[f"monitor {monitor.target}"] = path
-    return written
+        paths[f"monitor {monitor.target}"] = out.with_name(f"{out.stem}.monitor.{monitor.target}.npz")
+    if check is not None:
+        check(list(paths.values()))
+    monitors = {f"monitor {m.target}": m for m in result.extra.get("monitors", [])}
+    for name, path in paths.items():
+        if name in monitors:
+            write_npz(path, monitors[name].arrays(), compress=True)
+            continue
+        records = result.outputs[name]
+        if name in depth_names:
+            write_depth(path, records, t0_us=result.t0_us, timestep_us=result.timestep_us,
+                        latency_steps=result.latency[name], summary=summary)
+        else:
+            write_npz(path, {field: records[field] for field in records.dtype.names}, compress=True)
+    return paths
 
 
 def format_summary(summary: dict, result, written: dict, network_width) -> str:

@@ -22,6 +22,7 @@ def register(subparsers) -> None:
                    help="sensor size in pixels; the intrinsics scale to keep the field of view (default: 240x180)")
     p.add_argument("--list", action="store_true", help="list the scenarios and exit")
     p.add_argument("--json", metavar="FILE", help="also write the summary as JSON")
+    p.add_argument("--force", action="store_true", help="overwrite the recording files already in OUT_DIR")
     p.add_argument("--quiet", action="store_true", help="no progress, summary only")
     p.set_defaults(handler=handle)
 
@@ -41,6 +42,12 @@ def handle(args) -> int:
     if args.sensor_size:
         from tofnet.core.params import parse_size
         sensor = parse_size(args.sensor_size, "--sensor-size")
+    check_out_dir(Path(args.out_dir), args.force)
+    if args.json:
+        from tofnet.io.files import check_output
+        from tofnet.io.ecd import SIDE_FILES
+        check_output(args.json, force=args.force, inputs=[Path(args.out_dir) / name for name in SIDE_FILES],
+                     what="--json")
     progress = None
     if not args.quiet:
         from tofnet.cli.progress import Progress
@@ -51,8 +58,23 @@ def handle(args) -> int:
         progress.done()
     print(format_summary(summary))
     if args.json:
-        Path(args.json).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+        from tofnet.io.files import write_text_atomic
+        write_text_atomic(args.json, json.dumps(summary, indent=2) + "\n")
     return 0
+
+
+def check_out_dir(folder: Path, force: bool) -> None:
+    """OUT_DIR must be (or become) a writable folder; recording files already in it are
+    replaced only with ``--force``."""
+    from tofnet.io.ecd import SIDE_FILES
+    from tofnet.io.files import check_folder_writable, check_output
+
+    if folder.exists() and not folder.is_dir():
+        raise TofnetError(f"{folder}: OUT_DIR exists and is not a folder")
+    check_folder_writable(folder, "OUT_DIR")
+    for name in SIDE_FILES:
+        if (folder / name).exists() or (folder / name).is_symlink():
+            check_output(folder / name, force=force, what="OUT_DIR file")
 
 
 def list_scenarios() -> str:

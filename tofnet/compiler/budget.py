@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Any, Mapping
 
-from tofnet.errors import BudgetError
+from tofnet.errors import BudgetError, quote
 
 #: Per-core limits every budget has, in report order.
 CORE_LIMITS = ("accumulators", "neurons")
@@ -105,7 +105,7 @@ class Budget:
             return data
         if not isinstance(data, Mapping):
             raise BudgetError(f"{where}: expected a budget name ({', '.join(BUDGETS)}) or a mapping "
-                              f"with core, chip, max_chips; got {data!r}")
+                              f"with core, chip, max_chips; got {quote(data)}")
         _only(data, ("name", "base", "core", "chip", "max_chips"), where)
         base = named_budget(data.get("base", "loihi2"), f"{where}.base")
         core_data = data.get("core") or {}
@@ -123,7 +123,7 @@ class Budget:
             max_chips = _positive(max_chips, f"{where}.max_chips")
         name = data.get("name", "custom")
         if not isinstance(name, str):
-            raise BudgetError(f"{where}.name: expected a string, got {name!r}")
+            raise BudgetError(f"{where}.name: expected a string, got {quote(name)}")
         return Budget(core=core, chip=chip, max_chips=max_chips, name=name)
 
     def with_max_chips(self, max_chips: int | None) -> "Budget":
@@ -138,12 +138,20 @@ def _only(data: Mapping, keys: tuple[str, ...], where: str) -> None:
 
 def _mapping(data: Any, where: str) -> None:
     if not isinstance(data, Mapping):
-        raise BudgetError(f"{where}: expected a mapping, got {data!r}")
+        raise BudgetError(f"{where}: expected a mapping, got {quote(data)}")
+
+
+#: Largest number a budget may hold (per-core limits, cores per chip, chips): 2**31 - 1.
+MAX_BUDGET_VALUE = 2**31 - 1
 
 
 def _positive(value: Any, where: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or int(value) != value or value < 1:
-        raise BudgetError(f"{where}: expected a positive whole number, got {value!r}")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= 1:
+        raise BudgetError(f"{where}: expected a positive whole number, got {quote(value)}")
+    if value > MAX_BUDGET_VALUE:
+        raise BudgetError(f"{where}: expected at most {MAX_BUDGET_VALUE}, got {quote(value)}")
+    if int(value) != value:
+        raise BudgetError(f"{where}: expected a positive whole number, got {quote(value)}")
     return int(value)
 
 
@@ -162,7 +170,7 @@ BUDGETS: dict[str, Budget] = {
 def named_budget(name: str, where: str = "budget") -> Budget:
     """The built-in budget called ``name``; raises naming the known ones."""
     if not isinstance(name, str) or name not in BUDGETS:
-        raise BudgetError(f"{where}: unknown budget {name!r}; expected one of {', '.join(BUDGETS)} "
+        raise BudgetError(f"{where}: unknown budget {quote(name)}; expected one of {', '.join(BUDGETS)} "
                           "or a mapping with core, chip, max_chips")
     return BUDGETS[name]
 

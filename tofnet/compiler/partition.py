@@ -16,14 +16,16 @@ from typing import Any, Iterable, Mapping, Union
 import numpy as np
 
 from tofnet.core.process import Process
-from tofnet.errors import BudgetError
+from tofnet.errors import BudgetError, quote
+from tofnet.events import sensor_size_problem
 
 #: A rectangle of pixels ``(x0, y0, x1, y1)``, half-open: columns x0..x1-1, rows y0..y1-1.
 Rect = tuple[int, int, int, int]
 #: What ``compile_network(patch=...)`` accepts.
 PatchOption = Union[None, str, int, tuple[int, int], Mapping[str, Any]]
 
-_SIZE = re.compile(r"^\s*(\d+)\s*[xX]\s*(\d+)\s*$")
+_SIZE = re.compile(r"^\s*(\d{1,9})\s*[xX]\s*(\d{1,9})\s*$", re.ASCII)
+_SIDE = re.compile(r"^\s*\d{1,9}\s*$", re.ASCII)
 
 
 def parse_patch_size(value: Any, where: str = "patch") -> tuple[int, int] | str:
@@ -34,7 +36,7 @@ def parse_patch_size(value: Any, where: str = "patch") -> tuple[int, int] | str:
         match = _SIZE.match(value)
         if match:
             value = (int(match.group(1)), int(match.group(2)))
-        elif value.strip().isdigit():
+        elif _SIDE.match(value):
             value = int(value)
     if isinstance(value, int) and not isinstance(value, bool):
         value = (value, value)
@@ -42,7 +44,7 @@ def parse_patch_size(value: Any, where: str = "patch") -> tuple[int, int] | str:
             and all(isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in value)):
         return (int(value[0]), int(value[1]))
     raise BudgetError(f"{where}: expected auto, a side in pixels (30), WIDTHxHEIGHT (30x30) or "
-                      f"[width, height] with positive whole numbers; got {value!r}")
+                      f"[width, height] with positive whole numbers; got {quote(value)}")
 
 
 def patch_per_layer(option: PatchOption, layers: Iterable[str], where: str = "patch") -> dict[str, Any]:
@@ -68,7 +70,7 @@ def needs_of(process: Process) -> dict[str, int]:
     for key, value in dict(process.resources_per_pixel).items():
         if isinstance(value, bool) or not isinstance(value, int) or value < 0:
             raise BudgetError(f"{process.name} ({type(process).__name__}): resources_per_pixel[{key!r}] must be "
-                              f"a whole number >= 0, got {value!r}")
+                              f"a whole number >= 0, got {quote(value)}")
         if value:
             needs[key] = value
     return needs
@@ -223,14 +225,30 @@ class LayerPlan:
     automatic: bool
 
 
+#: Most cores one layer may be cut into (512 Loihi 2 chips); planning costs ~0.1 ms per core.
+MAX_CORES_PER_LAYER = 2**16
+
+
 def plan_layer(process: Process, limits: Mapping[str, int], sensor: tuple[int, int],
                request: tuple[int, int] | str) -> LayerPlan:
-    """Cut ``process`` into patches: the requested size (checked) or the automatic one."""
+    """Cut ``process`` into patches: the requested size (checked) or the automatic one.
+
+    Refuses sensors beyond ``tofnet.events.MAX_SENSOR_PIXELS`` and layers needing more
+    than ``MAX_CORES_PER_LAYER`` cores before any work (so compiling never takes minutes).
+    """
+    problem = sensor_size_problem(*sensor)
+    if problem:
+        raise BudgetError(f"{process.name}: sensor size: {problem}")
     if request == "auto":
         size = auto_patch(sensor, max_pixels_per_core(process, limits, sensor[0] * sensor[1]))
     else:
         check_patch(process, limits, request, sensor)
         size = (min(request[0], sensor[0]), min(request[1], sensor[1]))
+    across, down = grid_of(sensor, size)
+    if across * down > MAX_CORES_PER_LAYER:
+        raise BudgetError(f"{process.name}: {size[0]}x{size[1]} patches on a {sensor[0]}x{sensor[1]} sensor need "
+                          f"{across * down:,} cores; at most {MAX_CORES_PER_LAYER:,} per layer are compiled "
+                          "(use larger patches or patch: auto)")
     rects = tile(sensor, size)
     offsets = receptive_offsets(process)
     return LayerPlan(process, size, grid_of(sensor, size), rects,

@@ -5,7 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from tofnet.errors import NetworkError, TofnetError
+import math
+
+from tofnet.errors import NetworkError, TofnetError, quote
+from tofnet.events import sensor_size_problem
 from tofnet.units import seconds, metres
 
 #: Parameter kinds: how a raw value (Python or YAML) becomes the stored value.
@@ -39,69 +42,83 @@ class Param:
                 return None
             raise NetworkError(f"{field}: a value is required ({self.doc})")
         try:
-            out = _CONVERTERS[self.kind](value, field)
+            if self.kind == "duration" and self.maximum is not None:
+                out = seconds(value, field, limit=self.maximum)
+            else:
+                out = _CONVERTERS[self.kind](value, field)
         except TofnetError as err:
             raise NetworkError(str(err)) from None
         if self.choices and out not in self.choices:
-            raise NetworkError(f"{field}: expected one of {', '.join(map(str, self.choices))}, got {value!r}")
+            raise NetworkError(f"{field}: expected one of {', '.join(map(str, self.choices))}, got {quote(value)}")
         for number in (out if isinstance(out, tuple) else (out,)):
             if isinstance(number, (int, float)) and not isinstance(number, bool):
                 if self.minimum is not None and number < self.minimum:
-                    raise NetworkError(f"{field}: expected at least {self.minimum:g}{self.unit and ' ' + self.unit}, got {value!r}")
+                    raise NetworkError(f"{field}: expected at least {self.minimum:g}{self.unit and ' ' + self.unit}, got {quote(value)}")
                 if self.maximum is not None and number > self.maximum:
-                    raise NetworkError(f"{field}: expected at most {self.maximum:g}{self.unit and ' ' + self.unit}, got {value!r}")
+                    raise NetworkError(f"{field}: expected at most {self.maximum:g}{self.unit and ' ' + self.unit}, "
+                                       f"got {quote(value)}")
         return out
 
 
 def _integer(value: Any, field: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or int(value) != value:
-        raise TofnetError(f"{field}: expected a whole number, got {value!r}")
+    if (isinstance(value, bool) or not isinstance(value, (int, float))
+            or (isinstance(value, float) and not math.isfinite(value)) or int(value) != value):
+        raise TofnetError(f"{field}: expected a whole number, got {quote(value)}")
     return int(value)
 
 
 def _number(value: Any, field: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise TofnetError(f"{field}: expected a number, got {value!r}")
-    return float(value)
+        raise TofnetError(f"{field}: expected a number, got {quote(value)}")
+    try:
+        out = float(value)
+    except OverflowError:
+        out = math.inf
+    if not math.isfinite(out):
+        raise TofnetError(f"{field}: expected a finite number, got {quote(value)}")
+    return out
 
 
 def _boolean(value: Any, field: str) -> bool:
     if not isinstance(value, bool):
-        raise TofnetError(f"{field}: expected true or false, got {value!r}")
+        raise TofnetError(f"{field}: expected true or false, got {quote(value)}")
     return value
 
 
 def _string(value: Any, field: str) -> str:
     if not isinstance(value, str):
-        raise TofnetError(f"{field}: expected a string, got {value!r}")
+        raise TofnetError(f"{field}: expected a string, got {quote(value)}")
     return value
 
 
 def parse_size(value: Any, field: str) -> tuple[int, int]:
-    if isinstance(value, str) and "x" in value:
-        value = value.split("x")
+    """``"640x480"`` or ``[640, 480]`` -> ``(width, height)`` px, within the documented
+    limits (``tofnet.events.MAX_SENSOR_SIDE``, ``MAX_SENSOR_PIXELS``)."""
+    if isinstance(value, str) and "x" in value and len(value) <= 40:
+        parts = value.split("x")
         try:
-            value = [int(v) for v in value]
+            value = [int(v) for v in parts]
         except ValueError:
-            raise TofnetError(f"{field}: expected WIDTHxHEIGHT in pixels, got {value!r}") from None
+            raise TofnetError(f"{field}: expected WIDTHxHEIGHT in pixels, got {quote(value)}") from None
     if not isinstance(value, (list, tuple)) or len(value) != 2:
-        raise TofnetError(f"{field}: expected [width, height] in pixels, got {value!r}")
+        raise TofnetError(f"{field}: expected [width, height] in pixels, got {quote(value)}")
     width, height = (_integer(v, field) for v in value)
-    if width < 1 or height < 1:
-        raise TofnetError(f"{field}: width and height must be positive, got {value!r}")
+    problem = sensor_size_problem(width, height)
+    if problem:
+        raise TofnetError(f"{field}: {problem}")
     return (width, height)
 
 
 def _floats(value: Any, field: str) -> tuple[float, ...]:
     if not isinstance(value, (list, tuple)):
-        raise TofnetError(f"{field}: expected a list of numbers, got {value!r}")
+        raise TofnetError(f"{field}: expected a list of numbers, got {quote(value)}")
     return tuple(_number(v, field) for v in value)
 
 
 def _vector3(value: Any, field: str) -> tuple[float, float, float]:
     out = _floats(value, field)
     if len(out) != 3:
-        raise TofnetError(f"{field}: expected three numbers [x, y, z], got {value!r}")
+        raise TofnetError(f"{field}: expected three numbers [x, y, z], got {quote(value)}")
     return out  # type: ignore[return-value]
 
 

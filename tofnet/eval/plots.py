@@ -270,10 +270,11 @@ def _limits(points: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 
 def save_figure(fig: Figure, path: str | Path) -> Path:
-    """Write ``fig`` as PNG at its own size (``DPI``); returns the path."""
+    """Write ``fig`` as PNG at its own size (``DPI``), atomically; returns the path."""
+    from tofnet.io.files import atomic_write
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=DPI, format="png")
+    with atomic_write(path) as handle:
+        fig.savefig(handle, dpi=DPI, format="png")
     return path
 
 

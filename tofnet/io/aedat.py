@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tofnet.errors import DataError, located
+from tofnet.errors import DataError, located, quote, reason
 from tofnet.io.source import EventSource
 
 #: Standard gravity, m/s² per g (DV's accelerometer unit).
@@ -32,6 +32,7 @@ class AedatSource(EventSource):
         super().__init__(path)
         from faery.extension import aedat
 
+        check_header(self.path)
         try:
             with aedat.Decoder(self.path) as decoder:
                 tracks = decoder.tracks()
@@ -42,11 +43,12 @@ class AedatSource(EventSource):
                 except RuntimeError:
                     counts = {}  # no index table (an interrupted recording): counts unknown
         except RuntimeError as err:
-            raise DataError(located(self.path, None, f"not a readable AEDAT4 file ({err})")) from None
+            raise DataError(located(self.path, None, f"not a readable AEDAT4 file ({reason(err)})")) from None
         events = [track for track in tracks if track.data_type == "events"]
         if not events:
             raise DataError(located(self.path, None, "the file has no event track; found "
-                                                     + (", ".join(t.data_type for t in tracks) or "no tracks")))
+                                                     + (", ".join(quote(t.data_type, 20) for t in tracks[:10])
+                                                        or "no tracks")))
         self.track_id = events[0].id
         self.sensor_size = tuple(events[0].dimensions)
         self.n_events = counts.get(self.track_id)
@@ -72,9 +74,65 @@ class AedatSource(EventSource):
                     elif track.data_type == "imus" and len(packet):
                         imu.append(imu_to_ecd(packet))
             except RuntimeError as err:
-                raise DataError(located(self.path, None, f"cannot decode ({err})")) from None
+                raise DataError(located(self.path, None, f"cannot decode ({reason(err)})")) from None
         if imu:
             self.imu = np.concatenate(imu)
+
+
+#: Longest AEDAT4 header (its XML description) read: DV writes a few KB.
+MAX_HEADER_BYTES = 16 * 2**20
+
+
+def check_header(path: Path) -> None:
+    """Refuse an AEDAT4 file whose header faery cannot decode safely.
+
+    faery 0.7 aborts the whole Python process (a Rust panic that cannot unwind) when the
+    header's XML description is not UTF-8; so the header, a flatbuffer ``IOHeader``
+    (compression, data table position, description), is checked here first: every
+    offset inside the header, the description valid UTF-8.
+    """
+    import struct
+
+    from tofnet.io.files import open_regular
+
+    def corrupt(why: str) -> DataError:
+        return DataError(located(path, None, f"not a readable AEDAT4 file (header: {why})"))
+
+    with open_regular(path, "AEDAT4 file") as handle:
+        start = handle.read(18)
+        if len(start) < 18 or not start.startswith(b"#!AER-DAT4.0\r\n"):
+            raise corrupt("no '#!AER-DAT4.0' line followed by the header size")
+        size = struct.unpack("<i", start[14:18])[0]
+        if not 12 <= size <= MAX_HEADER_BYTES:
+            raise corrupt(f"a size of {size:,} bytes")
+        header = handle.read(size)
+    if len(header) != size:
+        raise corrupt("the file ends inside it")
+
+    def u32(at: int) -> int:
+        if not 0 <= at <= size - 4:
+            raise corrupt("an offset outside the header")
+        return struct.unpack_from("<I", header, at)[0]
+
+    table = u32(0)
+    vtable = table - struct.unpack("<i", struct.pack("<I", u32(table)))[0]
+    if not 0 <= vtable <= size - 4:
+        raise corrupt("an offset outside the header")
+    vtable_size = struct.unpack_from("<H", header, vtable)[0]
+    if vtable_size < 4 or vtable + vtable_size > size:
+        raise corrupt("an offset outside the header")
+    if vtable_size >= 10:  # field 2: the description string
+        field = struct.unpack_from("<H", header, vtable + 8)[0]
+        if field:
+            at = table + field
+            text = at + u32(at)
+            length = u32(text)
+            if text + 4 + length > size:
+                raise corrupt("a description longer than the header")
+            try:
+                header[text + 4:text + 4 + length].decode("utf-8")
+            except UnicodeDecodeError as err:
+                raise corrupt(f"the description is not UTF-8 (byte {err.start})") from None
 
 
 def imu_to_ecd(packet: np.ndarray) -> np.ndarray:

@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from tofnet.errors import DataError, located
+from tofnet.errors import DataError, located, quote
+from tofnet.io.npy import load_npz, write_npz
 
 COLUMNS = ("t", "x", "y", "p")
 #: Accepted names of the polarity field, in the order they are looked for.
@@ -28,10 +29,10 @@ def parse_columns(columns: str | tuple[str, ...] | list[str] | None, source: obj
     """``"x,y,t,p"`` (or a sequence) as a tuple: a permutation of ``t``, ``x``, ``y``, ``p``."""
     if columns is None:
         return COLUMNS
-    names = tuple(c.strip() for c in (columns.split(",") if isinstance(columns, str) else columns))
+    names = tuple(str(c).strip() for c in (columns.split(",") if isinstance(columns, str) else columns))
     if sorted(names) != sorted(COLUMNS):
         raise DataError(located(source, None, f"columns must name t, x, y and p once each (e.g. x,y,t,p), "
-                                              f"got {','.join(names)}"))
+                                              f"got {quote(','.join(names))}"))
     return names
 
 
@@ -51,53 +52,102 @@ def columns_of(path: object, array: np.ndarray, what: str,
         polarity = _polarity_name(names)
         missing = [name for name in ("t", "x", "y") if name not in names] + ([] if polarity else ["p"])
         if missing:
-            raise DataError(located(path, None, f"{what} has fields {', '.join(names)}; expected t, x, y and "
+            raise DataError(located(path, None, f"{what} has fields {_names(names)}; expected t, x, y and "
                                                 f"p (or on, polarity); missing {', '.join(missing)}"))
         return {"t": array["t"], "x": array["x"], "y": array["y"], "p": array[polarity]}
     if array.ndim == 2 and array.shape[1] == 4:
         order = parse_columns(columns)
         return PlainColumns((name, array[:, k]) for k, name in enumerate(order))
-    raise DataError(located(path, None, f"{what} has shape {array.shape} and dtype {array.dtype}; expected a "
+    raise DataError(located(path, None, f"{what} has shape {_shape(array)} and dtype {quote(str(array.dtype))}; expected a "
                                         "structured array with fields t, x, y, p or an (n, 4) array of columns "
                                         "t x y p (another order: --columns)"))
 
 
-def npz_columns(path: object, loaded, columns: str | tuple[str, ...] | None = None) -> dict[str, np.ndarray]:
-    """The event columns of an open ``.npz``: a structured array under a known key, or four arrays."""
-    keys = list(loaded.files)
+def _names(names) -> str:
+    """Field or key names of a user's file for a message: each cut to 20 characters, ten at most."""
+    names = list(names)
+    text = ", ".join(quote(name, 20) for name in names[:10])
+    return text + (f" (and {len(names) - 10} more)" if len(names) > 10 else "")
+
+
+def _shape(array: np.ndarray) -> str:
+    return quote(array.shape, 40)
+
+
+def npz_columns(path: object, columns: str | tuple[str, ...] | None = None) -> dict[str, np.ndarray]:
+    """The event columns of a ``.npz``: a structured array under a known key, or four arrays.
+
+    Only the arrays needed are read, through ``tofnet.io.npy`` (sizes checked before
+    anything is allocated, zip bombs and bad CRCs refused).
+    """
+    keys, _ = load_npz(path, (), "events file")
     for key in ARRAY_KEYS:
         if key in keys:
-            return columns_of(path, loaded[key], f"'{key}'", columns)
+            _, arrays = load_npz(path, (key,), "events file")
+            return columns_of(path, arrays[key], f"'{key}'", columns)
     polarity = _polarity_name(keys)
     if polarity and {"t", "x", "y"} <= set(keys):
-        return {"t": loaded["t"], "x": loaded["x"], "y": loaded["y"], "p": loaded[polarity]}
+        _, arrays = load_npz(path, ("t", "x", "y", polarity), "events file")
+        return {"t": arrays["t"], "x": arrays["x"], "y": arrays["y"], "p": arrays[polarity]}
     raise DataError(located(path, None, f"expected a structured array 'events' or arrays 't', 'x', 'y', 'p' "
-                                        f"(or N-ImageNet's 'event_data'); found {', '.join(keys) or 'nothing'}"))
+                                        f"(or N-ImageNet's 'event_data'); found {_names(keys) or 'nothing'}"))
+
+
+#: The camera metadata keys ``write_npz_recording`` adds beside the events.
+METADATA_KEYS = ("intrinsics", "distortion", "distortion_model", "sensor_size", "poses", "imu")
 
 
 def apply_npz_metadata(recording, path: Path) -> None:
-    """Set what a ``tofnet convert`` ``.npz`` holds besides events (the file wins over side files)."""
+    """Set what a ``tofnet convert`` ``.npz`` holds besides events (the file wins over side files).
+
+    Each array is checked (shape, finite numbers); the sensor size, intrinsics and IMU
+    then go through the checks every reader shares (``tofnet.io.source``).
+    """
     from tofnet.io.groundtruth import Trajectory
     from tofnet.io.recording import Intrinsics
 
-    with np.load(path, allow_pickle=False) as loaded:
-        keys = set(loaded.files)
-        if "intrinsics" in keys:
-            fx, fy, cx, cy = (float(v) for v in loaded["intrinsics"])
-            distortion = tuple(float(v) for v in loaded["distortion"]) if "distortion" in keys else ()
-            model = str(loaded["distortion_model"]) if "distortion_model" in keys else "radtan"
-            recording.intrinsics = Intrinsics(fx, fy, cx, cy, distortion=distortion, distortion_model=model)
-        if "sensor_size" in keys:
-            recording.sensor_size = tuple(int(v) for v in loaded["sensor_size"])
-        if "poses" in keys:
-            poses = loaded["poses"]
-            recording.trajectory = Trajectory(poses[:, 0], poses[:, 1:4], poses[:, 4:8], source=f"{path}:poses")
-        if "imu" in keys:
-            recording.imu = np.asarray(loaded["imu"], dtype=np.float64)
+    _, arrays = load_npz(path, METADATA_KEYS, "events file")
+
+    def numbers(key: str, shape: str, columns: int | None = None) -> np.ndarray:
+        array = arrays[key]
+        ok = array.dtype.kind in "iuf" and (array.ndim == 1 if columns is None else
+                                            (array.ndim == 2 and array.shape[1] == columns))
+        if ok:
+            array = array.astype(np.float64)
+            ok = bool(np.all(np.isfinite(array)))
+        if not ok:
+            raise DataError(located(f"{path}[{key}]", None, f"expected finite numbers of shape {shape}, got shape "
+                                                            f"{_shape(arrays[key])} and dtype {quote(str(arrays[key].dtype))}"))
+        return array
+
+    if "intrinsics" in arrays:
+        values = numbers("intrinsics", "(4,)")
+        if values.shape != (4,):
+            raise DataError(located(f"{path}[intrinsics]", None, f"expected 4 numbers fx fy cx cy, got {len(values)}"))
+        distortion = tuple(float(v) for v in numbers("distortion", "(n,)")) if "distortion" in arrays else ()
+        model = "radtan"
+        if "distortion_model" in arrays:
+            raw = arrays["distortion_model"]
+            if raw.dtype.kind != "U" or raw.ndim != 0 or str(raw) not in ("radtan", "equidistant"):
+                raise DataError(located(f"{path}[distortion_model]", None, "expected 'radtan' or 'equidistant'"))
+            model = str(raw)
+        fx, fy, cx, cy = (float(v) for v in values)
+        recording.intrinsics = Intrinsics(fx, fy, cx, cy, distortion=distortion, distortion_model=model)
+    if "sensor_size" in arrays:
+        size = numbers("sensor_size", "(2,)")
+        if size.shape != (2,) or np.any(size != np.floor(size)) or np.any(np.abs(size) > 2**31):
+            raise DataError(located(f"{path}[sensor_size]", None, "expected two whole numbers width, height"))
+        recording.sensor_size = (int(size[0]), int(size[1]))
+    if "poses" in arrays:
+        poses = numbers("poses", "(n, 8)", 8)
+        recording.trajectory = Trajectory(poses[:, 0], poses[:, 1:4], poses[:, 4:8], source=f"{path}[poses]")
+    if "imu" in arrays:
+        recording.imu = numbers("imu", "(n, 7)", 7)
 
 
 def write_npz_recording(path: str | Path, recording) -> None:
-    """Events (``t`` int64 µs, ``x``, ``y`` uint16, ``p`` uint8) and the camera metadata in one ``.npz``."""
+    """Events (``t`` int64 µs, ``x``, ``y`` uint16, ``p`` uint8) and the camera metadata in one ``.npz``
+    (written atomically)."""
     events = recording.events
     arrays = {name: np.ascontiguousarray(events[name]) for name in COLUMNS}
     intrinsics = recording.intrinsics
@@ -112,5 +162,4 @@ def write_npz_recording(path: str | Path, recording) -> None:
         arrays["poses"] = np.column_stack([trajectory.times, trajectory.positions, trajectory.quaternions])
     if recording.imu is not None:
         arrays["imu"] = np.asarray(recording.imu, dtype=np.float64)
-    with open(path, "wb") as handle:
-        np.savez(handle, **arrays)
+    write_npz(path, arrays)

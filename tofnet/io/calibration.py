@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from tofnet.errors import DataError, located
+from tofnet.io.files import write_text_atomic
 from tofnet.io.groundtruth import finite_number, read_text
 from tofnet.io.recording import Intrinsics
 
@@ -43,6 +44,5 @@ def write_calibration(path: str | Path, intrinsics: Intrinsics) -> None:
     if len(values) not in (4, 9):
         raise DataError(located(path, None, f"distortion must have 5 coefficients (k1 k2 p1 p2 k3) or none, "
                                             f"got {len(intrinsics.distortion)}"))
-    path.parent.mkdir(parents=True, exist_ok=True)
     # repr() is the shortest text that reads back to the same float.
-    path.write_text(" ".join(repr(float(v)) for v in values) + "\n", encoding="utf-8")
+    write_text_atomic(path, " ".join(repr(float(v)) for v in values) + "\n")

@@ -3,15 +3,14 @@
 What the target cannot hold is either written as ECD side files next to it (AEDAT4:
 ``calib.txt``, ``groundtruth.txt``; ``read_recording`` reads them back) or reported in
 the returned messages; nothing is dropped without a line saying so. The output appears
-under its final name only once complete (written under a temporary name, then renamed).
+under its final name only once complete (``tofnet.io.files``: written under a temporary
+name, synced, then renamed), and is checked before any work (``check_convert_output``).
 HDF5 and AEDAT4 are written chunk by chunk (bounded memory); ECD and ``.npz`` need the
 whole recording in memory.
 """
 
 from __future__ import annotations
 
-import os
-import shutil
 from pathlib import Path
 
 from tofnet.errors import DataError, located
@@ -30,67 +29,80 @@ def output_kind(out: str | Path) -> str:
     return OUTPUTS[suffix]
 
 
+def check_convert_output(out: str | Path, input_path: str | Path, *, force: bool = False,
+                         gt_depth: bool = False) -> str:
+    """Refuse, before any work, an output that cannot or must not be written (see
+    ``tofnet.io.files.check_output``; an input is never overwritten, even with ``force``).
+    Returns the output kind."""
+    from tofnet.io.ecd import recording_files
+    from tofnet.io.files import check_output
+
+    out = Path(out)
+    kind = output_kind(out)
+    inputs = [Path(input_path), *recording_files(input_path)]
+    check_output(out, force=force, inputs=inputs, what="output", folder=kind == "ecd")
+    if gt_depth and kind == "npz":
+        check_output(_depth_path(out), force=force, inputs=inputs, what="true depth output")
+    return kind
+
+
+def _depth_path(out: Path) -> Path:
+    return out.with_name(f"{out.stem}_depth.npy")
+
+
 def convert(source: EventSource, out: str | Path, *, force: bool = False,
             progress: ProgressHook | None = None) -> list[str]:
     """Write ``source`` to ``out`` (format from its name); returns lines saying what went where."""
+    from tofnet.io.files import atomic_path
+
     out = Path(out)
-    kind = output_kind(out)
-    if out.exists() and not force:
-        raise DataError(located(out, None, "already exists (use --force to replace it)"))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    partial = out.with_name(f".{out.name}.partial-{os.getpid()}")
+    kind = check_convert_output(out, source.path, force=force, gt_depth=source.has_depth)
     messages: list[str] = []
-    try:
-        if kind in ("ecd", "npz"):
-            recording = source.read(progress)
-            count = len(recording.events)
-            _write_whole(kind, partial, recording, messages, final=out)
-            meta = recording
-        else:
-            from tofnet.io.aedat import write_aedat4
-            from tofnet.io.hdf5 import write_hdf5
-            if kind == "aedat4" and source.sensor_size is None:
-                source.sensor_size = _extent(source)
-                messages.append(f"sensor size {source.sensor_size[0]}x{source.sensor_size[1]} from the events' "
-                                "extent (the input does not say)")
-            writer = write_hdf5 if kind == "hdf5" else write_aedat4
-            count = writer(partial, source.chunks(DEFAULT_CHUNK, progress), source)
-            meta = source
-            if source.has_depth:
-                messages.append(f"not written: true depth per event ({kind} has no place for it)")
-        if count == 0:
-            raise DataError(located(source.path, None, "no events"))
-        if out.exists():
-            shutil.rmtree(out) if out.is_dir() else out.unlink()
-        os.replace(partial, out)
-    finally:
-        if partial.exists():
-            shutil.rmtree(partial) if partial.is_dir() else partial.unlink()
+    if kind == "npz":  # written atomically by tofnet.io.npy
+        from tofnet.io.arrays import write_npz_recording
+        from tofnet.io.npy import write_npy
+        meta = recording = source.read(progress)
+        count = len(recording.events)
+        write_npz_recording(out, recording)
+        if recording.gt_depth is not None:
+            write_npy(_depth_path(out), recording.gt_depth)
+            messages.append(f"true depth per event -> {_depth_path(out)}")
+    else:
+        with atomic_path(out, folder=kind == "ecd") as partial:
+            if kind == "ecd":
+                meta = recording = source.read(progress)
+                count = len(recording.events)
+                _write_ecd(partial, recording, messages)
+            else:
+                from tofnet.io.aedat import write_aedat4
+                from tofnet.io.hdf5 import write_hdf5
+                if kind == "aedat4" and source.sensor_size is None:
+                    source.sensor_size = _extent(source)
+                    messages.append(f"sensor size {source.sensor_size[0]}x{source.sensor_size[1]} from the "
+                                    "events' extent (the input does not say)")
+                writer = write_hdf5 if kind == "hdf5" else write_aedat4
+                count = writer(partial, source.chunks(DEFAULT_CHUNK, progress), source)
+                meta = source
+                if source.has_depth:
+                    messages.append(f"not written: true depth per event ({kind} has no place for it)")
+            if count == 0:
+                raise DataError(located(source.path, None, "no events"))
     if kind == "aedat4":
         _side_files(out.parent, meta, messages, force)
     return [f"wrote {count:,} events to {out} ({kind})"] + messages
 
 
-def _write_whole(kind: str, partial: Path, recording, messages: list[str], final: Path) -> None:
-    import numpy as np
-
-    if kind == "npz":
-        from tofnet.io.arrays import write_npz_recording
-        write_npz_recording(partial, recording)
-        if recording.gt_depth is not None:
-            depth_path = final.with_name(f"{final.stem}_depth.npy")
-            np.save(depth_path, recording.gt_depth)
-            messages.append(f"true depth per event -> {depth_path}")
-        return
+def _write_ecd(folder: Path, recording, messages: list[str]) -> None:
     from tofnet.io.ecd import write_ecd
+
     intrinsics = _text_calibration(recording.intrinsics, messages)
     trajectory = recording.trajectory
     poses = (trajectory.times, trajectory.positions, trajectory.quaternions) \
         if trajectory is not None and hasattr(trajectory, "quaternions") else (None, None, None)
-    write_ecd(partial, recording.events, intrinsics=intrinsics, times=poses[0], positions=poses[1],
+    write_ecd(folder, recording.events, intrinsics=intrinsics, times=poses[0], positions=poses[1],
               quaternions=poses[2], sensor_size=recording.sensor_size, gt_depth=recording.gt_depth)
     if recording.imu is not None:
-        _write_imu(partial / "imu.txt", recording.imu)
+        _write_imu(folder / "imu.txt", recording.imu)
 
 
 def _text_calibration(intrinsics, messages: list[str]):
@@ -130,7 +142,13 @@ def _side_files(folder: Path, meta, messages: list[str], force: bool) -> None:
 
 
 def _extent(source: EventSource) -> tuple[int, int]:
+    from tofnet.events import sensor_size_problem
+
     width = height = 0
     for chunk in source.chunks():
         width, height = max(width, int(chunk["x"].max()) + 1), max(height, int(chunk["y"].max()) + 1)
+    problem = sensor_size_problem(width, height)
+    if problem:
+        raise DataError(located(source.path, None, f"sensor size not in the file, and the events' extent is not "
+                                                   f"a usable one: {problem} (pass --sensor-size)"))
     return width, height

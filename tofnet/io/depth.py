@@ -1,20 +1,35 @@
-"""Depth estimates to and from ``.npz`` and ``.csv`` files."""
+"""Depth estimates to and from ``.npz`` and ``.csv`` files.
+
+Both are written atomically. A truncated file is never read as complete: a ``.npz`` is
+checked by zip (central directory, CRC-32 of every array); a ``.csv`` ends with the
+line ``# end: N rows``, which must be present, last, and agree with the rows read.
+Values read back are checked (times in range, whole pixels, finite depths).
+"""
 
 from __future__ import annotations
 
 import json
-import zipfile
+import re
+from decimal import ROUND_HALF_UP, Decimal, InvalidOperation
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
-from tofnet.errors import DataError, located
-from tofnet.events import DEPTH_DTYPE
+from tofnet.errors import DataError, located, quote
+from tofnet.events import DEPTH_DTYPE, MAX_TIME_US
+from tofnet.io.files import write_text_atomic
 from tofnet.io.groundtruth import read_text
+from tofnet.io.npy import load_npz, write_npz
 
 CSV_HEADER = "t,x,y,z,step"
+#: The last line of a depth CSV; a file without it (or with another count) is refused.
+CSV_END = "# end: {rows} rows"
+_CSV_END = re.compile(r"^# end: (\d{1,19}) rows$")
 _META = ("t0_us", "timestep_us", "latency_steps")
+_ARRAYS = ("t", "t_us", "x", "y", "z", "step")
+#: Below this |t| (µs) a float64 holds every µs exactly; larger CSV times are parsed as decimals.
+_FLOAT_EXACT_US = 2**52
 
 
 def _jsonable(value: Any) -> Any:
@@ -29,34 +44,35 @@ def _jsonable(value: Any) -> Any:
 
 def write_depth(path: str | Path, depth: np.ndarray, *, t0_us: int, timestep_us: int, latency_steps: int,
                 summary: dict | None = None) -> None:
-    """Write depth estimates (``DEPTH_DTYPE``) to ``.npz`` or ``.csv``, chosen by suffix.
+    """Write depth estimates (``DEPTH_DTYPE``) to ``.npz`` or ``.csv``, chosen by suffix, atomically.
 
     ``.npz``: arrays ``t`` (float64 s), ``t_us`` (int64 µs, exact), ``x``, ``y``
     (uint16 px), ``z`` (float64 m), ``step`` (int64) and scalars ``t0_us``,
     ``timestep_us``, ``latency_steps`` and ``summary_json`` (JSON text of ``summary``).
     ``.csv``: header ``t,x,y,z,step``, ``t`` in seconds with 6 decimals (exact for
-    µs stamps), ``z`` in metres (shortest round-tripping text); no metadata.
+    µs stamps), ``z`` in metres (shortest round-tripping text), then the line
+    ``# end: N rows``; no metadata.
     """
     path = Path(path)
     if not isinstance(depth, np.ndarray) or depth.dtype != DEPTH_DTYPE:
         raise TypeError(f"depth must be an array of dtype {DEPTH_DTYPE}, got {getattr(depth, 'dtype', type(depth))}")
     if path.suffix not in (".npz", ".csv"):
         raise DataError(located(path, None, "depth output must be a .npz or .csv file"))
-    path.parent.mkdir(parents=True, exist_ok=True)
     if path.suffix == ".npz":
         try:
             summary_json = json.dumps(summary or {}, default=_jsonable)
         except (TypeError, ValueError) as err:
             raise DataError(located(path, None, f"summary is not JSON-serialisable: {err}")) from None
-        np.savez(path, t=depth["t"] * 1e-6, t_us=depth["t"].astype(np.int64), x=depth["x"].astype(np.uint16),
-                 y=depth["y"].astype(np.uint16), z=depth["z"].astype(np.float64), step=depth["step"].astype(np.int64),
-                 t0_us=np.int64(t0_us), timestep_us=np.int64(timestep_us), latency_steps=np.int64(latency_steps),
-                 summary_json=np.str_(summary_json))
+        write_npz(path, dict(t=depth["t"] * 1e-6, t_us=depth["t"].astype(np.int64), x=depth["x"].astype(np.uint16),
+                             y=depth["y"].astype(np.uint16), z=depth["z"].astype(np.float64),
+                             step=depth["step"].astype(np.int64), t0_us=np.int64(t0_us),
+                             timestep_us=np.int64(timestep_us), latency_steps=np.int64(latency_steps),
+                             summary_json=np.str_(summary_json)))
         return
     rows = [f"{_seconds(t)},{x},{y},{z!r},{s}" for t, x, y, z, s in
             zip(depth["t"].tolist(), depth["x"].tolist(), depth["y"].tolist(), depth["z"].tolist(),
                 depth["step"].tolist())]
-    path.write_text("\n".join([CSV_HEADER, *rows]) + "\n", encoding="utf-8")
+    write_text_atomic(path, "\n".join([CSV_HEADER, *rows, CSV_END.format(rows=len(rows))]) + "\n")
 
 
 def _seconds(t_us: int) -> str:
@@ -82,34 +98,72 @@ def read_depth(path: str | Path) -> tuple[np.ndarray, dict]:
 
 
 def _read_npz(path: Path) -> tuple[np.ndarray, dict]:
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {key: data[key] for key in data.files}
-    except FileNotFoundError:
-        raise DataError(located(path, None, "file not found")) from None
-    except (ValueError, OSError, EOFError, zipfile.BadZipFile, AttributeError) as err:
-        raise DataError(located(path, None, f"not a readable .npz depth file ({err})")) from None
+    _, arrays = load_npz(path, (*_ARRAYS, *_META, "summary_json"), "depth file")
     missing = [key for key in ("t", "x", "y", "z", "step") if key not in arrays]
     if missing:
         raise DataError(located(path, None, f"missing array(s) {', '.join(missing)}; expected t, x, y, z, step"))
-    n = arrays["t"].shape[0]
-    for key in ("x", "y", "z", "step", "t_us"):
-        if key in arrays and arrays[key].shape != (n,):
+    n = arrays["t"].shape[0] if arrays["t"].ndim == 1 else -1
+    for key in _ARRAYS:
+        if key not in arrays:
+            continue
+        if arrays[key].shape != (n,):
             raise DataError(located(path, None, f"array '{key}' has shape {arrays[key].shape}, expected ({n},) like 't'"))
-    depth = np.empty(n, dtype=DEPTH_DTYPE)
+        if arrays[key].dtype.kind not in ("iuf" if key in ("t", "z") else "iu"):
+            raise DataError(located(path, None, f"array '{key}' has dtype {arrays[key].dtype}, expected "
+                                                f"{'numbers' if key in ('t', 'z') else 'whole numbers'}"))
     if "t_us" in arrays:
-        depth["t"] = arrays["t_us"]
+        t_us = arrays["t_us"]
     else:
-        depth["t"] = np.round(arrays["t"].astype(np.float64) * 1e6)
-    for key in ("x", "y", "z", "step"):
-        depth[key] = arrays[key]
-    meta: dict[str, Any] = {key: int(arrays[key]) if key in arrays else None for key in _META}
-    text = str(arrays["summary_json"]) if "summary_json" in arrays else ""
+        with np.errstate(over="ignore", invalid="ignore"):
+            t_us = np.round(arrays["t"].astype(np.float64) * 1e6)
+    columns = {"t": t_us, "x": arrays["x"], "y": arrays["y"], "z": arrays["z"], "step": arrays["step"]}
+    depth = _checked(path, columns, row_line=None)
+    meta: dict[str, Any] = {}
+    for key in _META:
+        value = arrays.get(key)
+        if value is not None and (value.shape != () or value.dtype.kind not in "iu"
+                                  or not -MAX_TIME_US < int(value) < MAX_TIME_US):
+            raise DataError(located(path, None, f"'{key}' must be one whole number, |value| < 2**61"))
+        meta[key] = None if value is None else int(value)
+    text = arrays.get("summary_json")
+    if text is not None and (text.shape != () or text.dtype.kind != "U"):
+        raise DataError(located(path, None, "'summary_json' must be one string"))
+    text = "" if text is None else str(text)
     try:
         meta["summary"] = json.loads(text) if text.strip() else {}
     except json.JSONDecodeError as err:
         raise DataError(located(path, None, f"summary_json is not valid JSON ({err.msg})")) from None
+    except RecursionError:
+        raise DataError(located(path, None, "summary_json is nested too deeply")) from None
     return depth, meta
+
+
+def _checked(path: Path, columns: dict[str, np.ndarray], row_line: Callable[[int], int] | None) -> np.ndarray:
+    """A ``DEPTH_DTYPE`` array from checked columns: ``t`` whole µs with ``|t| < 2**61``,
+    ``x``, ``y`` whole pixels 0..65535, ``z`` finite metres, ``step`` a whole number >= 0."""
+    def whole(a, low, high):
+        return (a >= low) & (a <= high) & (a == np.round(a)) if a.dtype.kind == "f" else (a >= low) & (a <= high)
+
+    checks = (("t", lambda a: whole(a, -MAX_TIME_US + 1, MAX_TIME_US - 1), "whole µs with |t| < 2**61"),
+              ("x", lambda a: whole(a, 0, 65535), "a whole number 0..65535"),
+              ("y", lambda a: whole(a, 0, 65535), "a whole number 0..65535"),
+              ("z", lambda a: np.isfinite(a) if a.dtype.kind == "f" else np.ones(a.shape, bool), "a finite depth"),
+              ("step", lambda a: whole(a, 0, MAX_TIME_US - 1), "a whole number >= 0"))
+    for name, ok, expected in checks:
+        values = columns[name]
+        with np.errstate(invalid="ignore"):
+            bad = np.flatnonzero(~ok(values))
+        if bad.size:
+            row = int(bad[0])
+            if row_line is None:
+                raise DataError(located(path, None, f"array '{name}', row {row}: expected {expected}, "
+                                                    f"got {values[row]}"))
+            raise DataError(located(path, row_line(row), f"column '{name}': expected {expected}, "
+                                                         f"got {values[row]:.17g}"))
+    depth = np.empty(len(columns["t"]), dtype=DEPTH_DTYPE)
+    for name in ("t", "x", "y", "z", "step"):
+        depth[name] = columns[name]
+    return depth
 
 
 def _read_csv(path: Path) -> np.ndarray:
@@ -117,8 +171,20 @@ def _read_csv(path: Path) -> np.ndarray:
     lines = text.splitlines()
     if not lines or lines[0].strip().replace(" ", "") != CSV_HEADER:
         first = lines[0].strip() if lines else ""
-        raise DataError(located(path, 1, f"expected the header '{CSV_HEADER}', got {first!r}"))
-    if not any(line.strip() for line in lines[1:]):
+        raise DataError(located(path, 1, f"expected the header '{CSV_HEADER}', got {quote(first)}"))
+    last = len(lines) - 1
+    while last > 0 and not lines[last].strip():
+        last -= 1
+    end = _CSV_END.match(lines[last].strip()) if last > 0 else None
+    if end is None or not text.endswith(("\n", "\r")):
+        raise DataError(located(path, None, f"no end line '{CSV_END.format(rows='N')}': the file is truncated "
+                                            "(or was not written by tofnet; add that line to read it)"))
+    lines = lines[:last]
+    rows = sum(1 for line in lines[1:] if line.strip())
+    if rows != int(end.group(1)):
+        raise DataError(located(path, last + 1, f"the end line says {int(end.group(1))} rows but the file holds "
+                                                f"{rows}: truncated or edited"))
+    if rows == 0:
         return np.empty(0, dtype=DEPTH_DTYPE)
     try:
         table = np.loadtxt(lines[1:], delimiter=",", dtype=np.float64, ndmin=2, comments=None)
@@ -127,16 +193,30 @@ def _read_csv(path: Path) -> np.ndarray:
         raise DataError(located(path, None, f"cannot parse the rows as '{CSV_HEADER}'")) from None
     if table.shape[1] != 5:
         _raise_first_bad_row(path, lines)
-    for column, name in ((1, "x"), (2, "y"), (4, "step")):
-        values = table[:, column]
-        bad = np.flatnonzero((values != np.round(values)) | (values < 0) | ((values > 65535) & (column < 4)))
-        if bad.size:
-            raise DataError(located(path, _line_of_row(lines, int(bad[0])),
-                                    f"column '{name}': expected a whole number >= 0, got {values[bad[0]]:g}"))
-    depth = np.empty(table.shape[0], dtype=DEPTH_DTYPE)
-    depth["t"] = np.round(table[:, 0] * 1e6)
-    depth["x"], depth["y"], depth["z"], depth["step"] = table[:, 1], table[:, 2], table[:, 3], table[:, 4]
-    return depth
+    with np.errstate(over="ignore", invalid="ignore"):
+        t_us = np.round(table[:, 0] * 1e6)
+    if not np.all(np.abs(t_us) < _FLOAT_EXACT_US):
+        t_us = _exact_microseconds(path, lines)
+    columns = {"t": t_us, "x": table[:, 1], "y": table[:, 2], "z": table[:, 3], "step": table[:, 4]}
+    return _checked(path, columns, row_line=lambda row: _line_of_row(lines, row))
+
+
+def _exact_microseconds(path: Path, lines: list[str]) -> np.ndarray:
+    """The ``t`` column as µs from the decimal text (rounded half away from zero), for times
+    a float64 cannot hold to the µs; values out of range become ``±2**61`` (then refused)."""
+    out = []
+    for number, line in enumerate(lines[1:], start=2):
+        if not line.strip():
+            continue
+        try:
+            value = Decimal(line.split(",", 1)[0].strip()) * 1_000_000
+        except InvalidOperation:
+            raise DataError(located(path, number, "column 't': expected a number")) from None
+        if not value.is_finite() or abs(value) >= MAX_TIME_US:
+            out.append(MAX_TIME_US if not value.is_signed() else -MAX_TIME_US)
+        else:
+            out.append(int(value.to_integral_value(rounding=ROUND_HALF_UP)))  # half away from zero
+    return np.array(out, dtype=object).astype(np.int64)
 
 
 def _line_of_row(lines: list[str], row: int) -> int:
@@ -163,4 +243,5 @@ def _raise_first_bad_row(path: Path, lines: list[str]) -> None:
             try:
                 float(field)
             except ValueError:
-                raise DataError(located(path, number, f"column '{name}': expected a number, got {field.strip()!r}")) from None
+                raise DataError(located(path, number, f"column '{name}': expected a number, "
+                                                      f"got {quote(field.strip())}")) from None

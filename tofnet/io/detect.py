@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from tofnet.errors import DataError, located
+from tofnet.errors import DataError, located, quote
+from tofnet.io.files import open_regular
 
 #: Every format ``read_recording`` knows, with a one-line description (``tofnet info``, docs).
 FORMATS = {
@@ -35,12 +36,13 @@ _EXPECTED = ("an ECD folder or an events file (.txt, .npy, .npz, .aedat4, .raw, 
 def detect_format(path: str | Path) -> str:
     """The key of ``FORMATS`` for ``path``; ``DataError`` when it is missing or unknown."""
     path = Path(path)
-    if not path.exists():
+    if "\x00" in str(path) or not path.exists():
         raise DataError(located(path, None, f"no such file or folder; expected {_EXPECTED}"))
     if path.is_dir():
         return "ecd"
+    # Only a regular file is read: a FIFO, a device (/dev/zero), a socket is refused unread.
     try:
-        with open(path, "rb") as handle:
+        with open_regular(path, "recording file") as handle:
             head = handle.read(4096)
             hdf5 = head.startswith(_HDF5_MAGIC) or _hdf5_userblock(handle)
     except OSError as err:
@@ -50,6 +52,7 @@ def detect_format(path: str | Path) -> str:
         return "aedat4"
     if head.startswith(b"#!AER-DAT"):
         version = head[9:12].decode("ascii", "replace").strip()
+        version = version if version.isprintable() else quote(version)
         raise DataError(located(path, None, f"AEDAT {version} is not supported, only AEDAT4; convert it with "
                                             "iniVation DV or jAER to AEDAT4"))
     if hdf5:
@@ -72,7 +75,7 @@ def detect_format(path: str | Path) -> str:
         return _unknown(path, "the file is empty")
     if suffix in _SUFFIX_NAMES:
         return _unknown(path, f"{suffix!r} names {_SUFFIX_NAMES[suffix]} but the content does not start like one")
-    return _unknown(path, f"suffix {suffix or '(none)'!r} and content not recognised")
+    return _unknown(path, f"suffix {quote(suffix, 20) if suffix else '(none)'} and content not recognised")
 
 
 def _hdf5_userblock(handle) -> bool:

@@ -8,13 +8,15 @@ recordings. ECD's ``images.txt`` and ``images/`` are not used.
 
 from __future__ import annotations
 
-import zipfile
 from pathlib import Path
 
 import numpy as np
 
 from tofnet.errors import DataError, located
+from tofnet.events import sensor_size_problem
 from tofnet.io.calibration import read_calibration, write_calibration
+from tofnet.io.files import write_text_atomic
+from tofnet.io.npy import load_npy, write_npy
 from tofnet.io.events import read_events_txt, write_events_txt
 from tofnet.io.groundtruth import read_groundtruth, read_table, write_groundtruth
 from tofnet.io.recording import Intrinsics, Recording
@@ -34,7 +36,8 @@ def read_imu(path: str | Path) -> np.ndarray:
 
 
 def read_sensor_size(path: str | Path) -> tuple[int, int]:
-    """``sensor_size.txt``: one line ``width height`` in pixels."""
+    """``sensor_size.txt``: one line ``width height`` in pixels, within the documented
+    maximum (``tofnet.events.MAX_SENSOR_SIDE``, ``MAX_SENSOR_PIXELS``)."""
     values, lines = read_table(path, ("width", "height"), "sensor size")
     if len(values) != 1:
         raise DataError(located(path, None, f"expected one line 'width height', found {len(values)}"))
@@ -42,37 +45,53 @@ def read_sensor_size(path: str | Path) -> tuple[int, int]:
     if width != int(width) or height != int(height) or width < 1 or height < 1:
         raise DataError(located(path, int(lines[0]), f"expected positive whole numbers 'width height' in pixels, "
                                                      f"got {width:g} {height:g}"))
+    problem = sensor_size_problem(int(width), int(height))
+    if problem:
+        raise DataError(located(path, int(lines[0]), f"sensor size: {problem}"))
     return int(width), int(height)
 
 
 def read_gt_depth(path: str | Path, n_events: int) -> np.ndarray:
-    """True depth per event (float64 metres, NaN where unknown), checked against the event count."""
+    """True depth per event (float64 metres, NaN where unknown), checked against the event count.
+
+    Every known depth must be finite and positive: infinities and depths <= 0 are refused.
+    """
     path = Path(path)
-    try:
-        depth = np.load(path, allow_pickle=False)
-    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as err:
-        raise DataError(located(path, None, f"not a readable .npy array ({err})")) from None
-    if not isinstance(depth, np.ndarray) or depth.dtype.kind not in "iuf" or depth.shape != (n_events,):
+    depth = load_npy(path, "depth file")
+    if depth.dtype.kind not in "iuf" or depth.shape != (n_events,):
         raise DataError(located(path, None, f"expected {n_events} depths (one per event, float metres), "
-                                            f"got an array of shape {getattr(depth, 'shape', '?')}"))
-    return depth.astype(np.float64)
+                                            f"got an array of shape {depth.shape} and dtype {depth.dtype}"))
+    depth = depth.astype(np.float64)
+    bad = np.flatnonzero(~np.isnan(depth) & ~((depth > 0) & np.isfinite(depth)))
+    if bad.size:
+        raise DataError(located(path, None, f"event {int(bad[0])}: true depth {depth[bad[0]]:g} m; expected a "
+                                            "finite depth > 0 (or NaN where unknown)"))
+    return depth
 
 
 def attach_sidecars(recording: Recording, folder: Path, gt_depth_name: str | None = GT_DEPTH) -> Recording:
-    """Add the calibration, poses, IMU, sensor size and true depth found in ``folder``."""
-    if (folder / CALIBRATION).is_file():
+    """Add the calibration, poses, IMU, sensor size and true depth found in ``folder``.
+
+    A side file that exists but is not a regular file (a folder, a FIFO, ...) is an
+    error, not silently skipped.
+    """
+    if _present(folder / CALIBRATION):
         recording.intrinsics = read_calibration(folder / CALIBRATION)
     else:
         recording.notes.append(f"no {CALIBRATION}: intrinsics unknown")
-    if (folder / GROUNDTRUTH).is_file():
+    if _present(folder / GROUNDTRUTH):
         recording.trajectory = read_groundtruth(folder / GROUNDTRUTH)
-    if (folder / IMU).is_file():
+    if _present(folder / IMU):
         recording.imu = read_imu(folder / IMU)
-    if (folder / SENSOR_SIZE).is_file():
+    if _present(folder / SENSOR_SIZE):
         recording.sensor_size = read_sensor_size(folder / SENSOR_SIZE)
-    if gt_depth_name is not None and (folder / gt_depth_name).is_file():
+    if gt_depth_name is not None and _present(folder / gt_depth_name):
         recording.gt_depth = read_gt_depth(folder / gt_depth_name, len(recording.events))
     return recording
+
+
+def _present(path: Path) -> bool:
+    return path.exists() or path.is_symlink()
 
 
 def read_ecd(folder: str | Path) -> Recording:
@@ -80,10 +99,12 @@ def read_ecd(folder: str | Path) -> Recording:
     folder = Path(folder)
     if not folder.is_dir():
         raise DataError(located(folder, None, "not a folder; an ECD recording is a folder holding events.txt"))
-    if not (folder / EVENTS).is_file():
+    if not _present(folder / EVENTS):
         raise DataError(located(folder, None, f"no {EVENTS}; an ECD recording folder needs {EVENTS} "
                                               "(lines 't x y p': seconds, column, row, polarity)"))
-    recording = Recording(events=read_events_txt(folder / EVENTS), source=str(folder))
+    notes: list[str] = []
+    events = read_events_txt(folder / EVENTS, notes)
+    recording = Recording(events=events, source=str(folder), notes=notes)
     return attach_sidecars(recording, folder)
 
 
@@ -95,7 +116,8 @@ def write_ecd(folder: str | Path, events: np.ndarray, *, intrinsics: Intrinsics 
     ``events.txt`` always; ``calib.txt`` when ``intrinsics`` is given;
     ``groundtruth.txt`` when poses are given (``times`` s, ``positions`` m,
     ``quaternions`` ``qx qy qz qw`` camera-to-world); ``sensor_size.txt`` (width,
-    height px) and ``events_depth.npy`` (metres per event) when given.
+    height px) and ``events_depth.npy`` (metres per event) when given. Each file is
+    written atomically.
     """
     folder = Path(folder)
     poses = (times, positions, quaternions)
@@ -104,7 +126,10 @@ def write_ecd(folder: str | Path, events: np.ndarray, *, intrinsics: Intrinsics 
     if gt_depth is not None and np.shape(gt_depth) != (len(events),):
         raise DataError(located(folder / GT_DEPTH, None, f"expected {len(events)} depths (one per event), "
                                                          f"got shape {np.shape(gt_depth)}"))
-    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise DataError(located(folder, None, f"cannot create the folder: {err.strerror or err}")) from None
     write_events_txt(folder / EVENTS, events)
     if intrinsics is not None:
         write_calibration(folder / CALIBRATION, intrinsics)
@@ -112,6 +137,20 @@ def write_ecd(folder: str | Path, events: np.ndarray, *, intrinsics: Intrinsics 
         write_groundtruth(folder / GROUNDTRUTH, times, positions, quaternions)
     if sensor_size is not None:
         width, height = (int(v) for v in sensor_size)
-        (folder / SENSOR_SIZE).write_text(f"{width} {height}\n", encoding="utf-8")
+        write_text_atomic(folder / SENSOR_SIZE, f"{width} {height}\n")
     if gt_depth is not None:
-        np.save(folder / GT_DEPTH, np.asarray(gt_depth, dtype=np.float64))
+        write_npy(folder / GT_DEPTH, np.asarray(gt_depth, dtype=np.float64))
+
+
+#: Every file name ``read_ecd`` may read in a recording folder.
+SIDE_FILES = (EVENTS, CALIBRATION, GROUNDTRUTH, IMU, SENSOR_SIZE, GT_DEPTH)
+
+
+def recording_files(path: str | Path) -> list[Path]:
+    """The files a recording at ``path`` is read from (a folder's, or a file and its
+    side files); outputs must not overwrite any of them."""
+    path = Path(path)
+    if path.is_dir():
+        return [path / name for name in SIDE_FILES if _present(path / name)]
+    names = [name for name in SIDE_FILES if name not in (EVENTS, GT_DEPTH)] + [f"{path.stem}_depth.npy"]
+    return [path] + [path.parent / name for name in names if _present(path.parent / name)]

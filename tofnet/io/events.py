@@ -2,30 +2,35 @@
 
 The text reader parses the raw bytes in one compiled pass (no Python per line) and
 converts the decimal seconds to integer microseconds exactly, without going through
-a float: ``1468939993.0674165`` s becomes ``1468939993067417`` µs (half away from zero).
+a float: ``1468939993.0674165`` s becomes ``1468939993067417`` µs (half away from zero),
+whatever the number of digits. How many times had sub-µs digits (and were rounded) is
+counted and reported in ``Recording.notes``. Every time must satisfy
+``|t| < MAX_TIME_US`` (``tofnet.events``).
 """
 
 from __future__ import annotations
 
-import zipfile
 from pathlib import Path
 
 import numpy as np
 from numba import njit
 
-from tofnet.errors import DataError, located
-from tofnet.events import EVENT_DTYPE
+from tofnet.errors import DataError, located, quote
+from tofnet.events import EVENT_DTYPE, MAX_TIME_US
+from tofnet.io.files import atomic_write, read_bytes
+from tofnet.io.npy import load_npy, numpy_kind, write_npy, write_npz
 
 _COLUMNS = ("t", "x", "y", "p")
 _EXPECTED = "4 columns 't x y p' (seconds, column px, row px, polarity 0/1)"
 _MAX_COORD = 65535  # uint16
 _POW10 = np.array([10 ** k for k in range(19)], dtype=np.int64)
 _I64_MAX = np.iinfo(np.int64).max
+_MAX_TIME_US = np.int64(MAX_TIME_US)
 
 # Status codes of the compiled parser.
 _OK, _COLUMN_COUNT, _NOT_NUMBER, _NOT_WHOLE, _NEGATIVE, _TOO_LARGE, _POLARITY, _TIME_BACK, _TIME_RANGE = range(9)
 # Fields of the parser's ``info`` array.
-_STATUS, _LINE, _LINE_START, _LINE_END, _COLUMN, _TOKEN_START, _TOKEN_END, _PREV_LINE = range(8)
+_STATUS, _LINE, _LINE_START, _LINE_END, _COLUMN, _TOKEN_START, _TOKEN_END, _PREV_LINE, _ROUNDED = range(9)
 
 
 @njit(cache=True)
@@ -34,11 +39,13 @@ def _is_space(c) -> bool:
 
 
 @njit(cache=True)
-def _scan_number(buf, start, end):
+def _scan_number(buf, start, end, i64_max):
     """Parse ``buf[start:end]`` as ``[+-]digits[.digits][e[+-]digits]``.
 
-    Returns ``(ok, negative, mantissa, exp10)`` with value ``mantissa * 10**exp10``;
-    digits past the 18th significant one are dropped (far below a microsecond).
+    Returns ``(ok, negative, mantissa, exp10, next_digit, sticky)``: the value is
+    ``mantissa * 10**exp10`` plus the digits that did not fit in the int64 mantissa,
+    of which ``next_digit`` is the first (-1 when none) and ``sticky`` says whether any
+    of them is not 0. Nothing is silently lost: callers round or refuse with these.
     """
     i = start
     negative = False
@@ -48,28 +55,37 @@ def _scan_number(buf, start, end):
     mantissa = np.int64(0)
     exp10 = 0
     digits = 0
-    significant = 0
-    while i < end and 48 <= buf[i] <= 57:
-        if significant < 18:
-            mantissa = mantissa * 10 + np.int64(buf[i] - 48)
-            if mantissa > 0:
-                significant += 1
+    full = False
+    next_digit = -1
+    sticky = False
+    fraction = False
+    while i < end:
+        c = buf[i]
+        if c == 46 and not fraction:
+            fraction = True
+            i += 1
+            continue
+        if not 48 <= c <= 57:
+            break
+        d = np.int64(c - 48)
+        if not full and mantissa <= (i64_max - d) // 10:
+            mantissa = mantissa * 10 + d
+            if fraction:
+                exp10 -= 1
         else:
-            exp10 += 1
+            full = True
+            if next_digit < 0:
+                next_digit = d
+            elif d != 0:
+                sticky = True
+            if not fraction:
+                exp10 += 1
         digits += 1
         i += 1
-    if i < end and buf[i] == 46:
-        i += 1
-        while i < end and 48 <= buf[i] <= 57:
-            if significant < 18:
-                mantissa = mantissa * 10 + np.int64(buf[i] - 48)
-                exp10 -= 1
-                if mantissa > 0:
-                    significant += 1
-            digits += 1
-            i += 1
+    if next_digit > 0:
+        sticky = True
     if digits == 0:
-        return False, negative, mantissa, exp10
+        return False, negative, mantissa, exp10, next_digit, sticky
     if i < end and (buf[i] == 101 or buf[i] == 69):
         i += 1
         exp_negative = False
@@ -84,42 +100,56 @@ def _scan_number(buf, start, end):
             exp_digits += 1
             i += 1
         if exp_digits == 0:
-            return False, negative, mantissa, exp10
+            return False, negative, mantissa, exp10, next_digit, sticky
         exp10 += -exponent if exp_negative else exponent
-    return i == end, negative, mantissa, exp10
+    return i == end, negative, mantissa, exp10, next_digit, sticky
 
 
 @njit(cache=True)
-def _to_microseconds(negative, mantissa, exp10, pow10, i64_max):
-    """Seconds ``±mantissa * 10**exp10`` as integer µs, half away from zero: ``(ok, value)``."""
-    if mantissa == 0:
-        return True, np.int64(0)
+def _to_microseconds(negative, mantissa, exp10, next_digit, sticky, pow10, max_time):
+    """Seconds as integer µs, half away from zero: ``(ok, value, rounded)``.
+
+    ``ok`` is False when ``|value| >= max_time``; ``rounded`` when sub-µs digits were not 0.
+    """
     scale = exp10 + 6
-    if scale >= 0:
-        if scale > 18 or mantissa > i64_max // pow10[scale]:
-            return False, np.int64(0)
+    rounded = sticky
+    if mantissa == 0 and not sticky:
+        return True, np.int64(0), False
+    if scale > 0:
+        if sticky or scale > 18 or mantissa >= max_time // pow10[scale] + 1:
+            return False, np.int64(0), False  # digits at or above 1 µs were cut: far out of range
         value = mantissa * pow10[scale]
-    elif -scale > 18:
-        value = np.int64(0)  # below 0.1 µs
+    elif scale == 0:
+        value = mantissa + (1 if next_digit >= 5 else 0)
+    elif -scale > 19:
+        value = np.int64(0)  # below 0.1 µs (the mantissa has at most 19 digits)
+        rounded = True
+    elif -scale == 19:
+        value = np.int64(1) if mantissa >= 5 * pow10[18] else np.int64(0)
+        rounded = True
     else:
         p = pow10[-scale]
         value = mantissa // p
-        if 2 * (mantissa - value * p) >= p:
+        remainder = mantissa - value * p
+        rounded = rounded or remainder != 0
+        if 2 * remainder >= p:
             value += 1
-    return True, -value if negative else value
+    if value >= max_time:
+        return False, np.int64(0), False
+    return True, -value if negative else value, rounded
 
 
 @njit(cache=True)
-def _to_whole(negative, mantissa, exp10, pow10):
+def _to_whole(negative, mantissa, exp10, sticky, pow10):
     """An integer field: ``(status, value)``; values past 1e6 only need to be known as too large."""
-    if mantissa == 0:
+    if mantissa == 0 and not sticky:
         return _OK, np.int64(0)
     if exp10 >= 0:
         if exp10 > 6 or mantissa > 1000000:
             return _TOO_LARGE, np.int64(0)
         value = mantissa * pow10[exp10]
     else:
-        if -exp10 > 18 or mantissa % pow10[-exp10] != 0:
+        if sticky or -exp10 > 18 or mantissa % pow10[-exp10] != 0:
             return _NOT_WHOLE, np.int64(0)
         value = mantissa // pow10[-exp10]
     if value > 1000000:
@@ -128,10 +158,11 @@ def _to_whole(negative, mantissa, exp10, pow10):
 
 
 @njit(cache=True)
-def _parse_events(buf, t, x, y, p, info, pow10, i64_max, max_coord):
+def _parse_events(buf, t, x, y, p, info, pow10, i64_max, max_coord, max_time):
     """Parse ``t x y p`` lines of ``buf`` into the arrays; returns the number of events.
 
-    On the first bad line, stops and fills ``info`` (status, line, where).
+    On the first bad line, stops and fills ``info`` (status, line, where). Counts the
+    times rounded to the µs in ``info[_ROUNDED]``.
     """
     n_bytes = buf.shape[0]
     starts = np.empty(4, dtype=np.int64)
@@ -174,25 +205,27 @@ def _parse_events(buf, t, x, y, p, info, pow10, i64_max, max_coord):
             info[_COLUMN] = c
             info[_TOKEN_START] = starts[c]
             info[_TOKEN_END] = ends[c]
-            ok, negative, mantissa, exp10 = _scan_number(buf, starts[c], ends[c])
+            ok, negative, mantissa, exp10, next_digit, sticky = _scan_number(buf, starts[c], ends[c], i64_max)
             if not ok:
                 info[_STATUS] = _NOT_NUMBER
                 return n
             if c == 0:
-                ok, value = _to_microseconds(negative, mantissa, exp10, pow10, i64_max)
+                ok, value, rounded = _to_microseconds(negative, mantissa, exp10, next_digit, sticky, pow10, max_time)
                 if not ok:
                     info[_STATUS] = _TIME_RANGE
                     return n
+                if rounded:
+                    info[_ROUNDED] += 1
                 if n > 0 and value < prev_t:
                     info[_STATUS] = _TIME_BACK
                     info[_PREV_LINE] = prev_line
                     return n
                 t[n] = value
                 continue
-            if negative and mantissa != 0 and c < 3:
+            if negative and (mantissa != 0 or sticky) and c < 3:
                 info[_STATUS] = _NEGATIVE
                 return n
-            status, value = _to_whole(negative, mantissa, exp10, pow10)
+            status, value = _to_whole(negative, mantissa, exp10, sticky, pow10)
             if status != 0:
                 info[_STATUS] = status
                 return n
@@ -219,40 +252,39 @@ def _parse_events(buf, t, x, y, p, info, pow10, i64_max, max_coord):
     return n
 
 
-def _read_bytes(path: Path) -> bytes:
-    try:
-        return path.read_bytes()
-    except FileNotFoundError:
-        raise DataError(located(path, None, "file not found")) from None
-    except IsADirectoryError:
-        raise DataError(located(path, None, "is a folder, expected an events file")) from None
-    except OSError as err:
-        raise DataError(located(path, None, f"cannot read: {err.strerror or err}")) from None
+#: What ``Recording.notes`` says when times were rounded (``{count}``, ``{name}``).
+ROUNDED_NOTE = ("{name}: {count:,} time(s) had digits below 1 µs; rounded to the nearest µs, "
+                "halves away from zero")
 
 
-def read_events_txt(path: str | Path) -> np.ndarray:
+def read_events_txt(path: str | Path, notes: list[str] | None = None) -> np.ndarray:
     """Read ECD ``events.txt``: lines ``t x y p`` (t seconds, x column, y row, p 0/1 or -1/1).
 
-    Columns after the fourth are ignored. Returns an ``EVENT_DTYPE`` array with ``t`` in integer microseconds. Blank lines
-    and ``#`` comments are skipped. Raises ``DataError`` naming the line for a
-    malformed line, a negative or >65535 coordinate, a polarity outside {-1, 0, 1},
-    a timestamp earlier than the previous line's, or a file without events.
+    Columns after the fourth are ignored. Returns an ``EVENT_DTYPE`` array with ``t`` in
+    integer microseconds, converted from the decimal text exactly and rounded half away
+    from zero; when ``notes`` is given, a line saying how many times were rounded is
+    appended to it. Blank lines and ``#`` comments are skipped. Raises ``DataError``
+    naming the line for a malformed line, a negative or >65535 coordinate, a polarity
+    outside {-1, 0, 1}, a timestamp earlier than the previous line's or outside
+    ``|t| < MAX_TIME_US``, or a file without events.
     """
     path = Path(path)
-    data = _read_bytes(path)
+    data = read_bytes(path, "events file")
     buf = np.frombuffer(data, dtype=np.uint8)
     capacity = data.count(b"\n") + 1
     t = np.empty(capacity, dtype=np.int64)
     x = np.empty(capacity, dtype=np.uint16)
     y = np.empty(capacity, dtype=np.uint16)
     p = np.empty(capacity, dtype=np.uint8)
-    info = np.zeros(8, dtype=np.int64)
-    n = _parse_events(buf, t, x, y, p, info, _POW10, _I64_MAX, _MAX_COORD)
+    info = np.zeros(9, dtype=np.int64)
+    n = _parse_events(buf, t, x, y, p, info, _POW10, _I64_MAX, _MAX_COORD, _MAX_TIME_US)
     if info[_STATUS] != _OK:
         raise DataError(_describe(path, data, info))
     if n == 0:
         what = "the file is empty" if not data.strip() else "only blank lines and # comments"
         raise DataError(located(path, None, f"no events ({what}); expected lines of {_EXPECTED}"))
+    if info[_ROUNDED] and notes is not None:
+        notes.append(ROUNDED_NOTE.format(name=path.name, count=int(info[_ROUNDED])))
     events = np.empty(n, dtype=EVENT_DTYPE)
     events["t"], events["x"], events["y"], events["p"] = t[:n], x[:n], y[:n], p[:n]
     return events
@@ -260,21 +292,23 @@ def read_events_txt(path: str | Path) -> np.ndarray:
 
 def _describe(path: Path, data: bytes, info: np.ndarray) -> str:
     """The one-line message for the parser's error ``info``."""
+    # Only the offending field is quoted (cut to 40 characters), never the line: the
+    # file may not be an events file at all.
     status, line = int(info[_STATUS]), int(info[_LINE])
-    text = data[info[_LINE_START]:info[_LINE_END]].decode("utf-8", "replace").strip()
-    text = text if len(text) <= 80 else text[:77] + "..."
-    token = data[info[_TOKEN_START]:info[_TOKEN_END]].decode("utf-8", "replace")
+    text = data[info[_TOKEN_START]:info[_TOKEN_END]].decode("utf-8", "replace")
+    quoted = quote(text)
+    token = text if len(text) <= 40 else text[:37] + "..."
     name = _COLUMNS[int(info[_COLUMN])] if status != _COLUMN_COUNT else ""
     messages = {
-        _COLUMN_COUNT: f"expected {_EXPECTED}, found {int(info[_COLUMN])} column(s): {text!r}",
-        _NOT_NUMBER: f"column '{name}': expected a number, got {token!r}",
-        _NOT_WHOLE: f"column '{name}': expected a whole number, got {token!r}",
+        _COLUMN_COUNT: f"expected {_EXPECTED}, found {int(info[_COLUMN])} column(s)",
+        _NOT_NUMBER: f"column '{name}': expected a number, got {quoted}",
+        _NOT_WHOLE: f"column '{name}': expected a whole number, got {quoted}",
         _NEGATIVE: f"column '{name}': pixel coordinates must be >= 0, got {token}",
         _TOO_LARGE: f"column '{name}': expected at most {_MAX_COORD}, got {token}",
         _POLARITY: f"column 'p': polarity must be 0 or 1 (or -1 for OFF), got {token}",
         _TIME_BACK: f"time goes back: t = {token} s is earlier than the previous event "
                     f"(line {int(info[_PREV_LINE])}); events must be sorted by time",
-        _TIME_RANGE: f"column 't': time {token} s is out of range",
+        _TIME_RANGE: f"column 't': time {token} s is out of range (|t| < 2**61 µs, about 2.3e12 s)",
     }
     return located(path, line, messages[status])
 
@@ -339,10 +373,8 @@ def _check_writable(events: np.ndarray) -> np.ndarray:
 def write_events_txt(path: str | Path, events: np.ndarray, chunk: int = 1_000_000) -> None:
     """Write ECD ``events.txt``: ``t x y p`` per line, t in seconds with 9 decimals."""
     events = _check_writable(events)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     # A line is at most 1 + 19 + 1 + 9 + 3 * (1 + 5) + 1 bytes; 56 leaves room.
-    with open(path, "wb") as handle:
+    with atomic_write(path) as handle:
         for start in range(0, len(events), chunk):
             part = events[start:start + chunk]
             out = np.empty(56 * len(part) + 4, dtype=np.uint8)
@@ -364,22 +396,10 @@ def read_events_npy(path: str | Path, columns: str | tuple[str, ...] | None = No
     from tofnet.io.arrays import PlainColumns, columns_of, npz_columns
 
     path = Path(path)
-    try:
-        loaded = np.load(path, allow_pickle=False)
-    except FileNotFoundError:
-        raise DataError(located(path, None, "file not found")) from None
-    except IsADirectoryError:
-        raise DataError(located(path, None, "is a folder, expected an events file")) from None
-    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as err:
-        raise DataError(located(path, None, f"not a readable .npy/.npz file ({err})")) from None
-    if isinstance(loaded, np.lib.npyio.NpzFile):
-        with loaded:
-            try:
-                arrays = npz_columns(path, loaded, columns)
-            except (ValueError, OSError, zipfile.BadZipFile) as err:
-                raise DataError(located(path, None, f"cannot read array ({err})")) from None
+    if numpy_kind(path, "events file") == "npz":
+        arrays = npz_columns(path, columns)
     else:
-        arrays = columns_of(path, loaded, "the array", columns)
+        arrays = columns_of(path, load_npy(path, "events file"), "the array", columns)
     try:
         return events_from_columns(arrays, path)
     except DataError as err:
@@ -407,27 +427,34 @@ def events_from_columns(columns: dict[str, np.ndarray], source: object = "<memor
         return DataError(located(source, None, f"field '{name}', event {index}: {message}"))
 
     for name, a in arrays.items():
-        if a.dtype.kind not in "biuf":
+        if a.dtype.kind not in ("iuf" if name != "p" else "biuf"):
             raise DataError(located(source, None, f"field '{name}': expected numbers, got dtype {a.dtype}"))
         if a.dtype.kind == "f":
             bad = np.flatnonzero(~np.isfinite(a))
             if bad.size:
                 raise fail(name, int(bad[0]), f"expected a finite number, got {a[bad[0]]}")
     t = arrays["t"]
+    limit = MAX_TIME_US
     if t.dtype.kind == "f":
-        if np.max(np.abs(t)) >= 9e12:
-            i = int(np.argmax(np.abs(t)))
-            raise fail("t", i, f"{t[i]:g} s is out of range (float t is seconds)")
         scaled = t.astype(np.float64) * 1e6
-        t_us = (np.sign(scaled) * np.floor(np.abs(scaled) + 0.5)).astype(np.int64)
+        t_us = np.sign(scaled) * np.floor(np.abs(scaled) + 0.5)
+        bad = np.flatnonzero(np.abs(t_us) >= limit)
+        if bad.size:
+            raise fail("t", int(bad[0]), f"{t[bad[0]]:g} s is out of range (|t| < 2**61 µs; float t is seconds)")
+        t_us = t_us.astype(np.int64)
     else:
+        # Compare in the file's own dtype: uint64 >= 2**63 must not wrap to negative first.
+        bad = np.flatnonzero((t >= limit) | (t <= -limit)) if t.dtype.kind == "i" else np.flatnonzero(t >= limit)
+        if bad.size:
+            raise fail("t", int(bad[0]), f"{t[bad[0]]} µs is out of range (|t| < 2**61 µs; integer t is microseconds)")
         t_us = t.astype(np.int64)
+    # In range, a difference of two times cannot overflow int64.
     back = np.flatnonzero(np.diff(t_us) < 0)
     if back.size:
         i = int(back[0]) + 1
         raise fail("t", i, f"time goes back ({t_us[i]} µs after {t_us[i - 1]} µs); events must be sorted by time")
     for name in ("x", "y"):
-        a = arrays[name]
+        a = arrays[name] if arrays[name].dtype.kind != "f" else arrays[name].astype(np.float64)
         checks = [(a < 0, "pixel coordinates must be >= 0"), (a > _MAX_COORD, f"expected at most {_MAX_COORD}")]
         if a.dtype.kind == "f":
             checks.append((a != np.floor(a), "expected a whole number"))
@@ -451,10 +478,9 @@ def write_events_npy(path: str | Path, events: np.ndarray) -> None:
     """Write events: ``.npy`` a structured ``EVENT_DTYPE`` array; ``.npz`` arrays ``t`` (int64 µs), ``x``, ``y``, ``p``."""
     events = _check_writable(events)
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     if path.suffix == ".npy":
-        np.save(path, events)
+        write_npy(path, events)
     elif path.suffix == ".npz":
-        np.savez(path, **{name: np.ascontiguousarray(events[name]) for name in _COLUMNS})
+        write_npz(path, {name: np.ascontiguousarray(events[name]) for name in _COLUMNS})
     else:
         raise DataError(located(path, None, "expected a .npy or .npz file name"))

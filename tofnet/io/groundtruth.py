@@ -11,7 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
-from tofnet.errors import DataError, located
+from tofnet.errors import DataError, located, quote
+from tofnet.events import MAX_TIME_US
+from tofnet.io import files
 
 #: Below this angle between two samples (radians) slerp falls back to normalised lerp,
 #: where ``sin(angle)`` would lose precision.
@@ -19,18 +21,8 @@ _SLERP_MIN_ANGLE = 1e-6
 
 
 def read_text(path: str | Path) -> str:
-    """The text of ``path``, or a ``DataError`` saying why it cannot be read."""
-    path = Path(path)
-    try:
-        return path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise DataError(located(path, None, "file not found")) from None
-    except IsADirectoryError:
-        raise DataError(located(path, None, "is a folder, expected a file")) from None
-    except UnicodeDecodeError as err:
-        raise DataError(located(path, None, f"not a text file (byte {err.start} is not UTF-8)")) from None
-    except OSError as err:
-        raise DataError(located(path, None, f"cannot read: {err.strerror or err}")) from None
+    """The UTF-8 text of a regular file, or a ``DataError`` saying why it cannot be read."""
+    return files.read_text(path)
 
 
 def read_table(path: str | Path, names: tuple[str, ...], what: str) -> tuple[np.ndarray, np.ndarray]:
@@ -60,8 +52,9 @@ def read_table(path: str | Path, names: tuple[str, ...], what: str) -> tuple[np.
             continue
         fields = stripped.replace(",", " ").split()
         if len(fields) != len(names):
+            # The line itself is not quoted: the file may not be a table at all.
             raise DataError(located(path, number, f"expected {len(names)} columns '{expected}' per {what}, "
-                                                  f"found {len(fields)}: {_clip(stripped)!r}"))
+                                                  f"found {len(fields)}"))
         rows.append([finite_number(path, number, f"column '{name}'", field) for name, field in zip(names, fields)])
         lines.append(number)
     values = np.asarray(rows, dtype=np.float64).reshape(len(rows), len(names))
@@ -71,20 +64,23 @@ def read_table(path: str | Path, names: tuple[str, ...], what: str) -> tuple[np.
 def finite_number(path: object, line: int, what: str, field: str) -> float:
     """``field`` as a float, or a ``DataError`` naming the file, line and ``what`` (NaN and inf refused)."""
     try:
-        value = float(field)
+        value = float(field) if len(field) <= 1000 else math.nan
     except ValueError:
-        raise DataError(located(path, line, f"{what}: expected a number, got {field!r}")) from None
+        raise DataError(located(path, line, f"{what}: expected a number, got {quote(field)}")) from None
     if not math.isfinite(value):
-        raise DataError(located(path, line, f"{what}: expected a finite number, got {field!r}"))
+        raise DataError(located(path, line, f"{what}: expected a finite number, got {quote(field)}"))
     return value
 
 
-def _clip(text: str, width: int = 80) -> str:
-    return text if len(text) <= width else text[: width - 3] + "..."
-
-
 def _check_times(times: np.ndarray, source: object, lines: np.ndarray | None, what: str) -> None:
-    """Strictly increasing times; names the first offending line (or index)."""
+    """Times in the documented range (``|t| < 2**61 µs``) and strictly increasing; names
+    the first offending line (or index)."""
+    out = np.flatnonzero(np.abs(times) >= MAX_TIME_US * 1e-6)
+    if out.size:
+        i = int(out[0])
+        where = int(lines[i]) if lines is not None else None
+        index = "" if lines is not None else f"{what} {i}: "
+        raise DataError(located(source, where, f"{index}t = {times[i]:.9g} s is out of range (|t| < 2**61 µs)"))
     back = np.flatnonzero(np.diff(times) <= 0)
     if back.size:
         i = int(back[0]) + 1
@@ -154,17 +150,33 @@ class Trajectory:
         if n < 2:
             raise DataError(located(source, None, f"need at least 2 poses to derive a velocity, got {n}"))
         bad = ~(np.isfinite(times) & np.all(np.isfinite(positions), axis=1) & np.all(np.isfinite(quaternions), axis=1))
-        norms = np.linalg.norm(quaternions, axis=1)
+        # Scaled by the largest component first, so that neither 1e200 overflows nor
+        # 1e-200 underflows: only a (near) zero quaternion has no rotation.
+        scale = np.max(np.abs(quaternions), axis=1) if n else np.zeros(0)
+        unit = quaternions / np.where(scale > 0, scale, 1.0)[:, None]
+        norms = np.linalg.norm(unit, axis=1)
+        with np.errstate(over="ignore", under="ignore"):
+            zero = ~bad & ((scale == 0) | (scale * norms < 1e-12))
         for i, problem in ((_first(bad), "pose is not finite (NaN or inf)"),
-                           (_first(~bad & (norms < 1e-12)), "quaternion qx qy qz qw is zero")):
+                           (_first(zero), "quaternion qx qy qz qw is zero")):
             if i is not None:
-                where = int(lines[i]) if lines is not None else None
-                raise DataError(located(source, where, problem if lines is not None else f"pose {i}: {problem}"))
+                raise DataError(self._where(source, lines, i, problem))
         _check_times(times, source, lines, "pose")
+        with np.errstate(over="ignore", invalid="ignore"):
+            speeds = np.diff(positions, axis=0) / np.diff(times)[:, None]
+        fast = _first(~np.all(np.isfinite(speeds), axis=1))
+        if fast is not None:
+            raise DataError(self._where(source, lines, fast + 1, "the velocity to this pose overflows (positions too "
+                                                                 "far apart for the time between the poses)"))
         self.times = times
         self.positions = positions
-        self.quaternions = quaternions / norms[:, None]
+        self.quaternions = unit / norms[:, None]
         self.source = source
+
+    @staticmethod
+    def _where(source: object, lines: np.ndarray | None, i: int, problem: str) -> str:
+        where = int(lines[i]) if lines is not None else None
+        return located(source, where, problem if lines is not None else f"pose {i}: {problem}")
 
     def __len__(self) -> int:
         return self.times.shape[0]
@@ -227,11 +239,9 @@ def write_groundtruth(path: str | Path, times, positions, quaternions) -> None:
 
 
 def _write_rows(path: str | Path, rows: np.ndarray, header: str) -> None:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     # repr() is the shortest text that reads back to the same float.
     text = "".join(" ".join(repr(float(v)) for v in row) + "\n" for row in rows)
-    path.write_text(header + "\n" + text, encoding="utf-8")
+    files.write_text_atomic(path, header + "\n" + text)
 
 
 class VelocitySamples:

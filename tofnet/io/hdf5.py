@@ -22,7 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from tofnet.errors import DataError, located
+from tofnet.errors import DataError, located, quote, reason
+from tofnet.events import MAX_TIME_US
 from tofnet.io.extras import require
 from tofnet.io.recording import Intrinsics
 from tofnet.io.source import EventSource
@@ -37,7 +38,7 @@ def open_hdf5(path: Path) -> EventSource:
     try:
         handle = h5py.File(path, "r")
     except OSError as err:
-        raise DataError(located(path, None, f"not a readable HDF5 file ({err})")) from None
+        raise DataError(located(path, None, f"not a readable HDF5 file ({reason(err)})")) from None
     try:
         if _has(handle, "events", ("x", "y", "t", "p")):
             return DsecSource(path, handle)
@@ -47,7 +48,8 @@ def open_hdf5(path: Path) -> EventSource:
         if _has(handle, "prophesee/left", ("x", "y", "t", "p")):
             from tofnet.io.hdf5_datasets import M3edSource
             return M3edSource(path, handle)
-        found = ", ".join(sorted(handle.keys())) or "nothing"
+        keys = sorted(handle.keys())
+        found = ", ".join(quote(key, 20) for key in keys[:10]) + (", ..." if len(keys) > 10 else "") or "nothing"
         raise DataError(located(path, None, f"no event datasets; expected events/{{x,y,t,p}} (DSEC, TUM-VIE), "
                                             f"davis/left/events (MVSEC) or prophesee/left/{{x,y,t,p}} (M3ED); "
                                             f"found {found}"))
@@ -102,6 +104,8 @@ class ColumnsSource(EventSource):
                                                 f"got {self.columns['t'].dtype}"))
         self.n_events = int(lengths["t"][0])
         self.t_offset = int(t_offset)
+        if abs(self.t_offset) >= MAX_TIME_US:
+            raise DataError(located(path, None, f"t_offset {self.t_offset} µs is out of range (|t| < 2**61 µs)"))
 
     def _packets(self, size_hint: int) -> Iterable[np.ndarray]:
         from tofnet.io.events import events_from_columns
@@ -109,7 +113,14 @@ class ColumnsSource(EventSource):
         for start in range(0, self.n_events, size_hint):
             stop = min(start + size_hint, self.n_events)
             arrays = {name: dataset[start:stop] for name, dataset in self.columns.items()}
-            arrays["t"] = arrays["t"].astype(np.int64) + self.t_offset
+            t = arrays["t"]
+            # In range before the cast and the sum, so neither wraps (uint64 past 2**63).
+            outside = np.flatnonzero((t >= MAX_TIME_US) | ((t <= -MAX_TIME_US) if t.dtype.kind == "i" else False))
+            if outside.size:
+                i = int(outside[0])
+                raise DataError(located(self.path, None, f"event {start + i + 1:,}: t = {int(t[i])} µs is out of "
+                                                         "range (|t| < 2**61 µs)"))
+            arrays["t"] = t.astype(np.int64) + self.t_offset
             yield events_from_columns(arrays, f"{self.path} (events {start}..{stop - 1})")
 
     def close(self) -> None:
@@ -140,17 +151,18 @@ class DsecSource(ColumnsSource):
         # DSEC: <sequence>/events/{left,right}/events.h5 and <sequence>/calibration/cam_to_cam.yaml.
         side = self.path.parent.name
         yaml_path = self.path.parent.parent.parent / "calibration" / "cam_to_cam.yaml"
-        if side not in ("left", "right") or not yaml_path.is_file():
+        if side not in ("left", "right") or not (yaml_path.exists() or yaml_path.is_symlink()):
             return
-        import yaml
+        from tofnet.io.spec import read_yaml_file
+        data = read_yaml_file(yaml_path, "calibration")  # bounded (size, nesting, aliases)
         try:
-            camera = yaml.safe_load(yaml_path.read_text())["intrinsics"]["cam0" if side == "left" else "cam3"]
+            camera = data["intrinsics"]["cam0" if side == "left" else "cam3"]
             self.intrinsics = intrinsics_from(camera["camera_matrix"], camera.get("distortion_coeffs", ()),
                                               camera.get("distortion_model", "radtan"))
             self.sensor_size = self.sensor_size or tuple(int(v) for v in camera["resolution"])
-        except (KeyError, TypeError, ValueError, yaml.YAMLError) as err:
+        except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as err:
             raise DataError(located(yaml_path, None, f"expected intrinsics/cam0 (or cam3) with camera_matrix "
-                                                     f"[fx, fy, cx, cy] ({err})")) from None
+                                                     f"[fx, fy, cx, cy] ({reason(err, 40)})")) from None
         self.notes.append(f"intrinsics from {yaml_path}")
 
 
@@ -166,7 +178,8 @@ def intrinsics_from(matrix, coefficients, model: str) -> Intrinsics:
     """
     model_name = MODEL_NAMES.get(str(model).lower().strip())
     if model_name is None:
-        raise ValueError(f"unknown distortion model {model!r}; expected one of {', '.join(sorted(MODEL_NAMES))}")
+        raise ValueError(f"unknown distortion model {quote(str(model), 20)}; expected one of "
+                         f"{', '.join(sorted(MODEL_NAMES))}")
     coefficients = tuple(float(c) for c in np.ravel(coefficients))
     if model_name == "radtan" and len(coefficients) == 4:
         coefficients = coefficients + (0.0,)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tofnet.errors import DataError, located
+from tofnet.errors import DataError, located, reason
 from tofnet.io.hdf5 import ColumnsSource, read_calib_group, readable
 
 #: An event further than this from every depth image gets no true depth (s).
@@ -92,7 +92,7 @@ class _GroundTruthMixin:
         try:
             return h5py.File(gt_path, "r")
         except OSError as err:
-            raise DataError(located(gt_path, None, f"not a readable HDF5 file ({err})")) from None
+            raise DataError(located(gt_path, None, f"not a readable HDF5 file ({reason(err)})")) from None
 
     def _depth(self, events: np.ndarray, first_index: int) -> np.ndarray | None:
         return self.depth_images.lookup(events)

@@ -12,7 +12,6 @@ which tofnet already has through matplotlib; no new dependency.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -88,16 +87,13 @@ def depth_to_png16(depth_m: np.ndarray) -> tuple[np.ndarray, int]:
 
 
 def write_png16(path: str | Path, image: np.ndarray) -> None:
-    """A uint16 (H, W) array as a 16-bit greyscale PNG (written whole, then renamed)."""
+    """A uint16 (H, W) array as a 16-bit greyscale PNG (written atomically, ``tofnet.io.files``)."""
     from PIL import Image
 
-    path = Path(path)
-    partial = path.with_name(f".{path.name}.partial-{os.getpid()}")
-    try:
-        Image.fromarray(np.ascontiguousarray(image, dtype=np.uint16)).save(partial, format="PNG")
-        os.replace(partial, path)
-    finally:
-        partial.unlink(missing_ok=True)
+    from tofnet.io.files import atomic_write
+
+    with atomic_write(path) as handle:
+        Image.fromarray(np.ascontiguousarray(image, dtype=np.uint16)).save(handle, format="PNG")
 
 
 def write_depth_maps(maps: Iterator[DepthMap], folder: str | Path, *, png: bool = True) -> dict:
@@ -106,14 +102,20 @@ def write_depth_maps(maps: Iterator[DepthMap], folder: str | Path, *, png: bool 
     ``index.csv``: ``window,t_start_s,t_end_s,pixels_with_depth,estimates_in_window``.
     Returns ``{"windows": n, "saturated_png_pixels": n}``.
     """
+    from tofnet.io.files import write_text_atomic
+    from tofnet.io.npy import write_npy
+
     folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise DataError(located(folder, None, f"cannot create the folder: {err.strerror or err}")) from None
     rows = ["window,t_start_s,t_end_s,pixels_with_depth,estimates_in_window"]
     saturated = 0
     for depth_map in maps:
         stem = f"{depth_map.index:06d}"
-        _save_npy(folder / f"depth_{stem}.npy", depth_map.depth)
-        _save_npy(folder / f"age_{stem}.npy", depth_map.age_ms)
+        write_npy(folder / f"depth_{stem}.npy", depth_map.depth)
+        write_npy(folder / f"age_{stem}.npy", depth_map.age_ms)
         if png:
             image, clipped = depth_to_png16(depth_map.depth)
             saturated += clipped
@@ -121,17 +123,5 @@ def write_depth_maps(maps: Iterator[DepthMap], folder: str | Path, *, png: bool 
         pixels = int(np.count_nonzero(np.isfinite(depth_map.depth)))
         rows.append(f"{depth_map.index},{depth_map.t_start_us * 1e-6:.6f},{depth_map.t_end_us * 1e-6:.6f},"
                     f"{pixels},{depth_map.estimates}")
-    (folder / "index.csv").write_text("\n".join(rows) + "\n", encoding="utf-8")
+    write_text_atomic(folder / "index.csv", "\n".join(rows) + "\n")
     return {"windows": len(rows) - 1, "saturated_png_pixels": saturated}
-
-
-def _save_npy(path: Path, array: np.ndarray) -> None:
-    partial = path.with_name(f".{path.name}.partial-{os.getpid()}")
-    try:
-        with open(partial, "wb") as handle:
-            np.save(handle, array)
-        os.replace(partial, path)
-    except OSError as err:
-        raise DataError(located(path, None, f"cannot write: {err.strerror or err}")) from None
-    finally:
-        partial.unlink(missing_ok=True)

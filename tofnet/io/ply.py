@@ -12,12 +12,11 @@ asked, ``uchar red, green, blue`` colouring the depth (matplotlib's turbo map).
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 
-from tofnet.errors import DataError, located
+from tofnet.errors import DataError
 
 FRAMES = ("camera", "world")
 
@@ -83,19 +82,14 @@ def write_ply(path: str | Path, points: np.ndarray, *, colors: np.ndarray | None
     if colors is not None:
         header += ["property uchar red", "property uchar green", "property uchar blue"]
     header.append("end_header")
-    partial = path.with_name(f".{path.name}.partial-{os.getpid()}")
-    try:
-        with open(partial, "wb") as handle:
-            handle.write(("\n".join(header) + "\n").encode("ascii"))
-            if binary:
-                handle.write(vertices.tobytes())
-            else:
-                table = np.column_stack([vertices[name].astype(np.float64) for name in vertices.dtype.names])
-                fmt = "%.9g %.9g %.9g" + (" %d %d %d" if colors is not None else "")
-                np.savetxt(handle, table.reshape(-1, len(vertices.dtype.names)), fmt=fmt)
-        os.replace(partial, path)
-    except OSError as err:
-        raise DataError(located(path, None, f"cannot write: {err.strerror or err}")) from None
-    finally:
-        partial.unlink(missing_ok=True)
+    from tofnet.io.files import atomic_write
+
+    with atomic_write(path) as handle:
+        handle.write(("\n".join(header) + "\n").encode("ascii"))
+        if binary:
+            handle.write(vertices.tobytes())
+        else:
+            table = np.column_stack([vertices[name].astype(np.float64) for name in vertices.dtype.names])
+            fmt = "%.9g %.9g %.9g" + (" %d %d %d" if colors is not None else "")
+            np.savetxt(handle, table.reshape(-1, len(vertices.dtype.names)), fmt=fmt)
     return len(vertices)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tofnet.errors import DataError, located
+from tofnet.errors import DataError, located, quote, reason
 from tofnet.io.extras import require
 from tofnet.io.source import EventSource
 
@@ -52,7 +52,7 @@ class FaerySource(EventSource):
                     self.detail, self.sensor_size = f"{decoder.version.upper()}, {decoder.event_type}", \
                         tuple(decoder.dimensions)
                     if decoder.event_type != "cd":
-                        raise DataError(located(self.path, None, f"DAT file of {decoder.event_type!r} events; "
+                        raise DataError(located(self.path, None, f"DAT file of {quote(decoder.event_type)} events; "
                                                                  "expected 'cd' (change detection) events"))
                 self.n_events = self._dat_count()
             else:
@@ -60,11 +60,11 @@ class FaerySource(EventSource):
                     self.detail, self.sensor_size = f"{decoder.event_type}, v{decoder.version}", \
                         tuple(decoder.dimensions)
                     if decoder.event_type not in ("dvs", "atis"):
-                        raise DataError(located(self.path, None, f"Event Stream of {decoder.event_type!r} events; "
+                        raise DataError(located(self.path, None, f"Event Stream of {quote(decoder.event_type)} events; "
                                                                  "expected 'dvs' or 'atis'"))
         except RuntimeError as err:
             if "size" not in str(err) or kind == "es":
-                raise DataError(located(self.path, None, f"not a readable {kind.upper()} file ({err})")) from None
+                raise DataError(located(self.path, None, f"not a readable {kind.upper()} file ({reason(err)})")) from None
             fallback = _NO_GEOMETRY
             self.notes.append("the header gives no sensor size (width, height)")
             if kind == "evt":
@@ -101,4 +101,4 @@ class FaerySource(EventSource):
             else:
                 yield from faery.file_decoder.Decoder(self.path, file_type="es", time_range_cache=None)
         except RuntimeError as err:
-            raise DataError(located(self.path, None, f"cannot decode ({err})")) from None
+            raise DataError(located(self.path, None, f"cannot decode ({reason(err)})")) from None

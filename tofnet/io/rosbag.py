@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tofnet.errors import DataError, located
+from tofnet.errors import DataError, located, quote, reason
 from tofnet.io.extras import require
 from tofnet.io.source import EventSource
 
@@ -78,7 +78,7 @@ class RosbagSource(EventSource):
         try:
             self.reader.open()
         except (ReaderError, OSError) as err:
-            raise DataError(located(self.path, None, f"not a readable ROS1 bag ({err})")) from None
+            raise DataError(located(self.path, None, f"not a readable ROS1 bag ({reason(err)})")) from None
         try:
             self.topics = self._choose(dict(topics or {}))
             self._read_side_topics()
@@ -91,7 +91,7 @@ class RosbagSource(EventSource):
         available = self.reader.topics
         unknown = set(overrides) - set(ROLES)
         if unknown:
-            raise DataError(located(self.path, None, f"unknown topic role(s) {', '.join(sorted(unknown))}; "
+            raise DataError(located(self.path, None, f"unknown topic role(s) {', '.join(quote(r, 20) for r in sorted(unknown))}; "
                                                      f"expected {', '.join(ROLES)}"))
         chosen = {}
         for role, msgtype in ROLES.items():
@@ -100,7 +100,7 @@ class RosbagSource(EventSource):
                 name = overrides[role]
                 if name not in available or available[name].msgtype != msgtype:
                     found = available[name].msgtype if name in available else "no such topic"
-                    raise DataError(located(self.path, None, f"topic {name!r} for {role}: expected {msgtype}, "
+                    raise DataError(located(self.path, None, f"topic {quote(name)} for {role}: expected {msgtype}, "
                                                              f"found {found}"))
                 chosen[role] = name
             elif candidates:
@@ -112,7 +112,8 @@ class RosbagSource(EventSource):
                     self.notes.append(f"{role}: {chosen[role]} of {', '.join(candidates)} "
                                       f"(choose with --topic {role}=NAME)")
         if "events" not in chosen:
-            found = ", ".join(f"{name} ({info.msgtype})" for name, info in sorted(available.items())) or "none"
+            found = ", ".join(f"{quote(name)} ({quote(info.msgtype)})"
+                              for name, info in sorted(available.items())[:10]) or "none"
             raise DataError(located(self.path, None, f"no dvs_msgs/EventArray topic; topics: {found}"))
         for name, info in sorted(available.items()):
             if name not in chosen.values():
@@ -152,7 +153,7 @@ class RosbagSource(EventSource):
         try:
             self.intrinsics = intrinsics_from([k[0], k[4], k[2], k[5]], coefficients, info.distortion_model or "radtan")
         except ValueError as err:
-            raise DataError(located(self.path, None, f"{self.topics['camera_info']}: {err}")) from None
+            raise DataError(located(self.path, None, f"{quote(self.topics['camera_info'])}: {err}")) from None
         if info.width and info.height:
             self.sensor_size = (int(info.width), int(info.height))
 

@@ -7,6 +7,13 @@ ECD side files next to it for what the file lacks) without decoding the events;
 ``chunks(n)`` then yields ``EVENT_DTYPE`` arrays of ``n`` events (the last one shorter),
 holding at most about one chunk in memory, and ``read()`` loads everything into a
 ``Recording``, which is what ``read_recording`` does.
+
+The checks of docs/reliability.md are made here once for every format: what a file
+declares (``check_metadata``: sensor size within ``MAX_SENSOR_SIDE``/``MAX_SENSOR_PIXELS``,
+finite intrinsics with ``fx``, ``fy`` > 0, IMU rows) when it is opened and once more
+after ``read()``; every event a reader returns (``check_packet``: ``|t| < MAX_TIME_US``,
+coordinates 0..65535) before it is copied into a chunk; and errors of the decoding
+libraries (h5py, faery, rosbags) become one-line ``DataError``s.
 """
 
 from __future__ import annotations
@@ -17,8 +24,9 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from tofnet.errors import DataError, located
-from tofnet.events import EVENT_DTYPE
+from tofnet.errors import DataError, located, reason
+from tofnet.events import EVENT_DTYPE, sensor_size_problem
+from tofnet.io.checks import OWN_FORMATS, check_metadata, check_packet, is_decode_error
 from tofnet.io.recording import Intrinsics, Recording, VelocitySource
 
 #: Events per chunk unless asked otherwise: 13 MB of ``EVENT_DTYPE``.
@@ -70,7 +78,7 @@ class EventSource:
         done = 0
         previous = None
         size = min(n_events, self.n_events) if self.n_events else n_events
-        for chunk, back in _rechunk(self._packets(size), size):
+        for chunk, back in _rechunk(self._checked_packets(size), size):
             if back >= 0:
                 before = int(chunk["t"][back - 1]) if back > 0 else previous
                 raise DataError(located(self.path, None, f"event {done + back + 1}: time goes back "
@@ -81,6 +89,24 @@ class EventSource:
             if progress is not None:
                 progress(done, self.n_events)
             yield chunk
+
+    def _checked_packets(self, size_hint: int) -> Iterator[np.ndarray]:
+        """``_packets``, each checked by ``check_packet``; decoding libraries' errors as ``DataError``."""
+        packets = iter(self._packets(size_hint))
+        done = 0
+        while True:
+            try:
+                packet = next(packets)
+            except StopIteration:
+                return
+            except BaseException as err:
+                if not is_decode_error(err, self.format):
+                    raise
+                raise DataError(located(self.path, None, f"cannot decode the events after event {done:,}: "
+                                                         f"{reason(err)}")) from None
+            check_packet(packet, done, self.path)
+            done += len(packet)
+            yield packet
 
     def read(self, progress: ProgressHook | None = None) -> Recording:
         """All events and metadata as a ``Recording``; ``DataError`` when there are no events."""
@@ -102,9 +128,14 @@ class EventSource:
             recording.gt_depth = np.concatenate(depths)
         if recording.sensor_size is None:
             extent = (int(events["x"].max()) + 1, int(events["y"].max()) + 1)
+            problem = sensor_size_problem(*extent)
+            if problem:
+                raise DataError(located(self.path, None, f"sensor size not in the file, and the events' extent "
+                                                         f"is not a usable one: {problem}"))
             recording.sensor_size = extent
             recording.notes.append(f"sensor size not in the file: {extent[0]}x{extent[1]} taken from the events' "
                                    "extent (pass --sensor-size to set it)")
+        check_metadata(recording, self.path)  # some readers find metadata (AEDAT4's IMU) among the events
         return recording
 
     def describe(self) -> str:
@@ -204,6 +235,7 @@ class RecordingSource(EventSource):
         # Attributes set after opening (a sensor size override) win over what was read.
         recording.sensor_size, recording.intrinsics = self.sensor_size, self.intrinsics
         recording.trajectory, recording.imu = self.trajectory, self.imu
+        recording.notes = list(self.notes)  # the file's (rounded times) and any added since
         if progress is not None:
             progress(len(recording.events), len(recording.events))
         return recording
@@ -223,7 +255,8 @@ def fill_from_side_files(source: EventSource) -> EventSource:
     for name, attribute, reader in ((CALIBRATION, "intrinsics", read_calibration),
                                     (GROUNDTRUTH, "trajectory", read_groundtruth),
                                     (IMU, "imu", read_imu), (SENSOR_SIZE, "sensor_size", read_sensor_size)):
-        if getattr(source, attribute) is None and (folder / name).is_file():
+        # A side file that exists but is not a regular file is an error (the reader says so).
+        if getattr(source, attribute) is None and ((folder / name).exists() or (folder / name).is_symlink()):
             setattr(source, attribute, reader(folder / name))
             source.notes.append(f"{attribute.replace('_', ' ')} from {name} next to the file")
     return source
@@ -246,29 +279,45 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
         raise DataError(located(path, None, f"--columns applies to plain numpy arrays (.npy/.npz), not {kind} files"))
     if topics and kind != "rosbag1":
         raise DataError(located(path, None, f"topics apply to ROS bags, not {kind} files"))
-    if kind in ("aedat4", "evt", "dat", "es"):
-        from tofnet.io.prophesee import open_faery
-        source = open_faery(path, kind)
-    elif kind == "hdf5":
-        from tofnet.io.hdf5 import open_hdf5
-        source = open_hdf5(path)
-    elif kind == "rosbag1":
-        from tofnet.io.rosbag import RosbagSource
-        source = RosbagSource(path, topics)
-    else:
-        source = RecordingSource(_read_in_memory(path, kind, columns), kind, path)
     try:
-        if kind in ("aedat4", "evt", "dat", "es", "hdf5", "rosbag1"):
+        if kind in ("aedat4", "evt", "dat", "es"):
+            from tofnet.io.prophesee import open_faery
+            source = open_faery(path, kind)
+        elif kind == "hdf5":
+            from tofnet.io.hdf5 import open_hdf5
+            source = open_hdf5(path)
+        elif kind == "rosbag1":
+            from tofnet.io.rosbag import RosbagSource
+            source = RosbagSource(path, topics)
+        else:
+            source = RecordingSource(_read_in_memory(path, kind, columns), kind, path)
+    except BaseException as err:
+        if not is_decode_error(err, kind):
+            raise
+        raise DataError(located(path, None, f"not a readable {FORMAT_NAMES.get(kind, kind)} file: "
+                                            f"{reason(err)}")) from None
+    try:
+        if kind not in OWN_FORMATS:
             fill_from_side_files(source)
         if sensor_size is not None:
             width, height = (int(v) for v in sensor_size)
-            if width < 1 or height < 1:
-                raise DataError(f"sensor size must be positive, got {width}x{height}")
+            problem = sensor_size_problem(width, height)
+            if problem:
+                raise DataError(f"sensor size: {problem}")
             source.sensor_size = (width, height)
-    except BaseException:
+        check_metadata(source, path)
+    except BaseException as err:
         source.close()
-        raise
+        if not is_decode_error(err, kind):
+            raise
+        raise DataError(located(path, None, f"not a readable {FORMAT_NAMES.get(kind, kind)} file: "
+                                            f"{reason(err)}")) from None
     return source
+
+
+#: Format names for messages.
+FORMAT_NAMES = {"aedat4": "AEDAT4", "evt": "Prophesee RAW", "dat": "Prophesee DAT", "es": "Event Stream",
+                "hdf5": "HDF5", "rosbag1": "ROS1 bag"}
 
 
 def _read_in_memory(path: Path, kind: str, columns) -> Recording:
@@ -278,11 +327,12 @@ def _read_in_memory(path: Path, kind: str, columns) -> Recording:
     if kind == "ecd":
         recording = read_ecd(path)
     else:
+        notes: list[str] = []
         if kind == "text":
-            events = read_events_txt(path)
+            events = read_events_txt(path, notes)  # notes: how many times were rounded to the µs
         else:
             events = read_events_npy(path, columns=columns)
-        recording = attach_sidecars(Recording(events=events, source=str(path)), path.parent,
+        recording = attach_sidecars(Recording(events=events, source=str(path), notes=notes), path.parent,
                                     gt_depth_name=f"{path.stem}_depth.npy")
         if kind == "npz":
             from tofnet.io.arrays import apply_npz_metadata

@@ -3,6 +3,11 @@
 ``load_spec`` reads a spec (a file or YAML text) into a ``Spec``; ``dump_spec`` writes
 one back. Every process type, parameter and connection of the Python API can be
 written; errors name the file, the line and the key. The format is in docs/spec.md.
+
+YAML is read with a bounded safe loader: at most ``MAX_SPEC_BYTES`` of text,
+``MAX_NESTING`` levels, ``MAX_ALIASES`` alias uses and ``MAX_VALUES`` values after
+expanding aliases (a "billion laughs" file is refused, not expanded); recursive
+aliases and tags other than YAML's plain types are refused; no tag runs code.
 """
 
 from __future__ import annotations
@@ -22,7 +27,7 @@ from tofnet.compiler.partition import parse_patch_size, patch_per_layer
 from tofnet.core.network import Network
 from tofnet.core.ports import InPort, OutPort
 from tofnet.core.process import Process
-from tofnet.errors import SpecError, TofnetError, located
+from tofnet.errors import DataError, SpecError, TofnetError, located, quote, reason
 from tofnet.units import seconds
 
 TOP_KEYS = ("name", "description", "processes", "connections", "compile", "backend")
@@ -30,6 +35,13 @@ COMPILE_KEYS = ("patch", "budget")
 _CONNECTION = re.compile(r"^\s*(\w+)\.(\w+)\s*->\s*(\w+)\.(\w+)\s*$")
 # YAML 1.1 (PyYAML) reads 1e-3 as a string; YAML 1.2 and people read it as a number.
 _FLOAT = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+$")
+
+#: Limits of the YAML loader (docs/reliability.md): a spec is a few KB.
+MAX_SPEC_BYTES = 1 << 20
+MAX_NESTING = 32
+MAX_ALIASES = 100
+MAX_VALUES = 100_000
+_PLAIN_TAGS = {"tag:yaml.org,2002:" + name for name in ("str", "int", "float", "bool", "null", "timestamp")}
 
 
 @dataclass
@@ -75,41 +87,103 @@ class _Seq(list):
 
 def _parse_yaml(text: str, source: str, empty: str = "empty spec; expected a mapping with processes and connections"
                 ) -> Any:
+    if len(text) > MAX_SPEC_BYTES:
+        raise SpecError(located(source, None, f"{len(text):,} characters; a spec may hold at most {MAX_SPEC_BYTES:,}"))
     try:
+        _check_shape(text, source)
         node = yaml.compose(text, Loader=yaml.SafeLoader)
     except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None) or getattr(err, "context_mark", None)
-        problem = getattr(err, "problem", None) or str(err).splitlines()[0]
-        where = f" (column {mark.column + 1})" if mark else ""
-        raise SpecError(located(source, mark.line + 1 if mark else None, f"malformed YAML: {problem}{where}")) from None
+        raise _yaml_error(err, source) from None
     if node is None:
         raise SpecError(located(source, None, empty))
-    return _build(node, yaml.SafeLoader(""), source)
+    return _Builder(source).build(node)
 
 
-def _build(node: yaml.Node, loader: yaml.SafeLoader, source: str) -> Any:
-    line = node.start_mark.line + 1
-    if isinstance(node, yaml.MappingNode):
-        loader.flatten_mapping(node)  # YAML merge keys (<<)
+def _yaml_error(err: yaml.YAMLError, source: str) -> SpecError:
+    mark = getattr(err, "problem_mark", None) or getattr(err, "context_mark", None)
+    problem = getattr(err, "problem", None) or str(err).splitlines()[0]
+    where = f" (column {mark.column + 1})" if mark else ""
+    return SpecError(located(source, mark.line + 1 if mark else None, f"malformed YAML: {problem}{where}"))
+
+
+def _check_shape(text: str, source: str) -> None:
+    """Nesting depth and alias count from the parser's event stream (which does not
+    recurse), before anything is composed or expanded."""
+    depth, aliases = 0, 0
+    for event in yaml.parse(text, Loader=yaml.SafeLoader):
+        if isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
+            depth += 1
+            if depth > MAX_NESTING:
+                raise SpecError(located(source, event.start_mark.line + 1,
+                                        f"nested more than {MAX_NESTING} levels deep"))
+        elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
+            depth -= 1
+        elif isinstance(event, yaml.AliasEvent):
+            aliases += 1
+            if aliases > MAX_ALIASES:
+                raise SpecError(located(source, event.start_mark.line + 1,
+                                        f"more than {MAX_ALIASES} aliases (*name)"))
+
+
+class _Builder:
+    """Nodes to Python values with line numbers, expanding aliases within a budget."""
+
+    def __init__(self, source: str):
+        self.source, self.loader, self.values, self.active = source, yaml.SafeLoader(""), 0, set()
+
+    def fail(self, node: yaml.Node, message: str) -> SpecError:
+        return SpecError(located(self.source, node.start_mark.line + 1, message))
+
+    def build(self, node: yaml.Node) -> Any:
+        self.values += 1
+        if self.values > MAX_VALUES:
+            raise self.fail(node, f"expands to more than {MAX_VALUES:,} values (through aliases)")
+        if id(node) in self.active:
+            raise self.fail(node, "recursive alias: a value contains itself")
+        line = node.start_mark.line + 1
+        if isinstance(node, (yaml.MappingNode, yaml.SequenceNode)):
+            kind = "map" if isinstance(node, yaml.MappingNode) else "seq"
+            if node.tag != f"tag:yaml.org,2002:{kind}":
+                raise self.fail(node, f"tag {quote(node.tag)} is not allowed; a spec holds plain values")
+            self.active.add(id(node))
+            try:
+                return self.mapping(node, line) if kind == "map" else self.sequence(node, line)
+            finally:
+                self.active.discard(id(node))
+        if node.tag not in _PLAIN_TAGS:
+            raise self.fail(node, f"tag {quote(node.tag)} is not allowed; a spec holds plain values")
+        if node.tag == "tag:yaml.org,2002:str" and node.style is None and _FLOAT.match(node.value):
+            return float(node.value)
+        try:
+            return self.loader.construct_object(node, deep=True)
+        except yaml.YAMLError as err:
+            raise _yaml_error(err, self.source) from None
+        except (ValueError, OverflowError):  # e.g. an integer of more than 4300 digits
+            raise self.fail(node, f"cannot read the value {quote(node.value)}") from None
+
+    def mapping(self, node: yaml.MappingNode, line: int) -> "_Map":
+        try:
+            self.loader.flatten_mapping(node)  # YAML merge keys (<<)
+        except yaml.YAMLError as err:
+            raise _yaml_error(err, self.source) from None
         out = _Map()
         out.line, out.key_lines = line, {}
         for key_node, value_node in node.value:
-            key = _build(key_node, loader, source)
+            key = self.build(key_node)
             key_line = key_node.start_mark.line + 1
             if isinstance(key, (dict, list)):
-                raise SpecError(located(source, key_line, "a mapping key must be a plain value"))
+                raise SpecError(located(self.source, key_line, "a mapping key must be a plain value"))
             if key in out:
-                raise SpecError(located(source, key_line, f"duplicate key {key!r} (first on line {out.key_lines[key]})"))
-            out[key] = _build(value_node, loader, source)
+                raise SpecError(located(self.source, key_line,
+                                        f"duplicate key {quote(key)} (first on line {out.key_lines[key]})"))
+            out[key] = self.build(value_node)
             out.key_lines[key] = key_line
         return out
-    if isinstance(node, yaml.SequenceNode):
-        out = _Seq(_build(item, loader, source) for item in node.value)
+
+    def sequence(self, node: yaml.SequenceNode, line: int) -> "_Seq":
+        out = _Seq(self.build(item) for item in node.value)
         out.line, out.item_lines = line, [item.start_mark.line + 1 for item in node.value]
         return out
-    if node.tag == "tag:yaml.org,2002:str" and node.style is None and _FLOAT.match(node.value):
-        return float(node.value)
-    return loader.construct_object(node, deep=True)
 
 
 def _line(container: Any, key: Any = None) -> int | None:
@@ -157,10 +231,10 @@ class _Reader:
                 raise self.fail(tree, key, str(key), f"unknown key; expected one of {', '.join(TOP_KEYS)}")
         name = tree.get("name", "network")
         if not isinstance(name, str):
-            raise self.fail(tree, "name", "name", f"expected a string, got {name!r}")
+            raise self.fail(tree, "name", "name", f"expected a string, got {quote(name)}")
         description = tree.get("description")
         if description is not None and not isinstance(description, str):
-            raise self.fail(tree, "description", "description", f"expected a string, got {description!r}")
+            raise self.fail(tree, "description", "description", f"expected a string, got {quote(description)}")
         processes = self.processes(tree)
         self.connections(tree, processes)
         try:
@@ -182,8 +256,11 @@ class _Reader:
         out = {}
         for name, body in section.items():
             path = f"processes.{name}"
+            if not isinstance(name, str) or not name.isidentifier():
+                raise self.fail(section, name, f"processes.{quote(name)}",
+                                "a process name must be an identifier (letters, digits, _)")
             if not isinstance(body, Mapping):
-                raise self.fail(section, name, path, f"expected a mapping with type: and parameters, got {body!r}")
+                raise self.fail(section, name, path, f"expected a mapping with type: and parameters, got {quote(body)}")
             if "type" not in body:
                 raise self.fail(section, name, path, f"missing type; expected one of {', '.join(_known_types())}")
             cls = self.process_type(body, path)
@@ -216,7 +293,7 @@ class _Reader:
             if found is not None:
                 return found
         raise self.fail(body, "type", f"{path}.type",
-                        f"unknown process type {type_name!r}; expected one of {', '.join(_known_types())}, "
+                        f"unknown process type {quote(type_name)}; expected one of {', '.join(_known_types())}, "
                         "'package.module:ClassName' or a 'tofnet.processes' entry point")
 
     def connections(self, tree: Mapping, processes: dict[str, Process]) -> None:
@@ -228,15 +305,15 @@ class _Reader:
             path = f"connections[{i}]"
             match = _CONNECTION.match(item) if isinstance(item, str) else None
             if not match:
-                raise self.fail(section, i, path, f"expected 'process.port -> process.port', got {item!r}")
+                raise self.fail(section, i, path, f"expected 'process.port -> process.port', got {quote(item)}")
             ends = []
             for proc_name, port_name in (match.group(1, 2), match.group(3, 4)):
                 if proc_name not in processes:
-                    raise self.fail(section, i, path, f"unknown process {proc_name!r}; "
+                    raise self.fail(section, i, path, f"unknown process {quote(proc_name)}; "
                                     f"processes: {', '.join(processes)}")
                 process = processes[proc_name]
                 if port_name not in process.ports:
-                    raise self.fail(section, i, path, f"unknown port {port_name!r} of {proc_name} "
+                    raise self.fail(section, i, path, f"unknown port {quote(port_name)} of {proc_name} "
                                     f"({type(process).__name__}); ports: {_ports(process)}")
                 ends.append(process.ports[port_name])
             source, target = ends
@@ -292,7 +369,7 @@ class _Reader:
         if isinstance(value, Mapping) and isinstance(value.get("name"), str):
             return value["name"], {k: v for k, v in value.items() if k != "name"}
         raise self.fail(tree, "backend", "backend", "expected a backend name (fixed) or a mapping "
-                        f"{{name: fixed, option: value, ...}}, got {value!r}")
+                        f"{{name: fixed, option: value, ...}}, got {quote(value)}")
 
 
 def _strip_field(message: str, field_name: str) -> str:
@@ -321,11 +398,11 @@ def process_class(type_name: str) -> type[Process] | None:
         try:
             module = importlib.import_module(module_name)
         except Exception as err:  # the user's module: whatever it raises, one line
-            raise SpecError(f"cannot import {module_name!r} for process type {type_name!r}: "
-                            f"{type(err).__name__}: {err}") from None
+            raise SpecError(f"cannot import {quote(module_name)} for process type {quote(type_name)}: "
+                            f"{type(err).__name__}: {reason(err)}") from None
         found = getattr(module, attr, None)
         if not (isinstance(found, type) and issubclass(found, Process)):
-            raise SpecError(f"{type_name!r} is not a process type (a subclass of tofnet.Process)")
+            raise SpecError(f"{quote(type_name)} is not a process type (a subclass of tofnet.Process)")
         return found
     for candidate in (type_name, type_name + "Process"):
         if candidate in Process._registry:
@@ -365,16 +442,38 @@ def load_spec(path_or_text: str | Path) -> Spec:
     is YAML text. Raises ``SpecError`` naming the file, line and key.
     """
     if isinstance(path_or_text, Path) or ("\n" not in path_or_text and (
-            path_or_text.endswith((".yaml", ".yml")) or Path(path_or_text).is_file())):
+            path_or_text.endswith((".yaml", ".yml")) or _is_file(path_or_text))):
         path = Path(path_or_text)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as err:
-            raise SpecError(f"{path}: cannot read the spec: {getattr(err, 'strerror', None) or err}") from None
-        source = str(path)
+        text, source = _read_spec_file(path, "spec"), str(path)
+    elif "\n" not in path_or_text and ":" not in path_or_text and "{" not in path_or_text:
+        # One line that is neither a mapping nor an existing file: most likely a file name.
+        raise SpecError(f"{quote(path_or_text)}: no such spec file (and not YAML text describing a mapping)")
     else:
         text, source = path_or_text, "<string>"
     return _Reader(_parse_yaml(text, source), source).read()
+
+
+def _is_file(name: str) -> bool:
+    try:
+        return len(name) < 4096 and Path(name).is_file()
+    except (OSError, ValueError):  # a name too long for the system, a NUL byte
+        return False
+
+
+def _read_spec_file(path: Path, what: str) -> str:
+    from tofnet.io.files import read_text
+    try:
+        return read_text(path, f"{what} file", limit=MAX_SPEC_BYTES)
+    except DataError as err:
+        message = str(err).removeprefix(located(path, None, ""))
+        raise SpecError(located(path, None, f"cannot read the {what}: {message}")) from None
+
+
+def read_yaml_file(path: str | Path, what: str) -> Any:
+    """Plain data of a YAML file that is not a spec (DSEC's ``cam_to_cam.yaml``), read under
+    the spec's limits (size, nesting, aliases, plain types only)."""
+    path = Path(path)
+    return _parse_yaml(_read_spec_file(path, what), str(path), empty=f"empty {what}")
 
 
 def spec_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> Spec:
@@ -535,11 +634,10 @@ def load_budget(path_or_name: str | Path) -> Budget:
     if isinstance(path_or_name, str) and path_or_name in BUDGETS:
         return BUDGETS[path_or_name]
     path = Path(path_or_name)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as err:
-        raise SpecError(f"{path}: cannot read the budget ({err.strerror}); expected a YAML file or one of "
-                        f"{', '.join(BUDGETS)}") from None
+    if not (path.exists() or path.is_symlink()):
+        raise SpecError(located(path, None, f"cannot read the budget (no such file); expected a YAML file or one "
+                                            f"of {', '.join(BUDGETS)}"))
+    text = _read_spec_file(path, "budget")
     tree = _parse_yaml(text, str(path), "empty budget file; expected a mapping with core, chip, max_chips")
     reader = _Reader(tree, str(path))
     where, data = "budget", tree

@@ -6,6 +6,7 @@ from tofnet.core.params import Param
 from tofnet.core.ports import Payload, PortSpec
 from tofnet.core.process import Process
 from tofnet.core.vars import Var
+from tofnet.processes.input import MAX_PERIOD_S
 
 
 class BackgroundActivityFilterProcess(Process):
@@ -30,7 +31,7 @@ class BackgroundActivityFilterProcess(Process):
         Param("radius", "int", 1, unit="px", doc="neighbourhood (Chebyshev distance) that supports a spike",
               minimum=1, maximum=16),
         Param("window", "duration", "30ms", unit="s", doc="how recent a neighbour's spike must be (jAER's default)",
-              minimum=0.0),
+              minimum=0.0, maximum=MAX_PERIOD_S),
     )
     vars = (Var("last_spike", "pixel", "int64", "steps", "the step the pixel last received a spike; -2**62 before "
                 "the first", settable=True),)

@@ -18,6 +18,10 @@ from tofnet.core.vars import Var
 #: scenes want less (fast_slider: 5-10 ms). See docs/accuracy.md.
 DEFAULT_REFRACTORY = "60ms"
 
+#: Longest timestep and refractory period (s): an hour is far beyond any use and keeps
+#: step arithmetic well inside int64 microseconds (docs/reliability.md).
+MAX_PERIOD_S = 3600.0
+
 
 class InputProcess(Process):
     """Bins camera events into timesteps and sends one graded spike per active pixel.
@@ -32,9 +36,11 @@ class InputProcess(Process):
     outports = (PortSpec("events", Payload.POLARITY, 1, "one spike per active pixel, carrying its polarity"),)
     params = (
         Param("sensor_size", "size", (240, 180), unit="px", doc="sensor (width, height)"),
-        Param("timestep", "duration", "1ms", unit="s", doc="duration of one network step", minimum=1e-9),
+        Param("timestep", "duration", "1ms", unit="s", doc="duration of one network step",
+              minimum=1e-9, maximum=MAX_PERIOD_S),
         Param("refractory", "duration", DEFAULT_REFRACTORY, unit="s",
-              doc="minimum time between two accepted events of one pixel (0 disables)", minimum=0.0),
+              doc="minimum time between two accepted events of one pixel (0 disables)", minimum=0.0,
+              maximum=MAX_PERIOD_S),
         Param("refractory_per_polarity", "bool", False,
               doc="apply the refractory period to ON and OFF events separately"),
         Param("t0", "duration", None, unit="s", optional=True,

@@ -22,7 +22,8 @@ class TimeOfTravelProcess(Process):
     inports = (PortSpec("events", Payload.POLARITY, 1, "input spikes: trigger and facilitating"),)
     outports = (PortSpec("counts", Payload.COUNT, 4, "counter values per direction (+u, -u, +v, -v), steps"),)
     params = (
-        Param("distance", "int", 1, unit="px", doc="pixels between facilitating and trigger pixel", minimum=1),
+        Param("distance", "int", 1, unit="px", doc="pixels between facilitating and trigger pixel",
+              minimum=1, maximum=255),
         Param("counter_bits", "int", 8, unit="bits", doc="width of the unsigned counter", minimum=1, maximum=30),
     )
     vars = (Var("counter", "channels", "int64", "steps", "the counter each unit shows at the start of the step "

@@ -29,8 +29,10 @@ class VelocityProcess(Process):
         Param("samples", "str", None, optional=True,
               doc="file of 't vx vy vz' lines, seconds and m/s in the camera frame (source: samples)"),
         Param("per", "str", "patch", doc="one A t per patch (paper) or per pixel (exact)", choices=("patch", "pixel")),
-        Param("patch_size", "int", 30, unit="px", doc="side of the square patches sharing one A t", minimum=1),
-        Param("update_every", "int", 1, unit="steps", doc="steps between two A t updates", minimum=1),
+        Param("patch_size", "int", 30, unit="px", doc="side of the square patches sharing one A t",
+              minimum=1, maximum=65536),
+        Param("update_every", "int", 1, unit="steps", doc="steps between two A t updates",
+              minimum=1, maximum=1_000_000),
         Param("intrinsics", "floats", None, unit="px", optional=True,
               doc="[fx, fy, cx, cy]; from the recording's calibration when omitted"),
     )
@@ -48,5 +50,9 @@ class VelocityProcess(Process):
             raise NetworkError(f"{self.name}: source 'constant' needs velocity: [tx, ty, tz] in m/s")
         if values["source"] == "samples" and values["samples"] is None:
             raise NetworkError(f"{self.name}: source 'samples' needs samples: a file of 't vx vy vz' lines")
-        if values["intrinsics"] is not None and len(values["intrinsics"]) != 4:
-            raise NetworkError(f"{self.name}.intrinsics: expected [fx, fy, cx, cy], got {list(values['intrinsics'])}")
+        intrinsics = values["intrinsics"]
+        if intrinsics is not None and len(intrinsics) != 4:
+            raise NetworkError(f"{self.name}.intrinsics: expected [fx, fy, cx, cy] (4 numbers), got {len(intrinsics)}")
+        if intrinsics is not None and not (intrinsics[0] > 0 and intrinsics[1] > 0):
+            raise NetworkError(f"{self.name}.intrinsics: focal lengths fx, fy must be positive (pixels), "
+                               f"got {intrinsics[0]:g}, {intrinsics[1]:g}")

@@ -41,6 +41,10 @@ def check_sensor_size(size: object, what: str = "sensor_size") -> tuple[int, int
         raise SimError(f"{what}: expected (width, height) in pixels, got {size!r}") from None
     if width < 2 or height < 2 or width > 65535 or height > 65535:
         raise SimError(f"{what}: expected width and height between 2 and 65535 pixels, got {width}x{height}")
+    from tofnet.events import sensor_size_problem
+    problem = sensor_size_problem(width, height)
+    if problem:
+        raise SimError(f"{what}: {problem}")
     return width, height
 
 

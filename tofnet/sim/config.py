@@ -16,6 +16,9 @@ from tofnet.sim.scene import Scene
 OCCLUSION_DEPTHS = ("nearest_in_time", "nearer_surface")
 
 
+#: Longest simulation (s): an hour of a busy scene is billions of events.
+MAX_DURATION_S = 3600.0
+
 @dataclass(frozen=True)
 class SimConfig:
     """A simulation, ready to run with ``tofnet.sim.generate`` or ``tofnet.sim.simulate``.
@@ -57,6 +60,8 @@ class SimConfig:
 
     def __post_init__(self) -> None:
         check_sensor_size(self.sensor_size)
+        if isinstance(self.duration, (int, float)) and self.duration > MAX_DURATION_S:
+            raise SimError(f"duration: expected at most {MAX_DURATION_S:g} s, got {self.duration!r}")
         positive = {"duration": self.duration, "contrast_on": self.contrast_on, "contrast_off": self.contrast_off,
                      "pose_rate": self.pose_rate, "max_step_px": self.max_step_px}
         for key, value in positive.items():

@@ -11,6 +11,7 @@ import numpy as np
 from tofnet.events import EVENT_DTYPE
 from tofnet.io.recording import Intrinsics, Recording
 from tofnet.sim.config import SimConfig
+from tofnet.sim.errors import SimError
 from tofnet.sim.dvs import DEPTH_JUMP, count_crossings, emit_crossings, thresholds
 from tofnet.sim.render import Renderer, max_flow, render_times
 from tofnet.sim.rotation import imu_samples
@@ -91,9 +92,11 @@ def generate(config: SimConfig, *, seed: int = 0, progress: Progress | None = No
     """Simulate ``config`` and return events with per-event ground-truth depth.
 
     Everything random (textures, thresholds, noise) comes from ``seed``: the same
-    config and seed give identical events. A turning camera (``config.trajectory.rotates``)
-    is simulated by ``tofnet.sim.engine_rotating``.
+    config and seed give identical events. ``seed`` is a whole number >= 0. A turning
+    camera (``config.trajectory.rotates``) is simulated by ``tofnet.sim.engine_rotating``.
     """
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise SimError(f"seed: expected a whole number >= 0, got {seed!r}")
     if getattr(config.trajectory, "rotates", False):
         from tofnet.sim.engine_rotating import generate_rotating  # it builds on this module
         return generate_rotating(config, seed=seed, progress=progress)

@@ -271,4 +271,7 @@ def scenario(name: str, duration: float | None = None) -> SimConfig:
         raise SimError(f"scenario: unknown name {name!r}; expected one of {', '.join(known)}")
     if duration is not None and not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
         raise SimError(f"duration: expected a positive number of seconds, got {duration!r}")
+    from tofnet.sim.config import MAX_DURATION_S
+    if duration is not None and duration > MAX_DURATION_S:
+        raise SimError(f"duration: expected at most {MAX_DURATION_S:g} s, got {duration!r}")
     return known[name](1.0 if duration is None else float(duration))

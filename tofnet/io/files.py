@@ -1,0 +1,277 @@
+"""Safe file access for every reader and writer of tofnet.
+
+Readers open only regular files (a FIFO, a device such as ``/dev/zero``, a socket or a
+folder is refused with one line, never read) and never read more than the file holds.
+Writers are atomic: the data goes to a temporary file in the destination folder, is
+flushed to disk (``fsync``) and renamed over the final name, so a kill or a full disk
+never leaves a partial file under that name; the temporary file is removed on error.
+``check_outputs`` validates where outputs go before any work is done. The guarantees
+are listed in docs/reliability.md.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import stat
+import tempfile
+from pathlib import Path
+from typing import IO, Iterable, Iterator
+
+from tofnet.errors import DataError, located
+
+
+def _reason(err: OSError) -> str:
+    return err.strerror or type(err).__name__
+
+
+def open_regular(path: str | Path, what: str = "file") -> IO[bytes]:
+    """Open ``path`` for binary reading, refusing anything but a regular file.
+
+    The file is opened without blocking (a FIFO with no writer would block ``open``)
+    and checked with ``fstat`` on the open descriptor, so a name swapped between the
+    check and the read cannot slip through.
+    """
+    path = Path(path)
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    except ValueError:  # a NUL byte in the name
+        raise DataError(located(path, None, f"not a valid file name for the {what}")) from None
+    except FileNotFoundError:
+        raise DataError(located(path, None, "file not found")) from None
+    except IsADirectoryError:
+        raise DataError(located(path, None, f"is a folder, expected a {what}")) from None
+    except OSError as err:
+        try:  # a socket cannot be opened at all (ENXIO): say what it is
+            mode = os.stat(path).st_mode
+        except OSError:
+            mode = stat.S_IFREG
+        if not stat.S_ISREG(mode):
+            raise DataError(located(path, None, f"is {_kind(mode)}, expected a regular {what}")) from None
+        raise DataError(located(path, None, f"cannot open the {what}: {_reason(err)}")) from None
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            raise DataError(located(path, None, f"is {_kind(mode)}, expected a regular {what}"))
+        if hasattr(os, "set_blocking"):
+            os.set_blocking(fd, True)
+        return os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def _kind(mode: int) -> str:
+    for test, name in ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
+                       (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"),
+                       (stat.S_ISBLK, "a block device")):
+        if test(mode):
+            return name
+    return "not a regular file"
+
+
+def read_bytes(path: str | Path, what: str = "file", limit: int | None = None) -> bytes:
+    """The bytes of a regular file; ``limit`` (bytes) refuses larger files before reading."""
+    path = Path(path)
+    with open_regular(path, what) as handle:
+        size = os.fstat(handle.fileno()).st_size
+        if limit is not None and size > limit:
+            raise DataError(located(path, None, f"{what} of {size:,} bytes is larger than the limit of "
+                                                f"{limit:,} bytes"))
+        try:
+            data = handle.read(size + 1 if limit is None else limit + 1)
+        except OSError as err:
+            raise DataError(located(path, None, f"cannot read: {_reason(err)}")) from None
+    if limit is not None and len(data) > limit:
+        raise DataError(located(path, None, f"{what} is larger than the limit of {limit:,} bytes"))
+    return data
+
+
+def read_text(path: str | Path, what: str = "file", limit: int | None = None) -> str:
+    """UTF-8 text of a regular file (see ``read_bytes``)."""
+    data = read_bytes(path, what, limit)
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise DataError(located(path, None, f"not a text file (byte {err.start} is not UTF-8)")) from None
+
+
+# ---------------------------------------------------------------- writing
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+@contextlib.contextmanager
+def atomic_write(path: str | Path, mode: str = "wb", encoding: str | None = None) -> Iterator[IO]:
+    """Write ``path`` atomically: yields a handle on a temporary file in the same folder.
+
+    On success the file is flushed, ``fsync``-ed and renamed to ``path`` (replacing it);
+    on any error, including ``KeyboardInterrupt``, the temporary file is removed and
+    ``path`` is untouched. Missing parent folders are created. ``OSError`` (read-only
+    folder, full disk, ...) becomes a one-line ``DataError`` naming ``path``.
+    """
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
+    except OSError as err:
+        raise DataError(located(path, None, f"cannot write: {_reason(err)}")) from None
+    try:
+        with os.fdopen(fd, mode, encoding=encoding) as handle:
+            yield handle
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.chmod(tmp, 0o666 & ~_umask())
+        os.replace(tmp, path)
+    except BaseException as err:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        if isinstance(err, OSError):
+            raise DataError(located(path, None, f"cannot write: {_reason(err)}")) from None
+        raise
+    _sync_folder(path.parent)
+
+
+def _sync_folder(folder: Path) -> None:
+    """Make the rename durable (best effort: not every system can fsync a folder)."""
+    with contextlib.suppress(OSError):
+        fd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | Path, folder: bool = False) -> Iterator[Path]:
+    """``atomic_write`` for writers that need a name (h5py, faery) or a whole folder (ECD).
+
+    Yields a temporary path in the destination folder (an empty folder when ``folder``);
+    on success the file is ``fsync``-ed and renamed to ``path`` (an existing folder at
+    ``path`` is removed first: callers check ``--force`` before), on any error it is
+    removed and ``path`` is untouched.
+    """
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if folder:
+            tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part"))
+        else:
+            fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
+            os.close(fd)
+            tmp = Path(name)
+    except OSError as err:
+        raise DataError(located(path, None, f"cannot write: {_reason(err)}")) from None
+    try:
+        yield tmp
+        if folder:
+            os.chmod(tmp, 0o777 & ~_umask())
+            if path.is_dir() and not path.is_symlink():
+                shutil.rmtree(path)
+        else:
+            fd = os.open(tmp, os.O_RDONLY)
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+            os.chmod(tmp, 0o666 & ~_umask())
+        os.replace(tmp, path)
+    except BaseException as err:
+        with contextlib.suppress(OSError):
+            shutil.rmtree(tmp) if tmp.is_dir() else os.unlink(tmp)
+        if isinstance(err, OSError):
+            raise DataError(located(path, None, f"cannot write: {_reason(err)}")) from None
+        raise
+    _sync_folder(path.parent)
+
+
+def write_text_atomic(path: str | Path, text: str) -> None:
+    """Write UTF-8 ``text`` to ``path`` atomically."""
+    with atomic_write(path, "w", encoding="utf-8") as handle:
+        handle.write(text)
+
+
+# ---------------------------------------------------------------- checking outputs before the work
+
+def same_file(a: str | Path, b: str | Path) -> bool:
+    """Whether two paths name the same file: same resolved path, or same inode (hard links)."""
+    a, b = Path(a), Path(b)
+    if a.resolve() == b.resolve():
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def check_output(path: str | Path, *, force: bool = False, inputs: Iterable[str | Path] = (),
+                 what: str = "output", option: str = "--force", folder: bool = False) -> Path:
+    """Check that ``path`` can be written, before any work is done; returns it.
+
+    Refused: a path that is a folder, one under a file, one whose nearest existing
+    folder is not writable, an input file (same path or inode; even with ``force``),
+    and an existing file unless ``force``. With ``folder`` the output is a whole folder
+    (an ECD recording): an existing folder is replaced only with ``force``, and never
+    one that holds an input.
+    """
+    path = Path(path)
+    if path.name in ("", ".", "..") or "\x00" in str(path):
+        raise DataError(located(path, None, f"{what}: expected a {'folder' if folder else 'file'} name"))
+    inputs = [source for source in inputs if "\x00" not in str(source)]  # such a name cannot exist
+    for source in inputs:
+        if (path.exists() or path.is_symlink()) and Path(source).exists() and same_file(path, source):
+            raise DataError(located(path, None, f"{what} would overwrite the input {source}; choose another name"))
+        if folder and Path(source).exists() and Path(source).resolve().is_relative_to(path.resolve()):
+            raise DataError(located(path, None, f"{what} would replace a folder holding the input {source}; "
+                                                "choose another name"))
+    if path.is_dir() and not folder:
+        raise DataError(located(path, None, f"{what} is a folder, expected a file name"))
+    if path.exists() or path.is_symlink():
+        wrong_kind = (not path.is_dir() or path.is_symlink()) if folder else not path.is_file()
+        if wrong_kind:
+            kind = "folder" if folder else "regular file"
+            raise DataError(located(path, None, f"{what} exists and is not a {kind}"))
+        if not force:
+            raise DataError(located(path, None, f"{what} exists; pass {option} to overwrite it"))
+    check_folder_writable(path.parent, what)
+    return path
+
+
+def check_folder_writable(folder: str | Path, what: str = "output") -> None:
+    """The nearest existing ancestor of ``folder`` must be a writable folder."""
+    folder = Path(folder) if str(folder) else Path(".")
+    probe = folder
+    while not (probe.exists() or probe.is_symlink()):
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if not probe.is_dir():
+        raise DataError(located(folder, None, f"{what}: cannot create a folder under {probe}, which is a file"))
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise DataError(located(probe, None, f"{what}: the folder is not writable"))
+    if probe == folder:
+        # Permission bits do not show a read-only mount or a full disk: try a file.
+        try:
+            fd, tmp = tempfile.mkstemp(dir=folder, prefix=".tofnet-probe.", suffix=".part")
+            os.close(fd)
+            os.unlink(tmp)
+        except OSError as err:
+            raise DataError(located(folder, None, f"{what}: cannot write in this folder: {_reason(err)}")) from None
+
+
+def distinct_outputs(paths: dict[str, str | Path | None]) -> None:
+    """Refuse two outputs (``{option: path}``) naming the same file."""
+    seen: dict[Path, str] = {}
+    for option, path in paths.items():
+        if path is None:
+            continue
+        if "\x00" in str(path):
+            raise DataError(located(path, None, f"{option}: expected a file name"))
+        key = Path(path).resolve()
+        if key in seen:
+            raise DataError(f"{option} and {seen[key]} name the same file {path}; choose two names")
+        seen[key] = option
