@@ -123,3 +123,17 @@ def test_a_refused_packet_leaves_the_stream_as_it_was(fuse):
     for a, b in zip(got, expected):
         assert a.keys() == b.keys() and all(a[k].tobytes() == b[k].tobytes() for k in a)
     assert closed.counts == expected_close.counts and closed.steps == expected_close.steps
+
+
+@pytest.mark.parametrize("fuse", [True, False])
+def test_times_beyond_the_documented_range_are_refused(fuse):
+    """Issue 11: events after 2**62 µs were all dropped as 'refractory' (a sentinel collided)."""
+    from tofnet.events import MAX_TIME_US
+    stream = FixedBackend(fuse=fuse).open_stream(network(), intrinsics=INTRINSICS,
+                                                 velocity_source=ConstantVelocity(VELOCITY))
+    late = make_events([MAX_TIME_US - 5, MAX_TIME_US + 5], [1, 2], [1, 1], [1, 1])
+    with pytest.raises(BackendError, match=r"\|t\| < 2\*\*61"):
+        stream.feed(late)
+    near = make_events([MAX_TIME_US - 5_000, MAX_TIME_US - 1_000], [1, 2], [1, 1], [1, 1])
+    stream.feed(near)  # just inside: accepted, and the filter still sees both events
+    assert stream.close().accepted == 2

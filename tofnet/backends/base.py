@@ -17,6 +17,9 @@ DROP_REASONS = ("out_of_bounds", "before_t0", "refractory", "same_step")
 #: translational share at or below ``min_share``; only with an angular velocity input).
 REJECT_REASONS = ("no_measurement", "too_near", "too_far", "rotation_dominated")
 
+#: Summary keys that depend on how and where a run went, not on what it computed.
+RUN_SPECIFIC = ("backend", "wall_time_s")
+
 #: ``progress(done, total)``: called now and then with events processed so far.
 ProgressCallback = Callable[[int, int], None]
 
@@ -124,6 +127,12 @@ class RunResult:
     @property
     def latency_seconds(self) -> float:
         return self.latency_steps * self.timestep_us * 1e-6
+
+    def facts(self) -> dict:
+        """What the run computed, the same on every backend of one arithmetic: counts, outputs, steps,
+        latency (no backend name, times or machine facts). Depth files store this, so that integer
+        backends write the same bytes."""
+        return {k: v for k, v in self.summary().items() if k not in RUN_SPECIFIC}
 
     def summary(self) -> dict:
         """Plain-data summary (for JSON and the CLI)."""

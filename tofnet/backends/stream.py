@@ -10,7 +10,7 @@ import numpy as np
 from tofnet.backends.base import ProgressCallback, RunResult
 from tofnet.backends.graph import GraphExecutor
 from tofnet.errors import BackendError
-from tofnet.events import EVENT_DTYPE
+from tofnet.events import EVENT_DTYPE, MAX_TIME_US
 from tofnet.models.input import check_time_order
 
 #: Events per packet when a backend runs a whole recording (bounded memory).
@@ -26,10 +26,18 @@ def primary_output(sinks: list[str], payloads: dict[str, str]) -> str | None:
 
 
 def check_events(events) -> None:
-    if not isinstance(events, np.ndarray) or events.dtype != EVENT_DTYPE:
+    """Refuse a packet that is not an event array, or whose times leave ``|t| < MAX_TIME_US``.
+
+    Only the first and last times are looked at: a packet whose times are not in order is
+    refused by the time-order check anyway, so in an accepted one they bound the rest.
+    """
+    if not isinstance(events, np.ndarray) or events.dtype != EVENT_DTYPE or events.ndim != 1:
         got = events.dtype if isinstance(events, np.ndarray) else type(events).__name__
-        raise BackendError(f"events must be a numpy array of dtype {EVENT_DTYPE} (tofnet.events.EVENT_DTYPE), "
-                           f"got {got}")
+        raise BackendError(f"events must be a one-dimensional numpy array of dtype {EVENT_DTYPE} "
+                           f"(tofnet.events.EVENT_DTYPE), got {got}")
+    if len(events) and not (-MAX_TIME_US < int(events["t"][0]) and int(events["t"][-1]) < MAX_TIME_US):
+        raise BackendError(f"event times must satisfy |t| < 2**61 µs (docs/reliability.md), got "
+                           f"{int(events['t'][0])} .. {int(events['t'][-1])} µs")
 
 
 class GraphStream:

@@ -174,11 +174,25 @@ def numpy_kind(path: str | Path, what: str = "numpy file") -> str:
     raise DataError(located(path, None, "not a readable .npy/.npz file (neither magic bytes found)"))
 
 
+#: The time stamped on every member of the ``.npz`` files tofnet writes (numpy's own writer
+#: stamps the wall-clock time, so the same arrays written twice would differ in bytes).
+ZIP_TIME = (1980, 1, 1, 0, 0, 0)
+
+
 def write_npz(path: str | Path, arrays: dict[str, np.ndarray], compress: bool = False) -> None:
-    """Write ``arrays`` as a ``.npz`` atomically (see ``tofnet.io.files.atomic_write``)."""
+    """Write ``arrays`` as a ``.npz`` atomically (see ``tofnet.io.files.atomic_write``), the same
+    bytes for the same arrays: a zip of ``name.npy`` members (numpy's format, readable by
+    ``np.load``) with a fixed time stamp, in the order given."""
     from tofnet.io.files import atomic_write
+    method = zipfile.ZIP_DEFLATED if compress else zipfile.ZIP_STORED
     with atomic_write(path) as handle:
-        (np.savez_compressed if compress else np.savez)(handle, **arrays)
+        with zipfile.ZipFile(handle, "w", compression=method, allowZip64=True) as archive:
+            for name, array in arrays.items():
+                info = zipfile.ZipInfo(f"{name}.npy", date_time=ZIP_TIME)
+                info.compress_type = method
+                info.external_attr = 0o644 << 16
+                with archive.open(info, "w", force_zip64=True) as member:
+                    np.lib.format.write_array(member, np.asanyarray(array), allow_pickle=False)
 
 
 def write_npy(path: str | Path, array: np.ndarray) -> None:
