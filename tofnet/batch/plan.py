@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from tofnet.errors import SpecError, TofnetError, located
-from tofnet.io.spec import _line, _parse_yaml
+from tofnet.io.spec import _line, _parse_yaml, yaml_source
 
 TOP_KEYS = ("name", "description", "output", "cache", "recordings", "networks", "grid", "backend", "keep")
 PATH_KEYS = ("path", "name")
@@ -93,24 +93,13 @@ def load_plan(path_or_text: str | Path, *, output: str | Path | None = None) -> 
     Relative paths in the plan are relative to the plan file's folder (the working
     directory for text). ``output`` overrides the plan's ``output``.
     """
-    text, source, base = _read_source(path_or_text)
-    try:
+    try:  # the spec reader's file checks and YAML errors, already located
+        text, source, path = yaml_source(path_or_text, "plan")
         tree = _parse_yaml(text, source, empty="empty plan; expected a mapping with recordings (and networks, grid)")
-    except SpecError as err:  # the spec reader's YAML errors, already located
+    except SpecError as err:
         raise PlanError(str(err)) from None
+    base = path.resolve().parent if path is not None else Path.cwd()
     return _PlanReader(tree, source, base).read(output)
-
-
-def _read_source(path_or_text: str | Path) -> tuple[str, str, Path]:
-    if isinstance(path_or_text, Path) or ("\n" not in path_or_text and (
-            path_or_text.endswith((".yaml", ".yml")) or Path(path_or_text).is_file())):
-        path = Path(path_or_text)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as err:
-            raise PlanError(f"{path}: cannot read the plan: {getattr(err, 'strerror', None) or err}") from None
-        return text, str(path), path.resolve().parent
-    return str(path_or_text), "<string>", Path.cwd()
 
 
 def _grid_options() -> dict[str, str]:

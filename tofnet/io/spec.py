@@ -441,16 +441,25 @@ def load_spec(path_or_text: str | Path) -> Spec:
     A ``Path``, or a one-line string naming a file, is read as a file; any other string
     is YAML text. Raises ``SpecError`` naming the file, line and key.
     """
+    text, source, _ = yaml_source(path_or_text, "spec")
+    return _Reader(_parse_yaml(text, source), source).read()
+
+
+def yaml_source(path_or_text: str | Path, what: str) -> tuple[str, str, Path | None]:
+    """``(text, source name, file)`` of a YAML document given as a file or as text (``file`` None).
+
+    A ``Path``, or a one-line string naming a file (or ending in ``.yaml``), is read as a file,
+    with the limits of ``MAX_SPEC_BYTES`` and regular files only; one line that is neither a
+    file nor a mapping is taken for a missing file. Errors are ``SpecError`` naming ``what``.
+    """
     if isinstance(path_or_text, Path) or ("\n" not in path_or_text and (
             path_or_text.endswith((".yaml", ".yml")) or _is_file(path_or_text))):
         path = Path(path_or_text)
-        text, source = _read_spec_file(path, "spec"), str(path)
-    elif "\n" not in path_or_text and ":" not in path_or_text and "{" not in path_or_text:
+        return _read_spec_file(path, what), str(path), path
+    if "\n" not in path_or_text and ":" not in path_or_text and "{" not in path_or_text:
         # One line that is neither a mapping nor an existing file: most likely a file name.
-        raise SpecError(f"{quote(path_or_text)}: no such spec file (and not YAML text describing a mapping)")
-    else:
-        text, source = path_or_text, "<string>"
-    return _Reader(_parse_yaml(text, source), source).read()
+        raise SpecError(f"{quote(path_or_text)}: no such {what} file (and not YAML text describing a mapping)")
+    return path_or_text, "<string>", None
 
 
 def _is_file(name: str) -> bool:
