@@ -123,8 +123,11 @@ def pipeline_of(network: Network) -> PipelineParams:
 class FusedStream:
     """The paper's chain on a live event stream through the fused kernel (the ``GraphStream`` API).
 
-    Estimates come out as soon as the event that triggers them is fed (a partial step's
-    too); memory is fixed by the sensor and the largest packet.
+    ``feed`` returns estimates as soon as the event that triggers them is fed (a partial
+    step's too, in the kernel's order); ``feed_all`` keeps the GraphStream contract and
+    returns what it would: the records of the steps the packet completed (a later event or
+    ``until_us`` completes a step), in canonical order. Memory is fixed by the sensor and the
+    largest packet.
     """
 
     def __init__(self, backend: str, config: KernelConfig, pipeline: PipelineParams,
@@ -147,6 +150,7 @@ class FusedStream:
         self.tot: np.ndarray | None = None
         self._events_in = 0
         self._last_event_us: int | None = None
+        self._held: dict[str, np.ndarray] = {}  # feed_all: records of steps not complete yet
         p = pipeline
         self._updates = UpdateRows(lambda first, count: velocity_table(
             self.velocity_source, self.kernel.t0_us, p.timestep_us, p.update_every, count, first), VELOCITY_LOOKAHEAD)
@@ -195,11 +199,30 @@ class FusedStream:
             return np.empty(0, DEPTH_DTYPE)
         end, n_tot = done
         self.tot = copy_records(self.kernel.buffers()[2][:n_tot]) if self.record_tot else None
-        return into[:end]
+        # a view would keep the whole packet-sized buffer alive: a copy when the estimates are few
+        return into[:end] if 2 * end >= len(into) else copy_records(into[:end])
 
     def feed_all(self, events: np.ndarray, until_us: int | None = None) -> dict[str, np.ndarray]:
-        depth = canonical(self.feed(events, until_us))
-        return {self.depth_name: depth, **({self.tot_name: canonical(self.tot)} if self.record_tot else {})}
+        """The records of the steps this packet completed, canonical order (as ``GraphStream``)."""
+        new = {self.depth_name: self.feed(events, until_us)}
+        if self.record_tot:
+            new[self.tot_name] = self.tot
+        horizon = None  # records of steps from here on wait (a later event or until_us completes them)
+        if self._last_event_us is not None:
+            horizon = (self._last_event_us - self.t0_us) // self.timestep_us
+            if until_us is not None:
+                horizon = max(horizon, (until_us - self.t0_us) // self.timestep_us)
+        out = {}
+        for name, records in new.items():
+            held = self._held.pop(name, None)
+            if held is not None and len(held):
+                records = np.concatenate([held, records])
+            # the kernel writes records in event order, so their steps never decrease
+            cut = len(records) if horizon is None else int(np.searchsorted(records["step"], horizon, "left"))
+            if cut < len(records):
+                self._held[name] = copy_records(records[cut:])
+            out[name] = canonical(records[:cut])
+        return out
 
     def feed_into(self, events: np.ndarray, into: np.ndarray, offset: int) -> KernelOutput | None:
         """Like ``feed``, but write the estimates to ``into[offset:]`` (room for ``len(events)``).
@@ -211,8 +234,19 @@ class FusedStream:
         return self._kernel_call(events, None, lambda: self.kernel.process_events(
             events, self._rows, record_tot=self.record_tot, into=into, offset=offset, copy=False))
 
+    def _empty(self, name: str) -> np.ndarray:
+        return np.empty(0, DEPTH_DTYPE if name == self.depth_name else TOT_DTYPE)
+
+    def _latency(self, name: str) -> int:
+        """Steps from an event to the records it makes on output ``name``."""
+        return 2 if name == self.depth_name else 1
+
+    def abort(self) -> None:
+        """Give up the stream (after its caller failed)."""
+        self._closed = True
+
     def close(self) -> RunResult:
-        """The counts so far; ``outputs`` are empty (``feed`` returned every estimate)."""
+        """The counts so far; ``outputs`` hold what ``feed_all`` kept of the open step (``feed`` returned every estimate)."""
         if self._closed:
             raise BackendError("stream is closed")
         self._closed = True
@@ -225,14 +259,14 @@ class FusedStream:
             names[2]: {name: int(c) for name, c in zip(OUTCOMES, kernel.outcomes)},
             names[3]: {}}
         counts = {name: counts[name] for name in self.order}
-        outputs = {self.depth_name: np.empty(0, DEPTH_DTYPE)}
+        outputs = {self.depth_name: canonical(self._held.pop(self.depth_name, np.empty(0, DEPTH_DTYPE)))}
         if self.record_tot:
-            outputs[self.tot_name] = np.empty(0, TOT_DTYPE)
+            outputs[self.tot_name] = canonical(self._held.pop(self.tot_name, np.empty(0, TOT_DTYPE)))
         t0, last = self.t0_us if self.t0_us is not None else 0, self._last_event_us
         last_step = (last - t0) // self.timestep_us if last is not None and last >= t0 else -1
         return RunResult(
             self.backend, outputs, counts, last_step + 1 + self.pipeline.latency_steps,
             t0, self.timestep_us,
-            {name: (2 if name == self.depth_name else 1) for name in outputs}, dict(self.payloads),
+            {name: self._latency(name) for name in outputs}, dict(self.payloads),
             wall_time=time.perf_counter() - self._started,
             extra={"frac_bits": fmt.frac_bits, "payload_bits": fmt.payload_bits} if fmt else {})

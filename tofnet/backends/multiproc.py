@@ -294,6 +294,12 @@ class _GuardedStream(GraphStream):
     def feed_all(self, events, until_us=None):
         return self.session._guarded(lambda: GraphStream.feed_all(self, events, until_us))
 
+    def abort(self) -> None:
+        """Stop the workers at once (the caller failed); the session is done."""
+        GraphStream.abort(self)
+        self.session._state = "failed"
+        self.session.close(graceful=False)
+
     def close(self) -> RunResult:
         def finish() -> RunResult:
             result = GraphStream.close(self)

@@ -104,6 +104,10 @@ class GraphStream:
         return self.executor.network.process(proc).port(port).spec.payload.empty() if self.executor else \
             np.empty(0, EVENT_DTYPE)
 
+    def abort(self) -> None:
+        """Give up the stream (after its caller failed): release what it holds, return nothing."""
+        self._closed = True
+
     def close(self) -> RunResult:
         """Run the steps still in flight; their outputs (``outputs``) and every count so far."""
         if self._closed:
@@ -124,18 +128,52 @@ class GraphStream:
 
 
 class Collected:
-    """Records of several outputs gathered packet by packet, joined once at the end."""
+    """Records of several outputs gathered packet by packet, joined once at the end.
 
-    def __init__(self):
+    With ``spill_dir``, an output that grows past ``limit_bytes`` goes on in a temporary
+    file there (unlinked as soon as it is mapped): ``joined`` then returns a read-only
+    memory map, so a long recording's outputs need disk, not memory.
+    """
+
+    def __init__(self, spill_dir=None, limit_bytes: int = 256 << 20):
         self.parts: dict[str, list[np.ndarray]] = {}
+        self.spill_dir, self.limit_bytes = spill_dir, limit_bytes
+        self._files: dict[str, tuple[object, np.dtype, int]] = {}  # name -> (open file, dtype, records)
+        self._bytes: dict[str, int] = {}
 
     def add(self, outputs: dict[str, np.ndarray]) -> None:
         for name, records in outputs.items():
+            if not len(records):
+                continue
+            if name in self._files:
+                self._spill(name, [records])
+                continue
             self.parts.setdefault(name, []).append(records)
+            self._bytes[name] = self._bytes.get(name, 0) + records.nbytes
+            if self.spill_dir is not None and self._bytes[name] > self.limit_bytes:
+                self._spill(name, self.parts.pop(name))
+
+    def _spill(self, name: str, parts: list[np.ndarray]) -> None:
+        import tempfile
+        if name not in self._files:
+            handle = tempfile.NamedTemporaryFile(dir=self.spill_dir, prefix=f".tofnet-{name}.", suffix=".spill",
+                                                 delete=True)
+            self._files[name] = (handle, parts[0].dtype, 0)
+        handle, dtype, count = self._files[name]
+        for part in parts:
+            handle.write(np.ascontiguousarray(part).tobytes())
+            count += len(part)
+        self._files[name] = (handle, dtype, count)
 
     def joined(self, names: Iterable[str], empty: Callable[[str], np.ndarray]) -> dict[str, np.ndarray]:
         out = {}
         for name in names:
+            if name in self._files:
+                handle, dtype, count = self._files.pop(name)
+                handle.flush()
+                out[name] = np.memmap(handle.name, dtype=dtype, mode="r", shape=(count,))
+                handle.close()  # deletes the file's name; the map keeps its pages until it is dropped
+                continue
             parts = [p for p in self.parts.get(name, []) if len(p)]
             out[name] = np.concatenate(parts) if len(parts) > 1 else (parts[0] if parts else empty(name))
         return out

@@ -75,25 +75,33 @@ def build_network(args, recording_sensor_size, recording=None):
 
 
 def handle(args) -> int:
-    from tofnet.api import DEFAULT_BACKEND, run
+    from tofnet.api import DEFAULT_BACKEND, run, run_source
+    from tofnet.cli.inputs import input_options
     from tofnet.cli.outputs import check_more_outputs, check_run_outputs
     from tofnet.cli.progress import Progress
-    from tofnet.io import read_recording
+    from tofnet.io.source import open_recording
+    from tofnet.monitor import Monitor
 
     started = time.perf_counter()
-    from tofnet.cli.inputs import input_options
     check_run_outputs(args)
-    recording = read_recording(args.recording, **input_options(args))
-    network, compile_options, spec_backend, backend_options = build_network(args, recording.sensor_size, recording)
-    backend = args.backend or spec_backend or DEFAULT_BACKEND
-    if args.backend and args.backend != spec_backend:
-        backend_options = {}  # the spec's options belong to the spec's backend
-    progress = None if args.quiet else Progress(f"tofnet run [{backend}]")
-    from tofnet.monitor import Monitor
     monitors = [Monitor.parse(text, args.monitor_every) for text in args.monitor]
-    result, compiled = run(recording, network, backend=backend, backend_options=backend_options,
-                           compile_options=compile_options, record_tot=args.record_tot, probes=args.probe,
-                           monitors=monitors, progress=progress)
+    with open_recording(args.recording, **input_options(args)) as source:
+        # A file that says its sensor size streams through the network in chunks (events never all
+        # in memory); otherwise the size comes from the events' extent, which needs them all.
+        streaming = source.sensor_size is not None and not monitors
+        recording = source.metadata() if streaming else source.read()
+        network, compile_options, spec_backend, backend_options = build_network(args, recording.sensor_size,
+                                                                                 recording)
+        backend = args.backend or spec_backend or DEFAULT_BACKEND
+        if args.backend and args.backend != spec_backend:
+            backend_options = {}  # the spec's options belong to the spec's backend
+        progress = None if args.quiet else Progress(f"tofnet run [{backend}]")
+        options = dict(backend=backend, backend_options=backend_options, compile_options=compile_options,
+                       record_tot=args.record_tot, probes=args.probe, progress=progress)
+        if streaming:
+            result, compiled = run_source(source, network, spill_dir=Path(args.out).resolve().parent, **options)
+        else:
+            result, compiled = run(recording, network, monitors=monitors, **options)
     if progress:
         progress.done()
     out = Path(args.out)

@@ -20,9 +20,11 @@ from tofnet.errors import DataError, located, quote
 from tofnet.events import DEPTH_DTYPE, MAX_TIME_US
 from tofnet.io.files import write_text_atomic
 from tofnet.io.groundtruth import read_text
-from tofnet.io.npy import load_npz, write_npz
+from tofnet.io.npy import Column, load_npz, write_npz
 
 CSV_HEADER = "t,x,y,z,step"
+#: Estimates per slice when a depth file is written (bounded memory for any number of them).
+PIECE = 1 << 20
 #: The last line of a depth CSV; a file without it (or with another count) is refused.
 CSV_END = "# end: {rows} rows"
 _CSV_END = re.compile(r"^# end: (\d{1,19}) rows$")
@@ -63,11 +65,13 @@ def write_depth(path: str | Path, depth: np.ndarray, *, t0_us: int, timestep_us:
             summary_json = json.dumps(summary or {}, default=_jsonable)
         except (TypeError, ValueError) as err:
             raise DataError(located(path, None, f"summary is not JSON-serialisable: {err}")) from None
-        write_npz(path, dict(t=depth["t"] * 1e-6, t_us=depth["t"].astype(np.int64), x=depth["x"].astype(np.uint16),
-                             y=depth["y"].astype(np.uint16), z=depth["z"].astype(np.float64),
-                             step=depth["step"].astype(np.int64), t0_us=np.int64(t0_us),
-                             timestep_us=np.int64(timestep_us), latency_steps=np.int64(latency_steps),
-                             summary_json=np.str_(summary_json)))
+        def column(dtype, of):  # written a slice at a time: depth may be a memory map larger than memory
+            return Column(dtype, len(depth), lambda: (of(depth[lo:lo + PIECE]) for lo in range(0, len(depth), PIECE)))
+        write_npz(path, dict(t=column(np.float64, lambda d: d["t"] * 1e-6), t_us=column(np.int64, lambda d: d["t"]),
+                             x=column(np.uint16, lambda d: d["x"]), y=column(np.uint16, lambda d: d["y"]),
+                             z=column(np.float64, lambda d: d["z"]), step=column(np.int64, lambda d: d["step"]),
+                             t0_us=np.int64(t0_us), timestep_us=np.int64(timestep_us),
+                             latency_steps=np.int64(latency_steps), summary_json=np.str_(summary_json)))
         return
     rows = [f"{_seconds(t)},{x},{y},{z!r},{s}" for t, x, y, z, s in
             zip(depth["t"].tolist(), depth["x"].tolist(), depth["y"].tolist(), depth["z"].tolist(),

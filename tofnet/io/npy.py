@@ -21,7 +21,7 @@ import struct
 import zipfile
 import zlib
 from pathlib import Path
-from typing import IO, Iterable
+from typing import IO, Callable, Iterable
 
 import numpy as np
 
@@ -179,10 +179,19 @@ def numpy_kind(path: str | Path, what: str = "numpy file") -> str:
 ZIP_TIME = (1980, 1, 1, 0, 0, 0)
 
 
-def write_npz(path: str | Path, arrays: dict[str, np.ndarray], compress: bool = False) -> None:
+class Column:
+    """A one-dimensional array written piece by piece: ``length`` values of ``dtype`` that
+    ``pieces()`` yields in order (so a column larger than memory can be written)."""
+
+    def __init__(self, dtype, length: int, pieces: Callable[[], Iterable[np.ndarray]]):
+        self.dtype, self.length, self.pieces = np.dtype(dtype), int(length), pieces
+
+
+def write_npz(path: str | Path, arrays: dict[str, "np.ndarray | Column"], compress: bool = False) -> None:
     """Write ``arrays`` as a ``.npz`` atomically (see ``tofnet.io.files.atomic_write``), the same
     bytes for the same arrays: a zip of ``name.npy`` members (numpy's format, readable by
-    ``np.load``) with a fixed time stamp, in the order given."""
+    ``np.load``) with a fixed time stamp, in the order given. A ``Column`` is written as it
+    comes, in bounded memory."""
     from tofnet.io.files import atomic_write
     method = zipfile.ZIP_DEFLATED if compress else zipfile.ZIP_STORED
     with atomic_write(path) as handle:
@@ -192,7 +201,23 @@ def write_npz(path: str | Path, arrays: dict[str, np.ndarray], compress: bool = 
                 info.compress_type = method
                 info.external_attr = 0o644 << 16
                 with archive.open(info, "w", force_zip64=True) as member:
-                    np.lib.format.write_array(member, np.asanyarray(array), allow_pickle=False)
+                    if isinstance(array, Column):
+                        _write_column(member, array)
+                    else:
+                        np.lib.format.write_array(member, np.asanyarray(array), allow_pickle=False)
+
+
+def _write_column(member: IO[bytes], column: Column) -> None:
+    header = {"descr": np.lib.format.dtype_to_descr(column.dtype), "fortran_order": False,
+              "shape": (column.length,)}
+    np.lib.format.write_array_header_1_0(member, header)
+    written = 0
+    for piece in column.pieces():
+        piece = np.ascontiguousarray(piece, dtype=column.dtype)
+        member.write(piece.tobytes())
+        written += len(piece)
+    if written != column.length:
+        raise ValueError(f"column yielded {written} values, {column.length} declared")
 
 
 def write_npy(path: str | Path, array: np.ndarray) -> None:

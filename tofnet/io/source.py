@@ -108,6 +108,12 @@ class EventSource:
             done += len(packet)
             yield packet
 
+    def metadata(self) -> Recording:
+        """What is known about the camera before reading the events: a ``Recording`` without
+        events (for streams, which read them in chunks)."""
+        return Recording(events=np.empty(0, EVENT_DTYPE), intrinsics=self.intrinsics, trajectory=self.trajectory,
+                         sensor_size=self.sensor_size, imu=self.imu, source=str(self.path), notes=self.notes)
+
     def read(self, progress: ProgressHook | None = None) -> Recording:
         """All events and metadata as a ``Recording``; ``DataError`` when there are no events."""
         parts, depths = [], []

@@ -1,0 +1,73 @@
+"""`tofnet run` streams a file through the network: bounded memory, the same bytes as a whole read."""
+
+import tracemalloc
+
+import numpy as np
+import pytest
+
+from tofnet.api import run, run_source
+from tofnet.cli import main
+from tofnet.events import EVENT_DTYPE
+from tofnet.io import read_recording
+from tofnet.io.recording import Intrinsics, Recording
+from tofnet.io.source import open_recording
+from tofnet.networks import depth_network
+from tofnet.testing import merge_events, moving_pattern, noise_events
+
+pytest.importorskip("h5py")
+from tofnet.io.hdf5 import write_hdf5  # noqa: E402
+
+SENSOR = (64, 48)
+INTRINSICS = Intrinsics(80.0, 80.0, 31.5, 23.5)
+NET = dict(velocity={"source": "constant", "velocity": [-0.4, 0.1, 0.05]})
+
+
+def write_file(path, seconds: int) -> int:
+    def chunks():
+        for s in range(seconds):
+            part = merge_events(moving_pattern(SENSOR, (300, -120), 1_000_000, seed=s),
+                                noise_events(SENSOR, 20, 1_000_000, seed=s))
+            part["t"] += s * 1_000_000
+            yield part
+    return write_hdf5(path, chunks(), Recording(np.empty(0, EVENT_DTYPE), intrinsics=INTRINSICS, sensor_size=SENSOR))
+
+
+def test_a_streamed_file_gives_exactly_the_run_of_the_whole_recording(tmp_path):
+    path = tmp_path / "rec.h5"
+    write_file(path, 2)
+    whole, _ = run(read_recording(path), depth_network(SENSOR, **NET), record_tot=True)
+    with open_recording(path) as source:
+        streamed, _ = run_source(source, depth_network(SENSOR, **NET), record_tot=True, spill_dir=tmp_path,
+                                 spill_bytes=100_000, chunk_events=30_000)
+    assert isinstance(streamed.depth, np.memmap) and len(streamed.depth) > 10_000  # spilled to disk
+    assert streamed.depth.tobytes() == whole.depth.tobytes() and streamed.tot.tobytes() == whole.tot.tobytes()
+    assert streamed.counts == whole.counts and list(tmp_path.iterdir()) == [path]  # no spill file left
+
+
+def test_memory_does_not_grow_with_the_events(tmp_path):
+    peaks, estimates = [], []
+    for seconds in (1, 4):
+        path = tmp_path / f"rec{seconds}.h5"
+        write_file(path, seconds)
+        with open_recording(path) as source:
+            tracemalloc.start()
+            result, _ = run_source(source, depth_network(SENSOR, **NET), chunk_events=50_000)
+            peaks.append(tracemalloc.get_traced_memory()[1])
+            tracemalloc.stop()
+        estimates.append(len(result.depth))
+    # the peak grows by the estimates kept (28 B each), not by the events (13 B each, ~3x as many)
+    kept = (estimates[1] - estimates[0]) * 28
+    assert peaks[1] - peaks[0] < kept + 2_000_000, (peaks, estimates)
+
+
+def test_tofnet_run_streams_a_file_that_states_its_size_and_says_the_same(tmp_path, capsys):
+    path = tmp_path / "rec.h5"
+    write_file(path, 1)
+    for name in ("streamed.npz", "read.npz"):
+        args = ["run", str(path), "--out", str(tmp_path / name), "--velocity=-0.4,0.1,0.05", "--quiet"]
+        if name == "read.npz":
+            args += ["--monitor", "input.last_accepted@3,3"]  # monitors need the whole recording
+        assert main(args) == 0
+    assert "monitor" in capsys.readouterr().out
+    a, b = np.load(tmp_path / "streamed.npz"), np.load(tmp_path / "read.npz")
+    assert all(np.array_equal(a[k], b[k]) for k in ("t_us", "x", "y", "z", "step"))
