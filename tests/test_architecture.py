@@ -3,7 +3,8 @@
 import subprocess
 import sys
 
-WHAT = ["tofnet", "tofnet.core", "tofnet.processes", "tofnet.networks", "tofnet.io.spec", "tofnet.compiler"]
+WHAT = ["tofnet", "tofnet.core", "tofnet.processes", "tofnet.networks", "tofnet.io.spec", "tofnet.io.safe_yaml",
+        "tofnet.io.spec_writer", "tofnet.compiler"]
 
 
 def test_declarations_specs_and_compiler_import_no_backend_kernel_or_numba():

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from tofnet.errors import SpecError, TofnetError, located
-from tofnet.io.spec import _line, _parse_yaml, yaml_source
+from tofnet.io.safe_yaml import _line, _parse_yaml, yaml_source
 
 TOP_KEYS = ("name", "description", "output", "cache", "recordings", "networks", "grid", "backend", "keep")
 PATH_KEYS = ("path", "name")

@@ -1,4 +1,4 @@
-"""Event files: ECD ``events.txt`` and numpy ``.npy``/``.npz``, read into ``EVENT_DTYPE``.
+"""Event files: ECD ``events.txt`` (numpy ``.npy``/``.npz`` in ``tofnet.io.arrays``), read into ``EVENT_DTYPE``.
 
 The text reader parses the raw bytes in one compiled pass (no Python per line) and
 converts the decimal seconds to integer microseconds exactly, without going through
@@ -17,12 +17,11 @@ from numba import njit
 
 from tofnet.errors import DataError, located, quote
 from tofnet.events import EVENT_DTYPE, MAX_TIME_US
+from tofnet.io.arrays import COLUMNS as _COLUMNS, MAX_COORD as _MAX_COORD, check_writable
+from tofnet.io.arrays import events_from_columns, read_events_npy, write_events_npy  # noqa: F401 (their old home)
 from tofnet.io.files import atomic_write, read_bytes
-from tofnet.io.npy import load_npy, numpy_kind, write_npy, write_npz
 
-_COLUMNS = ("t", "x", "y", "p")
 _EXPECTED = "4 columns 't x y p' (seconds, column px, row px, polarity 0/1)"
-_MAX_COORD = 65535  # uint16
 _POW10 = np.array([10 ** k for k in range(19)], dtype=np.int64)
 _I64_MAX = np.iinfo(np.int64).max
 _MAX_TIME_US = np.int64(MAX_TIME_US)
@@ -362,17 +361,9 @@ def _format_events(t, x, y, p, out):
     return k
 
 
-def _check_writable(events: np.ndarray) -> np.ndarray:
-    if not isinstance(events, np.ndarray) or events.dtype != EVENT_DTYPE:
-        raise TypeError(f"events must be an array of dtype {EVENT_DTYPE}, got {getattr(events, 'dtype', type(events))}")
-    if np.any(events["p"] > 1):
-        raise DataError(f"polarity must be 0 or 1, got {int(events['p'].max())}")
-    return events
-
-
 def write_events_txt(path: str | Path, events: np.ndarray, chunk: int = 1_000_000) -> None:
     """Write ECD ``events.txt``: ``t x y p`` per line, t in seconds with 9 decimals."""
-    events = _check_writable(events)
+    events = check_writable(events)
     # A line is at most 1 + 19 + 1 + 9 + 3 * (1 + 5) + 1 bytes; 56 leaves room.
     with atomic_write(path) as handle:
         for start in range(0, len(events), chunk):
@@ -381,106 +372,3 @@ def write_events_txt(path: str | Path, events: np.ndarray, chunk: int = 1_000_00
             k = _format_events(np.ascontiguousarray(part["t"]), np.ascontiguousarray(part["x"]),
                                np.ascontiguousarray(part["y"]), np.ascontiguousarray(part["p"]), out)
             handle.write(out[:k].tobytes())
-
-
-def read_events_npy(path: str | Path, columns: str | tuple[str, ...] | None = None) -> np.ndarray:
-    """Read events from ``.npy`` or ``.npz`` into ``EVENT_DTYPE`` (t in µs).
-
-    ``.npy``: a structured array with fields ``t x y p``, or an ``(n, 4)`` array of
-    columns ``t x y p`` (another order: ``columns="x,y,t,p"``). ``.npz``: a structured
-    array under key ``events`` or ``event_data``, or arrays ``t``, ``x``, ``y``, ``p``.
-    The polarity may be named ``p``, ``on`` or ``polarity`` (``tofnet.io.arrays``).
-    A float ``t`` is seconds, an integer ``t`` microseconds.
-    Polarity -1 maps to 0 (OFF); booleans are accepted.
-    """
-    from tofnet.io.arrays import PlainColumns, columns_of, npz_columns
-
-    path = Path(path)
-    if numpy_kind(path, "events file") == "npz":
-        arrays = npz_columns(path, columns)
-    else:
-        arrays = columns_of(path, load_npy(path, "events file"), "the array", columns)
-    try:
-        return events_from_columns(arrays, path)
-    except DataError as err:
-        if columns is None and isinstance(arrays, PlainColumns):
-            raise DataError(f"{err} (a plain (n, 4) array is read as columns t x y p; "
-                            "for another order pass --columns, e.g. x,y,t,p)") from None
-        raise
-
-
-def events_from_columns(columns: dict[str, np.ndarray], source: object = "<memory>") -> np.ndarray:
-    """Validate columns ``t x y p`` and build an ``EVENT_DTYPE`` array.
-
-    Float ``t`` is seconds (rounded to the nearest µs, half away from zero), integer
-    ``t`` microseconds. Errors name the field and the (0-based) event index.
-    """
-    arrays = {name: np.asarray(columns[name]) for name in _COLUMNS}
-    lengths = {name: a.shape for name, a in arrays.items()}
-    n = arrays["t"].shape[0] if arrays["t"].ndim == 1 else -1
-    if any(a.shape != (n,) for a in arrays.values()):
-        raise DataError(located(source, None, f"t, x, y, p must be 1-D arrays of one length, got shapes {lengths}"))
-    if n == 0:
-        raise DataError(located(source, None, "no events (the arrays are empty)"))
-
-    def fail(name: str, index: int, message: str) -> DataError:
-        return DataError(located(source, None, f"field '{name}', event {index}: {message}"))
-
-    for name, a in arrays.items():
-        if a.dtype.kind not in ("iuf" if name != "p" else "biuf"):
-            raise DataError(located(source, None, f"field '{name}': expected numbers, got dtype {a.dtype}"))
-        if a.dtype.kind == "f":
-            bad = np.flatnonzero(~np.isfinite(a))
-            if bad.size:
-                raise fail(name, int(bad[0]), f"expected a finite number, got {a[bad[0]]}")
-    t = arrays["t"]
-    limit = MAX_TIME_US
-    if t.dtype.kind == "f":
-        scaled = t.astype(np.float64) * 1e6
-        t_us = np.sign(scaled) * np.floor(np.abs(scaled) + 0.5)
-        bad = np.flatnonzero(np.abs(t_us) >= limit)
-        if bad.size:
-            raise fail("t", int(bad[0]), f"{t[bad[0]]:g} s is out of range (|t| < 2**61 µs; float t is seconds)")
-        t_us = t_us.astype(np.int64)
-    else:
-        # Compare in the file's own dtype: uint64 >= 2**63 must not wrap to negative first.
-        bad = np.flatnonzero((t >= limit) | (t <= -limit)) if t.dtype.kind == "i" else np.flatnonzero(t >= limit)
-        if bad.size:
-            raise fail("t", int(bad[0]), f"{t[bad[0]]} µs is out of range (|t| < 2**61 µs; integer t is microseconds)")
-        t_us = t.astype(np.int64)
-    # In range, a difference of two times cannot overflow int64.
-    back = np.flatnonzero(np.diff(t_us) < 0)
-    if back.size:
-        i = int(back[0]) + 1
-        raise fail("t", i, f"time goes back ({t_us[i]} µs after {t_us[i - 1]} µs); events must be sorted by time")
-    for name in ("x", "y"):
-        a = arrays[name] if arrays[name].dtype.kind != "f" else arrays[name].astype(np.float64)
-        checks = [(a < 0, "pixel coordinates must be >= 0"), (a > _MAX_COORD, f"expected at most {_MAX_COORD}")]
-        if a.dtype.kind == "f":
-            checks.append((a != np.floor(a), "expected a whole number"))
-        for mask, message in checks:
-            bad = np.flatnonzero(mask)
-            if bad.size:
-                raise fail(name, int(bad[0]), f"{message}, got {a[bad[0]]}")
-    p = arrays["p"]
-    bad = np.flatnonzero((p != 0) & (p != 1) & (p != -1))
-    if bad.size:
-        raise fail("p", int(bad[0]), f"polarity must be 0 or 1 (or -1 for OFF), got {p[bad[0]]}")
-    events = np.empty(n, dtype=EVENT_DTYPE)
-    events["t"] = t_us
-    events["x"] = arrays["x"]
-    events["y"] = arrays["y"]
-    events["p"] = p == 1
-    return events
-
-
-def write_events_npy(path: str | Path, events: np.ndarray) -> None:
-    """Write events: ``.npy`` a structured ``EVENT_DTYPE`` array; ``.npz`` arrays ``t`` (int64 µs), ``x``, ``y``, ``p``."""
-    events = _check_writable(events)
-    path = Path(path)
-    if path.suffix == ".npy":
-        write_npy(path, events)
-    elif path.suffix == ".npz":
-        write_npz(path, {name: np.ascontiguousarray(events[name]) for name in _COLUMNS})
-    else:
-        raise DataError(located(path, None, "expected a .npy or .npz file name"))

@@ -153,7 +153,7 @@ class DsecSource(ColumnsSource):
         yaml_path = self.path.parent.parent.parent / "calibration" / "cam_to_cam.yaml"
         if side not in ("left", "right") or not (yaml_path.exists() or yaml_path.is_symlink()):
             return
-        from tofnet.io.spec import read_yaml_file
+        from tofnet.io.safe_yaml import read_yaml_file
         data = read_yaml_file(yaml_path, "calibration")  # bounded (size, nesting, aliases)
         try:
             camera = data["intrinsics"]["cam0" if side == "left" else "cam3"]

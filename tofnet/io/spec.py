@@ -1,13 +1,9 @@
 """YAML network specs: a network, how to compile it and which backend runs it.
 
-``load_spec`` reads a spec (a file or YAML text) into a ``Spec``; ``dump_spec`` writes
-one back. Every process type, parameter and connection of the Python API can be
-written; errors name the file, the line and the key. The format is in docs/spec.md.
-
-YAML is read with a bounded safe loader: at most ``MAX_SPEC_BYTES`` of text,
-``MAX_NESTING`` levels, ``MAX_ALIASES`` alias uses and ``MAX_VALUES`` values after
-expanding aliases (a "billion laughs" file is refused, not expanded); recursive
-aliases and tags other than YAML's plain types are refused; no tag runs code.
+``load_spec`` reads a spec (a file or YAML text) into a ``Spec``; ``dump_spec``
+(``tofnet.io.spec_writer``) writes one back. Every process type, parameter and connection
+of the Python API can be written; errors name the file, the line and the key. The format
+is in docs/spec.md. YAML is read by the bounded safe loader of ``tofnet.io.safe_yaml``.
 """
 
 from __future__ import annotations
@@ -20,28 +16,19 @@ from importlib.resources import files
 from pathlib import Path
 from typing import Any, Mapping
 
-import yaml
-
-from tofnet.compiler.budget import LOIHI2, Budget, budget_name_or_dict
+from tofnet.compiler.budget import LOIHI2, Budget
 from tofnet.compiler.partition import parse_patch_size, patch_per_layer
 from tofnet.core.network import Network
 from tofnet.core.ports import InPort, OutPort
 from tofnet.core.process import Process
-from tofnet.errors import DataError, SpecError, TofnetError, located, quote, reason
-from tofnet.units import seconds
-
+from tofnet.errors import SpecError, TofnetError, located, quote, reason
+from tofnet.io.safe_yaml import (MAX_SPEC_BYTES, _Map, _Seq, _line, _parse_yaml, _read_spec_file,  # noqa: F401
+                                 read_yaml_file, yaml_source)
+from tofnet.io.spec_writer import (dump_spec, network_signature, network_to_dict, networks_equal,  # noqa: F401
+                                   patch_to_data, spec_to_dict, type_name_of)
 TOP_KEYS = ("name", "description", "processes", "connections", "compile", "backend")
 COMPILE_KEYS = ("patch", "budget")
 _CONNECTION = re.compile(r"^\s*(\w+)\.(\w+)\s*->\s*(\w+)\.(\w+)\s*$")
-# YAML 1.1 (PyYAML) reads 1e-3 as a string; YAML 1.2 and people read it as a number.
-_FLOAT = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+$")
-
-#: Limits of the YAML loader (docs/reliability.md): a spec is a few KB.
-MAX_SPEC_BYTES = 1 << 20
-MAX_NESTING = 32
-MAX_ALIASES = 100
-MAX_VALUES = 100_000
-_PLAIN_TAGS = {"tag:yaml.org,2002:" + name for name in ("str", "int", "float", "bool", "null", "timestamp")}
 
 
 @dataclass
@@ -67,133 +54,6 @@ class Spec:
         """``compile_network(network, **compile)``, with ``overrides`` (budget, patch) applied."""
         from tofnet.compiler import compile_network
         return compile_network(self.network, **{**self.compile, **overrides})
-
-
-# ---------------------------------------------------------------- reading YAML with line numbers
-
-class _Map(dict):
-    """A mapping that remembers its line and the line of each key (1-based)."""
-
-    line: int | None = None
-    key_lines: dict = {}
-
-
-class _Seq(list):
-    """A list that remembers its line and the line of each item (1-based)."""
-
-    line: int | None = None
-    item_lines: list = []
-
-
-def _parse_yaml(text: str, source: str, empty: str = "empty spec; expected a mapping with processes and connections"
-                ) -> Any:
-    if len(text) > MAX_SPEC_BYTES:
-        raise SpecError(located(source, None, f"{len(text):,} characters; a spec may hold at most {MAX_SPEC_BYTES:,}"))
-    try:
-        _check_shape(text, source)
-        node = yaml.compose(text, Loader=yaml.SafeLoader)
-    except yaml.YAMLError as err:
-        raise _yaml_error(err, source) from None
-    if node is None:
-        raise SpecError(located(source, None, empty))
-    return _Builder(source).build(node)
-
-
-def _yaml_error(err: yaml.YAMLError, source: str) -> SpecError:
-    mark = getattr(err, "problem_mark", None) or getattr(err, "context_mark", None)
-    problem = getattr(err, "problem", None) or str(err).splitlines()[0]
-    where = f" (column {mark.column + 1})" if mark else ""
-    return SpecError(located(source, mark.line + 1 if mark else None, f"malformed YAML: {problem}{where}"))
-
-
-def _check_shape(text: str, source: str) -> None:
-    """Nesting depth and alias count from the parser's event stream (which does not
-    recurse), before anything is composed or expanded."""
-    depth, aliases = 0, 0
-    for event in yaml.parse(text, Loader=yaml.SafeLoader):
-        if isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
-            depth += 1
-            if depth > MAX_NESTING:
-                raise SpecError(located(source, event.start_mark.line + 1,
-                                        f"nested more than {MAX_NESTING} levels deep"))
-        elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
-            depth -= 1
-        elif isinstance(event, yaml.AliasEvent):
-            aliases += 1
-            if aliases > MAX_ALIASES:
-                raise SpecError(located(source, event.start_mark.line + 1,
-                                        f"more than {MAX_ALIASES} aliases (*name)"))
-
-
-class _Builder:
-    """Nodes to Python values with line numbers, expanding aliases within a budget."""
-
-    def __init__(self, source: str):
-        self.source, self.loader, self.values, self.active = source, yaml.SafeLoader(""), 0, set()
-
-    def fail(self, node: yaml.Node, message: str) -> SpecError:
-        return SpecError(located(self.source, node.start_mark.line + 1, message))
-
-    def build(self, node: yaml.Node) -> Any:
-        self.values += 1
-        if self.values > MAX_VALUES:
-            raise self.fail(node, f"expands to more than {MAX_VALUES:,} values (through aliases)")
-        if id(node) in self.active:
-            raise self.fail(node, "recursive alias: a value contains itself")
-        line = node.start_mark.line + 1
-        if isinstance(node, (yaml.MappingNode, yaml.SequenceNode)):
-            kind = "map" if isinstance(node, yaml.MappingNode) else "seq"
-            if node.tag != f"tag:yaml.org,2002:{kind}":
-                raise self.fail(node, f"tag {quote(node.tag)} is not allowed; a spec holds plain values")
-            self.active.add(id(node))
-            try:
-                return self.mapping(node, line) if kind == "map" else self.sequence(node, line)
-            finally:
-                self.active.discard(id(node))
-        if node.tag not in _PLAIN_TAGS:
-            raise self.fail(node, f"tag {quote(node.tag)} is not allowed; a spec holds plain values")
-        if node.tag == "tag:yaml.org,2002:str" and node.style is None and _FLOAT.match(node.value):
-            return float(node.value)
-        try:
-            return self.loader.construct_object(node, deep=True)
-        except yaml.YAMLError as err:
-            raise _yaml_error(err, self.source) from None
-        except (ValueError, OverflowError):  # e.g. an integer of more than 4300 digits
-            raise self.fail(node, f"cannot read the value {quote(node.value)}") from None
-
-    def mapping(self, node: yaml.MappingNode, line: int) -> "_Map":
-        try:
-            self.loader.flatten_mapping(node)  # YAML merge keys (<<)
-        except yaml.YAMLError as err:
-            raise _yaml_error(err, self.source) from None
-        out = _Map()
-        out.line, out.key_lines = line, {}
-        for key_node, value_node in node.value:
-            key = self.build(key_node)
-            key_line = key_node.start_mark.line + 1
-            if isinstance(key, (dict, list)):
-                raise SpecError(located(self.source, key_line, "a mapping key must be a plain value"))
-            if key in out:
-                raise SpecError(located(self.source, key_line,
-                                        f"duplicate key {quote(key)} (first on line {out.key_lines[key]})"))
-            out[key] = self.build(value_node)
-            out.key_lines[key] = key_line
-        return out
-
-    def sequence(self, node: yaml.SequenceNode, line: int) -> "_Seq":
-        out = _Seq(self.build(item) for item in node.value)
-        out.line, out.item_lines = line, [item.start_mark.line + 1 for item in node.value]
-        return out
-
-
-def _line(container: Any, key: Any = None) -> int | None:
-    """Line of ``container[key]`` (or of the container) when it came from YAML."""
-    if key is not None:
-        if isinstance(container, _Map) and key in container.key_lines:
-            return container.key_lines[key]
-        if isinstance(container, _Seq) and isinstance(key, int) and key < len(container.item_lines):
-            return container.item_lines[key]
-    return getattr(container, "line", None)
 
 
 class _Reader:
@@ -420,15 +280,6 @@ def process_class(type_name: str) -> type[Process] | None:
     return None
 
 
-def type_name_of(process: Process) -> str:
-    """How a spec names the type of ``process``: the class name for tofnet's own and for
-    classes a script defines, else ``package.module:ClassName`` (importable in a new process)."""
-    cls = type(process)
-    if cls.__module__.startswith("tofnet.processes") or cls.__module__ in ("__main__", "__mp_main__"):
-        return cls.__name__
-    return f"{cls.__module__}:{cls.__qualname__}"
-
-
 def _ports(process: Process, kind: type = object) -> str:
     return ", ".join(name for name, port in process.ports.items() if isinstance(port, kind)) or "(none)"
 
@@ -445,46 +296,6 @@ def load_spec(path_or_text: str | Path) -> Spec:
     return _Reader(_parse_yaml(text, source), source).read()
 
 
-def yaml_source(path_or_text: str | Path, what: str) -> tuple[str, str, Path | None]:
-    """``(text, source name, file)`` of a YAML document given as a file or as text (``file`` None).
-
-    A ``Path``, or a one-line string naming a file (or ending in ``.yaml``), is read as a file,
-    with the limits of ``MAX_SPEC_BYTES`` and regular files only; one line that is neither a
-    file nor a mapping is taken for a missing file. Errors are ``SpecError`` naming ``what``.
-    """
-    if isinstance(path_or_text, Path) or ("\n" not in path_or_text and (
-            path_or_text.endswith((".yaml", ".yml")) or _is_file(path_or_text))):
-        path = Path(path_or_text)
-        return _read_spec_file(path, what), str(path), path
-    if "\n" not in path_or_text and ":" not in path_or_text and "{" not in path_or_text:
-        # One line that is neither a mapping nor an existing file: most likely a file name.
-        raise SpecError(f"{quote(path_or_text)}: no such {what} file (and not YAML text describing a mapping)")
-    return path_or_text, "<string>", None
-
-
-def _is_file(name: str) -> bool:
-    try:
-        return len(name) < 4096 and Path(name).is_file()
-    except (OSError, ValueError):  # a name too long for the system, a NUL byte
-        return False
-
-
-def _read_spec_file(path: Path, what: str) -> str:
-    from tofnet.io.files import read_text
-    try:
-        return read_text(path, f"{what} file", limit=MAX_SPEC_BYTES)
-    except DataError as err:
-        message = str(err).removeprefix(located(path, None, ""))
-        raise SpecError(located(path, None, f"cannot read the {what}: {message}")) from None
-
-
-def read_yaml_file(path: str | Path, what: str) -> Any:
-    """Plain data of a YAML file that is not a spec (DSEC's ``cam_to_cam.yaml``), read under
-    the spec's limits (size, nesting, aliases, plain types only)."""
-    path = Path(path)
-    return _parse_yaml(_read_spec_file(path, what), str(path), empty=f"empty {what}")
-
-
 def spec_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> Spec:
     """A spec from plain data (as ``spec_to_dict`` returns); errors name keys, not lines."""
     return _Reader(data, source).read()
@@ -496,72 +307,6 @@ def network_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> Networ
                           source).network
 
 
-def network_to_dict(network: Network, full: bool = False) -> dict[str, Any]:
-    """``name``, ``processes`` and ``connections`` as plain data.
-
-    ``full=False`` writes only parameters that differ from their defaults (plus the
-    sensor size of sources, which others inherit); ``full=True`` writes every one.
-    """
-    processes = {}
-    for process in network.processes:
-        body: dict[str, Any] = {"type": type_name_of(process)}
-        for param in type(process).all_params():
-            value = process.values[param.name]
-            if not full and not _worth_writing(process, param, value):
-                continue
-            body[param.name] = _to_data(param.kind, value)
-        processes[process.name] = body
-    connections = [f"{s.qualified_name} -> {t.qualified_name}" for s, t in network.connections()]
-    return {"name": network.name, "processes": processes, "connections": connections}
-
-
-def _worth_writing(process: Process, param, value: Any) -> bool:
-    if param.name == "sensor_size":
-        # Inherited sizes are left out; a source with its own default (the input) keeps it.
-        fed = any(isinstance(p, InPort) and p.source is not None for p in process.ports.values())
-        feeds = any(isinstance(p, OutPort) and p.targets for p in process.ports.values())
-        return value is not None and not fed and (param.default is not None or not feeds)
-    try:
-        default = param.coerce(param.default, process.name)
-    except TofnetError:
-        return True
-    return value != default
-
-
-def _to_data(kind: str, value: Any) -> Any:
-    if value is None:
-        return None
-    if kind == "duration":
-        return _duration_text(value)
-    if kind in ("size", "vector3", "floats"):
-        return list(value)
-    return value
-
-
-def _duration_text(value: float) -> Any:
-    """``0.001`` -> ``"1ms"`` when that reads back exactly, else the number in seconds."""
-    if value == 0:
-        return 0
-    for unit, scale in (("s", 1.0), ("ms", 1e-3), ("us", 1e-6)):
-        number = value / scale
-        if 1 <= abs(number) < 1000 or unit == "us":
-            text = f"{number:.12g}{unit}"
-            if "e" not in text and seconds(text) == value:
-                return text
-    return value
-
-
-def patch_to_data(patch: Any) -> Any:
-    """A ``patch`` option as plain data: ``"auto"``, ``[w, h]`` or ``{process: ...}``."""
-    if patch is None or isinstance(patch, str):
-        return patch
-    if isinstance(patch, Mapping):
-        return {name: patch_to_data(v) for name, v in patch.items()}
-    if isinstance(patch, int):
-        return [patch, patch]
-    return list(patch)
-
-
 def patch_from_data(data: Any, where: str = "compile.patch") -> Any:
     """Inverse of ``patch_to_data``; checks sizes (``BudgetError`` naming ``where``)."""
     if data is None:
@@ -569,63 +314,6 @@ def patch_from_data(data: Any, where: str = "compile.patch") -> Any:
     if isinstance(data, Mapping):
         return {name: parse_patch_size(v, f"{where}.{name}") for name, v in data.items()}
     return parse_patch_size(data, where)
-
-
-def spec_to_dict(spec: Spec | Network, full: bool = False) -> dict[str, Any]:
-    """A spec (or a bare network) as plain data, ready for YAML or JSON."""
-    if isinstance(spec, Network):
-        spec = Spec(spec)
-    out = network_to_dict(spec.network, full=full)
-    if spec.description:
-        out = {"name": out.pop("name"), "description": spec.description, **out}
-    compile_data = {}
-    if "patch" in spec.compile:
-        compile_data["patch"] = patch_to_data(spec.compile["patch"])
-    if "budget" in spec.compile:
-        compile_data["budget"] = budget_name_or_dict(spec.compile["budget"])
-    if compile_data:
-        out["compile"] = compile_data
-    if spec.backend:
-        out["backend"] = {"name": spec.backend, **spec.backend_options} if spec.backend_options else spec.backend
-    return out
-
-
-def dump_spec(spec: Spec | Network, full: bool = False) -> str:
-    """YAML text for a spec or a network; ``load_spec`` reads it back to an equal network."""
-    data = spec_to_dict(spec, full=full)
-    lines = [f"name: {_flow(data['name'])}"]
-    if "description" in data:
-        lines.append(f"description: {_flow(data['description'])}")
-    lines.append("processes:")
-    lines += [f"  {_flow(name)}: {_flow(body)}" for name, body in data["processes"].items()]
-    lines.append("connections:")
-    lines += [f"  - {_flow(c)}" for c in data["connections"]]
-    for key in ("compile", "backend"):
-        if key in data:
-            nested = isinstance(data[key], Mapping) and any(isinstance(v, Mapping) for v in data[key].values())
-            if nested:
-                block = yaml.safe_dump({key: data[key]}, sort_keys=False, default_flow_style=None)
-                lines.append(block.rstrip())
-            else:
-                lines.append(f"{key}: {_flow(data[key])}")
-    return "\n".join(lines) + "\n"
-
-
-def _flow(value: Any) -> str:
-    text = yaml.safe_dump(value, default_flow_style=True, width=1 << 30, sort_keys=False, allow_unicode=True)
-    text = text.strip()
-    return text[:-3].rstrip() if text.endswith("\n...") else text
-
-
-def network_signature(network: Network) -> dict[str, Any]:
-    """What makes two networks equal: process names, types, parameter values and connections."""
-    return {"processes": {p.name: (type_name_of(p), p.values) for p in network.processes},
-            "connections": sorted(f"{s.qualified_name} -> {t.qualified_name}" for s, t in network.connections())}
-
-
-def networks_equal(a: Network, b: Network) -> bool:
-    """Same processes (name, type, parameter values) and the same connections."""
-    return network_signature(a) == network_signature(b)
 
 
 def default_spec_path() -> Path:
