@@ -253,9 +253,7 @@ class TimeOfTravelKernel:
         step = depth["step"]
         for seam in seams:
             if 0 < seam < len(depth) and step[seam - 1] == step[seam]:
-                s = step[seam]
-                lo, hi = int(np.searchsorted(step, s, "left")), int(np.searchsorted(step, s, "right"))
-                self._order(depth, self._no_raw, lo, hi)
+                self._order(depth, self._no_raw, *_run_around(step, seam))
         return depth
 
     def promise(self, until_us: int) -> None:
@@ -360,3 +358,18 @@ class TimeOfTravelKernel:
     def current_step(self) -> int:
         """Input step of the latest spike processed (-1 before the first)."""
         return int(self._cursor[tt.CURRENT])
+
+
+def _run_around(step: np.ndarray, at: int) -> tuple[int, int]:
+    """``(lo, hi)``: the records of ``step[at]``'s step in ``step`` (sorted); only a window
+    around ``at`` is searched, as ``step`` is a strided field that a search would copy whole."""
+    value, n, width = step[at], len(step), 256
+    while at - width > 0 and step[at - width] == value:
+        width *= 2
+    lo = max(at - width, 0)
+    lo += int(np.searchsorted(step[lo:at], value, "left"))
+    width = 256
+    while at + width < n and step[at + width] == value:
+        width *= 2
+    hi = at + int(np.searchsorted(step[at:min(at + width, n)], value, "right"))
+    return lo, hi

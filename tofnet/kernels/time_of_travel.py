@@ -216,17 +216,26 @@ def _check(ts, xs, ys, filtering, cursor, ip, n_rows, first_update):
     found = False
     lo = hi = np.int64(0)
     if filtering:  # events: all in time order, also after earlier calls (T_HI: the latest time fed)
-        t_hi, t0, width, height = cursor[T_HI], ip[T0], ip[WIDTH], ip[HEIGHT]
-        last = t0
+        t0, width, height = ip[T0], ip[WIDTH], ip[HEIGHT]
+        if n == 0:
+            return OK
+        back = ts[0] < cursor[T_HI]
+        for i in range(1, n):  # no early exit: a branch-free loop is several times faster
+            back |= ts[i] < ts[i - 1]
+        if back:
+            return UNSORTED
+        first = last = -1  # the first and the last event the filter may accept (scans stop early)
         for i in range(n):
-            if ts[i] < t_hi:
-                return UNSORTED
-            t_hi = ts[i]
-            if xs[i] < width and ys[i] < height and ts[i] >= t0:  # the filter may accept it
-                if not found:
-                    lo, found = ts[i], True
-                last = ts[i]
-        lo, hi = (lo - t0) // ip[DT], (last - t0) // ip[DT]
+            if xs[i] < width and ys[i] < height and ts[i] >= t0:
+                first = i
+                break
+        if first >= 0:
+            for i in range(n - 1, first - 1, -1):
+                if xs[i] < width and ys[i] < height:  # ts[i] >= ts[first] >= t0
+                    last = i
+                    break
+            found = True
+            lo, hi = (ts[first] - t0) // ip[DT], (ts[last] - t0) // ip[DT]
     else:  # spikes: sorted by step, continuing the previous call's
         previous = max(cursor[CURRENT], 0)
         for i in range(n):
