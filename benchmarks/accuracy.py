@@ -76,7 +76,9 @@ WHY = {
     "pan": "a pan on a slow slide (r < 0.75): rotation dominates, error ~ e / r",
 }
 
-SIM_SOURCES = sorted((Path(tofnet.__file__).parent / "sim").glob("*.py"))
+#: A change to the simulator (or the lens maths it casts distorted rays with) invalidates the cache.
+SIM_SOURCES = sorted((Path(tofnet.__file__).parent / "sim").glob("*.py")) + [
+    Path(tofnet.__file__).parent / "kernels" / "undistort.py"]
 
 
 def log(message: str) -> None:

@@ -144,6 +144,8 @@ def test_the_cases_exercise_what_they_are_named_for():
     assert np.unique(conflict.tot["direction"]).tolist() == [0, 1, 2, 3]
     depth_range = run("depth-range")
     assert depth_range.rejected["too_near"] > 0 and depth_range.rejected["too_far"] > 0
+    lens = run("graph-undistort").counts["undistort"]
+    assert lens["passed"] > 1000 and lens["left_image"] > 0
 
 
 def _rotation_runs(name):

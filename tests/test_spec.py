@@ -14,7 +14,7 @@ from tofnet.errors import SpecError
 from tofnet.io.spec import (default_spec_path, dump_spec, load_budget, load_spec, network_from_dict,
                             network_to_dict, networks_equal, spec_from_dict, spec_to_dict)
 from tofnet.processes import (AngularVelocityProcess, BackgroundActivityFilterProcess, DepthProcess, InputProcess,
-                              TimeOfTravelProcess, VelocityProcess)
+                              TimeOfTravelProcess, UndistortProcess, VelocityProcess)
 
 PAPER = """\
 name: paper
@@ -53,6 +53,8 @@ def every_parameter_changed() -> Network:
     inp = InputProcess(name="cam", sensor_size=(64, 48), timestep="250us", refractory="2.5ms",
                        refractory_per_polarity=True, t0=1.5)
     baf = BackgroundActivityFilterProcess(name="baf", radius=2, window="12ms")
+    lens = UndistortProcess(name="lens", model="equidistant", coefficients=[-0.04, 0.01, -0.003, 0.0006],
+                            intrinsics=[200.0, 201.5, 31.5, 23.5])
     tot = TimeOfTravelProcess(name="tot", distance=3, counter_bits=12)
     dep = DepthProcess(name="z", min_depth="10cm", max_depth=7.5, min_share=0.25)
     vel = VelocityProcess(name="v", source="samples", velocity=[0.1, -0.2, 0.3], samples="vel.txt", per="pixel",
@@ -62,11 +64,12 @@ def every_parameter_changed() -> Network:
                                  time_shift="-2.5ms", bias=[0.001, 0.002, -0.003], update_every=3,
                                  intrinsics=[200.0, 201.5, 31.5, 23.5])
     inp.events.connect(baf.events)
-    baf.passed.connect(tot.events)
+    baf.passed.connect(lens.events)
+    lens.undistorted.connect(tot.events)
     tot.counts.connect(dep.counts)
     vel.a_t.connect(dep.a_t)
     rot.b_w.connect(dep.b_w)
-    return Network([inp, baf, tot, dep, vel, rot], name="everything")
+    return Network([inp, baf, lens, tot, dep, vel, rot], name="everything")
 
 
 def test_every_process_type_and_parameter_round_trips():

@@ -10,7 +10,8 @@ from tofnet.core.network import Network
 from tofnet.errors import NetworkError
 from tofnet.io.recording import Recording
 from tofnet.networks import depth_network
-from tofnet.processes import AngularVelocityProcess, InputProcess, TimeOfTravelProcess, VelocityProcess
+from tofnet.processes import (AngularVelocityProcess, InputProcess, TimeOfTravelProcess, UndistortProcess,
+                              VelocityProcess)
 
 DEFAULT_BACKEND = "fixed"
 
@@ -27,17 +28,26 @@ def rotation_source_of(recording: Recording | None) -> str | None:
     return "groundtruth" if isinstance(found, PoseAngularVelocity) else "gyro"
 
 
+def lens_is_distorted(recording: Recording | None) -> bool:
+    """True when the recording's calibration has a non-zero distortion coefficient."""
+    intrinsics = recording.intrinsics if recording is not None else None
+    return intrinsics is not None and any(c != 0 for c in intrinsics.distortion)
+
+
 def default_network(recording: Recording | None = None, *, sensor_size: tuple[int, int] | None = None,
-                    rotation: bool = True) -> Network:
+                    rotation: bool = True, undistort: bool = True) -> Network:
     """The paper's network sized to ``sensor_size``, else the recording's, else 240x180.
 
     When the recording has rotation information (``rotation_source_of``) and ``rotation`` is
     True, an angular velocity process feeds the depth neurons, which then compensate the
     camera's rotation (paper eq. 7); otherwise it is the paper's eq. 8 network exactly.
+    When the recording's lens is distorted (``lens_is_distorted``) and ``undistort`` is True,
+    an ``UndistortProcess`` moves the spikes to the undistorted image before time of travel.
     """
     size = sensor_size or (recording.sensor_size if recording is not None else None) or (240, 180)
     source = rotation_source_of(recording) if rotation else None
-    return depth_network(size, rotation=None if source is None else {"source": source})
+    return depth_network(size, rotation=None if source is None else {"source": source},
+                         undistort={} if undistort and lens_is_distorted(recording) else None)
 
 
 def rotation_summary(network: Network) -> str | None:
@@ -64,22 +74,27 @@ def _rotation_source_text(process: AngularVelocityProcess) -> str:
 
 
 def load_network(spec: str | Path | None = None, *, sensor_size: tuple[int, int] | None = None,
-                 recording: Recording | None = None, rotation: bool = True):
+                 recording: Recording | None = None, rotation: bool = True, undistort: bool = True):
     """The network of a YAML spec (or the default network) and the spec's compile/backend settings.
 
     Returns ``(network, compile_options, backend_name_or_None, backend_options)``.
     ``sensor_size`` overrides the spec's (or the default's). Without a spec the network is
     ``default_network(recording, rotation=rotation)``; a spec decides for itself whether
-    its depth neurons compensate rotation (``rotation=False`` refuses one that does).
+    its depth neurons compensate rotation (``rotation=False`` refuses one that does) and whether
+    it undistorts (``undistort=False`` refuses one that does).
     """
     if spec is None:
-        return default_network(recording, sensor_size=sensor_size, rotation=rotation), {}, None, {}
+        network = default_network(recording, sensor_size=sensor_size, rotation=rotation, undistort=undistort)
+        return network, {}, None, {}
     from tofnet.io.spec import load_spec
     loaded = load_spec(spec)
     network = loaded.network
     if not rotation and rotation_summary(network) is not None:
         raise NetworkError(f"{spec}: the spec connects an angular velocity process to its depth neurons (eq. 7); "
                            "remove it from the spec to compute eq. 8")
+    if not undistort and network.of_type(UndistortProcess):
+        raise NetworkError(f"{spec}: the spec undistorts (process '{network.of_type(UndistortProcess)[0].name}'); "
+                           "remove it from the spec to keep raw pixels")
     if sensor_size is not None and network.sensor_size != tuple(sensor_size):
         resize(network, sensor_size)
     return network, dict(loaded.compile or {}), loaded.backend, dict(loaded.backend_options or {})

@@ -6,13 +6,13 @@ from typing import Any, Iterable
 
 from tofnet.core.network import Network
 from tofnet.processes import (AngularVelocityProcess, BackgroundActivityFilterProcess, DepthProcess, InputProcess,
-                              TimeOfTravelProcess, VelocityProcess)
+                              TimeOfTravelProcess, UndistortProcess, VelocityProcess)
 
 
 def depth_network(sensor_size: tuple[int, int] = (240, 180), *, name: str = "depth",
                   input: dict[str, Any] | None = None, time_of_travel: dict[str, Any] | None = None,
                   depth: dict[str, Any] | None = None, velocity: dict[str, Any] | None = None,
-                  rotation: dict[str, Any] | None = None) -> Network:
+                  rotation: dict[str, Any] | None = None, undistort: dict[str, Any] | None = None) -> Network:
     """The paper's network: input -> time_of_travel -> depth <- velocity.
 
     Each dict overrides that process's parameters, e.g.
@@ -20,15 +20,24 @@ def depth_network(sensor_size: tuple[int, int] = (240, 180), *, name: str = "dep
     ``rotation`` (a dict, ``{}`` for the defaults) adds an ``AngularVelocityProcess`` called
     ``angular_velocity`` feeding ``depth.b_w``: the depth neurons then compensate the camera's
     rotation (paper eq. 7), e.g. ``rotation={"source": "gyro"}``. None: the paper's eq. 8.
+    ``undistort`` (a dict, ``{}`` for the recording's lens) puts an ``UndistortProcess`` called
+    ``undistort`` between input and time of travel: the network then works on the undistorted
+    image (one step more latency). None: raw sensor pixels, as the paper.
     """
     inp = InputProcess(name="input", sensor_size=sensor_size, **(input or {}))
     tot = TimeOfTravelProcess(name="time_of_travel", **(time_of_travel or {}))
     dep = DepthProcess(name="depth", **(depth or {}))
     vel = VelocityProcess(name="velocity", **(velocity or {}))
-    inp.events.connect(tot.events)
+    processes = [inp, tot, dep, vel]
+    if undistort is None:
+        inp.events.connect(tot.events)
+    else:
+        lens = UndistortProcess(name="undistort", **undistort)
+        inp.events.connect(lens.events)
+        lens.undistorted.connect(tot.events)
+        processes.insert(1, lens)
     tot.counts.connect(dep.counts)
     vel.a_t.connect(dep.a_t)
-    processes = [inp, tot, dep, vel]
     if rotation is not None:
         rot = AngularVelocityProcess(name="angular_velocity", **rotation)
         rot.b_w.connect(dep.b_w)

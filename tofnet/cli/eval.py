@@ -98,6 +98,10 @@ def handle(args) -> int:
                      what="--json")
     recording, depth, meta = load_inputs(args.recording, args.depth, timestep=args.timestep,
                                          latency_steps=args.latency_steps)
+    undistortion = (meta.get("summary") or {}).get("undistortion")
+    if undistortion:  # the estimates are at undistorted pixels: match them to events moved there too
+        from tofnet.eval.undistorted import lens_from_summary, undistorted_recording
+        recording = undistorted_recording(recording, *lens_from_summary(undistortion))
     result = evaluate(recording, depth, meta, window_s=window_s)
     from tofnet.eval.rotation import format_share_split, split_by_true_share
     shares, what = split_by_true_share(recording, depth, result)

@@ -23,9 +23,10 @@ def register(subparsers) -> None:
     p.add_argument("--ply", metavar="FILE", help="write the estimates as a point cloud")
     p.add_argument("--frame", choices=("camera", "world"), default="camera",
                    help="point cloud frame: camera (OpenCV axes) or world (needs poses); default camera")
-    p.add_argument("--pixels", choices=("raw", "undistorted"), default="raw",
+    p.add_argument("--pixels", choices=("raw", "undistorted"), default=None,
                    help="whether the estimates' pixels are raw sensor pixels (the lens distortion is undone "
-                        "before back-projecting; the default) or already undistorted")
+                        "before back-projecting) or already undistorted; default: what the depth file says "
+                        "('tofnet run' undistorts when the recording's lens is distorted), else raw")
     p.add_argument("--ascii", action="store_true", help="ASCII .ply instead of binary little-endian")
     p.add_argument("--no-color", action="store_true", help="no depth colours in the .ply")
     p.add_argument("--sensor-size", metavar="WxH", help="map size in pixels (default: the recording's)")
@@ -63,7 +64,7 @@ def handle(args) -> int:
     if args.ply:
         from tofnet.io.ply import depth_colors, depth_points, write_ply
         points = depth_points(depth, recording.intrinsics, recording.trajectory, frame=args.frame,
-                              raw_pixels=args.pixels == "raw")
+                              raw_pixels=pixels_of(args.pixels, meta) == "raw")
         colors = None if args.no_color else depth_colors(depth["z"])
         written = write_ply(args.ply, points, colors=colors, binary=not args.ascii,
                             comment=f"tofnet depth from {args.depth}, {args.frame} frame, metres")
@@ -71,6 +72,13 @@ def handle(args) -> int:
         print(f"point cloud    {written:,} points ({args.frame} frame) -> {args.ply}"
               + (f"; {skipped:,} skipped (pixel without undistortion)" if skipped else ""))
     return 0
+
+
+def pixels_of(option: str | None, meta: dict) -> str:
+    """``--pixels``, else ``undistorted`` when the depth file records an undistortion, else ``raw``."""
+    if option is not None:
+        return option
+    return "undistorted" if (meta.get("summary") or {}).get("undistortion") else "raw"
 
 
 def check_export_outputs(args) -> None:

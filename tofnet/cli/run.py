@@ -53,6 +53,9 @@ def add_network_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--no-rotation", action="store_true",
                    help="keep the paper's eq. 8 even when the recording has rotation information (turning poses "
                         "or imu.txt), which the default network compensates (eq. 7)")
+    g.add_argument("--no-undistort", action="store_true",
+                   help="keep raw sensor pixels even when the recording's calibration has lens distortion, "
+                        "which the default network undoes (an undistort process before time of travel)")
 
 
 def build_network(args, recording_sensor_size, recording=None):
@@ -63,7 +66,8 @@ def build_network(args, recording_sensor_size, recording=None):
     sensor = parse_size(args.sensor_size, "--sensor-size") if args.sensor_size else None
     network, compile_options, spec_backend, backend_options = load_network(
         Path(args.spec) if args.spec else None, sensor_size=sensor or (None if args.spec else recording_sensor_size),
-        recording=recording, rotation=not getattr(args, "no_rotation", False))
+        recording=recording, rotation=not getattr(args, "no_rotation", False),
+        undistort=not getattr(args, "no_undistort", False))
     apply_overrides(network, timestep=args.timestep, refractory=args.refractory, distance=args.distance,
                     counter_bits=args.counter_bits, velocity_per=args.velocity_per,
                     update_every=args.update_every)
@@ -108,6 +112,7 @@ def handle(args) -> int:
     summary = result.summary()
     summary["recording"] = str(args.recording)
     summary["rotation"] = rotation_line(network, recording, args)
+    summary["undistortion"] = undistortion_of(network, recording, result, args)
     summary["notes"] = list(recording.notes)
     summary["total_time_s"] = time.perf_counter() - started
     written = write_outputs(out, result, summary, args.record_tot, check=lambda paths: check_more_outputs(args, paths))
@@ -134,6 +139,43 @@ def rotation_line(network, recording, args) -> str | None:
     why = "--no-rotation" if getattr(args, "no_rotation", False) else "the spec has no angular velocity process"
     return (f"not compensated (eq. 8: {why}), although the recording has "
             f"{'turning poses' if found == 'groundtruth' else 'a gyroscope (imu.txt)'}")
+
+
+def undistortion_of(network, recording, result, args) -> dict | None:
+    """Whether the network undid the lens distortion, with which lens and counts (None: the recording's lens
+    is not distorted and the network does not undistort: nothing to say)."""
+    from tofnet.api import lens_is_distorted
+    from tofnet.processes import UndistortProcess
+
+    found = network.of_type(UndistortProcess)
+    if found:
+        lens = found[0].lens(recording.intrinsics, str(args.recording))
+        return {"ran": True, "process": found[0].name, "model": lens.distortion_model,
+                "coefficients": list(lens.distortion), "intrinsics": [lens.fx, lens.fy, lens.cx, lens.cy],
+                "sensor_size": list(found[0].sensor_size), "counts": dict(result.counts.get(found[0].name, {}))}
+    if not lens_is_distorted(recording):
+        return None
+    why = "--no-undistort" if getattr(args, "no_undistort", False) else "the spec has no undistort process"
+    return {"ran": False, "why": why, "model": recording.intrinsics.distortion_model,
+            "coefficients": list(recording.intrinsics.distortion)}
+
+
+def lens_of_run(undistortion: dict | None) -> dict | None:
+    """What a depth file records of the undistortion (``tofnet export`` and ``eval`` read it): the lens
+    the estimates' pixels were undistorted with, or None for raw pixels."""
+    if not (undistortion or {}).get("ran"):
+        return None
+    return {key: undistortion[key] for key in ("model", "coefficients", "intrinsics", "sensor_size")}
+
+
+def undistortion_line(undistortion: dict) -> str:
+    """The summary's line on lens undistortion."""
+    lens = f"{undistortion['model']} {' '.join(f'{c:.4g}' for c in undistortion['coefficients'])}"
+    if not undistortion["ran"]:
+        return f"off ({undistortion['why']}): raw pixels, although the recording's lens has {lens} distortion"
+    counts = undistortion["counts"]
+    return (f"{lens}: passed {counts.get('passed', 0):,}, left image {counts.get('left_image', 0):,}, "
+            f"merged {counts.get('merged', 0):,}")
 
 
 def write_outputs(out: Path, result, summary: dict, record_tot: bool, check=None) -> dict[str, Path]:
@@ -168,7 +210,8 @@ def write_outputs(out: Path, result, summary: dict, record_tot: bool, check=None
         if name in depth_names:  # the run's facts only: the same input gives the same bytes on integer backends
             write_depth(path, records, t0_us=result.t0_us, timestep_us=result.timestep_us,
                         latency_steps=result.latency[name],
-                        summary={**result.facts(), "recording": summary["recording"], "notes": summary["notes"]})
+                        summary={**result.facts(), "recording": summary["recording"], "notes": summary["notes"],
+                                 "undistortion": lens_of_run(summary.get("undistortion"))})
         else:
             write_npz(path, {field: records[field] for field in records.dtype.names}, compress=True)
     return paths
@@ -181,6 +224,7 @@ def format_summary(summary: dict, result, written: dict, network_width) -> str:
              f"{summary['timestep_s'] * 1e3:g} ms)",
              f"backend        {summary['backend']}",
              *([f"rotation       {summary['rotation']}"] if summary.get("rotation") else []),
+             *([f"undistort      {undistortion_line(summary['undistortion'])}"] if summary.get("undistortion") else []),
              f"events in      {summary['events_in']:>12,}",
              f"  accepted     {summary['accepted']:>12,}"]
     for reason, count in summary["dropped"].items():

@@ -253,6 +253,15 @@ def _denoised() -> Scene:
                  (8, 8))
 
 
+@case("graph-undistort", "a barrel lens (k1 -0.3, f 20 px) undone by an undistort process (host) between input "
+      "and time of travel: spikes moved, some leave the image; on 8x8 cores")
+def _undistort() -> Scene:
+    size, flow, lens = (24, 16), (250.0, 100.0), Intrinsics(20.0, 20.0, 11.5, 7.5, (-0.3, 0.1, 0.001, -0.002, 0.0))
+    velocity = (-flow[0] / lens.fx, -flow[1] / lens.fy, 0.0)  # a plane at 1 m moves by flow px/s
+    network = depth_network(size, input={"refractory": "1ms", "t0": 0}, undistort={}, velocity=_constant(velocity))
+    return Scene(network, rec(moving_pattern(size, flow, 200_000, seed=15), intrinsics=lens), (8, 8))
+
+
 @case("graph-user-process", "a process declared and registered outside tofnet's own (tofnet.testing."
       "ParityGateProcess), core-placed between input and time of travel with distance 2")
 def _user_process() -> Scene:

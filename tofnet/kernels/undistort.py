@@ -125,27 +125,36 @@ def undistortion_map(intrinsics, sensor_size: tuple[int, int]) -> np.ndarray:
     return np.stack([x * intrinsics.fx + intrinsics.cx, y * intrinsics.fy + intrinsics.cy], axis=-1)
 
 
+def pixel_targets(pixel_map: np.ndarray, image_size: tuple[int, int] | None = None) -> np.ndarray:
+    """``(height, width)`` int64 of the map: ``v' * width + u'``, the undistorted pixel each raw pixel
+    moves to (nearest, halves up), or -1 where that pixel lies outside the ``image_size``
+    (width, height; default the map's) image or the model has no inverse (NaN)."""
+    height, width = pixel_map.shape[:2]
+    if image_size is not None:
+        width, height = (int(v) for v in image_size)
+    with np.errstate(invalid="ignore"):
+        u, v = np.floor(pixel_map[..., 0] + 0.5), np.floor(pixel_map[..., 1] + 0.5)
+        inside = (u >= 0) & (v >= 0) & (u < width) & (v < height)  # False for NaN
+    targets = np.full(u.shape, -1, dtype=np.int64)
+    targets[inside] = v[inside].astype(np.int64) * width + u[inside].astype(np.int64)
+    return targets
+
+
 @njit(cache=True)
-def _remap(t, x, y, p, map_u, map_v, width, height, out_t, out_x, out_y, out_p, counts):
+def _remap(t, x, y, p, targets, width, out_t, out_x, out_y, out_p, counts):
     n_out = 0
-    map_height, map_width = map_u.shape
+    map_height, map_width = targets.shape
     for i in range(t.shape[0]):
         if x[i] >= map_width or y[i] >= map_height:
             counts[1] += 1
             continue
-        u = map_u[y[i], x[i]]
-        v = map_v[y[i], x[i]]
-        if not (u == u and v == v):  # NaN: no inverse at this pixel
-            counts[0] += 1
-            continue
-        ui = np.floor(u + 0.5)
-        vi = np.floor(v + 0.5)
-        if ui < 0 or vi < 0 or ui >= width or vi >= height:
+        target = targets[y[i], x[i]]
+        if target < 0:
             counts[0] += 1
             continue
         out_t[n_out] = t[i]
-        out_x[n_out] = np.uint16(ui)
-        out_y[n_out] = np.uint16(vi)
+        out_x[n_out] = np.uint16(target % width)
+        out_y[n_out] = np.uint16(target // width)
         out_p[n_out] = p[i]
         n_out += 1
     return n_out
@@ -160,17 +169,65 @@ def remap_events(events: np.ndarray, pixel_map: np.ndarray,
     and ``{"left_image": n, "beyond_map": n}``: events whose undistorted pixel falls
     outside the image (or has no inverse), and events whose raw pixel lies outside the map.
     """
-    height, width = pixel_map.shape[:2]
-    if image_size is not None:
-        width, height = (int(v) for v in image_size)
+    targets = pixel_targets(pixel_map, image_size)
+    width = pixel_map.shape[1] if image_size is None else int(image_size[0])
     n = len(events)
     out_t, out_x = np.empty(n, np.int64), np.empty(n, np.uint16)
     out_y, out_p = np.empty(n, np.uint16), np.empty(n, np.uint8)
     counts = np.zeros(2, dtype=np.int64)
     kept = _remap(np.ascontiguousarray(events["t"]), np.ascontiguousarray(events["x"]),
                   np.ascontiguousarray(events["y"]), np.ascontiguousarray(events["p"]),
-                  np.ascontiguousarray(pixel_map[..., 0]), np.ascontiguousarray(pixel_map[..., 1]),
-                  width, height, out_t, out_x, out_y, out_p, counts)
+                  targets, width, out_t, out_x, out_y, out_p, counts)
     out = np.empty(kept, dtype=EVENT_DTYPE)
     out["t"], out["x"], out["y"], out["p"] = out_t[:kept], out_x[:kept], out_y[:kept], out_p[:kept]
     return out, {"left_image": int(counts[0]), "beyond_map": int(counts[1])}
+
+
+NEVER_STEP = -(1 << 62)  # "no spike yet" in ``remap_spikes``'s ``last_step``
+
+
+@njit(cache=True)
+def remap_spikes(step, x, y, p, targets, width, last_step, out, counts):
+    """Spikes (received step, raw x, y, polarity; sorted by step, then y, x) moved to their undistorted pixel.
+
+    ``targets`` is ``pixel_targets``; ``last_step[target]`` the latest step the undistorted
+    pixel was sent a spike (``NEVER_STEP`` before). Within a step the first spike (in the
+    given order) to land on a pixel is sent, later ones are counted ``merged`` (one spike per
+    pixel and step); a spike whose pixel has no target is counted ``left_image``. Each step's
+    spikes go to ``out`` stamped with the step, sorted by (y, x) of the undistorted pixel;
+    ``counts`` = [passed, left_image, merged]. Returns how many were sent.
+    """
+    n = step.shape[0]
+    map_height, map_width = targets.shape
+    keys = np.empty(n, dtype=np.int64)
+    kept = np.empty(n, dtype=np.int64)
+    n_out = 0
+    i = 0
+    while i < n:
+        k = step[i]
+        j = i
+        m = 0
+        while j < n and step[j] == k:
+            xi, yi = np.int64(x[j]), np.int64(y[j])
+            target = targets[yi, xi] if xi < map_width and yi < map_height else -1
+            if target < 0:
+                counts[1] += 1
+            elif last_step[target] == k:
+                counts[2] += 1
+            else:
+                last_step[target] = k
+                keys[m] = target
+                kept[m] = j
+                m += 1
+            j += 1
+        order = np.argsort(keys[:m])
+        for q in range(m):
+            target = keys[order[q]]
+            out[n_out].step = k
+            out[n_out].x = np.uint16(target % width)
+            out[n_out].y = np.uint16(target // width)
+            out[n_out].p = p[kept[order[q]]]
+            n_out += 1
+        counts[0] += m
+        i = j
+    return n_out

@@ -34,6 +34,7 @@ for _family, _suffix in (("reference", "StepModel"), ("float", "EventModel"), ("
     _BUILTIN[("DepthProcess", _family)] = f"tofnet.models.depth:Depth{_suffix}"
     _BUILTIN[("BackgroundActivityFilterProcess", _family)] = (
         f"tofnet.models.background_filter:BackgroundFilter{_suffix}")
+    _BUILTIN[("UndistortProcess", _family)] = f"tofnet.models.undistort:Undistort{_suffix}"
 _BUILTIN_MODULES = ("tofnet.processes",)  # where the built-in process classes live
 
 _registered: dict[tuple[type, str], type[Model]] = {}

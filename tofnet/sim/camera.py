@@ -18,7 +18,8 @@ from tofnet.sim.errors import SimError
 #: DAVIS240C-like sensor (width, height) in pixels.
 DEFAULT_SENSOR_SIZE = (240, 180)
 #: DAVIS240C-like pinhole intrinsics (pixels), rounded from the ECD DAVIS240C
-#: calibration (e.g. ``slider_depth/calib.txt``); no distortion is simulated.
+#: calibration (e.g. ``slider_depth/calib.txt``), without its distortion (a pinhole; intrinsics
+#: with distortion coefficients simulate that lens, ``tofnet.sim.lens``).
 DEFAULT_INTRINSICS = Intrinsics(fx=199.1, fy=198.8, cx=132.2, cy=110.7)
 
 
@@ -26,11 +27,13 @@ def scaled_intrinsics(intrinsics: Intrinsics, base_size: tuple[int, int], size: 
     """The same field of view on a sensor of ``size = (width, height)`` pixels.
 
     Each axis scales by ``size / base_size``; pixel centres are at integers, so the
-    principal point maps as ``c' = (c + 0.5) * s - 0.5``.
+    principal point maps as ``c' = (c + 0.5) * s - 0.5``. Distortion coefficients act on
+    normalised coordinates and are kept.
     """
     sx, sy = size[0] / base_size[0], size[1] / base_size[1]
     return Intrinsics(fx=intrinsics.fx * sx, fy=intrinsics.fy * sy,
-                      cx=(intrinsics.cx + 0.5) * sx - 0.5, cy=(intrinsics.cy + 0.5) * sy - 0.5)
+                      cx=(intrinsics.cx + 0.5) * sx - 0.5, cy=(intrinsics.cy + 0.5) * sy - 0.5,
+                      distortion=intrinsics.distortion, distortion_model=intrinsics.distortion_model)
 
 
 def check_sensor_size(size: object, what: str = "sensor_size") -> tuple[int, int]:

@@ -12,6 +12,7 @@ from tofnet.events import EVENT_DTYPE
 from tofnet.io.recording import Intrinsics, Recording
 from tofnet.sim.config import SimConfig
 from tofnet.sim.errors import SimError
+from tofnet.sim.lens import pixel_rays
 from tofnet.sim.dvs import DEPTH_JUMP, count_crossings, emit_crossings, thresholds
 from tofnet.sim.render import Renderer, max_flow, render_times
 from tofnet.sim.rotation import imu_samples
@@ -108,11 +109,11 @@ def generate(config: SimConfig, *, seed: int = 0, progress: Progress | None = No
     # Positions are piecewise linear: their extremes are at segment boundaries or the ends.
     corners = np.concatenate([[0.0, config.duration], traj.boundaries[traj.boundaries < config.duration]])
     poses = traj.position_at(corners)
-    fov = (-(k.cx + 0.5) / k.fx, (width - 0.5 - k.cx) / k.fx, -(k.cy + 0.5) / k.fy, (height - 0.5 - k.cy) / k.fy)
+    rays = pixel_rays(k, config.sensor_size)  # a pinhole, or the lens's distortion (tofnet.sim.lens)
     scene = pack_scene(config.scene, focal=max(k.fx, k.fy), camera_box=(poses.min(axis=0), poses.max(axis=0)),
-                       fov=fov, seed=seed)
-    renderer = Renderer(scene, k, config.sensor_size)
-    times = render_times(traj, config.duration, scene.min_z, k, config.sensor_size, config.max_step_px)
+                       fov=rays.fov, seed=seed)
+    renderer = Renderer(scene, k, config.sensor_size, rays)
+    times = render_times(traj, config.duration, scene.min_z, k, config.sensor_size, config.max_step_px, rays)
     positions = traj.position_at(times)
     velocities = traj.velocity_at(0.5 * (times[:-1] + times[1:])) if times.size > 1 else np.zeros((0, 3))
 
@@ -132,8 +133,9 @@ def generate(config: SimConfig, *, seed: int = 0, progress: Progress | None = No
         vx, vy, vz = velocities[i]
         span = times[i + 1] - times[i]
         # The image step actually taken, from the rendered depths at both ends.
-        step = span * max(max_flow(depth0, vx, vy, vz, k.fx, k.fy, k.cx, k.cy, width),
-                          max_flow(depth1, vx, vy, vz, k.fx, k.fy, k.cx, k.cy, width))
+        # (through a distorted lens: the pinhole flow at the pixels, times the lens's largest magnification)
+        step = span * rays.flow_scale * max(max_flow(depth0, vx, vy, vz, k.fx, k.fy, k.cx, k.cy, width),
+                                            max_flow(depth1, vx, vy, vz, k.fx, k.fy, k.cx, k.cy, width))
         max_step = max(max_step, step)
         buf.reserve(count_crossings(log0, log1, ref, c_on, c_off))
         buf.n = emit_crossings(log0, log1, depth0, depth1, ref, c_on, c_off, times[i] * 1e6, times[i + 1] * 1e6,

@@ -71,6 +71,9 @@ def generate_rotating(config: SimConfig, *, seed: int = 0, progress: Progress | 
     """``tofnet.sim.engine.generate`` for a turning camera (``config.trajectory.rotates``)."""
     start = time.perf_counter()
     k = config.intrinsics
+    if any(c != 0 for c in k.distortion):
+        raise SimError("intrinsics: lens distortion is simulated for translating cameras only; expected no "
+                       "distortion coefficients with a turning camera")
     width, height = config.sensor_size
     npix = width * height
     traj = config.trajectory

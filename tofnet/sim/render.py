@@ -15,6 +15,7 @@ from numba import njit
 from tofnet.io.recording import Intrinsics
 from tofnet.sim.camera import Trajectory
 from tofnet.sim.errors import SimError
+from tofnet.sim.lens import PixelRays, pixel_rays
 from tofnet.sim.scene import PackedScene
 
 #: Offset in ``log(intensity + LOG_EPS)``, as ESIM (intensities are in (0, 1]).
@@ -24,12 +25,16 @@ MIN_CLEARANCE = 0.05
 
 
 @njit(cache=True)
-def _render(cam, fx, fy, cx, cy, width, height, centers, axes_u, axes_v, normals, half, one_sided, shade,
+def _render(cam, fx, fy, cx, cy, width, height, ray_x, ray_y, distorted, col_lo, col_hi, row_lo, row_hi,
+            centers, axes_u, axes_v, normals, half, one_sided, shade,
             texel, tex_offset, tex_shape, tex_flat, log_eps, out_log, out_depth):  # pragma: no cover - numba
     """Fill ``out_log`` (log intensity) and ``out_depth`` (m; NaN where no rectangle is hit), raveled rows.
 
-    Face by face with a depth buffer; each face only tests the pixels inside the
-    bounding box of its projected corners (the whole image if a corner is behind the camera).
+    Pixel ``i`` casts the ray ``(ray_x[i], ray_y[i], 1)`` (``tofnet.sim.lens``). Face by face
+    with a depth buffer; each face only tests the pixels inside the bounding box of its
+    projected corners (the whole image if a corner is behind the camera): for a pinhole
+    the box itself, through a distorted lens the columns and rows whose ideal image
+    coordinates (``col_lo .. col_hi``, ``row_lo .. row_hi``) reach into it.
     """
     nf = centers.shape[0]
     npix = width * height
@@ -62,21 +67,31 @@ def _render(cam, fx, fy, cx, cy, width, height, centers, axes_u, axes_v, normals
                     vmin, vmax = min(vmin, pv), max(vmax, pv)
         if not behind:
             # One pixel of margin: the corners' projection bounds the face exactly.
-            if umax < -1.0 or vmax < -1.0 or umin > width or vmin > height:
+            if (umax < col_lo.min() - 1.0 or vmax < row_lo.min() - 1.0 or umin > col_hi.max() + 1.0
+                    or vmin > row_hi.max() + 1.0):
                 continue
-            u0 = max(0, int(np.floor(umin)) - 1)
-            u1 = min(width - 1, int(np.ceil(umax)) + 1)
-            v0 = max(0, int(np.floor(vmin)) - 1)
-            v1 = min(height - 1, int(np.ceil(vmax)) + 1)
+            if distorted:
+                u0, u1, v0, v1 = width, -1, height, -1
+                for c in range(width):
+                    if col_hi[c] >= umin - 1.0 and col_lo[c] <= umax + 1.0:
+                        u0, u1 = min(u0, c), max(u1, c)
+                for r in range(height):
+                    if row_hi[r] >= vmin - 1.0 and row_lo[r] <= vmax + 1.0:
+                        v0, v1 = min(v0, r), max(v1, r)
+            else:
+                u0 = max(0, int(np.floor(umin)) - 1)
+                u1 = min(width - 1, int(np.ceil(umax)) + 1)
+                v0 = max(0, int(np.floor(vmin)) - 1)
+                v1 = min(height - 1, int(np.ceil(vmax)) + 1)
         for v in range(v0, v1 + 1):
-            dy = (v - cy) / fy
             for u in range(u0, u1 + 1):
-                dx = (u - cx) / fx
+                i = v * width + u
+                dx = ray_x[i]
+                dy = ray_y[i]
                 den = normals[k, 0] * dx + normals[k, 1] * dy + normals[k, 2]
                 if den == 0.0:
                     continue
                 t = num / den
-                i = v * width + u
                 if t <= 0.0 or t >= best[i]:
                     continue
                 px = rel[0] + t * dx
@@ -132,10 +147,12 @@ def max_flow(depth, vx, vy, vz, fx, fy, cx, cy, width):  # pragma: no cover - nu
 class Renderer:
     """Renders ``scene`` for camera positions; holds the output buffers."""
 
-    def __init__(self, scene: PackedScene, intrinsics: Intrinsics, sensor_size: tuple[int, int]) -> None:
+    def __init__(self, scene: PackedScene, intrinsics: Intrinsics, sensor_size: tuple[int, int],
+                 rays: PixelRays | None = None) -> None:
         self.scene = scene
         self.intrinsics = intrinsics
         self.width, self.height = sensor_size
+        self.rays = rays if rays is not None else pixel_rays(intrinsics, sensor_size)
 
     def render(self, position: np.ndarray, rotation: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(log_intensity, depth)`` float64 arrays of ``width * height`` (row-major) at ``position`` (m).
@@ -155,9 +172,10 @@ class Renderer:
             centers, axes_u, axes_v, normals = (np.ascontiguousarray(a) for a in
                                                 ((s.centers - cam) @ r, s.axes_u @ r, s.axes_v @ r, s.normals @ r))
             cam = np.zeros(3)
-        _render(cam, k.fx, k.fy, k.cx, k.cy, self.width, self.height,
-                centers, axes_u, axes_v, normals, s.half, s.one_sided, s.shade, s.texel, s.tex_offset,
-                s.tex_shape, s.tex_flat, LOG_EPS, log_i, depth)
+        rays = self.rays
+        _render(cam, k.fx, k.fy, k.cx, k.cy, self.width, self.height, rays.x, rays.y, rays.distorted, rays.col_lo,
+                rays.col_hi, rays.row_lo, rays.row_hi, centers, axes_u, axes_v, normals, s.half, s.one_sided, s.shade,
+                s.texel, s.tex_offset, s.tex_shape, s.tex_flat, LOG_EPS, log_i, depth)
         if np.isnan(depth).any():
             i = int(np.flatnonzero(np.isnan(depth))[0])
             raise SimError(f"scene: the ray of pixel (x={i % self.width}, y={i // self.width}) hits nothing at camera "
@@ -165,24 +183,29 @@ class Renderer:
         return log_i, depth
 
 
-def flow_bound(velocity: np.ndarray, z_min: float, intrinsics: Intrinsics, sensor_size: tuple[int, int]) -> float:
+def flow_bound(velocity: np.ndarray, z_min: float, intrinsics: Intrinsics, sensor_size: tuple[int, int],
+               rays: PixelRays | None = None) -> float:
     """Upper bound (px/s) of the image speed ``|A t| / Z`` over the sensor when every depth is >= ``z_min`` m.
 
-    ``|A t|`` is convex in the pixel position, so its maximum is at a sensor corner.
+    ``|A t|`` is convex in the pixel position, so its maximum is at a sensor corner. Through a
+    distorted lens (``rays``) the corners are those of the ideal image the sensor sees, and the
+    bound is scaled by the lens's largest magnification of image motion (``rays.flow_scale``).
     """
     k = intrinsics
     w, h = sensor_size
+    u_lo, u_hi, v_lo, v_hi = (-0.5, w - 0.5, -0.5, h - 0.5) if rays is None or not rays.distorted else rays.extent(k)
+    scale = 1.0 if rays is None else rays.flow_scale
     best = 0.0
-    for u in (-0.5, w - 0.5):
-        for v in (-0.5, h - 0.5):
+    for u in (u_lo, u_hi):
+        for v in (v_lo, v_hi):
             fu = -k.fx * velocity[0] + (u - k.cx) * velocity[2]
             fv = -k.fy * velocity[1] + (v - k.cy) * velocity[2]
             best = max(best, math.hypot(fu, fv))
-    return best / z_min
+    return scale * best / z_min
 
 
 def render_times(trajectory: Trajectory, duration: float, min_z: float, intrinsics: Intrinsics,
-                 sensor_size: tuple[int, int], max_step_px: float = 0.25) -> np.ndarray:
+                 sensor_size: tuple[int, int], max_step_px: float = 0.25, rays: PixelRays | None = None) -> np.ndarray:
     """Render times (s) from 0 to ``duration`` such that no image point moves more than ``max_step_px`` between two.
 
     Every segment boundary is a render time (so each interval has one velocity), and
@@ -202,7 +225,7 @@ def render_times(trajectory: Trajectory, duration: float, min_z: float, intrinsi
             raise SimError(f"trajectory: between t = {t0:.4g} s and {t1:.4g} s the camera (z up to {cam_z:.3g} m) comes "
                            f"within {MIN_CLEARANCE} m of the scene's nearest point (z = {min_z:.3g} m); expected the "
                            f"camera to stay in front of every object")
-        flow = flow_bound(vel, z_near, intrinsics, sensor_size)
+        flow = flow_bound(vel, z_near, intrinsics, sensor_size, rays)
         n = max(1, int(math.ceil((t1 - t0) * flow / max_step_px)))
         times.append(np.linspace(t0, t1, n + 1)[1:])
     return np.concatenate(times)
