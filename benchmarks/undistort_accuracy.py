@@ -1,7 +1,7 @@
 """Depth accuracy behind a distorted lens, with and without undistortion (run by hand, not in CI).
 
     python benchmarks/undistort_accuracy.py                       # slider, all_axes, forward; 1 s; both lenses
-    python benchmarks/undistort_accuracy.py --scenarios slider --duration 0.5 --no-prototype
+    python benchmarks/undistort_accuracy.py --scenarios slider --duration 0.5
 
 Each scenario is simulated (``tofnet.sim``, cached as in ``accuracy.py``) through a pinhole
 and through each lens: ``davis240c``, ECD ``slider_depth``'s DAVIS240C radtan coefficients
@@ -10,15 +10,13 @@ and through each lens: ``davis240c``, ECD ``slider_depth``'s DAVIS240C radtan co
 each pixel's ray through the lens (``tofnet.sim.lens``), so events and their ground-truth
 depth come from the distorted camera. Each distorted recording is run by the paper's network
 (1 ms steps, 8-bit counters, default refractory, ``A t`` per 30 px patch, fixed backend):
-- ``raw pixels``: as the paper, the lens ignored (``tofnet run --no-undistort``);
-- ``undistort process``: an ``UndistortProcess`` between input and time of travel (the
-  default of ``tofnet run`` on a distorted lens); its estimates are scored against the
-  events moved to the undistorted pixels (``tofnet.eval.undistorted``);
-- ``lens-aware A t (prototype)``: no remap; the depth neurons receive, per patch, the
-  velocity term seen through the lens, ``J⁻¹ A(ideal) t`` with ``J`` the Jacobian of the
-  undistortion at the patch centre (a user-registered velocity model, reference backend
-  only; ``LensVelocityProcess`` below). Not part of tofnet: it shows what a lens-aware
-  depth layer would gain.
+- ``lens ignored``: as the paper, a pinhole assumed (``tofnet run --no-undistort``);
+- ``A t through the lens``: the default; the velocity process evaluates each patch's
+  ``A t`` at its undistorted centre and takes it onto the raw sensor with the lens's
+  Jacobian (``tofnet.kernels.lens``); raw pixels, the fused kernel;
+- ``undistort process``: an ``UndistortProcess`` between input and time of travel moves
+  the spikes to undistorted pixels (and the velocity process sees a pinhole); its
+  estimates are scored against the events moved likewise (``tofnet.eval.undistorted``).
 Coverage is estimates over all events of the recording. Then the speed of the fixed
 backend on the distorted ``slider``: fused paper chain, the paper chain unfused, and the
 network with the undistort process (unfused), best of three. Text and markdown on stdout.
@@ -41,66 +39,11 @@ from tofnet.api import run  # noqa: E402
 from tofnet.eval.metrics import evaluate  # noqa: E402
 from tofnet.eval.undistorted import undistorted_recording  # noqa: E402
 from tofnet.io.recording import Intrinsics  # noqa: E402
-from tofnet.kernels.undistort import undistort  # noqa: E402
-from tofnet.kernels.velocity import sample_grid  # noqa: E402
-from tofnet.models import register_model  # noqa: E402
-from tofnet.models.velocity import VelocityModel  # noqa: E402
 from tofnet.networks import depth_network  # noqa: E402
-from tofnet.processes import VelocityProcess  # noqa: E402
 
 LENSES = {"davis240c": ("radtan", (-0.368436311798, 0.150947243557, -0.000296130534385, -0.000759431726241, 0.0)),
           "dsec_like": ("equidistant", (-0.04, 0.01, -0.003, 0.0006))}
 SCENARIOS = "slider,all_axes,forward"
-
-
-class LensVelocityProcess(VelocityProcess):
-    """The velocity process whose receivers evaluate ``A t`` through the recording's lens (prototype)."""
-
-
-@dataclass(frozen=True)
-class LensField:
-    """``A t`` at each raw pixel as the raw-pixel time of travel needs it: ``J⁻¹ A(ideal) t`` (px*m/s)."""
-
-    matrix: np.ndarray  # (2, 3, height, width)
-
-    def dense(self, t) -> tuple[np.ndarray, np.ndarray]:
-        m = self.matrix
-        return (m[0, 0] * t[0] + m[0, 1] * t[1] + m[0, 2] * t[2], m[1, 0] * t[0] + m[1, 1] * t[1] + m[1, 2] * t[2])
-
-
-class LensVelocityModel(VelocityModel):
-    @classmethod
-    def output_meta(cls, process, ctx) -> dict:
-        k = ctx.recording.intrinsics
-        width, height = ctx.sensor_size
-        u, v = sample_grid(process.per == "pixel", int(process.patch_size), width, height)
-
-        def ideal(du, dv):  # ideal image coordinates (px) of raw points (u + du, v + dv)
-            x, y = undistort((u + du - k.cx) / k.fx, (v + dv - k.cy) / k.fy, k.distortion_model, k.distortion)
-            return np.stack([k.fx * x + k.cx, k.fy * y + k.cy])
-
-        h = 0.5  # central differences over one raw pixel
-        jacobian = np.stack([(ideal(h, 0) - ideal(-h, 0)) / (2 * h), (ideal(0, h) - ideal(0, -h)) / (2 * h)], axis=1)
-        at = ideal(0, 0)
-        a = np.zeros((2, 3, height, width))
-        a[0, 0], a[0, 2], a[1, 1], a[1, 2] = -k.fx, at[0] - k.cx, -k.fy, at[1] - k.cy
-        inverse = np.linalg.inv(np.moveaxis(jacobian, (0, 1), (2, 3)))  # (h, w, 2, 2)
-        return {"a_t": LensField(np.einsum("hwij,jkhw->ikhw", inverse, a))}
-
-
-register_model(LensVelocityProcess, "reference", LensVelocityModel)
-
-
-def lens_network(sensor_size):
-    """The paper's network (default parameters) with ``LensVelocityProcess`` as its velocity process."""
-    from tofnet.core.network import Network
-    from tofnet.processes import DepthProcess, InputProcess, TimeOfTravelProcess
-    inp, tot = InputProcess(name="input", sensor_size=sensor_size), TimeOfTravelProcess(name="time_of_travel")
-    dep, vel = DepthProcess(name="depth"), LensVelocityProcess(name="velocity")
-    inp.events.connect(tot.events)
-    tot.counts.connect(dep.counts)
-    vel.a_t.connect(dep.a_t)
-    return Network([inp, tot, dep, vel], name="lens-aware")
 
 
 def score(recording, result, undistorted_lens=None) -> dict:
@@ -129,7 +72,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--lenses", default=",".join(LENSES))
     parser.add_argument("--duration", type=float, default=1.0)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--no-prototype", action="store_true", help="skip the lens-aware A t rows (reference backend)")
     parser.add_argument("--cache", default=str(default_cache()))
     args = parser.parse_args(argv)
     cache = Path(args.cache) if args.cache else None
@@ -146,18 +88,18 @@ def main(argv: list[str] | None = None) -> int:
             k = base.intrinsics
             lens = Intrinsics(k.fx, k.fy, k.cx, k.cy, coefficients, model)
             rec = recording_for(base.replace(intrinsics=lens), args.seed, cache)
+            ignored = depth_network(rec.sensor_size, velocity={"distortion_model": "none"})
+            result, _ = run(rec, ignored, backend="fixed")
+            rows.append([name, lens_name, "lens ignored (--no-undistort)", score(rec, result)])
             result, _ = run(rec, depth_network(rec.sensor_size), backend="fixed")
-            rows.append([name, lens_name, "raw pixels", score(rec, result)])
+            rows.append([name, lens_name, "A t through the lens (default)", score(rec, result)])
             result, _ = run(rec, depth_network(rec.sensor_size, undistort={}), backend="fixed")
             rows.append([name, lens_name, "undistort process", score(rec, result, lens)])
-            if not args.no_prototype:
-                result, _ = run(rec, lens_network(rec.sensor_size), backend="reference")
-                rows.append([name, lens_name, "lens-aware A t (prototype)", score(rec, result)])
-            for row in rows[-(2 if args.no_prototype else 3):]:
+            for row in rows[-3:]:
                 m = row[3]
                 log(f"  {name} {lens_name} {row[2]}: median {m['median_rel_pct']:.1f} %, bias {m['bias_pct']:+.1f} %")
 
-    header = ["scenario", "lens", "pixels", "estimates", "coverage %", "median rel %", "mean rel %", "bias %",
+    header = ["scenario", "lens", "network", "estimates", "coverage %", "median rel %", "mean rel %", "bias %",
               "left image", "merged"]
     table = [[n, lens, how, fmt(m["estimates"]), fmt(m["coverage_pct"]), fmt(m["median_rel_pct"]),
               fmt(m["mean_rel_pct"]), f"{m['bias_pct']:+.1f}", fmt(m["left_image"]), fmt(m["merged"])]
@@ -200,8 +142,6 @@ def main(argv: list[str] | None = None) -> int:
                                  ("--duration", args.duration, 1.0), ("--seed", args.seed, 0)):
         if value != default:
             cmd.append(f"{flag} {value}")
-    if args.no_prototype:
-        cmd.append("--no-prototype")
     print("reproduce: " + " ".join(cmd))
     return 0
 

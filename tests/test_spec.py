@@ -58,7 +58,8 @@ def every_parameter_changed() -> Network:
     tot = TimeOfTravelProcess(name="tot", distance=3, counter_bits=12)
     dep = DepthProcess(name="z", min_depth="10cm", max_depth=7.5, min_share=0.25)
     vel = VelocityProcess(name="v", source="samples", velocity=[0.1, -0.2, 0.3], samples="vel.txt", per="pixel",
-                          patch_size=16, update_every=5, intrinsics=[200.0, 201.5, 31.5, 23.5])
+                          patch_size=16, update_every=5, intrinsics=[200.0, 201.5, 31.5, 23.5],
+                          distortion_model="equidistant", distortion=[-0.04, 0.01, -0.003, 0.0006])
     rot = AngularVelocityProcess(name="w", source="gyro", omega=[0.01, -0.02, 0.03], samples="w.txt", imu="imu.txt",
                                  rotation_cam_imu=[0.0, 0.0, 0.7071067811865476, 0.7071067811865476],
                                  time_shift="-2.5ms", bias=[0.001, 0.002, -0.003], update_every=3,

@@ -41,9 +41,33 @@ def test_the_simulated_lens_casts_each_pixel_ray_through_the_distortion(distorte
     assert rays.fov[0] < pinhole.fov[0] and rays.fov[3] > pinhole.fov[3]  # barrel: the lens sees wider
 
 
-def test_run_undistorts_by_default_and_says_so(distorted_folder, tmp_path, capsys):
+def test_run_takes_the_lens_into_account_on_raw_pixels_by_default(distorted_folder, tmp_path, capsys):
     out, summary = tmp_path / "depth.npz", tmp_path / "run.json"
     assert main(["run", str(distorted_folder), "--out", str(out), "--json", str(summary), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    line = next(text for text in printed.splitlines() if text.startswith("undistort"))
+    assert line == "undistort      radtan -0.368 0.15 -0.0003 -0.0008 0: A t through the lens (velocity), raw pixels"
+    assert json.loads(summary.read_text())["undistortion"]["velocity"] == "velocity"
+    depth, meta = read_depth(out)
+    assert meta["latency_steps"] == 2 and meta["summary"]["undistortion"] is None  # raw pixels, the fused chain
+    plain = tmp_path / "pinhole.npz"
+    assert main(["run", str(distorted_folder), "--out", str(plain), "--no-undistort", "--quiet"]) == 0
+    pinhole, _ = read_depth(plain)
+    # the same pixels fire (no event moves); the lens changes A t, so the depths differ
+    assert len(depth) > 500 and not np.array_equal(depth["z"][:100], pinhole["z"][:100])
+    capsys.readouterr()
+    assert main(["eval", str(distorted_folder), str(out), "--window", "0", "--json", "-"]) == 0
+    assert json.loads(capsys.readouterr().out)["unmatched"] == 0  # matched at the raw pixels they are at
+
+
+def test_an_undistort_process_moves_the_spikes_and_eval_and_export_follow(distorted_folder, tmp_path, capsys):
+    from tofnet.io.spec import dump_spec
+    from tofnet.networks import depth_network
+    spec = tmp_path / "moved.yaml"
+    spec.write_text(dump_spec(depth_network(SIZE, undistort={})))
+    out, summary = tmp_path / "depth.npz", tmp_path / "run.json"
+    assert main(["run", str(distorted_folder), "--spec", str(spec), "--out", str(out), "--json", str(summary),
+                 "--quiet"]) == 0
     printed = capsys.readouterr().out
     line = next(text for text in printed.splitlines() if text.startswith("undistort"))
     counts = json.loads(summary.read_text())["undistortion"]["counts"]
@@ -62,11 +86,10 @@ def test_run_undistorts_by_default_and_says_so(distorted_folder, tmp_path, capsy
     assert plys["default"].read_bytes() == plys["undistorted"].read_bytes() != plys["raw"].read_bytes()
 
 
-def test_no_undistort_keeps_raw_pixels_and_the_fused_chain(distorted_folder, tmp_path, capsys):
+def test_no_undistort_treats_the_camera_as_a_pinhole(distorted_folder, tmp_path, capsys):
     out = tmp_path / "raw.npz"
     assert main(["run", str(distorted_folder), "--out", str(out), "--no-undistort", "--quiet"]) == 0
     printed = capsys.readouterr().out
-    assert "undistort      off (--no-undistort): raw pixels, although the recording's lens has radtan" in printed
+    assert "undistort      off (--no-undistort): a pinhole, although the recording's lens has radtan" in printed
     _, meta = read_depth(out)
     assert meta["latency_steps"] == 2 and meta["summary"]["undistortion"] is None
-    assert "undistort" not in meta["summary"]["counts"]

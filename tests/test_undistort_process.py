@@ -129,12 +129,18 @@ def test_merged_keeps_the_first_spike_in_canonical_order_and_left_image_counts_t
     assert result.counts["undistort"] == {"passed": 0, "left_image": 1, "merged": 0}
 
 
-def test_default_network_undistorts_only_a_distorted_lens():
+def test_networks_with_the_process_see_a_pinhole_and_never_correct_the_lens_twice(tmp_path):
     distorted, pinhole = texture(BARREL), texture(Intrinsics(20.0, 20.0, 11.5, 7.5, (0.0,) * 5))
     assert lens_is_distorted(distorted) and not lens_is_distorted(pinhole) and not lens_is_distorted(None)
-    assert default_network(distorted).process("undistort").events.sources[0].process.name == "input"
-    assert [p.name for p in default_network(distorted, undistort=False).processes] == \
-        [p.name for p in default_network(pinhole).processes] == ["input", "time_of_travel", "depth", "velocity"]
+    # the default network keeps raw pixels (its velocity process sees the lens): no undistort process
+    assert [p.name for p in default_network(distorted).processes] == ["input", "time_of_travel", "depth", "velocity"]
+    assert depth_network(SENSOR, undistort={}).process("velocity").distortion_model == "none"
+    spec = tmp_path / "twice.yaml"
+    spec.write_text(dump_spec(depth_network(SENSOR, undistort={}, velocity=VELOCITY)).replace(
+        ", distortion_model: none", ""))
+    with pytest.raises(NetworkError, match="also takes the lens into account; set distortion_model: none"):
+        load_network(spec, recording=distorted)
+    load_network(spec, recording=pinhole)  # no lens: nothing to correct twice
 
 
 def test_specs_declare_it_round_trip_it_and_no_undistort_refuses_it(tmp_path, capsys):

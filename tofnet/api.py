@@ -41,13 +41,43 @@ def default_network(recording: Recording | None = None, *, sensor_size: tuple[in
     When the recording has rotation information (``rotation_source_of``) and ``rotation`` is
     True, an angular velocity process feeds the depth neurons, which then compensate the
     camera's rotation (paper eq. 7); otherwise it is the paper's eq. 8 network exactly.
-    When the recording's lens is distorted (``lens_is_distorted``) and ``undistort`` is True,
-    an ``UndistortProcess`` moves the spikes to the undistorted image before time of travel.
+    The velocity process sees the calibration's lens (``VelocityProcess``: ``A t`` through the
+    lens, on raw pixels); ``undistort=False`` makes it ignore the lens (``ignore_lens``).
     """
     size = sensor_size or (recording.sensor_size if recording is not None else None) or (240, 180)
     source = rotation_source_of(recording) if rotation else None
-    return depth_network(size, rotation=None if source is None else {"source": source},
-                         undistort={} if undistort and lens_is_distorted(recording) else None)
+    network = depth_network(size, rotation=None if source is None else {"source": source})
+    if not undistort:
+        ignore_lens(network)
+    return network
+
+
+def check_lens_once(network: Network, recording: Recording | None, source: str) -> None:
+    """Refuse a network that would correct a distorted lens twice: spikes moved to undistorted
+    pixels (an ``UndistortProcess``) and a velocity process that also takes the lens into account."""
+    from tofnet.backends.runtime import camera_of
+    from tofnet.errors import TofnetError
+
+    moved = network.of_type(UndistortProcess)
+    if not moved:
+        return
+    for process in network.of_type(VelocityProcess):
+        try:
+            camera = camera_of(process.intrinsics, process.distortion_model, process.distortion, recording,
+                               process.name)
+        except TofnetError:  # no calibration: the run says so
+            continue
+        if any(c != 0 for c in camera.distortion):
+            raise NetworkError(f"{source}: process '{moved[0].name}' moves spikes to undistorted pixels and velocity "
+                               f"process '{process.name}' also takes the lens into account; set distortion_model: "
+                               "none on the velocity process (or remove the undistort process)")
+
+
+def ignore_lens(network: Network) -> None:
+    """Make every velocity process of ``network`` treat the camera as a pinhole (``--no-undistort``)."""
+    for process in network.of_type(VelocityProcess):
+        process.set_param("distortion", None)
+        process.set_param("distortion_model", "none")
 
 
 def rotation_summary(network: Network) -> str | None:
@@ -81,7 +111,8 @@ def load_network(spec: str | Path | None = None, *, sensor_size: tuple[int, int]
     ``sensor_size`` overrides the spec's (or the default's). Without a spec the network is
     ``default_network(recording, rotation=rotation)``; a spec decides for itself whether
     its depth neurons compensate rotation (``rotation=False`` refuses one that does) and whether
-    it undistorts (``undistort=False`` refuses one that does).
+    it moves spikes to undistorted pixels (``undistort=False`` refuses one that does, and makes its
+    velocity processes ignore the lens).
     """
     if spec is None:
         network = default_network(recording, sensor_size=sensor_size, rotation=rotation, undistort=undistort)
@@ -95,6 +126,9 @@ def load_network(spec: str | Path | None = None, *, sensor_size: tuple[int, int]
     if not undistort and network.of_type(UndistortProcess):
         raise NetworkError(f"{spec}: the spec undistorts (process '{network.of_type(UndistortProcess)[0].name}'); "
                            "remove it from the spec to keep raw pixels")
+    if not undistort:
+        ignore_lens(network)
+    check_lens_once(network, recording, str(spec))
     if sensor_size is not None and network.sensor_size != tuple(sensor_size):
         resize(network, sensor_size)
     return network, dict(loaded.compile or {}), loaded.backend, dict(loaded.backend_options or {})

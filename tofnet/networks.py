@@ -20,14 +20,16 @@ def depth_network(sensor_size: tuple[int, int] = (240, 180), *, name: str = "dep
     ``rotation`` (a dict, ``{}`` for the defaults) adds an ``AngularVelocityProcess`` called
     ``angular_velocity`` feeding ``depth.b_w``: the depth neurons then compensate the camera's
     rotation (paper eq. 7), e.g. ``rotation={"source": "gyro"}``. None: the paper's eq. 8.
-    ``undistort`` (a dict, ``{}`` for the recording's lens) puts an ``UndistortProcess`` called
-    ``undistort`` between input and time of travel: the network then works on the undistorted
-    image (one step more latency). None: raw sensor pixels, as the paper.
+    The velocity process takes a distorted lens into account (``VelocityProcess``), on raw pixels.
+    ``undistort`` (a dict, ``{}`` for the recording's lens) instead puts an ``UndistortProcess``
+    called ``undistort`` between input and time of travel: the network then works on the
+    undistorted image (one step more latency) and the velocity process sees a pinhole.
     """
     inp = InputProcess(name="input", sensor_size=sensor_size, **(input or {}))
     tot = TimeOfTravelProcess(name="time_of_travel", **(time_of_travel or {}))
     dep = DepthProcess(name="depth", **(depth or {}))
-    vel = VelocityProcess(name="velocity", **(velocity or {}))
+    lens_free = {} if undistort is None else {"distortion_model": "none"}  # the pixels are undistorted already
+    vel = VelocityProcess(name="velocity", **{**lens_free, **(velocity or {})})
     processes = [inp, tot, dep, vel]
     if undistort is None:
         inp.events.connect(tot.events)

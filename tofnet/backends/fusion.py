@@ -55,6 +55,8 @@ class PipelineParams:
     update_every: int
     intrinsics: tuple[float, float, float, float] | None
     names: tuple[str, str, str, str]  # input, time-of-travel, depth, velocity
+    distortion_model: str | None = None
+    distortion: tuple[float, ...] | None = None
 
     @property
     def timestep_us(self) -> int:
@@ -109,7 +111,8 @@ def paper_chain(network: Network, family: str, probes=()) -> PipelineParams | No
         velocity_constant=vel.velocity, velocity_samples=vel.samples, velocity_per=vel.per,
         velocity_patch_size=vel.patch_size, update_every=vel.update_every,
         intrinsics=tuple(vel.intrinsics) if vel.intrinsics is not None else None,
-        names=(inp.name, tot.name, dep.name, vel.name))
+        names=(inp.name, tot.name, dep.name, vel.name), distortion_model=vel.distortion_model,
+        distortion=tuple(vel.distortion) if vel.distortion is not None else None)
 
 
 def pipeline_of(network: Network) -> PipelineParams:

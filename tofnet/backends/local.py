@@ -16,7 +16,7 @@ import numpy as np
 from tofnet.backends.base import Backend, ProgressCallback, RunResult
 from tofnet.backends.fusion import FusedStream, PipelineParams, paper_chain
 from tofnet.backends.graph import GraphExecutor, canonical, resolve_probes, sinks_of
-from tofnet.backends.runtime import clock_of, intrinsics_of, start_time_us, velocity_source_of
+from tofnet.backends.runtime import camera_of, clock_of, start_time_us, velocity_source_of
 from tofnet.backends.stream import DEFAULT_PACKET_EVENTS, GraphStream, run_in_packets
 from tofnet.compiler.compiled import network_of
 from tofnet.core.network import Network
@@ -101,7 +101,8 @@ class LocalBackend(Backend):
 
     def _fused_stream(self, network: Network, pipeline: PipelineParams, known: Recording, t0_us: int | None,
                       record_tot: bool) -> FusedStream:
-        intr = intrinsics_of(pipeline.intrinsics, known, pipeline.names[3])
+        intr = camera_of(pipeline.intrinsics, pipeline.distortion_model, pipeline.distortion, known,
+                         pipeline.names[3])
         source = velocity_source_of(pipeline.velocity_source, pipeline.velocity_constant, pipeline.velocity_samples,
                                     known, pipeline.names[3])
         config = KernelConfig.from_pipeline(pipeline, intr, self._format())

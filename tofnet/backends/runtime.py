@@ -69,6 +69,22 @@ def intrinsics_of(given, recording: Recording | None, who: str) -> Intrinsics:
     return recording.intrinsics
 
 
+def camera_of(intrinsics, distortion_model: str | None, distortion, recording: Recording | None,
+              who: str) -> Intrinsics:
+    """The camera a velocity process sees: its intrinsics (``intrinsics_of``) and its lens: the given
+    ``distortion`` (with ``distortion_model``), none for ``distortion_model: none``, else the
+    recording's calibration when the intrinsics come from it."""
+    camera = intrinsics_of(intrinsics, recording, who)
+    if distortion_model == "none":
+        return Intrinsics(camera.fx, camera.fy, camera.cx, camera.cy)
+    if distortion is not None:
+        coefficients = tuple(float(c) for c in distortion)
+        if distortion_model == "radtan" and len(coefficients) == 4:
+            coefficients += (0.0,)  # k3
+        return Intrinsics(camera.fx, camera.fy, camera.cx, camera.cy, coefficients, distortion_model)
+    return camera
+
+
 def velocity_source_of(source: str, constant, samples: str | None, recording: Recording | None,
                        who: str) -> VelocitySource:
     """The camera velocity a velocity process reads: ``constant``, ``samples`` (a file) or ``groundtruth``."""

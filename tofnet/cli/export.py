@@ -26,7 +26,7 @@ def register(subparsers) -> None:
     p.add_argument("--pixels", choices=("raw", "undistorted"), default=None,
                    help="whether the estimates' pixels are raw sensor pixels (the lens distortion is undone "
                         "before back-projecting) or already undistorted; default: what the depth file says "
-                        "('tofnet run' undistorts when the recording's lens is distorted), else raw")
+                        "(a network with an undistort process moves its spikes), else raw")
     p.add_argument("--ascii", action="store_true", help="ASCII .ply instead of binary little-endian")
     p.add_argument("--no-color", action="store_true", help="no depth colours in the .ply")
     p.add_argument("--sensor-size", metavar="WxH", help="map size in pixels (default: the recording's)")

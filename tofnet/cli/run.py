@@ -54,8 +54,8 @@ def add_network_options(p: argparse.ArgumentParser) -> None:
                    help="keep the paper's eq. 8 even when the recording has rotation information (turning poses "
                         "or imu.txt), which the default network compensates (eq. 7)")
     g.add_argument("--no-undistort", action="store_true",
-                   help="keep raw sensor pixels even when the recording's calibration has lens distortion, "
-                        "which the default network undoes (an undistort process before time of travel)")
+                   help="treat the camera as a pinhole even when the recording's calibration has lens "
+                        "distortion, which the velocity process otherwise takes into account")
 
 
 def build_network(args, recording_sensor_size, recording=None):
@@ -142,10 +142,12 @@ def rotation_line(network, recording, args) -> str | None:
 
 
 def undistortion_of(network, recording, result, args) -> dict | None:
-    """Whether the network undid the lens distortion, with which lens and counts (None: the recording's lens
-    is not distorted and the network does not undistort: nothing to say)."""
+    """How the network treated the lens: through the velocity term (raw pixels), by moving spikes
+    (an undistort process), or not at all; None when there is no lens to speak of."""
     from tofnet.api import lens_is_distorted
-    from tofnet.processes import UndistortProcess
+    from tofnet.backends.runtime import camera_of
+    from tofnet.errors import TofnetError
+    from tofnet.processes import UndistortProcess, VelocityProcess
 
     found = network.of_type(UndistortProcess)
     if found:
@@ -153,29 +155,40 @@ def undistortion_of(network, recording, result, args) -> dict | None:
         return {"ran": True, "process": found[0].name, "model": lens.distortion_model,
                 "coefficients": list(lens.distortion), "intrinsics": [lens.fx, lens.fy, lens.cx, lens.cy],
                 "sensor_size": list(found[0].sensor_size), "counts": dict(result.counts.get(found[0].name, {}))}
+    for process in network.of_type(VelocityProcess):
+        try:
+            camera = camera_of(process.intrinsics, process.distortion_model, process.distortion, recording,
+                               process.name)
+        except TofnetError:
+            continue
+        if any(c != 0 for c in camera.distortion):
+            return {"ran": True, "velocity": process.name, "model": camera.distortion_model,
+                    "coefficients": list(camera.distortion)}
     if not lens_is_distorted(recording):
         return None
-    why = "--no-undistort" if getattr(args, "no_undistort", False) else "the spec has no undistort process"
+    why = "--no-undistort" if getattr(args, "no_undistort", False) else "the spec's velocity process ignores it"
     return {"ran": False, "why": why, "model": recording.intrinsics.distortion_model,
             "coefficients": list(recording.intrinsics.distortion)}
 
 
 def lens_of_run(undistortion: dict | None) -> dict | None:
     """What a depth file records of the undistortion (``tofnet export`` and ``eval`` read it): the lens
-    the estimates' pixels were undistorted with, or None for raw pixels."""
-    if not (undistortion or {}).get("ran"):
+    the estimates' pixels were moved with by an undistort process, or None for raw pixels."""
+    if not (undistortion or {}).get("process"):
         return None
     return {key: undistortion[key] for key in ("model", "coefficients", "intrinsics", "sensor_size")}
 
 
 def undistortion_line(undistortion: dict) -> str:
-    """The summary's line on lens undistortion."""
+    """The summary's line on the lens."""
     lens = f"{undistortion['model']} {' '.join(f'{c:.4g}' for c in undistortion['coefficients'])}"
     if not undistortion["ran"]:
-        return f"off ({undistortion['why']}): raw pixels, although the recording's lens has {lens} distortion"
+        return f"off ({undistortion['why']}): a pinhole, although the recording's lens has {lens} distortion"
+    if "velocity" in undistortion:
+        return f"{lens}: A t through the lens ({undistortion['velocity']}), raw pixels"
     counts = undistortion["counts"]
-    return (f"{lens}: passed {counts.get('passed', 0):,}, left image {counts.get('left_image', 0):,}, "
-            f"merged {counts.get('merged', 0):,}")
+    return (f"{lens}: spikes moved to undistorted pixels ({undistortion['process']}): passed "
+            f"{counts.get('passed', 0):,}, left image {counts.get('left_image', 0):,}, merged {counts.get('merged', 0):,}")
 
 
 def write_outputs(out: Path, result, summary: dict, record_tot: bool, check=None) -> dict[str, Path]:

@@ -13,7 +13,7 @@ import numpy as np
 
 from tofnet.errors import BackendError
 from tofnet.kernels.fixed_point import FixedPointFormat
-from tofnet.kernels.velocity import sample_grid
+from tofnet.kernels.lens import SAMPLE_COLUMNS, Lens, lens_of, sample_table
 
 
 @dataclass(frozen=True)
@@ -54,7 +54,8 @@ class KernelConfig:
     ``emit_depth`` False runs the time-of-travel units alone (no velocity needed);
     ``min_share`` (dimensionless) makes the depth layer alone (``process_counts``) compute
     eq. 7 from angular velocity updates, ``B ω`` evaluated with ``rotation_intrinsics``
-    (``intrinsics`` when None); None keeps eq. 8.
+    (``intrinsics`` when None); None keeps eq. 8. ``lens`` (model, coefficients): ``A t`` is
+    taken through that lens onto the raw pixels (``tofnet.kernels.lens``); None: a pinhole.
     """
 
     sensor_size: tuple[int, int]
@@ -73,15 +74,16 @@ class KernelConfig:
     emit_depth: bool = True
     min_share: float | None = None
     rotation_intrinsics: tuple[float, float, float, float] | None = None
+    lens: Lens | None = None
 
     @classmethod
     def from_pipeline(cls, pipeline, intrinsics, fixed: FixedPointFormat | None = None) -> "KernelConfig":
-        """From a ``PipelineParams`` and an ``Intrinsics``."""
+        """From a ``PipelineParams`` and an ``Intrinsics`` (its distortion is the lens)."""
         return cls(tuple(pipeline.sensor_size), pipeline.timestep, pipeline.distance, pipeline.counter_bits,
                    pipeline.min_depth, pipeline.max_depth, pipeline.update_every,
                    pipeline.velocity_per == "pixel", pipeline.velocity_patch_size,
                    (intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy), fixed,
-                   pipeline.refractory_us, pipeline.refractory_per_polarity)
+                   pipeline.refractory_us, pipeline.refractory_per_polarity, lens=lens_of(intrinsics))
 
     @property
     def timestep_us(self) -> int:
@@ -145,18 +147,19 @@ def velocity_rows(steps: np.ndarray, update_every: int) -> tuple[int, int]:
 
 def _sample_tables(config: KernelConfig, r: Region) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``rows``, ``cols`` (the sample of pixel (x, y) is ``rows[y-y0] + cols[x-x0]``) and ``points``
-    (where ``A t`` is evaluated, one per sample: the pixel, or its patch centre)."""
-    (_, w), (width, height) = r.shape, config.sensor_size
-    su, sv = sample_grid(config.per_pixel, config.patch_size, width, height)
+    (one row of ``tofnet.kernels.lens.sample_table`` per sample: where ``A t`` is evaluated, the
+    pixel or its patch centre, seen through the lens)."""
+    (_, w) = r.shape
+    table = sample_table(config.per_pixel, config.patch_size, tuple(config.sensor_size), tuple(config.intrinsics),
+                         config.lens)
     ys, xs = np.arange(r.y0, r.y1), np.arange(r.x0, r.x1)
     if config.per_pixel:
         rows, cols = (ys - r.y0) * w, xs - r.x0
-        py, px = ys, xs
     else:  # patches tile the sensor from (0, 0); the region overlaps a rectangle of them
         py, px = ys // config.patch_size, xs // config.patch_size
         rows, cols = (py - py[0]) * (px[-1] - px[0] + 1), px - px[0]
         # one pixel of each patch, in sample order: the first of the region inside it
         ys = ys[np.r_[0, np.flatnonzero(np.diff(py)) + 1]]
         xs = xs[np.r_[0, np.flatnonzero(np.diff(px)) + 1]]
-    points = np.stack([su[ys[:, None], xs[None, :]].ravel(), sv[ys[:, None], xs[None, :]].ravel()], axis=1)
+    points = table[ys[:, None], xs[None, :]].reshape(-1, SAMPLE_COLUMNS)
     return rows, cols, points

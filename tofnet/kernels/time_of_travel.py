@@ -50,7 +50,8 @@ from numba.extending import intrinsic
 from tofnet.kernels.depth import float_depth
 from tofnet.kernels.fixed_point import fixed_depth, quantize
 from tofnet.kernels.input_filter import ACCEPTED, BEFORE_T0, OUT_OF_BOUNDS, admit
-from tofnet.kernels.velocity import velocity_term
+from tofnet.kernels.lens import SAMPLE_COLUMNS
+from tofnet.kernels.velocity import sampled_velocity_term
 
 #: Stamp of an idle unit (never facilitated, sent since, or overflowed at a rebase).
 IDLE = -(1 << 31)
@@ -81,7 +82,8 @@ INACTIVE, TOT_SPIKES, N_COUNTS = EMITTED + 1, EMITTED + 2, EMITTED + 3
 (X0, Y0, X1, Y1, DISTANCE, COUNTER_MAX, REBASE_AT, UPDATE_EVERY, FIXED, FRAC_BITS, PAYLOAD_BITS, MIN_RAW,
  MAX_RAW, T0, DT, REFRACTORY_US, PER_POLARITY, WIDTH, HEIGHT, STRIDE, ROW, N_SAMPLES, EMIT_DEPTH,
  AT_CURSOR, AT_COUNTS, AT_ROWS, AT_COLS, AT_CACHE_J, AT_CACHE_W, AT_PEND, PEND_SIZE, AT_REC, REC_SIZE, N_IP) = range(34)
-# Float slots, then the points (x, y per sample) and the cached ``A t`` (x, y per sample).
+# Float slots, then the points (per sample: where ``A t`` is evaluated and the lens's ``J``,
+# ``tofnet.kernels.lens``) and the cached ``A t`` (x, y per sample).
 FX, FY, CX, CY, SECONDS_PER_COUNT, MIN_DEPTH, MAX_DEPTH, N_FP = range(8)
 
 _BIG = 1 << 40  # above any counter value
@@ -149,7 +151,8 @@ def refresh_sample(sample, update, tx, ty, tz, params, cache_j, cache_w, cache_a
     """``A t`` (and ``W = A t * dt / distance`` quantised, in fixed point) of one sample under
     velocity ``update``, cached: called once per sample (patch or pixel) and update."""
     fixed, frac_bits, payload_bits, _, _, _, _, _, fx, fy, cx, cy, seconds_per_count = params
-    at_x, at_y = velocity_term(tx, ty, tz, points[2 * sample], points[2 * sample + 1], fx, fy, cx, cy)
+    at_x, at_y = sampled_velocity_term(tx, ty, tz, points[SAMPLE_COLUMNS * sample:SAMPLE_COLUMNS * (sample + 1)],
+                                       fx, fy, cx, cy)
     cache_at[2 * sample], cache_at[2 * sample + 1] = at_x, at_y
     if fixed:  # W quantised once (docs/fixed_point.md)
         cache_w[2 * sample] = quantize(at_x * seconds_per_count, frac_bits, payload_bits)
@@ -261,7 +264,8 @@ def views(ints, floats):
             ints[ip[AT_ROWS]:ip[AT_COLS]], ints[ip[AT_COLS]:ip[AT_CACHE_J]],
             ints[ip[AT_CACHE_J]:ip[AT_CACHE_J] + n_samples], ints[ip[AT_CACHE_W]:ip[AT_CACHE_W] + 2 * n_samples],
             ints[ip[AT_PEND]:ip[AT_PEND] + ip[PEND_SIZE]], rec,
-            floats[:N_FP], floats[N_FP:N_FP + 2 * n_samples], floats[N_FP + 2 * n_samples:N_FP + 4 * n_samples])
+            floats[:N_FP], floats[N_FP:N_FP + SAMPLE_COLUMNS * n_samples],
+            floats[N_FP + SAMPLE_COLUMNS * n_samples:N_FP + (SAMPLE_COLUMNS + 2) * n_samples])
 
 
 @njit(cache=True)

@@ -14,6 +14,15 @@ def velocity_term(tx: float, ty: float, tz: float, u: float, v: float,
 
 
 @njit(cache=True)
+def sampled_velocity_term(tx: float, ty: float, tz: float, sample, fx: float, fy: float, cx: float,
+                          cy: float) -> tuple[float, float]:
+    """``J A(p') t`` px*m/s for one row of a lens sample table (``tofnet.kernels.lens``): ``A t``
+    at the ideal point ``p'`` taken onto the raw sensor by ``J`` (exactly ``A(p) t`` for a pinhole)."""
+    at_x, at_y = velocity_term(tx, ty, tz, sample[0], sample[1], fx, fy, cx, cy)
+    return sample[2] * at_x + sample[3] * at_y, sample[4] * at_x + sample[5] * at_y
+
+
+@njit(cache=True)
 def sample_point(x: int, y: int, per_pixel: bool, patch_size: int, width: int, height: int) -> tuple[float, float]:
     """Where ``A t`` is evaluated for pixel (x, y): the pixel, or the centre of its patch.
 

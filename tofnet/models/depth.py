@@ -116,7 +116,8 @@ class DepthEventModel(Model):
         config = KernelConfig(tuple(ctx.sensor_size), ctx.timestep_s, counts.distance, 1, process.min_depth,
                               process.max_depth, 1, field.per_pixel, field.patch_size, field.intrinsics,
                               ctx.fixed_format, min_share=process.min_share if self.rotating else None,
-                              rotation_intrinsics=ctx.input_meta(process, "b_w").intrinsics if self.rotating else None)
+                              rotation_intrinsics=ctx.input_meta(process, "b_w").intrinsics if self.rotating else None,
+                              lens=field.lens)
         self.kernel = TimeOfTravelKernel(config, ctx.region, ctx.t0_us)
         self.field = field
         self.rotation = ctx.input_meta(process, "b_w") if self.rotating else None

@@ -6,9 +6,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tofnet.backends.runtime import UpdateRows, intrinsics_of, velocity_source_of, velocity_table
+from tofnet.backends.runtime import UpdateRows, camera_of, velocity_source_of, velocity_table
 from tofnet.core.ports import Payload
-from tofnet.kernels.velocity import sample_grid, velocity_term
+from tofnet.kernels.lens import Lens, lens_of, sample_table
+from tofnet.kernels.velocity import velocity_term
 from tofnet.models.base import Model, ModelContext, records
 from tofnet.processes import VelocityProcess
 
@@ -27,19 +28,20 @@ class VelocityField:
 
     ``A t`` of pixel (x, y) is evaluated at the pixel (``per_pixel``) or at the centre of its
     ``patch_size`` square (patches tile the sensor from (0, 0)), with ``intrinsics``
-    ``(fx, fy, cx, cy)`` px.
+    ``(fx, fy, cx, cy)`` px, through ``lens`` (``tofnet.kernels.lens``; None: a pinhole).
     """
 
     per_pixel: bool
     patch_size: int
     intrinsics: tuple[float, float, float, float]
     sensor_size: tuple[int, int]
+    lens: Lens | None = None
 
     def dense(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``A t`` at every pixel: two ``(height, width)`` arrays (the reference models' view)."""
-        width, height = self.sensor_size
-        u, v = sample_grid(self.per_pixel, self.patch_size, width, height)
-        return velocity_term(float(t[0]), float(t[1]), float(t[2]), u, v, *self.intrinsics)
+        s = sample_table(self.per_pixel, self.patch_size, tuple(self.sensor_size), tuple(self.intrinsics), self.lens)
+        at_x, at_y = velocity_term(float(t[0]), float(t[1]), float(t[2]), s[..., 0], s[..., 1], *self.intrinsics)
+        return s[..., 2] * at_x + s[..., 3] * at_y, s[..., 4] * at_x + s[..., 5] * at_y
 
 
 class VelocityModel(Model):
@@ -57,9 +59,11 @@ class VelocityModel(Model):
 
     @classmethod
     def output_meta(cls, process: VelocityProcess, ctx: ModelContext) -> dict:
-        intr = intrinsics_of(process.intrinsics, ctx.recording, process.name)
+        camera = camera_of(process.intrinsics, process.distortion_model, process.distortion, ctx.recording,
+                           process.name)
         return {"a_t": VelocityField(process.per == "pixel", int(process.patch_size),
-                                     (intr.fx, intr.fy, intr.cx, intr.cy), tuple(ctx.sensor_size))}
+                                     (camera.fx, camera.fy, camera.cx, camera.cy), tuple(ctx.sensor_size),
+                                     lens_of(camera))}
 
     def run(self, first: int, end: int, inputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         j0, j1 = updates_between(first, end, self.update_every)

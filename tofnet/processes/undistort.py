@@ -41,6 +41,12 @@ class UndistortProcess(Process):
     compiler counts (0 cores); its table is applied where the events enter the chip.
     tofnet's graph still delays each connection by one step, so the network's latency
     grows by one step (on the chip the table folds into the input's axons and adds none).
+
+    The velocity process feeding the depth neurons behind it must then see a pinhole
+    (``distortion_model: none``; ``depth_network(undistort=...)`` sets it), or the lens is
+    corrected twice. The default network does not move spikes: its velocity process takes
+    the lens into account on the raw pixels, which keeps every pixel and is more accurate
+    (docs/formats.md, "Lens distortion").
     """
 
     inports = (PortSpec("events", Payload.POLARITY, 1, "spikes at raw sensor pixels, one per pixel and step at most"),)

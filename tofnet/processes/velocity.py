@@ -7,8 +7,11 @@ from tofnet.core.ports import Payload, PortSpec
 from tofnet.core.process import Process
 from tofnet.core.vars import Var
 from tofnet.errors import NetworkError
+from tofnet.processes.undistort import COEFFICIENTS, MODELS
 
 SOURCES = ("groundtruth", "samples", "constant")
+#: Lens models (OpenCV conventions, ``tofnet.kernels.undistort``), and ``none`` for a pinhole.
+DISTORTION_MODELS = MODELS + ("none",)
 
 
 class VelocityProcess(Process):
@@ -19,6 +22,11 @@ class VelocityProcess(Process):
     or a constant. ``per="patch"`` sends one value per ``patch_size`` square taken at
     the patch centre (the paper); ``per="pixel"`` is exact at every pixel. Intrinsics
     come from the recording's calibration unless given as ``intrinsics: [fx, fy, cx, cy]``.
+
+    A distorted lens (the calibration's, or ``distortion_model`` with ``distortion``) is
+    taken into account: each sample's ``A t`` is evaluated at its undistorted point and taken
+    back onto the raw sensor by the lens's Jacobian (``tofnet.kernels.lens``), so the depth
+    neurons of raw pixels measure true depth. ``distortion_model: none`` ignores the lens.
     """
 
     outports = (PortSpec("a_t", Payload.VELOCITY_TERM, 2, "A t per pixel, px*m/s"),)
@@ -35,6 +43,11 @@ class VelocityProcess(Process):
               minimum=1, maximum=1_000_000),
         Param("intrinsics", "floats", None, unit="px", optional=True,
               doc="[fx, fy, cx, cy]; from the recording's calibration when omitted"),
+        Param("distortion_model", "str", None, optional=True, choices=DISTORTION_MODELS,
+              doc="lens model of 'distortion'; 'none' ignores the lens; omitted: the calibration's lens "
+                  "(when the intrinsics come from it)"),
+        Param("distortion", "floats", None, optional=True,
+              doc="lens coefficients: radtan k1 k2 p1 p2 [k3], equidistant k1 k2 k3 k4 (OpenCV)"),
     )
     vars = (Var("last_velocity", "vector", "float64", "m/s", "camera velocity of the last update sent (NaN before the "
                 "first)", channels=3),)
@@ -53,6 +66,15 @@ class VelocityProcess(Process):
         intrinsics = values["intrinsics"]
         if intrinsics is not None and len(intrinsics) != 4:
             raise NetworkError(f"{self.name}.intrinsics: expected [fx, fy, cx, cy] (4 numbers), got {len(intrinsics)}")
+        model, coefficients = values["distortion_model"], values["distortion"]
+        if coefficients is not None:
+            if model in (None, "none"):
+                raise NetworkError(f"{self.name}.distortion: needs distortion_model: radtan or equidistant")
+            if len(coefficients) not in COEFFICIENTS[model]:
+                raise NetworkError(f"{self.name}.distortion: {model} takes "
+                                   f"{' or '.join(map(str, COEFFICIENTS[model]))} coefficients, got {len(coefficients)}")
+        elif model in COEFFICIENTS:
+            raise NetworkError(f"{self.name}.distortion_model: {model} needs distortion: its coefficients")
         if intrinsics is not None and not (intrinsics[0] > 0 and intrinsics[1] > 0):
             raise NetworkError(f"{self.name}.intrinsics: focal lengths fx, fy must be positive (pixels), "
                                f"got {intrinsics[0]:g}, {intrinsics[1]:g}")
