@@ -167,6 +167,7 @@ def leak_check(session):
 
 
 def _failing_session(pids, **options):
+    options.setdefault("start_timeout", 120.0)  # a loaded machine may take seconds to start workers
     backend = MultiprocBackend(workers=2, chunk_steps=20, **options)
     s = backend.session(compile_network(network(), patch=(8, 8)))
     s.open()

@@ -23,6 +23,7 @@ from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, TOT_DTYPE
 from tofnet.io.recording import VelocitySource
 from tofnet.kernels.region import KernelConfig, KernelOutput, TimeOfTravelKernel, copy_records
+from tofnet.models.base import concat
 from tofnet.models.depth import OUTCOMES
 from tofnet.models.registry import _registered
 from tofnet.processes import DepthProcess, InputProcess, TimeOfTravelProcess, VelocityProcess
@@ -219,7 +220,7 @@ class FusedStream:
         for name, records in new.items():
             held = self._held.pop(name, None)
             if held is not None and len(held):
-                records = np.concatenate([held, records])
+                records = concat([held, records], None)
             # the kernel writes records in event order, so their steps never decrease
             cut = len(records) if horizon is None else int(np.searchsorted(records["step"], horizon, "left"))
             if cut < len(records):

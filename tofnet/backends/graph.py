@@ -22,7 +22,8 @@ from tofnet.core.network import Network
 from tofnet.core.ports import InPort, OutPort
 from tofnet.core.process import Process
 from tofnet.errors import BackendError, NetworkError
-from tofnet.models.base import Model, ModelContext, concat
+from tofnet.kernels.order import pixel_order
+from tofnet.models.base import ModelContext, concat
 from tofnet.models.registry import model_for
 
 #: ``place(process, model_class, ctx) -> model``: builds (or places remotely) one process's model.
@@ -63,14 +64,9 @@ def canonical(records: np.ndarray) -> np.ndarray:
         return records
     if np.any(step[1:] < step[:-1]):
         return records[np.lexsort((minor, x, y, step))]
-    out = records.copy()
-    later = np.flatnonzero((step[1:] == step[:-1]) & ((y[1:] < y[:-1]) | ((y[1:] == y[:-1]) & (
-        (x[1:] < x[:-1]) | ((x[1:] == x[:-1]) & (minor[1:] < minor[:-1]))))))
-    for s in np.unique(step[later]):
-        lo, hi = np.searchsorted(step, s, "left"), np.searchsorted(step, s, "right")
-        part = out[lo:hi]
-        out[lo:hi] = part[np.lexsort((minor[lo:hi], part["x"], part["y"]))]
-    return out
+    order = pixel_order(step, y, x, minor, int(y.max()) + 1)
+    # moved as raw bytes: numpy gathers packed records field by field otherwise (several times slower)
+    return records.view(np.dtype((np.void, records.dtype.itemsize)))[order].view(records.dtype)
 
 
 @dataclass

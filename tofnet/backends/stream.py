@@ -11,6 +11,7 @@ from tofnet.backends.base import ProgressCallback, RunResult
 from tofnet.backends.graph import GraphExecutor
 from tofnet.errors import BackendError
 from tofnet.events import EVENT_DTYPE, MAX_TIME_US
+from tofnet.models.base import concat
 from tofnet.models.input import check_time_order
 
 #: Events per packet when a backend runs a whole recording (bounded memory).
@@ -175,7 +176,7 @@ class Collected:
                 handle.close()  # deletes the file's name; the map keeps its pages until it is dropped
                 continue
             parts = [p for p in self.parts.get(name, []) if len(p)]
-            out[name] = np.concatenate(parts) if len(parts) > 1 else (parts[0] if parts else empty(name))
+            out[name] = concat(parts, None) if parts else empty(name)
         return out
 
 

@@ -67,3 +67,43 @@ def sort_steps_by_pixel(out: np.ndarray, lo: int, hi: int, height: int, scratch:
     Estimates of one step and pixel keep their order (stable).
     """
     _sort_words(out.view(np.uint32).reshape(-1, WORDS), lo, hi, height, scratch, row_start)
+
+
+@njit(cache=True)
+def pixel_order(step, y, x, minor, height):
+    """The stable permutation that puts records sorted by ``step`` into (step, y, x, minor)
+    order: per step, a counting sort by row (``y < height``), then by (x, minor) within rows."""
+    n = step.shape[0]
+    order = np.arange(n)
+    row_start = np.zeros(height + 1, np.int64)
+    scratch = np.empty(n, np.int64)
+    i = 0
+    while i < n:
+        j = i + 1
+        ordered = True
+        while j < n and step[j] == step[i]:
+            if ordered and (y[j] < y[j - 1] or (y[j] == y[j - 1] and (
+                    x[j] < x[j - 1] or (x[j] == x[j - 1] and minor[j] < minor[j - 1])))):
+                ordered = False
+            j += 1
+        if not ordered:
+            row_start[:] = 0
+            for q in range(i, j):
+                row_start[y[q] + 1] += 1
+            for r in range(height):
+                row_start[r + 1] += row_start[r]
+            for q in range(i, j):
+                at = row_start[y[q]]
+                scratch[at] = q
+                row_start[y[q]] = at + 1
+            for q in range(1, j - i):  # within a row, by (x, minor), stable: rows hold a few records
+                p, moving = q, scratch[q]
+                while p > 0 and y[scratch[p - 1]] == y[moving] and (
+                        x[scratch[p - 1]] > x[moving] or (x[scratch[p - 1]] == x[moving]
+                                                          and minor[scratch[p - 1]] > minor[moving])):
+                    scratch[p] = scratch[p - 1]
+                    p -= 1
+                scratch[p] = moving
+            order[i:j] = scratch[:j - i]
+        i = j
+    return order

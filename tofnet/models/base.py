@@ -169,7 +169,11 @@ def concat(chunks: list[np.ndarray], dtype: np.dtype) -> np.ndarray:
     """One record array from several (an empty one of ``dtype`` when there are none)."""
     if not chunks:
         return np.empty(0, dtype=dtype)
-    return chunks[0] if len(chunks) == 1 else np.concatenate(chunks)
+    if len(chunks) == 1:
+        return chunks[0]
+    # joined as raw bytes: numpy copies packed records field by field otherwise (several times slower)
+    raw = np.dtype((np.void, chunks[0].dtype.itemsize))
+    return np.concatenate([np.ascontiguousarray(c).view(raw) for c in chunks]).view(chunks[0].dtype)
 
 
 def records(dtype: np.dtype, n: int = 0, **columns: Any) -> np.ndarray:
