@@ -28,6 +28,7 @@ import numpy as np
 from numba import njit
 
 from tofnet.kernels.time_of_travel import prefetch
+from tofnet.kernels.rotation import rotational_flow
 from tofnet.kernels.time_surface_fit import FIT_ILL_CONDITIONED, FIT_TOO_FEW, fit_plane, fit_rows
 from tofnet.kernels.velocity import velocity_term
 
@@ -45,7 +46,8 @@ REJECT_SLOTS = tuple(range(NO_MOTION, EMITTED))  # a first event whose estimate 
 (I_WIDTH, I_HEIGHT, I_RADIUS, I_T0, I_DT, I_LATENCY, I_UPDATE_EVERY, I_MIN_POINTS, I_ITERATIONS,
  I_REFRACTORY, I_WINDOW, I_CONSISTENCY_WINDOW, I_MAX_HOLD, I_RECORD_REJECTED, I_MODEL, I_PER_PIXEL, N_IP) = range(17)
 (F_FX, F_FY, F_CX, F_CY, F_OUTLIER, F_MAX_RMS, F_MIN_SPREAD, F_MIN_DEPTH, F_MAX_DEPTH, F_MIN_DENOMINATOR,
- F_WINDOW_DEPTH, F_REFRACTORY_DEPTH, F_CONSISTENCY, F_HOLD_PX, F_AHEAD_PX, F_TURN, F_TRIM_PX, N_FP) = range(18)
+ F_WINDOW_DEPTH, F_REFRACTORY_DEPTH, F_CONSISTENCY, F_HOLD_PX, F_AHEAD_PX, F_TURN, F_TRIM_PX,
+ F_RFX, F_RFY, F_RCX, F_RCY, N_FP) = range(22)  # F_R*: the intrinsics B ω is evaluated with
 # Motion state: the velocity the current epoch started with, its start (µs), the last update seen.
 M_VX, M_VY, M_VZ, M_SINCE, M_UPDATE, N_MOTION = range(6)
 # Fit models (``I_MODEL``): a plane, or lines along the motion with a shared slope.
@@ -55,19 +57,6 @@ MODELS = ("plane", "rows")
 OK, UNSORTED, NO_VELOCITY = range(3)
 #: Events between a prefetch of a pixel's hold and surface rows and their use.
 PREFETCH = 8
-
-
-@njit(cache=True)
-def rotational_flow(wx: float, wy: float, wz: float, u: float, v: float,
-                    fx: float, fy: float, cx: float, cy: float) -> tuple[float, float]:
-    """``B ω`` in px/s at image point (u, v) for angular velocity (wx, wy, wz) rad/s (DESIGN, Rotation).
-
-    The rotation issue (12) owns this formula; this copy serves the estimator's hook until
-    that one is merged (then import it instead).
-    """
-    x, y = u - cx, v - cy
-    return (x * y / fy * wx - (fx + x * x / fx) * wy + fx / fy * y * wz,
-            (fy + y * y / fy) * wx - x * y / fx * wy - fy / fx * x * wz)
 
 
 @njit(cache=True)
@@ -249,7 +238,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, motion, sample_of, poin
             z = at_x * gx + at_y * gy
             if rotation:
                 bw_x, bw_y = rotational_flow(velocity[j, 3], velocity[j, 4], velocity[j, 5], float(x), float(y),
-                                             fx, fy, cx, cy)
+                                             fp[F_RFX], fp[F_RFY], fp[F_RCX], fp[F_RCY])
                 denominator = 1.0 - (bw_x * gx + bw_y * gy)
                 if denominator < min_denominator:
                     slot = ROTATION_DOMINATED

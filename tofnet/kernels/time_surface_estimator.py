@@ -61,6 +61,8 @@ class TimeSurfaceConfig:
       most ``consistency_window`` s older, agrees within this relative difference.
     - ``min_depth``, ``max_depth`` m: kept when strictly between. ``min_denominator``: with
       a rotation, ``1 − (B ω)·∇T`` below it is ``rotation_dominated``.
+    - ``rotation_intrinsics`` ``(fx, fy, cx, cy)`` px: where ``B ω`` is evaluated (with
+      velocity rows of six columns); None: ``intrinsics``.
     - ``timestep`` s, ``latency_steps``: an estimate's ``step`` is its event's input step
       plus ``latency_steps``; ``A t`` (per pixel with ``per_pixel``, else at the centre of
       ``patch_size`` px patches, as ``tofnet.kernels.velocity.sample_point``) comes from the
@@ -95,6 +97,7 @@ class TimeSurfaceConfig:
     update_every: int = 1
     per_pixel: bool = True
     patch_size: int = 30
+    rotation_intrinsics: tuple[float, float, float, float] | None = None
 
     def __post_init__(self) -> None:
         problems = []
@@ -153,9 +156,10 @@ class TimeSurfaceEstimator:
         self._fp = np.zeros(ts.N_FP, np.float64)
         self._fp[[ts.F_FX, ts.F_FY, ts.F_CX, ts.F_CY, ts.F_OUTLIER, ts.F_MAX_RMS, ts.F_MIN_SPREAD, ts.F_MIN_DEPTH,
                   ts.F_MAX_DEPTH, ts.F_MIN_DENOMINATOR, ts.F_WINDOW_DEPTH, ts.F_REFRACTORY_DEPTH, ts.F_CONSISTENCY,
-                  ts.F_HOLD_PX, ts.F_AHEAD_PX, ts.F_TURN, ts.F_TRIM_PX]] = (
+                  ts.F_HOLD_PX, ts.F_AHEAD_PX, ts.F_TURN, ts.F_TRIM_PX, ts.F_RFX, ts.F_RFY, ts.F_RCX, ts.F_RCY]] = (
             *c.intrinsics, c.outlier_px, c.max_rms_px, c.min_spread, c.min_depth, c.max_depth, c.min_denominator,
-            c.window_depth, c.refractory_depth, c.consistency, c.hold_px, c.ahead_px, c.turn, c.trim_px)
+            c.window_depth, c.refractory_depth, c.consistency, c.hold_px, c.ahead_px, c.turn, c.trim_px,
+            *(c.intrinsics if c.rotation_intrinsics is None else c.rotation_intrinsics))
         r, pixels = int(c.radius), width * height
         self._surface = np.full((2, (height + 2 * r) * (width + 2 * r)), ts.NEVER, np.int64)
         self._hold = np.zeros((pixels, 2), np.int32)
