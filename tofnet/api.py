@@ -9,10 +9,15 @@ from tofnet.backends.base import ProgressCallback, RunResult
 from tofnet.core.network import Network
 from tofnet.errors import NetworkError
 from tofnet.io.recording import Recording
-from tofnet.networks import depth_network
-from tofnet.processes import AngularVelocityProcess, InputProcess, TimeOfTravelProcess, VelocityProcess
+from tofnet.networks import depth_network, improved_network
+from tofnet.processes import (AngularVelocityProcess, InputProcess, TimeOfTravelProcess, TimeSurfaceProcess,
+                              VelocityProcess)
 
 DEFAULT_BACKEND = "fixed"
+#: The built-in estimators: the paper's network (the default) and the time-surface estimator
+#: (``improved``: beyond the paper, docs/time_surface.md).
+ESTIMATORS = {"paper": depth_network, "improved": improved_network}
+DEFAULT_ESTIMATOR = "paper"
 
 
 def rotation_source_of(recording: Recording | None) -> str | None:
@@ -28,16 +33,19 @@ def rotation_source_of(recording: Recording | None) -> str | None:
 
 
 def default_network(recording: Recording | None = None, *, sensor_size: tuple[int, int] | None = None,
-                    rotation: bool = True) -> Network:
-    """The paper's network sized to ``sensor_size``, else the recording's, else 240x180.
+                    rotation: bool = True, estimator: str = DEFAULT_ESTIMATOR) -> Network:
+    """The ``estimator``'s network (``ESTIMATORS``: the paper's by default) sized to ``sensor_size``,
+    else the recording's, else 240x180.
 
     When the recording has rotation information (``rotation_source_of``) and ``rotation`` is
-    True, an angular velocity process feeds the depth neurons, which then compensate the
-    camera's rotation (paper eq. 7); otherwise it is the paper's eq. 8 network exactly.
+    True, an angular velocity process feeds the depth neurons (or the time surface), which
+    then compensate the camera's rotation (paper eq. 7); otherwise eq. 8 exactly.
     """
+    if estimator not in ESTIMATORS:
+        raise NetworkError(f"estimator: expected one of {', '.join(ESTIMATORS)}, got {estimator!r}")
     size = sensor_size or (recording.sensor_size if recording is not None else None) or (240, 180)
     source = rotation_source_of(recording) if rotation else None
-    return depth_network(size, rotation=None if source is None else {"source": source})
+    return ESTIMATORS[estimator](size, rotation=None if source is None else {"source": source})
 
 
 def rotation_summary(network: Network) -> str | None:
@@ -64,16 +72,22 @@ def _rotation_source_text(process: AngularVelocityProcess) -> str:
 
 
 def load_network(spec: str | Path | None = None, *, sensor_size: tuple[int, int] | None = None,
-                 recording: Recording | None = None, rotation: bool = True):
+                 recording: Recording | None = None, rotation: bool = True, estimator: str | None = None):
     """The network of a YAML spec (or the default network) and the spec's compile/backend settings.
 
     Returns ``(network, compile_options, backend_name_or_None, backend_options)``.
     ``sensor_size`` overrides the spec's (or the default's). Without a spec the network is
     ``default_network(recording, rotation=rotation)``; a spec decides for itself whether
     its depth neurons compensate rotation (``rotation=False`` refuses one that does).
+    ``estimator`` picks the built-in network (``ESTIMATORS``; None: the paper's); a spec names
+    its own processes, so the two do not go together.
     """
     if spec is None:
-        return default_network(recording, sensor_size=sensor_size, rotation=rotation), {}, None, {}
+        return default_network(recording, sensor_size=sensor_size, rotation=rotation,
+                               estimator=estimator or DEFAULT_ESTIMATOR), {}, None, {}
+    if estimator is not None:
+        raise NetworkError(f"{spec}: --estimator picks a built-in network, and a spec names its own processes; "
+                           "give one or the other")
     from tofnet.io.spec import load_spec
     loaded = load_spec(spec)
     network = loaded.network
@@ -92,9 +106,9 @@ def resize(network: Network, sensor_size: tuple[int, int]) -> None:
     network.validate()
 
 
-#: Command-line overrides: option name -> (process type, parameter).
+#: Command-line overrides: option name -> (process type(s), parameter).
 OVERRIDES = {
-    "timestep": (InputProcess, "timestep"),
+    "timestep": ((InputProcess, TimeSurfaceProcess), "timestep"),
     "refractory": (InputProcess, "refractory"),
     "distance": (TimeOfTravelProcess, "distance"),
     "counter_bits": (TimeOfTravelProcess, "counter_bits"),
@@ -110,25 +124,28 @@ def apply_overrides(network: Network, **values: Any) -> None:
             continue
         if option not in OVERRIDES:
             raise NetworkError(f"unknown override {option!r}; expected one of {', '.join(OVERRIDES)}")
-        cls, param = OVERRIDES[option]
-        targets = network.of_type(cls)
+        classes, param = OVERRIDES[option]
+        classes = classes if isinstance(classes, tuple) else (classes,)
+        targets = [p for cls in classes for p in network.of_type(cls)]
         if not targets:
-            raise NetworkError(f"--{option.replace('_', '-')}: the network has no {cls.__name__}")
+            raise NetworkError(f"--{option.replace('_', '-')}: the network has no "
+                               f"{' or '.join(cls.__name__ for cls in classes)}")
         for process in targets:
             process.set_param(param, value)
     network.validate()
 
 
 def run(recording: Recording, network: Network | None = None, *, backend: str = DEFAULT_BACKEND,
+        estimator: str = DEFAULT_ESTIMATOR,
         backend_options: dict | None = None, compile_options: dict | None = None, record_tot: bool = False,
         probes: tuple[str, ...] | list[str] = (), monitors: list | tuple = (),
         progress: ProgressCallback | None = None) -> tuple[RunResult, Any]:
     """Compile ``network`` and run it on ``recording``.
 
-    The default network is ``default_network(recording)``: the paper's, sized to the
-    recording, compensating the camera's rotation when the recording has rotation
-    information. ``probes`` names output ports (``"process.port"``) to return besides the
-    sinks. ``monitors`` (``tofnet.Monitor`` or ``"process.var@x,y"`` strings) are recorded
+    The default network is ``default_network(recording, estimator=estimator)``: the paper's
+    (or, with ``estimator="improved"``, the time-surface estimator), sized to the recording,
+    compensating the camera's rotation when the recording has rotation information.
+    ``probes`` names output ports (``"process.port"``) to return besides the sinks. ``monitors`` (``tofnet.Monitor`` or ``"process.var@x,y"`` strings) are recorded
     while it runs, through a ``Session`` (model by model); ``result.extra["monitors"]``
     holds them. Returns ``(result, compiled)``.
     """
@@ -136,7 +153,7 @@ def run(recording: Recording, network: Network | None = None, *, backend: str = 
     from tofnet.compiler import compile_network
 
     if network is None:
-        network = default_network(recording)
+        network = default_network(recording, estimator=estimator)
     compiled = compile_network(network, **(compile_options or {}))
     if monitors:
         from tofnet.session import Session
