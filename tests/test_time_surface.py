@@ -1,5 +1,7 @@
 """The time-surface estimator (tofnet.kernels.time_surface*) on synthetic edges with known depth."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -205,6 +207,24 @@ def test_the_hold_follows_the_measured_time_per_pixel():
     fitted = (estimator._hold[:, 1] > 0) & (np.arange(SENSOR[0] * SENSOR[1]) % SENSOR[0] >= 10)
     assert fitted.sum() > 100
     np.testing.assert_allclose(estimator._hold[fitted, 1], 20_001, atol=2)
+
+
+def test_only_a_fit_close_to_its_points_sets_the_hold():
+    """In noise a fit is far off its points: it measured no crossing time, so the hold stays as it was."""
+    rng = np.random.default_rng(5)
+    n = 200_000  # 260 events per pixel and second
+    noise = make_events(np.sort(rng.integers(0, 1_000_000, n)), rng.integers(0, SENSOR[0], n),
+                        rng.integers(0, SENSOR[1], n), rng.integers(0, 2, n))
+    first = {}
+    for rms in (1.0, math.inf):
+        _, _, estimator = run(noise, (-0.5, 0.0, 0.0), hold_fit_rms_px=rms)
+        first[rms] = estimator.first_events
+        assert estimator.counts["bad_fit"] > 1000
+    # noise fits' holds are short (a flat surface): they let most noise events through as first events
+    assert first[1.0] < 0.5 * first[math.inf]
+    events, velocity = edge_events((1, 0), speed=50.0, depth=2.0, burst=3, burst_gap_us=4000)
+    _, _, clean = run(events, velocity, hold_px=1.0, refractory_depth=0.0, hold_fit_rms_px=0.0)
+    assert (clean._hold > 0).sum() > 100  # exact fits (rms 0) of an ideal edge still set it
 
 
 def test_points_from_before_a_turn_are_not_used():

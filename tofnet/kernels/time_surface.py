@@ -6,8 +6,9 @@ defaults in docs/time_surface.md. Per pixel and polarity the state holds the tim
 the last *first event* of an edge: the surface ``T(u, v)``. Per event:
 
 1. first-event rule: an event of a pixel and polarity whose last first event is more recent
-   than its hold (``hold_px`` times the time per pixel the last fit there measured, else the
-   refractory period) is part of the same edge's burst: dropped;
+   than its hold (``hold_px`` times the time per pixel the last fit there measured, if that
+   fit was within ``hold_fit_rms_px`` of its points, else the refractory period) is part of
+   the same edge's burst: dropped;
 2. gather the first events of the same polarity within ``radius`` pixels that the edge has
    already crossed (at most ``ahead_px`` along the image motion ``A t``), no older than the
    window nor than the camera's last turn;
@@ -47,7 +48,7 @@ REJECT_SLOTS = tuple(range(NO_MOTION, EMITTED))  # a first event whose estimate 
  I_REFRACTORY, I_WINDOW, I_CONSISTENCY_WINDOW, I_MAX_HOLD, I_RECORD_REJECTED, I_MODEL, I_PER_PIXEL, N_IP) = range(17)
 (F_FX, F_FY, F_CX, F_CY, F_OUTLIER, F_MAX_RMS, F_MIN_SPREAD, F_MIN_DEPTH, F_MAX_DEPTH, F_MIN_DENOMINATOR,
  F_WINDOW_DEPTH, F_REFRACTORY_DEPTH, F_CONSISTENCY, F_HOLD_PX, F_AHEAD_PX, F_TURN, F_TRIM_PX,
- F_RFX, F_RFY, F_RCX, F_RCY, N_FP) = range(22)  # F_R*: the intrinsics B ω is evaluated with
+ F_RFX, F_RFY, F_RCX, F_RCY, F_HOLD_RMS, N_FP) = range(23)  # F_R*: the intrinsics B ω is evaluated with
 # Motion state: the velocity the current epoch started with, its start (µs), the last update seen.
 M_VX, M_VY, M_VZ, M_SINCE, M_UPDATE, N_MOTION = range(6)
 # Fit models (``I_MODEL``): a plane, or lines along the motion with a shared slope.
@@ -85,7 +86,8 @@ def _velocity_term_at(x, y, pixel, per_pixel, sample_of, points, velocity, j, fx
 
 
 @njit(cache=True)
-def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, motion, sample_of, points, velocity, first_update, ps_, pw, pt, pg, lines, used, counts, out, quality, n_out, index0, t_hi):
+def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, motion, sample_of, points, velocity, first_update,
+            ps_, pw, pt, pg, lines, used, counts, out, quality, n_out, index0, t_hi):
     """Run time-ordered events through the estimator; returns ``(n_out, status, t_hi)``.
 
     ``surface[p, (y + r) * (w + 2r) + x + r]`` is the last first event (µs) of pixel (x, y) and
@@ -94,11 +96,11 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, motion, sample_of, poin
     none yet); ``prev[y * w + x]`` the pixel's last estimate (z, t) for the consistency rule.
     ``A t`` of pixel ``(x, y)`` is taken at the pixel (``I_PER_PIXEL``) or at
     ``points[sample_of[y * w + x]]``, computed only for events that need it (a pixel's first
-    hold, first events). ``velocity[j - first_update]`` is (tx, ty, tz[, wx, wy, wz]) of update j. ``ps_``, ``pw``, ``pt``, ``pg``, ``lines``, ``used`` are the
-    fits' scratch. Estimates go to ``out[n_out:]`` (``DEPTH_DTYPE``) and ``quality[n_out:]``.
-    ``t_hi`` is the latest time seen before; an earlier event stops the call with
-    ``UNSORTED`` before it changes any state (``n_out`` and ``counts`` cover the events
-    before it).
+    hold, first events). ``velocity[j - first_update]`` is (tx, ty, tz[, wx, wy, wz]) of update j.
+    ``ps_``, ``pw``, ``pt``, ``pg``, ``lines``, ``used`` are the fits' scratch. Estimates go to
+    ``out[n_out:]`` (``DEPTH_DTYPE``) and ``quality[n_out:]``. ``t_hi`` is the latest time seen
+    before; an earlier event stops the call with ``UNSORTED`` before it changes any state
+    (``n_out`` and ``counts`` cover the events before it).
     """
     width, height, radius = ip[I_WIDTH], ip[I_HEIGHT], ip[I_RADIUS]
     t0, dt, latency, update_every = ip[I_T0], ip[I_DT], ip[I_LATENCY], ip[I_UPDATE_EVERY]
@@ -111,6 +113,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, motion, sample_of, poin
     min_depth, max_depth, min_denominator = fp[F_MIN_DEPTH], fp[F_MAX_DEPTH], fp[F_MIN_DENOMINATOR]
     window_depth, refractory_depth, consistency = fp[F_WINDOW_DEPTH], fp[F_REFRACTORY_DEPTH], fp[F_CONSISTENCY]
     hold_px, ahead_px, turn, trim_px = fp[F_HOLD_PX], fp[F_AHEAD_PX], fp[F_TURN], fp[F_TRIM_PX]
+    hold_rms = fp[F_HOLD_RMS]
     rotation = velocity.shape[1] >= 6
     row = width + 2 * radius
     middle = (lines.shape[0] - 1) // 2
@@ -227,11 +230,12 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, motion, sample_of, poin
                                                                 iterations)
         slot = TOO_FEW_POINTS if fit == FIT_TOO_FEW else ILL_CONDITIONED if fit == FIT_ILL_CONDITIONED else EMITTED
         a, b = tau_s * fu - tau_w * fv, tau_s * fv + tau_w * fu  # ∇T at the event, µs/px along u and v
-        if slot == EMITTED:
-            if hold_px > 0.0:  # this edge's burst lasts about its ramp's width: hold_px pixels
-                hold[pixel, polarity] = min(max_hold, np.int64(hold_px * math.sqrt(a * a + b * b)) + 1)
-            if rms > max_rms:
-                slot = BAD_FIT
+        if slot == EMITTED and hold_px > 0.0 and rms <= hold_rms:
+            # this edge's burst lasts about its ramp's width: hold_px pixels (a fit far off the
+            # points, e.g. in noise, measured no crossing time: it leaves the hold as it was)
+            hold[pixel, polarity] = min(max_hold, np.int64(hold_px * math.sqrt(a * a + b * b)) + 1)
+        if slot == EMITTED and rms > max_rms:
+            slot = BAD_FIT
         z = 0.0
         gx, gy = a * 1e-6, b * 1e-6  # s/px
         if slot == EMITTED:

@@ -55,8 +55,9 @@ class TimeSurfaceConfig:
     - ``trim_px`` px (plane only): drop the points the plane puts within that distance of
       the window's ends and refit (``0``: off).
     - First events: ``hold_px`` times the time per pixel the last fit at a pixel measured is
-      its hold; before a fit, the larger of ``refractory`` and the time a surface at
-      ``refractory_depth`` takes per pixel; never above ``max_hold``.
+      its hold (a fit whose rms distance exceeds ``hold_fit_rms_px`` px measured nothing and
+      leaves the hold as it was); before a fit, the larger of ``refractory`` and the time a
+      surface at ``refractory_depth`` takes per pixel; never above ``max_hold``.
     - ``consistency`` (fraction, 0 = off): emit only when the pixel's previous estimate, at
       most ``consistency_window`` s older, agrees within this relative difference.
     - ``min_depth``, ``max_depth`` m: kept when strictly between. ``min_denominator``: with
@@ -82,6 +83,7 @@ class TimeSurfaceConfig:
     refractory: float = 0.0
     refractory_depth: float = 10.0
     hold_px: float = 3.0
+    hold_fit_rms_px: float = 1.0
     max_hold: float = 1.0
     ahead_px: float = -0.5
     turn: float = 0.2
@@ -111,7 +113,7 @@ class TimeSurfaceConfig:
                 problems.append(f"{name}: expected an integer >= 0, got {getattr(self, name)!r}")
         for name in ("window", "window_depth", "outlier_px", "max_rms_px", "min_spread", "refractory",
                      "refractory_depth", "consistency", "consistency_window", "min_depth", "hold_px",
-                     "max_hold"):
+                     "max_hold", "hold_fit_rms_px"):
             if not float(getattr(self, name)) >= 0:
                 problems.append(f"{name}: expected a number >= 0, got {getattr(self, name)!r}")
         if not self.timestep > 0:
@@ -156,10 +158,11 @@ class TimeSurfaceEstimator:
         self._fp = np.zeros(ts.N_FP, np.float64)
         self._fp[[ts.F_FX, ts.F_FY, ts.F_CX, ts.F_CY, ts.F_OUTLIER, ts.F_MAX_RMS, ts.F_MIN_SPREAD, ts.F_MIN_DEPTH,
                   ts.F_MAX_DEPTH, ts.F_MIN_DENOMINATOR, ts.F_WINDOW_DEPTH, ts.F_REFRACTORY_DEPTH, ts.F_CONSISTENCY,
-                  ts.F_HOLD_PX, ts.F_AHEAD_PX, ts.F_TURN, ts.F_TRIM_PX, ts.F_RFX, ts.F_RFY, ts.F_RCX, ts.F_RCY]] = (
+                  ts.F_HOLD_PX, ts.F_AHEAD_PX, ts.F_TURN, ts.F_TRIM_PX, ts.F_RFX, ts.F_RFY, ts.F_RCX, ts.F_RCY,
+                  ts.F_HOLD_RMS]] = (
             *c.intrinsics, c.outlier_px, c.max_rms_px, c.min_spread, c.min_depth, c.max_depth, c.min_denominator,
             c.window_depth, c.refractory_depth, c.consistency, c.hold_px, c.ahead_px, c.turn, c.trim_px,
-            *(c.intrinsics if c.rotation_intrinsics is None else c.rotation_intrinsics))
+            *(c.intrinsics if c.rotation_intrinsics is None else c.rotation_intrinsics), c.hold_fit_rms_px)
         r, pixels = int(c.radius), width * height
         self._surface = np.full((2, (height + 2 * r) * (width + 2 * r)), ts.NEVER, np.int64)
         self._hold = np.zeros((pixels, 2), np.int32)
