@@ -230,3 +230,21 @@ def test_run_and_compile_from_the_command_line(tmp_path, capsys):
     assert main(["run", str(tmp_path / "rec"), "--spec", "examples/improved.yaml", "--estimator", "paper",
                  "--out", str(out), "--quiet"]) != 0
     assert "give one or the other" in capsys.readouterr().err
+
+
+def test_at_most_one_estimate_per_pixel_and_step_the_first():
+    """ON and OFF edges 0.2 ms apart: the second estimate of a pixel in a step is counted same_step."""
+    on = moving_pattern(SENSOR, FLOW, 120_000, seed=9, sample_us=50, start_us=1_000)
+    off = on.copy()
+    off["p"] = 1 - off["p"]
+    off["t"] += 200  # the same edges, 0.2 ms later, the other polarity: the same pixels in the same steps
+    events = merge_events(on, off)
+    result, _ = run(Recording(events, intrinsics=TEST_INTRINSICS, sensor_size=SENSOR), network(), backend="fixed")
+    key = result.depth[["step", "x", "y"]]
+    assert len(np.unique(key)) == len(key) > 300
+    counts = result.counts["time_surface"]
+    assert counts["same_step"] > 300 and counts["emitted"] == len(result.depth)
+    rejected = sum(counts[r] for r in ts.COUNT_NAMES[ts.NO_MOTION:ts.EMITTED])
+    assert counts["accepted"] == rejected + counts["emitted"]
+    from_on = np.isin(result.outputs["time_surface.quality"]["t_event"], on["t"])
+    assert from_on.mean() > 0.8  # the ON edge comes first; OFF only where its estimate was rejected

@@ -37,9 +37,9 @@ NEVER = -(1 << 62)  # "no first event yet" (µs)
 
 #: Count slots: where each event ended. Drops of events, rejections of estimates, emitted.
 (OUT_OF_BOUNDS, BEFORE_T0, BURST, NO_MOTION, TOO_FEW_POINTS, ILL_CONDITIONED, BAD_FIT, ROTATION_DOMINATED,
- TOO_NEAR, TOO_FAR, INCONSISTENT, EMITTED, N_COUNTS) = range(13)
+ TOO_NEAR, TOO_FAR, INCONSISTENT, SAME_STEP, EMITTED, N_COUNTS) = range(14)
 COUNT_NAMES = ("out_of_bounds", "before_t0", "burst", "no_motion", "too_few_points", "ill_conditioned",
-               "bad_fit", "rotation_dominated", "too_near", "too_far", "inconsistent", "emitted")
+               "bad_fit", "rotation_dominated", "too_near", "too_far", "inconsistent", "same_step", "emitted")
 DROP_SLOTS = (OUT_OF_BOUNDS, BEFORE_T0, BURST)  # not the first event of an edge
 REJECT_SLOTS = tuple(range(NO_MOTION, EMITTED))  # a first event whose estimate was rejected
 
@@ -86,14 +86,15 @@ def _velocity_term_at(x, y, pixel, per_pixel, sample_of, points, velocity, j, fx
 
 
 @njit(cache=True)
-def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, motion, sample_of, points, velocity, first_update,
+def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, sample_of, points, velocity, first_update,
             ps_, pw, pt, pg, lines, used, counts, out, quality, n_out, index0, t_hi):
     """Run time-ordered events through the estimator; returns ``(n_out, status, t_hi)``.
 
     ``surface[p, (y + r) * (w + 2r) + x + r]`` is the last first event (µs) of pixel (x, y) and
     polarity p (one plane per polarity, so a fit reads one cache line per row; a border of
     ``r = radius`` pixels stays ``NEVER``); ``hold[y * w + x, p]`` its measured hold (µs, 0 =
-    none yet); ``prev[y * w + x]`` the pixel's last estimate (z, t) for the consistency rule.
+    none yet); ``prev[y * w + x]`` the pixel's last estimate (z, t) for the consistency rule;
+    ``last_step[y * w + x]`` the output step of its last estimate (at most one per pixel and step).
     ``A t`` of pixel ``(x, y)`` is taken at the pixel (``I_PER_PIXEL``) or at
     ``points[sample_of[y * w + x]]``, computed only for events that need it (a pixel's first
     hold, first events). ``velocity[j - first_update]`` is (tx, ty, tz[, wx, wy, wz]) of update j.
@@ -258,6 +259,11 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, motion, sample_of, poin
             prev[pixel, 0], prev[pixel, 1] = z, t
             if t - when > consistency_us or abs(z - before) > consistency * before:
                 slot = INCONSISTENT
+        if slot == EMITTED:  # one estimate per pixel and step, as a depth neuron: the first
+            if last_step[pixel] == step:
+                slot = SAME_STEP
+            else:
+                last_step[pixel] = step
         counts[slot] += 1
         if slot != EMITTED:
             if not record_rejected:

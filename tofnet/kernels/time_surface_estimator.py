@@ -167,6 +167,7 @@ class TimeSurfaceEstimator:
         self._surface = np.full((2, (height + 2 * r) * (width + 2 * r)), ts.NEVER, np.int64)
         self._hold = np.zeros((pixels, 2), np.int32)
         self._prev = np.zeros((pixels if c.consistency > 0 else 1, 2), np.float64)
+        self._last_step = np.full(pixels, ts.NEVER, np.int64)
         self._motion = np.zeros(ts.N_MOTION)
         self._motion[ts.M_UPDATE] = -1
         self._sample_of, self._points = sample_tables(c.per_pixel, c.patch_size, width, height)
@@ -236,7 +237,7 @@ class TimeSurfaceEstimator:
             table, first = self._table(velocity, int(t[lo]), int(t[hi - 1]))
             n_out, status, self._t_hi = ts.process(
                 t[lo:hi], x[lo:hi], y[lo:hi], p[lo:hi], self._ip, self._fp, self._surface, self._hold,
-                self._prev, self._motion, self._sample_of, self._points, table,
+                self._prev, self._last_step, self._motion, self._sample_of, self._points, table,
                 first, *self._scratch, self._counts, depth, quality, n_out, self.events_in + lo, self._t_hi)
             if status == ts.UNSORTED:
                 done = lo + int(np.argmax(t[lo:hi] < self._t_hi))
