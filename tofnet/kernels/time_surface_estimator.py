@@ -219,17 +219,18 @@ class TimeSurfaceEstimator:
         ``events`` must continue the previous packets in time order (a ``BackendError``
         otherwise, with the state of the events before the offending one kept).
         """
-        n = len(events)
+        return self.feed_columns(*event_columns(events), velocity, record_rejected=record_rejected)
+
+    def feed_columns(self, t: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray, velocity: VelocityRows, *,
+                     record_rejected: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """``feed`` for events given as contiguous columns (``event_columns``): t µs int64, x, y uint16, p uint8."""
+        n = len(t)
         depth, quality = np.empty(n, DEPTH_DTYPE), np.empty(n, QUALITY_DTYPE)
         if n == 0:
             return depth, quality
         if self._t0 is None:
-            self._t0 = int(events["t"][0])
+            self._t0 = int(t[0])
             self._ip[ts.I_T0] = self._t0
-        t = np.ascontiguousarray(events["t"], dtype=np.int64)
-        x = np.ascontiguousarray(events["x"])
-        y = np.ascontiguousarray(events["y"])
-        p = np.ascontiguousarray(events["p"])
         self._ip[ts.I_RECORD_REJECTED] = record_rejected
         n_out, lo = 0, 0
         while lo < n:
@@ -265,6 +266,12 @@ class TimeSurfaceEstimator:
         if table.ndim != 2 or table.shape[1] not in (3, 6):
             raise BackendError(f"time surface: velocity rows must have 3 or 6 columns, got shape {table.shape}")
         return table, int(table_first)
+
+
+def event_columns(events: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The columns ``t`` (µs, int64), ``x``, ``y``, ``p`` of ``EVENT_DTYPE`` events as contiguous arrays (copies)."""
+    return (np.ascontiguousarray(events["t"], dtype=np.int64), np.ascontiguousarray(events["x"]),
+            np.ascontiguousarray(events["y"]), np.ascontiguousarray(events["p"]))
 
 
 def sample_tables(per_pixel: bool, patch_size: int, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:

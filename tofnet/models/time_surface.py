@@ -14,8 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from tofnet.core.ports import Payload
-from tofnet.events import EVENT_DTYPE
-from tofnet.kernels.time_surface_estimator import TimeSurfaceConfig, TimeSurfaceEstimator
+from tofnet.kernels.time_surface_estimator import TimeSurfaceConfig, TimeSurfaceEstimator, event_columns
 from tofnet.models.base import Model, ModelContext, records
 from tofnet.models.input import check_time_order
 from tofnet.processes.time_surface import QUALITY, TimeSurfaceProcess
@@ -80,7 +79,7 @@ class TimeSurfaceModel(Model):
         self.rotating = bool(ctx.inputs.get("b_w"))
         self.velocity = HeldUpdates(("tx", "ty", "tz"))
         self.rotation = HeldUpdates(("wx", "wy", "wz"))
-        self._waiting: list[np.ndarray] = []
+        self._waiting: list[tuple[np.ndarray, ...]] = []  # event columns (t, x, y, p) not run yet
         self._latest_us: int | None = None
         self._depth, self._quality = Payload.DEPTH.dtype, QUALITY.dtype
 
@@ -93,7 +92,7 @@ class TimeSurfaceModel(Model):
         if len(events) == 0:
             return
         check_time_order(events, self._latest_us, self.process.name)
-        self._waiting.append(np.array(events, copy=True))
+        self._waiting.append(event_columns(events))  # copies: the caller may reuse its buffer
         self._latest_us = int(events["t"][-1])
 
     def complete_until(self) -> int | None:
@@ -101,14 +100,19 @@ class TimeSurfaceModel(Model):
             return None
         return (self._latest_us - self.ctx.t0_us) // self.ctx.timestep_us
 
-    def _take_events(self, before_us: int) -> np.ndarray:
-        """The waiting events earlier than ``before_us`` µs (removed from the queue)."""
-        if not self._waiting:
-            return np.empty(0, EVENT_DTYPE)
-        waiting = self._waiting[0] if len(self._waiting) == 1 else np.concatenate(self._waiting)
-        cut = int(np.searchsorted(waiting["t"], before_us, side="left"))
-        self._waiting = [waiting[cut:]] if cut < len(waiting) else []
-        return waiting[:cut]
+    def _take_events(self, before_us: int) -> list[tuple[np.ndarray, ...]]:
+        """The waiting events earlier than ``before_us`` µs, as column pieces (removed from the queue)."""
+        taken = []
+        while self._waiting:
+            columns = self._waiting[0]
+            cut = int(np.searchsorted(columns[0], before_us, side="left"))
+            if cut:
+                taken.append(tuple(c[:cut] for c in columns))
+            if cut < len(columns[0]):
+                self._waiting[0] = tuple(c[cut:] for c in columns)
+                break
+            self._waiting.pop(0)
+        return taken
 
     # -- running ------------------------------------------------------------------------------
     def _rows(self, first_update: int, count: int) -> tuple[np.ndarray, int]:
@@ -125,15 +129,19 @@ class TimeSurfaceModel(Model):
         if self.rotating:
             self.rotation.add(inputs["b_w"])
         # The events answered in steps [first, end): input steps before end - LATENCY_STEPS.
-        events = self._take_events(self.ctx.t0_us + (end - LATENCY_STEPS) * self.ctx.timestep_us)
-        if len(events):
-            depth, quality = self.estimator.feed(events, self._rows)
-        else:
-            depth, quality = np.empty(0, self._depth), None
+        pieces = self._take_events(self.ctx.t0_us + (end - LATENCY_STEPS) * self.ctx.timestep_us)
+        answers = [self.estimator.feed_columns(*columns, self._rows) for columns in pieces]
         self.velocity.forget_before(end - 1)
         self.rotation.forget_before(end - 1)
-        if quality is None or not len(depth):
+        if not answers:
             return {"depth": np.empty(0, self._depth), "quality": np.empty(0, self._quality)}
+        depth = np.concatenate([d for d, _ in answers])
+        quality = np.concatenate([q for _, q in answers])
+        # The canonical order (step, y, x; events in time order within a pixel's step), sorted once for both.
+        width, height = self.ctx.sensor_size
+        key = (depth["step"] * height + depth["y"]) * width + depth["x"]
+        order = np.argsort(key, kind="stable")
+        depth, quality = depth[order], quality[order]
         fit = records(self._quality, step=depth["step"], x=depth["x"], y=depth["y"], t_event=quality["t_event"],
                       points=quality["points"], rms_px=quality["rms_px"], gx=quality["gx"], gy=quality["gy"])
         return {"depth": depth, "quality": fit}
