@@ -248,3 +248,16 @@ def test_at_most_one_estimate_per_pixel_and_step_the_first():
     assert counts["accepted"] == rejected + counts["emitted"]
     from_on = np.isin(result.outputs["time_surface.quality"]["t_event"], on["t"])
     assert from_on.mean() > 0.8  # the ON edge comes first; OFF only where its estimate was rejected
+
+
+def test_the_conformance_cases_exercise_what_they_are_named_for():
+    from tofnet.backends.reference import ReferenceBackend
+    from tofnet.conformance.cases import get_case
+
+    for name in ("time-surface-texture", "time-surface-rotation"):  # both textures lie at 1 m
+        scene = get_case(name).build()
+        result = ReferenceBackend().run(scene.network, scene.recording)
+        counts = result.counts["time_surface"]
+        assert len(result.depth) > 500 and abs(np.median(result.depth["z"]) - 1.0) < 0.03, name
+        assert counts["burst"] > 500 and counts["bad_fit"] > 300 and counts["too_few_points"] > 300, name
+    assert counts["rotation_dominated"] > 0 and "angular_velocity" in result.counts  # eq. 7 in the second
