@@ -1,5 +1,7 @@
 """The time-surface process in the open graph: equal to the estimator, on every backend, in sessions and streams."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -207,7 +209,7 @@ def test_a_bad_parameter_is_one_line_naming_it():
         stream.feed(EVENTS[:50])
 
 
-def test_run_and_compile_from_the_command_line(tmp_path, capsys):
+def test_run_eval_and_compile_from_the_command_line(tmp_path, capsys):
     from tofnet.cli import main
     from tofnet.io import read_depth
     from tofnet.io.ecd import write_ecd
@@ -215,7 +217,8 @@ def test_run_and_compile_from_the_command_line(tmp_path, capsys):
     times = np.linspace(0, 0.25, 26)
     positions = np.outer(times, VELOCITY)
     write_ecd(tmp_path / "rec", EVENTS, intrinsics=TEST_INTRINSICS, times=times, positions=positions,
-              quaternions=np.tile([0.0, 0.0, 0.0, 1.0], (len(times), 1)), sensor_size=SENSOR)
+              quaternions=np.tile([0.0, 0.0, 0.0, 1.0], (len(times), 1)), sensor_size=SENSOR,
+              gt_depth=np.ones(len(EVENTS)))  # the texture lies at 1 m
     out = tmp_path / "depth.npz"
     assert main(["run", str(tmp_path / "rec"), "--estimator", "improved", "--out", str(out), "--quiet"]) == 0
     printed = capsys.readouterr().out
@@ -225,6 +228,9 @@ def test_run_and_compile_from_the_command_line(tmp_path, capsys):
     for line in ("first events", "dropped", "burst", "too few points", "bad fit", "time_surface.quality"):
         assert line in printed, line
     assert "tot spikes" not in printed
+    assert main(["eval", str(tmp_path / "rec"), str(out), "--json", str(tmp_path / "eval.json")]) == 0
+    scores = json.loads((tmp_path / "eval.json").read_text())
+    assert scores["unmatched"] == 0 and scores["matched"] == len(depth) and scores["median_rel_pct"] < 5
     assert main(["compile", "--estimator", "improved"]) == 0
     assert "host      velocity (VelocityProcess), time_surface (TimeSurfaceProcess)" in capsys.readouterr().out
     assert main(["run", str(tmp_path / "rec"), "--spec", "examples/improved.yaml", "--estimator", "paper",
