@@ -186,6 +186,13 @@ def test_the_improved_network_and_the_estimator_option():
     assert net.process("velocity").per == "pixel" and net.sensor_size == SENSOR
     with pytest.raises(NetworkError, match="estimator"):
         default_network(RECORDING, estimator="best")
+    from tofnet.testing import turning_trajectory
+    turning = Recording(EVENTS, intrinsics=TEST_INTRINSICS, sensor_size=SENSOR,
+                        trajectory=turning_trajectory((-0.3, 0.0, 0.0), (0.0, 0.2, 0.0), 0.3))
+    compensated = default_network(turning, estimator="improved")  # as the paper's default network does
+    assert [t.process.name for t in compensated.process("angular_velocity").b_w.targets] == ["time_surface"]
+    assert "angular_velocity" not in [p.name for p in default_network(turning, estimator="improved",
+                                                                      rotation=False).processes]
     with pytest.raises(NetworkError, match="spec names its own"):
         load_network("examples/improved.yaml", estimator="improved")
     spec_net, _, _, _ = load_network("examples/improved.yaml")
