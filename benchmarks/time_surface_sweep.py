@@ -53,6 +53,8 @@ FACTORS = {
 
 
 def parse_value(text: str):
+    if text in ("inf", "-inf"):
+        return float(text)
     try:
         return ast.literal_eval(text)
     except (ValueError, SyntaxError):

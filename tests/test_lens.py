@@ -95,3 +95,14 @@ def test_the_velocity_process_checks_its_lens():
         VelocityProcess(name="v", distortion=[0.1, 0.2, 0.3, 0.4])
     with pytest.raises(NetworkError, match="distortion_model: equidistant needs distortion"):
         VelocityProcess(name="v", distortion_model="equidistant")
+
+
+def test_the_time_surface_takes_the_lens_too():
+    from tofnet.networks import improved_network
+    recording = texture(Intrinsics(*CAMERA, DAVIS))
+    velocity = {"source": "constant", "velocity": [-0.4, 0.15, 0.2]}
+    lens = get_backend("fixed").run(improved_network(SENSOR, velocity=velocity), recording).depth
+    pinhole = get_backend("fixed").run(improved_network(SENSOR, velocity={**velocity, "distortion_model": "none"}),
+                                       recording).depth
+    assert len(lens) > 100 and len(pinhole) > 100
+    assert lens.tobytes() != pinhole.tobytes()  # the fits use the motion direction and depth J A(p') t

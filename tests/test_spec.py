@@ -14,7 +14,7 @@ from tofnet.errors import SpecError
 from tofnet.io.spec import (default_spec_path, dump_spec, load_budget, load_spec, network_from_dict,
                             network_to_dict, networks_equal, spec_from_dict, spec_to_dict)
 from tofnet.processes import (AngularVelocityProcess, BackgroundActivityFilterProcess, DepthProcess, InputProcess,
-                              TimeOfTravelProcess, UndistortProcess, VelocityProcess)
+                              TimeOfTravelProcess, TimeSurfaceProcess, UndistortProcess, VelocityProcess)
 
 PAPER = """\
 name: paper
@@ -64,13 +64,21 @@ def every_parameter_changed() -> Network:
                                  rotation_cam_imu=[0.0, 0.0, 0.7071067811865476, 0.7071067811865476],
                                  time_shift="-2.5ms", bias=[0.001, 0.002, -0.003], update_every=3,
                                  intrinsics=[200.0, 201.5, 31.5, 23.5])
+    surf = TimeSurfaceProcess(name="ts", sensor_size=(64, 48), timestep="250us", t0=1.5, model="plane", radius=2,
+                              ahead_px=0.5, window="30ms", window_depth=4.0, turn=0.3, min_points=6, min_spread=0.4,
+                              outlier_px=0.3, iterations=2, max_rms_px=0.2, trim_px=0.5, hold_px=2.0,
+                              hold_fit_rms_px=0.8, refractory_depth="8m", refractory="1ms", max_hold=0.5,
+                              consistency=0.2, consistency_window="100ms", min_depth="10cm", max_depth=15.0,
+                              min_denominator=0.2)
     inp.events.connect(baf.events)
     baf.passed.connect(lens.events)
     lens.undistorted.connect(tot.events)
     tot.counts.connect(dep.counts)
     vel.a_t.connect(dep.a_t)
     rot.b_w.connect(dep.b_w)
-    return Network([inp, baf, lens, tot, dep, vel, rot], name="everything")
+    vel.a_t.connect(surf.a_t)
+    rot.b_w.connect(surf.b_w)
+    return Network([inp, baf, lens, tot, dep, vel, rot, surf], name="everything")
 
 
 def test_every_process_type_and_parameter_round_trips():

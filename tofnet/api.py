@@ -9,11 +9,15 @@ from tofnet.backends.base import ProgressCallback, RunResult
 from tofnet.core.network import Network
 from tofnet.errors import NetworkError
 from tofnet.io.recording import Recording
-from tofnet.networks import depth_network
-from tofnet.processes import (AngularVelocityProcess, InputProcess, TimeOfTravelProcess, UndistortProcess,
-                              VelocityProcess)
+from tofnet.networks import depth_network, improved_network
+from tofnet.processes import (AngularVelocityProcess, InputProcess, TimeOfTravelProcess, TimeSurfaceProcess,
+                              UndistortProcess, VelocityProcess)
 
 DEFAULT_BACKEND = "fixed"
+#: The built-in estimators: the paper's network (the default) and the time-surface estimator
+#: (``improved``: beyond the paper, docs/time_surface.md).
+ESTIMATORS = {"paper": depth_network, "improved": improved_network}
+DEFAULT_ESTIMATOR = "paper"
 
 
 def rotation_source_of(recording: Recording | None) -> str | None:
@@ -35,18 +39,21 @@ def lens_is_distorted(recording: Recording | None) -> bool:
 
 
 def default_network(recording: Recording | None = None, *, sensor_size: tuple[int, int] | None = None,
-                    rotation: bool = True, undistort: bool = True) -> Network:
-    """The paper's network sized to ``sensor_size``, else the recording's, else 240x180.
+                    rotation: bool = True, estimator: str = DEFAULT_ESTIMATOR, undistort: bool = True) -> Network:
+    """The ``estimator``'s network (``ESTIMATORS``: the paper's by default) sized to ``sensor_size``,
+    else the recording's, else 240x180.
 
     When the recording has rotation information (``rotation_source_of``) and ``rotation`` is
-    True, an angular velocity process feeds the depth neurons, which then compensate the
-    camera's rotation (paper eq. 7); otherwise it is the paper's eq. 8 network exactly.
+    True, an angular velocity process feeds the depth neurons (or the time surface), which
+    then compensate the camera's rotation (paper eq. 7); otherwise eq. 8 exactly.
     The velocity process sees the calibration's lens (``VelocityProcess``: ``A t`` through the
     lens, on raw pixels); ``undistort=False`` makes it ignore the lens (``ignore_lens``).
     """
+    if estimator not in ESTIMATORS:
+        raise NetworkError(f"estimator: expected one of {', '.join(ESTIMATORS)}, got {estimator!r}")
     size = sensor_size or (recording.sensor_size if recording is not None else None) or (240, 180)
     source = rotation_source_of(recording) if rotation else None
-    network = depth_network(size, rotation=None if source is None else {"source": source})
+    network = ESTIMATORS[estimator](size, rotation=None if source is None else {"source": source})
     if not undistort:
         ignore_lens(network)
     return network
@@ -104,7 +111,8 @@ def _rotation_source_text(process: AngularVelocityProcess) -> str:
 
 
 def load_network(spec: str | Path | None = None, *, sensor_size: tuple[int, int] | None = None,
-                 recording: Recording | None = None, rotation: bool = True, undistort: bool = True):
+                 recording: Recording | None = None, rotation: bool = True, estimator: str | None = None,
+                 undistort: bool = True):
     """The network of a YAML spec (or the default network) and the spec's compile/backend settings.
 
     Returns ``(network, compile_options, backend_name_or_None, backend_options)``.
@@ -112,11 +120,16 @@ def load_network(spec: str | Path | None = None, *, sensor_size: tuple[int, int]
     ``default_network(recording, rotation=rotation)``; a spec decides for itself whether
     its depth neurons compensate rotation (``rotation=False`` refuses one that does) and whether
     it moves spikes to undistorted pixels (``undistort=False`` refuses one that does, and makes its
-    velocity processes ignore the lens).
+    velocity processes ignore the lens). ``estimator`` picks the built-in network (``ESTIMATORS``;
+    None: the paper's); a spec names its own processes, so the two do not go together.
     """
     if spec is None:
-        network = default_network(recording, sensor_size=sensor_size, rotation=rotation, undistort=undistort)
+        network = default_network(recording, sensor_size=sensor_size, rotation=rotation,
+                                   estimator=estimator or DEFAULT_ESTIMATOR, undistort=undistort)
         return network, {}, None, {}
+    if estimator is not None:
+        raise NetworkError(f"{spec}: --estimator picks a built-in network, and a spec names its own processes; "
+                           "give one or the other")
     from tofnet.io.spec import load_spec
     loaded = load_spec(spec)
     network = loaded.network
@@ -141,9 +154,9 @@ def resize(network: Network, sensor_size: tuple[int, int]) -> None:
     network.validate()
 
 
-#: Command-line overrides: option name -> (process type, parameter).
+#: Command-line overrides: option name -> (process type(s), parameter).
 OVERRIDES = {
-    "timestep": (InputProcess, "timestep"),
+    "timestep": ((InputProcess, TimeSurfaceProcess), "timestep"),
     "refractory": (InputProcess, "refractory"),
     "distance": (TimeOfTravelProcess, "distance"),
     "counter_bits": (TimeOfTravelProcess, "counter_bits"),
@@ -159,25 +172,28 @@ def apply_overrides(network: Network, **values: Any) -> None:
             continue
         if option not in OVERRIDES:
             raise NetworkError(f"unknown override {option!r}; expected one of {', '.join(OVERRIDES)}")
-        cls, param = OVERRIDES[option]
-        targets = network.of_type(cls)
+        classes, param = OVERRIDES[option]
+        classes = classes if isinstance(classes, tuple) else (classes,)
+        targets = [p for cls in classes for p in network.of_type(cls)]
         if not targets:
-            raise NetworkError(f"--{option.replace('_', '-')}: the network has no {cls.__name__}")
+            raise NetworkError(f"--{option.replace('_', '-')}: the network has no "
+                               f"{' or '.join(cls.__name__ for cls in classes)}")
         for process in targets:
             process.set_param(param, value)
     network.validate()
 
 
 def run(recording: Recording, network: Network | None = None, *, backend: str = DEFAULT_BACKEND,
+        estimator: str = DEFAULT_ESTIMATOR,
         backend_options: dict | None = None, compile_options: dict | None = None, record_tot: bool = False,
         probes: tuple[str, ...] | list[str] = (), monitors: list | tuple = (),
         progress: ProgressCallback | None = None) -> tuple[RunResult, Any]:
     """Compile ``network`` and run it on ``recording``.
 
-    The default network is ``default_network(recording)``: the paper's, sized to the
-    recording, compensating the camera's rotation when the recording has rotation
-    information. ``probes`` names output ports (``"process.port"``) to return besides the
-    sinks. ``monitors`` (``tofnet.Monitor`` or ``"process.var@x,y"`` strings) are recorded
+    The default network is ``default_network(recording, estimator=estimator)``: the paper's
+    (or, with ``estimator="improved"``, the time-surface estimator), sized to the recording,
+    compensating the camera's rotation when the recording has rotation information.
+    ``probes`` names output ports (``"process.port"``) to return besides the sinks. ``monitors`` (``tofnet.Monitor`` or ``"process.var@x,y"`` strings) are recorded
     while it runs, through a ``Session`` (model by model); ``result.extra["monitors"]``
     holds them. Returns ``(result, compiled)``.
     """
@@ -185,7 +201,7 @@ def run(recording: Recording, network: Network | None = None, *, backend: str = 
     from tofnet.compiler import compile_network
 
     if network is None:
-        network = default_network(recording)
+        network = default_network(recording, estimator=estimator)
     compiled = compile_network(network, **(compile_options or {}))
     if monitors:
         from tofnet.session import Session

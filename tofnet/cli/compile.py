@@ -15,7 +15,10 @@ def register(subparsers) -> None:
         description="Partition every core-placed process of a YAML network spec into patches, one per "
                     "neuromorphic core, check the budget (Loihi 2 by default) and print the mapping: "
                     "cores per layer, resource use per core, chips, and the spike traffic between cores.")
-    p.add_argument("spec", nargs="?", help="YAML network spec (default: the built-in paper spec, 240x180)")
+    p.add_argument("spec", nargs="?", help="YAML network spec (default: the --estimator's network, 240x180)")
+    p.add_argument("--estimator", choices=("paper", "improved"), default=None,
+                   help="built-in network without a spec: paper (the default: the built-in paper spec) or improved "
+                        "(the time-surface estimator: host processes only, no cores)")
     p.add_argument("--budget", metavar="FILE|NAME",
                    help="budget YAML file, or a built-in name (loihi2, oheo-gulch, kapoho-point); "
                         "default: the spec's, else loihi2")
@@ -55,12 +58,19 @@ def handle(args) -> int:
     from tofnet.compiler import compile_network
     from tofnet.compiler.report import format_report
     from tofnet.core.params import parse_size
-    from tofnet.io.spec import default_spec_path, load_budget, load_spec
+    from tofnet.io.spec import Spec, default_spec_path, load_budget, load_spec
 
     if args.json and args.json != "-":
         from tofnet.io.files import check_output
         check_output(args.json, force=args.force, inputs=[args.spec] if args.spec else [], what="--json")
-    spec = load_spec(Path(args.spec) if args.spec else default_spec_path())
+    if args.spec and args.estimator:
+        raise TofnetError(f"{args.spec}: --estimator picks a built-in network, and a spec names its own processes; "
+                          "give one or the other")
+    if args.estimator == "improved":
+        from tofnet.api import default_network
+        spec = Spec(default_network(estimator="improved"), source="--estimator improved")
+    else:
+        spec = load_spec(Path(args.spec) if args.spec else default_spec_path())
     network = spec.network
     if args.sensor_size:
         size = parse_size(args.sensor_size, "--sensor-size")

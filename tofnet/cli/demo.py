@@ -1,4 +1,9 @@
-"""``tofnet demo``: the main job end to end on a built-in scene — simulate, run, evaluate, plot."""
+"""``tofnet demo``: the main job end to end on a built-in scene — simulate, run, evaluate, plot.
+
+The paper's network and the time-surface estimator (beyond the paper, docs/time_surface.md)
+run on the same events; the figures show the paper's network, and ``compare.png`` both side
+by side with their errors.
+"""
 
 from __future__ import annotations
 
@@ -11,10 +16,11 @@ from tofnet.errors import TofnetError
 def register(subparsers) -> None:
     p = subparsers.add_parser("demo", help="simulate a scene, estimate depth, score it and draw figures",
                               description="Runs the whole pipeline on a built-in simulated scene "
-                                          "(no arguments needed) and tells you where the pictures are.")
+                                          "(no arguments needed) and tells you where the pictures are: the "
+                                          "paper's network, and beside it the time-surface estimator.")
     p.add_argument("--out", default="tofnet-demo",
                    help="output folder (default: ./tofnet-demo); the demo replaces its own files there "
-                        "(recording/, depth.npz, eval.json, figures/) on every run")
+                        "(recording/, depth files, eval files, figures/) on every run")
     p.add_argument("--scenario", default="slider", help="built-in scenario (default: slider, the paper's Table 2)")
     p.add_argument("--duration", type=float, default=0.5, help="seconds of camera motion (default: 0.5)")
     p.add_argument("--backend", default=None, help="backend (default: fixed)")
@@ -22,10 +28,14 @@ def register(subparsers) -> None:
     p.set_defaults(handler=handle)
 
 
+#: The estimators the demo runs: label, ``tofnet.api.ESTIMATORS`` name, depth file.
+ESTIMATORS = (("Paper's network", "paper", "depth.npz"), ("Time-surface estimator", "improved", "depth_improved.npz"))
+
+
 def handle(args) -> int:
     from tofnet.api import DEFAULT_BACKEND, run
     from tofnet.eval.metrics import evaluate
-    from tofnet.eval.plots import plot_all
+    from tofnet.eval.plots import comparison_figure, plot_all, save_figure
     from tofnet.io import read_recording
     from tofnet.io.depth import write_depth
     from tofnet.sim.run import simulate
@@ -47,29 +57,35 @@ def handle(args) -> int:
           f"({sim['sim_time_s']:.1f} s)")
 
     recording = read_recording(recording_dir)
-    print(f"[2/4] running the depth network on the '{backend}' backend")
-    result, compiled = run(recording, backend=backend)
-    depth_path = out / "depth.npz"
-    meta = {"t0_us": result.t0_us, "timestep_us": result.timestep_us, "latency_steps": result.latency_steps}
-    write_depth(depth_path, result.depth, **meta, summary=result.summary())
-    dropped = sum(result.dropped.values())
-    print(f"      {result.events_in:,} events in, {dropped:,} dropped by the input filter, "
-          f"{len(result.depth):,} depth estimates -> {depth_path}")
-    print(f"      {compiled.cores_used} neuromorphic cores on {compiled.chips_used} chip(s); "
-          f"latency {result.latency_steps} steps; network time {result.wall_time:.2f} s")
+    print(f"[2/4] running the paper's network and the time-surface estimator on the '{backend}' backend")
+    runs = {}
+    for label, estimator, name in ESTIMATORS:
+        result, compiled = run(recording, backend=backend, estimator=estimator)
+        meta = {"t0_us": result.t0_us, "timestep_us": result.timestep_us, "latency_steps": result.latency_steps}
+        write_depth(out / name, result.depth, **meta, summary=result.summary())
+        runs[label] = (result.depth, meta)
+        where = (f"{compiled.cores_used} neuromorphic cores on {compiled.chips_used} chip(s)" if compiled.cores_used
+                 else "off-chip (host)")
+        print(f"      {label}: {result.events_in:,} events in, {len(result.depth):,} depth estimates -> "
+              f"{out / name}; {where}; latency {result.latency_steps} steps; network time {result.wall_time:.2f} s")
 
     print("[3/4] scoring against the ground truth")
-    evaluation = evaluate(recording, result.depth, meta)
-    print(_indent(evaluation.table()))
-    write_text_atomic(out / "eval.json", evaluation.to_json() + "\n")
+    for (label, (depth, meta)), (_, _, name) in zip(runs.items(), ESTIMATORS):
+        evaluation = evaluate(recording, depth, meta)
+        print(f"      {label}:")
+        print(_indent(evaluation.table(), 8))
+        write_text_atomic(out / name.replace("depth", "eval").replace(".npz", ".json"), evaluation.to_json() + "\n")
 
     print("[4/4] drawing figures")
-    paths = plot_all(recording, result.depth, meta, out / "figures")
+    depth, meta = runs[ESTIMATORS[0][0]]
+    paths = plot_all(recording, depth, meta, out / "figures")
+    paths.append(save_figure(comparison_figure(recording, runs), out / "figures" / "compare.png"))
     for path in paths:
         print(f"      {path}")
-    print(f"done in {time.perf_counter() - started:.1f} s. Open the PNGs in {out / 'figures'} to see the depth maps.")
+    print(f"done in {time.perf_counter() - started:.1f} s. Open the PNGs in {out / 'figures'} to see the depth maps "
+          "(compare.png: both estimators side by side).")
     return 0
 
 
-def _indent(text: str) -> str:
-    return "\n".join("      " + line for line in text.splitlines())
+def _indent(text: str, width: int = 6) -> str:
+    return "\n".join(" " * width + line for line in text.splitlines())

@@ -39,7 +39,10 @@ def register(subparsers) -> None:
 def add_network_options(p: argparse.ArgumentParser) -> None:
     """Options that choose and adjust the network (shared with ``tofnet demo``)."""
     g = p.add_argument_group("network")
-    g.add_argument("--spec", help="YAML network spec (default: the paper's network)")
+    g.add_argument("--spec", help="YAML network spec (default: the --estimator's network)")
+    g.add_argument("--estimator", choices=("paper", "improved"), default=None,
+                   help="built-in network: paper (the default: the paper's network) or improved (the time-surface "
+                        "estimator, beyond the paper: docs/time_surface.md)")
     g.add_argument("--sensor-size", metavar="WxH", help="sensor size in pixels (default: the recording's, else 240x180)")
     g.add_argument("--timestep", help="timestep, e.g. 1ms or 0.001 (seconds)")
     g.add_argument("--refractory", help="refractory period, e.g. 5ms; 0 disables")
@@ -67,7 +70,7 @@ def build_network(args, recording_sensor_size, recording=None):
     network, compile_options, spec_backend, backend_options = load_network(
         Path(args.spec) if args.spec else None, sensor_size=sensor or (None if args.spec else recording_sensor_size),
         recording=recording, rotation=not getattr(args, "no_rotation", False),
-        undistort=not getattr(args, "no_undistort", False))
+        undistort=not getattr(args, "no_undistort", False), estimator=getattr(args, "estimator", None))
     apply_overrides(network, timestep=args.timestep, refractory=args.refractory, distance=args.distance,
                     counter_bits=args.counter_bits, velocity_per=args.velocity_per,
                     update_every=args.update_every)
@@ -240,10 +243,20 @@ def format_summary(summary: dict, result, written: dict, network_width) -> str:
              *([f"undistort      {undistortion_line(summary['undistortion'])}"] if summary.get("undistortion") else []),
              f"events in      {summary['events_in']:>12,}",
              f"  accepted     {summary['accepted']:>12,}"]
-    for reason, count in summary["dropped"].items():
-        lines.append(f"  dropped      {count:>12,}  {reason.replace('_', ' ')}")
     depth_names = result.depth_outputs
-    if len(depth_names) == 1:
+    own = result.counts.get(depth_names[0].split(".")[0], {}) if len(depth_names) == 1 else {}
+    dropped = dict(summary["dropped"])
+    if "burst" in own:  # the time-surface estimator reads the events itself: its first events, drops, rejections
+        lines[-1] = f"  first events {summary['accepted']:>12,}"
+        dropped = {reason: own[reason] for reason in ("out_of_bounds", "before_t0", "burst")}
+    for reason, count in dropped.items():
+        lines.append(f"  dropped      {count:>12,}  {reason.replace('_', ' ')}")
+    if "burst" in own:
+        lines.append(f"depth out      {summary['depth_out']:>12,}  -> {written[depth_names[0]]}")
+        lines += [f"  rejected     {count:>12,}  {reason.replace('_', ' ')}" for reason, count in own.items()
+                  if reason not in ("events_in", "accepted", *dropped, "emitted")
+                  and (count or reason != "rotation_dominated")]
+    elif len(depth_names) == 1:
         lines.append(f"tot spikes     {summary['tot_spikes']:>12,}")
         lines.append(f"depth out      {summary['depth_out']:>12,}  -> {written[depth_names[0]]}")
         rotating = str(summary.get("rotation") or "").startswith("eq. 7")

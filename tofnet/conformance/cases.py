@@ -17,7 +17,7 @@ import numpy as np
 from tofnet.core.network import Network
 from tofnet.events import EVENT_DTYPE, make_events
 from tofnet.io.recording import Intrinsics, Recording
-from tofnet.networks import denoised_network, depth_network, multi_distance_network
+from tofnet.networks import denoised_network, depth_network, improved_network, multi_distance_network
 from tofnet.processes import DepthProcess, InputProcess, TimeOfTravelProcess, VelocityProcess
 from tofnet.testing import (TEST_INTRINSICS, LinearVelocity, camera_flow, directed_edge, flowing_pattern,
                             merge_events, moving_edge, moving_pattern, noise_events, turning_trajectory)
@@ -280,6 +280,24 @@ def _user_process() -> Scene:
     return Scene(network, rec(moving_pattern(size, flow, 200_000, seed=11)), (7, 5))
 
 
+def jittered(events: np.ndarray, jitter_us: int, seed: int) -> np.ndarray:
+    """``events`` with each time moved later by up to ``jitter_us`` (µs), re-sorted: threshold mismatch."""
+    rng = np.random.default_rng(seed)
+    out = events.copy()
+    out["t"] += rng.integers(0, jitter_us, len(out))
+    return out[np.argsort(out["t"], kind="stable")]
+
+
+@case("time-surface-texture", "the time-surface estimator (host process reading the events) on a jittered "
+      "texture under noise; A t per pixel; microsecond times")
+def _time_surface_texture() -> Scene:
+    size, flow = (28, 20), (250.0, -120.0)
+    network = improved_network(size, time_surface={"t0": 0}, velocity=_constant(camera_for(flow)))
+    events = jittered(merge_events(moving_pattern(size, flow, 220_000, seed=15, sample_us=50, start_us=1_000),
+                                   noise_events(size, 10.0, 220_000, seed=16)), 600, 17)
+    return Scene(network, rec(events))
+
+
 # -- a turning camera (paper eq. 7) ----------------------------------------------------------
 ROTATION_INTRINSICS = Intrinsics(F, F, 11.5, 7.5)  # principal point inside the sensor: B ω varies across it
 
@@ -335,9 +353,22 @@ def _rotation_dominated() -> Scene:
                  (8, 8))
 
 
+@case("time-surface-rotation", "the time-surface estimator with B ω (eq. 7): a camera sliding and turning over a "
+      "texture at 1 m; A t per 5x5 patch, ω every 3 steps")
+def _time_surface_rotation() -> Scene:
+    size, velocity, omega = (28, 20), (-0.3, 0.1, 0.05), (0.05, -0.2, 0.1)
+    flow = camera_flow(ROTATION_INTRINSICS, 1.0, velocity, omega)
+    network = improved_network(size, time_surface={"t0": 0},
+                               velocity={"source": "constant", "velocity": list(velocity), "per": "patch",
+                                         "patch_size": 5},
+                               rotation={"source": "constant", "omega": list(omega), "update_every": 3})
+    events = jittered(flowing_pattern(size, flow, 250_000, seed=18), 300, 19)
+    return Scene(network, rec(events, intrinsics=ROTATION_INTRINSICS))
+
+
 # -- state variables read mid-run (sessions) ------------------------------------------------
 for _base, _steps in (("texture-blobs", (9, 60, 171)), ("patch-d2-ragged", (25, 90)), ("graph-denoised", (40, 120)),
-                      ("update-every", (33, 150)), ("rotation-poses", (30, 110))):
+                      ("update-every", (33, 150)), ("rotation-poses", (30, 110)), ("time-surface-texture", (50, 140))):
     _found = next(c for c in CASES if c.name == _base)
     CASES.append(Case(f"variables-{_base}", f"{_found.doc}; every variable compared at steps "
                       f"{', '.join(map(str, _steps))}", _found.build, _steps))

@@ -25,7 +25,7 @@ from tofnet.eval.views import (Window, depth_image, depth_range, event_times_us,
 DPI = 120
 #: Figure size in inches per kind (PNG size = size * DPI).
 FIGURE_SIZES = {"depthmap": (12.0, 4.8), "depthmap_single": (7.0, 4.8), "histogram": (8.0, 4.8),
-                "error": (10.0, 7.5), "cloud": (9.0, 8.0)}
+                "error": (10.0, 7.5), "cloud": (9.0, 8.0), "compare": (16.0, 8.5)}
 #: Depth colours: turbo reversed (near is red, far is blue), without its two darkest
 #: ends so every depth stands out against the dark background of empty pixels.
 DEPTH_CMAP = matplotlib.colors.ListedColormap(matplotlib.colormaps["turbo"](np.linspace(0.92, 0.08, 256)),
@@ -96,6 +96,59 @@ def depth_map_figure(recording, depth: np.ndarray, meta: dict, *, window=None, r
         ax.set_ylabel("y [px]")
     fig.colorbar(shown, ax=list(axes), label="depth [m]", shrink=0.9, extend="both")
     fig.suptitle(f"Depth accumulated over {win.label()} ({reduce} per pixel; {len(sel):,} estimates)")
+    return fig
+
+
+def comparison_figure(recording, runs: dict[str, tuple[np.ndarray, dict]], *, window=None,
+                      reduce: str = "latest") -> Figure:
+    """Several estimators on the same events, side by side: their depth maps over one window
+    (and the ground truth's) in one colour range, titled with each one's errors over the whole
+    run, and below, the distribution of their signed relative errors.
+
+    ``runs`` maps a label to ``(depth, meta)``; the ground truth needs ``recording.gt_depth``.
+    """
+    first_depth, first_meta = next(iter(runs.values()))
+    win = _window(window, recording, first_depth, first_meta, DEPTHMAP_WINDOW_S)
+    size = sensor_size_of(recording, first_depth)
+    panels, errors = [], {}
+    for label, (depth, meta) in runs.items():
+        sel = depth[win.contains(depth["t"])]
+        title = f"{label}\n{len(depth):,} estimates"
+        if recording.gt_depth is not None:
+            ev = evaluate(recording, depth, meta, window_s=0)
+            m = ev.matches
+            errors[label] = (depth["z"][m.valid] - m.gt[m.valid]) / m.gt[m.valid] * 100.0
+            title += (f"\nmedian error {ev.errors.median_rel_pct:.1f} %, mean {ev.errors.mean_rel_pct:.1f} %, "
+                      f"bias {ev.errors.bias_rel_pct:+.1f} %")
+        panels.append((title, depth_image(sel["x"], sel["y"], sel["z"], sel["t"], size, reduce)))
+    if recording.gt_depth is not None:
+        events = recording.events
+        keep = win.contains(events["t"]) & np.isfinite(recording.gt_depth) & (recording.gt_depth > 0)
+        panels.append(("Ground truth of the input events\n\n", depth_image(
+            events["x"][keep], events["y"][keep], recording.gt_depth[keep], events["t"][keep], size, reduce)))
+    vmin, vmax = depth_range(*(image for _, image in panels))
+    fig = _new_figure("compare")
+    grid = fig.add_gridspec(2 if errors else 1, len(panels), height_ratios=[3, 2] if errors else [1])
+    for i, (title, image) in enumerate(panels):
+        ax = fig.add_subplot(grid[0, i])
+        shown = ax.imshow(image, cmap=_cmap(), vmin=vmin, vmax=vmax, interpolation="nearest", origin="upper")
+        ax.set_facecolor(EMPTY_COLOUR)
+        ax.set_title(title, fontsize="medium")
+        ax.set_xlabel("x [px]")
+    fig.colorbar(shown, ax=fig.axes, label="depth [m]", shrink=0.8, extend="both", location="right")
+    if errors:
+        ax = fig.add_subplot(grid[1, :])
+        edges = np.linspace(-60.0, 60.0, 121)
+        for label, rel in errors.items():
+            ax.hist(np.clip(rel, edges[0], edges[-1]), bins=edges, histtype="step", linewidth=1.6,
+                    label=f"{label} ({len(rel):,} matched)")
+        ax.axvline(0.0, color="0.4", linewidth=0.8)
+        ax.set_xlim(edges[0], edges[-1])
+        ax.set_xlabel("signed relative error (z \u2212 z_gt) / z_gt [%] (beyond \u00b160 % in the end bins)")
+        ax.set_ylabel("estimates per 1 % bin")
+        ax.legend(loc="upper right", fontsize="small")
+    fig.suptitle(f"The same events, two estimators: depth over {win.label()} ({reduce} per pixel); "
+                 "errors over the whole run")
     return fig
 
 

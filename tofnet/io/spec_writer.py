@@ -47,8 +47,10 @@ def network_to_dict(network: Network, full: bool = False) -> dict[str, Any]:
 
 def _worth_writing(process: Process, param, value: Any) -> bool:
     if param.name == "sensor_size":
-        # Inherited sizes are left out; a source with its own default (the input) keeps it.
-        fed = any(isinstance(p, InPort) and p.source is not None for p in process.ports.values())
+        # Inherited sizes are left out; a source with its own default (the input) keeps it. Only spikes
+        # carry pixels: a process fed by fields alone (the time surface, from A t) is a source too.
+        fed = any(isinstance(p, InPort) and p.source is not None and p.spec.payload.kind == "spikes"
+                  for p in process.ports.values())
         feeds = any(isinstance(p, OutPort) and p.targets for p in process.ports.values())
         return value is not None and not fed and (param.default is not None or not feeds)
     try:

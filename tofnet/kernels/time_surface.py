@@ -6,8 +6,9 @@ defaults in docs/time_surface.md. Per pixel and polarity the state holds the tim
 the last *first event* of an edge: the surface ``T(u, v)``. Per event:
 
 1. first-event rule: an event of a pixel and polarity whose last first event is more recent
-   than its hold (``hold_px`` times the time per pixel the last fit there measured, else the
-   refractory period) is part of the same edge's burst: dropped;
+   than its hold (``hold_px`` times the time per pixel the last fit there measured, if that
+   fit was within ``hold_fit_rms_px`` of its points, else the refractory period) is part of
+   the same edge's burst: dropped;
 2. gather the first events of the same polarity within ``radius`` pixels that the edge has
    already crossed (at most ``ahead_px`` along the image motion ``A t``), no older than the
    window nor than the camera's last turn;
@@ -28,16 +29,17 @@ import numpy as np
 from numba import njit
 
 from tofnet.kernels.time_of_travel import prefetch
+from tofnet.kernels.rotation import rotational_flow
 from tofnet.kernels.time_surface_fit import FIT_ILL_CONDITIONED, FIT_TOO_FEW, fit_plane, fit_rows
-from tofnet.kernels.velocity import velocity_term
+from tofnet.kernels.velocity import sampled_velocity_term
 
 NEVER = -(1 << 62)  # "no first event yet" (µs)
 
 #: Count slots: where each event ended. Drops of events, rejections of estimates, emitted.
 (OUT_OF_BOUNDS, BEFORE_T0, BURST, NO_MOTION, TOO_FEW_POINTS, ILL_CONDITIONED, BAD_FIT, ROTATION_DOMINATED,
- TOO_NEAR, TOO_FAR, INCONSISTENT, EMITTED, N_COUNTS) = range(13)
+ TOO_NEAR, TOO_FAR, INCONSISTENT, SAME_STEP, EMITTED, N_COUNTS) = range(14)
 COUNT_NAMES = ("out_of_bounds", "before_t0", "burst", "no_motion", "too_few_points", "ill_conditioned",
-               "bad_fit", "rotation_dominated", "too_near", "too_far", "inconsistent", "emitted")
+               "bad_fit", "rotation_dominated", "too_near", "too_far", "inconsistent", "same_step", "emitted")
 DROP_SLOTS = (OUT_OF_BOUNDS, BEFORE_T0, BURST)  # not the first event of an edge
 REJECT_SLOTS = tuple(range(NO_MOTION, EMITTED))  # a first event whose estimate was rejected
 
@@ -45,7 +47,8 @@ REJECT_SLOTS = tuple(range(NO_MOTION, EMITTED))  # a first event whose estimate 
 (I_WIDTH, I_HEIGHT, I_RADIUS, I_T0, I_DT, I_LATENCY, I_UPDATE_EVERY, I_MIN_POINTS, I_ITERATIONS,
  I_REFRACTORY, I_WINDOW, I_CONSISTENCY_WINDOW, I_MAX_HOLD, I_RECORD_REJECTED, I_MODEL, I_PER_PIXEL, N_IP) = range(17)
 (F_FX, F_FY, F_CX, F_CY, F_OUTLIER, F_MAX_RMS, F_MIN_SPREAD, F_MIN_DEPTH, F_MAX_DEPTH, F_MIN_DENOMINATOR,
- F_WINDOW_DEPTH, F_REFRACTORY_DEPTH, F_CONSISTENCY, F_HOLD_PX, F_AHEAD_PX, F_TURN, F_TRIM_PX, N_FP) = range(18)
+ F_WINDOW_DEPTH, F_REFRACTORY_DEPTH, F_CONSISTENCY, F_HOLD_PX, F_AHEAD_PX, F_TURN, F_TRIM_PX,
+ F_RFX, F_RFY, F_RCX, F_RCY, F_HOLD_RMS, N_FP) = range(23)  # F_R*: the intrinsics B ω is evaluated with
 # Motion state: the velocity the current epoch started with, its start (µs), the last update seen.
 M_VX, M_VY, M_VZ, M_SINCE, M_UPDATE, N_MOTION = range(6)
 # Fit models (``I_MODEL``): a plane, or lines along the motion with a shared slope.
@@ -55,19 +58,6 @@ MODELS = ("plane", "rows")
 OK, UNSORTED, NO_VELOCITY = range(3)
 #: Events between a prefetch of a pixel's hold and surface rows and their use.
 PREFETCH = 8
-
-
-@njit(cache=True)
-def rotational_flow(wx: float, wy: float, wz: float, u: float, v: float,
-                    fx: float, fy: float, cx: float, cy: float) -> tuple[float, float]:
-    """``B ω`` in px/s at image point (u, v) for angular velocity (wx, wy, wz) rad/s (DESIGN, Rotation).
-
-    The rotation issue (12) owns this formula; this copy serves the estimator's hook until
-    that one is merged (then import it instead).
-    """
-    x, y = u - cx, v - cy
-    return (x * y / fy * wx - (fx + x * x / fx) * wy + fx / fy * y * wz,
-            (fy + y * y / fy) * wx - x * y / fx * wy - fy / fx * x * wz)
 
 
 @njit(cache=True)
@@ -85,31 +75,30 @@ def follow_motion(motion, row, update: int, update_start_us: int, turn: float) -
 
 @njit(cache=True, inline="always")
 def _velocity_term_at(x, y, pixel, per_pixel, sample_of, points, velocity, j, fx, fy, cx, cy):
-    """``A t`` (px*m/s) and ``|A t|`` for pixel (x, y) under velocity row ``j``."""
-    if per_pixel:
-        u, v = float(x), float(y)
-    else:
-        sample = sample_of[pixel]
-        u, v = points[sample, 0], points[sample, 1]
-    at_x, at_y = velocity_term(velocity[j, 0], velocity[j, 1], velocity[j, 2], u, v, fx, fy, cx, cy)
+    """``A t`` (px*m/s) and ``|A t|`` for pixel (x, y) under velocity row ``j``, through the lens of
+    ``points`` (one ``tofnet.kernels.lens.sample_table`` row per sample: the pixel or its patch)."""
+    sample = pixel if per_pixel else sample_of[pixel]
+    at_x, at_y = sampled_velocity_term(velocity[j, 0], velocity[j, 1], velocity[j, 2], points[sample], fx, fy, cx, cy)
     return at_x, at_y, math.sqrt(at_x * at_x + at_y * at_y)
 
 
 @njit(cache=True)
-def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, motion, sample_of, points, velocity, first_update, ps_, pw, pt, pg, lines, used, counts, out, quality, n_out, index0, t_hi):
+def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, sample_of, points, velocity, first_update,
+            ps_, pw, pt, pg, lines, used, counts, out, quality, n_out, index0, t_hi):
     """Run time-ordered events through the estimator; returns ``(n_out, status, t_hi)``.
 
     ``surface[p, (y + r) * (w + 2r) + x + r]`` is the last first event (µs) of pixel (x, y) and
     polarity p (one plane per polarity, so a fit reads one cache line per row; a border of
     ``r = radius`` pixels stays ``NEVER``); ``hold[y * w + x, p]`` its measured hold (µs, 0 =
-    none yet); ``prev[y * w + x]`` the pixel's last estimate (z, t) for the consistency rule.
+    none yet); ``prev[y * w + x]`` the pixel's last estimate (z, t) for the consistency rule;
+    ``last_step[y * w + x]`` the output step of its last estimate (at most one per pixel and step).
     ``A t`` of pixel ``(x, y)`` is taken at the pixel (``I_PER_PIXEL``) or at
     ``points[sample_of[y * w + x]]``, computed only for events that need it (a pixel's first
-    hold, first events). ``velocity[j - first_update]`` is (tx, ty, tz[, wx, wy, wz]) of update j. ``ps_``, ``pw``, ``pt``, ``pg``, ``lines``, ``used`` are the
-    fits' scratch. Estimates go to ``out[n_out:]`` (``DEPTH_DTYPE``) and ``quality[n_out:]``.
-    ``t_hi`` is the latest time seen before; an earlier event stops the call with
-    ``UNSORTED`` before it changes any state (``n_out`` and ``counts`` cover the events
-    before it).
+    hold, first events). ``velocity[j - first_update]`` is (tx, ty, tz[, wx, wy, wz]) of update j.
+    ``ps_``, ``pw``, ``pt``, ``pg``, ``lines``, ``used`` are the fits' scratch. Estimates go to
+    ``out[n_out:]`` (``DEPTH_DTYPE``) and ``quality[n_out:]``. ``t_hi`` is the latest time seen
+    before; an earlier event stops the call with ``UNSORTED`` before it changes any state
+    (``n_out`` and ``counts`` cover the events before it).
     """
     width, height, radius = ip[I_WIDTH], ip[I_HEIGHT], ip[I_RADIUS]
     t0, dt, latency, update_every = ip[I_T0], ip[I_DT], ip[I_LATENCY], ip[I_UPDATE_EVERY]
@@ -122,6 +111,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, motion, sample_of, poin
     min_depth, max_depth, min_denominator = fp[F_MIN_DEPTH], fp[F_MAX_DEPTH], fp[F_MIN_DENOMINATOR]
     window_depth, refractory_depth, consistency = fp[F_WINDOW_DEPTH], fp[F_REFRACTORY_DEPTH], fp[F_CONSISTENCY]
     hold_px, ahead_px, turn, trim_px = fp[F_HOLD_PX], fp[F_AHEAD_PX], fp[F_TURN], fp[F_TRIM_PX]
+    hold_rms = fp[F_HOLD_RMS]
     rotation = velocity.shape[1] >= 6
     row = width + 2 * radius
     middle = (lines.shape[0] - 1) // 2
@@ -238,18 +228,19 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, motion, sample_of, poin
                                                                 iterations)
         slot = TOO_FEW_POINTS if fit == FIT_TOO_FEW else ILL_CONDITIONED if fit == FIT_ILL_CONDITIONED else EMITTED
         a, b = tau_s * fu - tau_w * fv, tau_s * fv + tau_w * fu  # ∇T at the event, µs/px along u and v
-        if slot == EMITTED:
-            if hold_px > 0.0:  # this edge's burst lasts about its ramp's width: hold_px pixels
-                hold[pixel, polarity] = min(max_hold, np.int64(hold_px * math.sqrt(a * a + b * b)) + 1)
-            if rms > max_rms:
-                slot = BAD_FIT
+        if slot == EMITTED and hold_px > 0.0 and rms <= hold_rms:
+            # this edge's burst lasts about its ramp's width: hold_px pixels (a fit far off the
+            # points, e.g. in noise, measured no crossing time: it leaves the hold as it was)
+            hold[pixel, polarity] = min(max_hold, np.int64(hold_px * math.sqrt(a * a + b * b)) + 1)
+        if slot == EMITTED and rms > max_rms:
+            slot = BAD_FIT
         z = 0.0
         gx, gy = a * 1e-6, b * 1e-6  # s/px
         if slot == EMITTED:
             z = at_x * gx + at_y * gy
             if rotation:
                 bw_x, bw_y = rotational_flow(velocity[j, 3], velocity[j, 4], velocity[j, 5], float(x), float(y),
-                                             fx, fy, cx, cy)
+                                             fp[F_RFX], fp[F_RFY], fp[F_RCX], fp[F_RCY])
                 denominator = 1.0 - (bw_x * gx + bw_y * gy)
                 if denominator < min_denominator:
                     slot = ROTATION_DOMINATED
@@ -265,6 +256,11 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, motion, sample_of, poin
             prev[pixel, 0], prev[pixel, 1] = z, t
             if t - when > consistency_us or abs(z - before) > consistency * before:
                 slot = INCONSISTENT
+        if slot == EMITTED:  # one estimate per pixel and step, as a depth neuron: the first
+            if last_step[pixel] == step:
+                slot = SAME_STEP
+            else:
+                last_step[pixel] = step
         counts[slot] += 1
         if slot != EMITTED:
             if not record_rejected:

@@ -18,7 +18,7 @@ from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE
 from tofnet.kernels import time_surface as ts
 from tofnet.kernels.time_surface_fit import N_L
-from tofnet.kernels.velocity import sample_grid
+from tofnet.kernels.lens import SAMPLE_COLUMNS, Lens, sample_table
 
 #: Per estimate, aligned with the depth records: event time µs, points kept by the fit,
 #: their rms distance from the plane (px), the gradient ∇T (s/px), the event's index in the stream.
@@ -55,12 +55,17 @@ class TimeSurfaceConfig:
     - ``trim_px`` px (plane only): drop the points the plane puts within that distance of
       the window's ends and refit (``0``: off).
     - First events: ``hold_px`` times the time per pixel the last fit at a pixel measured is
-      its hold; before a fit, the larger of ``refractory`` and the time a surface at
-      ``refractory_depth`` takes per pixel; never above ``max_hold``.
+      its hold (a fit whose rms distance exceeds ``hold_fit_rms_px`` px measured nothing and
+      leaves the hold as it was); before a fit, the larger of ``refractory`` and the time a
+      surface at ``refractory_depth`` takes per pixel; never above ``max_hold``.
     - ``consistency`` (fraction, 0 = off): emit only when the pixel's previous estimate, at
       most ``consistency_window`` s older, agrees within this relative difference.
     - ``min_depth``, ``max_depth`` m: kept when strictly between. ``min_denominator``: with
       a rotation, ``1 − (B ω)·∇T`` below it is ``rotation_dominated``.
+    - ``lens`` (model, coefficients): ``A t`` taken through that lens onto the raw pixels
+      (``tofnet.kernels.lens``); None: a pinhole.
+    - ``rotation_intrinsics`` ``(fx, fy, cx, cy)`` px: where ``B ω`` is evaluated (with
+      velocity rows of six columns); None: ``intrinsics``.
     - ``timestep`` s, ``latency_steps``: an estimate's ``step`` is its event's input step
       plus ``latency_steps``; ``A t`` (per pixel with ``per_pixel``, else at the centre of
       ``patch_size`` px patches, as ``tofnet.kernels.velocity.sample_point``) comes from the
@@ -80,6 +85,7 @@ class TimeSurfaceConfig:
     refractory: float = 0.0
     refractory_depth: float = 10.0
     hold_px: float = 3.0
+    hold_fit_rms_px: float = 1.0
     max_hold: float = 1.0
     ahead_px: float = -0.5
     turn: float = 0.2
@@ -95,6 +101,8 @@ class TimeSurfaceConfig:
     update_every: int = 1
     per_pixel: bool = True
     patch_size: int = 30
+    rotation_intrinsics: tuple[float, float, float, float] | None = None
+    lens: Lens | None = None
 
     def __post_init__(self) -> None:
         problems = []
@@ -108,7 +116,7 @@ class TimeSurfaceConfig:
                 problems.append(f"{name}: expected an integer >= 0, got {getattr(self, name)!r}")
         for name in ("window", "window_depth", "outlier_px", "max_rms_px", "min_spread", "refractory",
                      "refractory_depth", "consistency", "consistency_window", "min_depth", "hold_px",
-                     "max_hold"):
+                     "max_hold", "hold_fit_rms_px"):
             if not float(getattr(self, name)) >= 0:
                 problems.append(f"{name}: expected a number >= 0, got {getattr(self, name)!r}")
         if not self.timestep > 0:
@@ -153,16 +161,20 @@ class TimeSurfaceEstimator:
         self._fp = np.zeros(ts.N_FP, np.float64)
         self._fp[[ts.F_FX, ts.F_FY, ts.F_CX, ts.F_CY, ts.F_OUTLIER, ts.F_MAX_RMS, ts.F_MIN_SPREAD, ts.F_MIN_DEPTH,
                   ts.F_MAX_DEPTH, ts.F_MIN_DENOMINATOR, ts.F_WINDOW_DEPTH, ts.F_REFRACTORY_DEPTH, ts.F_CONSISTENCY,
-                  ts.F_HOLD_PX, ts.F_AHEAD_PX, ts.F_TURN, ts.F_TRIM_PX]] = (
+                  ts.F_HOLD_PX, ts.F_AHEAD_PX, ts.F_TURN, ts.F_TRIM_PX, ts.F_RFX, ts.F_RFY, ts.F_RCX, ts.F_RCY,
+                  ts.F_HOLD_RMS]] = (
             *c.intrinsics, c.outlier_px, c.max_rms_px, c.min_spread, c.min_depth, c.max_depth, c.min_denominator,
-            c.window_depth, c.refractory_depth, c.consistency, c.hold_px, c.ahead_px, c.turn, c.trim_px)
+            c.window_depth, c.refractory_depth, c.consistency, c.hold_px, c.ahead_px, c.turn, c.trim_px,
+            *(c.intrinsics if c.rotation_intrinsics is None else c.rotation_intrinsics), c.hold_fit_rms_px)
         r, pixels = int(c.radius), width * height
         self._surface = np.full((2, (height + 2 * r) * (width + 2 * r)), ts.NEVER, np.int64)
         self._hold = np.zeros((pixels, 2), np.int32)
         self._prev = np.zeros((pixels if c.consistency > 0 else 1, 2), np.float64)
+        self._last_step = np.full(pixels, ts.NEVER, np.int64)
         self._motion = np.zeros(ts.N_MOTION)
         self._motion[ts.M_UPDATE] = -1
-        self._sample_of, self._points = sample_tables(c.per_pixel, c.patch_size, width, height)
+        self._sample_of, self._points = sample_tables(c.per_pixel, c.patch_size, width, height,
+                                                      tuple(c.intrinsics), c.lens)
         size = 2 * (2 * r + 1) ** 2
         lines = 4 * r + 3  # lines across the motion within the square (|w| <= r * sqrt(2)), centred
         self._scratch = (np.empty(size + 1), np.empty(size + 1), np.empty(size + 1), np.zeros(size + 1, np.int64),
@@ -211,17 +223,18 @@ class TimeSurfaceEstimator:
         ``events`` must continue the previous packets in time order (a ``BackendError``
         otherwise, with the state of the events before the offending one kept).
         """
-        n = len(events)
+        return self.feed_columns(*event_columns(events), velocity, record_rejected=record_rejected)
+
+    def feed_columns(self, t: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray, velocity: VelocityRows, *,
+                     record_rejected: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """``feed`` for events given as contiguous columns (``event_columns``): t µs int64, x, y uint16, p uint8."""
+        n = len(t)
         depth, quality = np.empty(n, DEPTH_DTYPE), np.empty(n, QUALITY_DTYPE)
         if n == 0:
             return depth, quality
         if self._t0 is None:
-            self._t0 = int(events["t"][0])
+            self._t0 = int(t[0])
             self._ip[ts.I_T0] = self._t0
-        t = np.ascontiguousarray(events["t"], dtype=np.int64)
-        x = np.ascontiguousarray(events["x"])
-        y = np.ascontiguousarray(events["y"])
-        p = np.ascontiguousarray(events["p"])
         self._ip[ts.I_RECORD_REJECTED] = record_rejected
         n_out, lo = 0, 0
         while lo < n:
@@ -229,7 +242,7 @@ class TimeSurfaceEstimator:
             table, first = self._table(velocity, int(t[lo]), int(t[hi - 1]))
             n_out, status, self._t_hi = ts.process(
                 t[lo:hi], x[lo:hi], y[lo:hi], p[lo:hi], self._ip, self._fp, self._surface, self._hold,
-                self._prev, self._motion, self._sample_of, self._points, table,
+                self._prev, self._last_step, self._motion, self._sample_of, self._points, table,
                 first, *self._scratch, self._counts, depth, quality, n_out, self.events_in + lo, self._t_hi)
             if status == ts.UNSORTED:
                 done = lo + int(np.argmax(t[lo:hi] < self._t_hi))
@@ -259,10 +272,18 @@ class TimeSurfaceEstimator:
         return table, int(table_first)
 
 
-def sample_tables(per_pixel: bool, patch_size: int, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+def event_columns(events: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The columns ``t`` (µs, int64), ``x``, ``y``, ``p`` of ``EVENT_DTYPE`` events as contiguous arrays (copies)."""
+    return (np.ascontiguousarray(events["t"], dtype=np.int64), np.ascontiguousarray(events["x"]),
+            np.ascontiguousarray(events["y"]), np.ascontiguousarray(events["p"]))
+
+
+def sample_tables(per_pixel: bool, patch_size: int, width: int, height: int,
+                  camera: tuple[float, float, float, float], lens: Lens | None) -> tuple[np.ndarray, np.ndarray]:
     """``sample_of`` (per pixel, row-major: the index of the point its ``A t`` is taken at) and
-    ``points`` (u, v px per sample): each pixel, or the centre of its patch (``velocity.sample_point``)."""
-    su, sv = sample_grid(per_pixel, patch_size, width, height)
+    ``points`` (per sample, the ``tofnet.kernels.lens.sample_table`` row of each pixel or of its
+    patch: where ``A t`` is evaluated, through the lens)."""
+    table = sample_table(per_pixel, patch_size, (width, height), camera, lens).reshape(-1, SAMPLE_COLUMNS)
     if per_pixel:
         sample_of = np.arange(width * height, dtype=np.int64)
     else:
@@ -270,7 +291,7 @@ def sample_tables(per_pixel: bool, patch_size: int, width: int, height: int) -> 
         columns = -(-width // patch_size)
         sample_of = ((ys // patch_size) * columns + xs // patch_size).ravel().astype(np.int64)
     first = np.unique(sample_of, return_index=True)[1]
-    return sample_of, np.ascontiguousarray(np.stack([su.ravel()[first], sv.ravel()[first]], axis=1))
+    return sample_of, np.ascontiguousarray(table[first])
 
 
 def constant_velocity(velocity, omega=None) -> VelocityRows:

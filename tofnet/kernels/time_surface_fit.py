@@ -126,17 +126,22 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
     """
     middle = (lines.shape[0] - 1) // 2
     n_used = 0
-    for i in range(n):
+    i = 0
+    while i < n:  # runs of points on one line: its sums stay in registers (the same additions, in order)
         g = pg[i]
         if lines[g, L_M] == 0.0:
             used[n_used] = g
             n_used += 1
-        s, t = ps[i], pt[i]
-        lines[g, L_M] += 1.0
-        lines[g, L_S] += s
-        lines[g, L_T] += t
-        lines[g, L_SS] += s * s
-        lines[g, L_ST] += s * t
+        m, sum_s, sum_t, sum_ss, sum_st = lines[g, L_M], lines[g, L_S], lines[g, L_T], lines[g, L_SS], lines[g, L_ST]
+        while i < n and pg[i] == g:
+            s, t = ps[i], pt[i]
+            m += 1.0
+            sum_s += s
+            sum_t += t
+            sum_ss += s * s
+            sum_st += s * t
+            i += 1
+        lines[g, L_M], lines[g, L_S], lines[g, L_T], lines[g, L_SS], lines[g, L_ST] = m, sum_s, sum_t, sum_ss, sum_st
     sxx = sxy = 0.0
     kept = 0
     for j in range(n_used):

@@ -29,6 +29,7 @@ for _family in _ALL:
     _BUILTIN[("InputProcess", _family)] = "tofnet.models.input:InputModel"
     _BUILTIN[("VelocityProcess", _family)] = "tofnet.models.velocity:VelocityModel"
     _BUILTIN[("AngularVelocityProcess", _family)] = "tofnet.models.angular_velocity:AngularVelocityModel"
+    _BUILTIN[("TimeSurfaceProcess", _family)] = "tofnet.models.time_surface:TimeSurfaceModel"
 for _family, _suffix in (("reference", "StepModel"), ("float", "EventModel"), ("fixed", "EventModel")):
     _BUILTIN[("TimeOfTravelProcess", _family)] = f"tofnet.models.time_of_travel:TimeOfTravel{_suffix}"
     _BUILTIN[("DepthProcess", _family)] = f"tofnet.models.depth:Depth{_suffix}"

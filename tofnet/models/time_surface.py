@@ -1,0 +1,179 @@
+"""The time-surface process on every backend family: one event-driven model (``kernels/time_surface``).
+
+The model reads the camera's events itself (``feed``/``complete_until``, as the input model),
+with their microsecond times. An event of input step ``k`` is answered in step
+``k + LATENCY_STEPS``; the model runs it once that step runs, with the ``A t`` (and ``B ω``)
+update the step holds: the last one sent before it, from the ``a_t`` (``b_w``) records, as
+the depth models take them. So any velocity process works, and a run in chunks of any size
+gives the records of one run. The arithmetic is float64 on every family (the same model:
+``reference``, ``float`` and ``fixed`` give the same bytes).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tofnet.core.ports import Payload
+from tofnet.kernels.time_surface_estimator import TimeSurfaceConfig, TimeSurfaceEstimator, event_columns
+from tofnet.models.base import Model, ModelContext, records
+from tofnet.models.input import check_time_order
+from tofnet.processes.time_surface import QUALITY, TimeSurfaceProcess
+
+#: A host process answers in the step after the event (the estimator's ``latency_steps``).
+LATENCY_STEPS = 1
+#: Process parameters that are ``TimeSurfaceConfig`` fields of the same name and unit.
+CONFIG_PARAMS = ("model", "radius", "ahead_px", "window", "window_depth", "turn", "min_points", "min_spread",
+                 "outlier_px", "iterations", "max_rms_px", "trim_px", "hold_px", "hold_fit_rms_px", "refractory_depth",
+                 "refractory", "max_hold", "consistency", "consistency_window", "min_depth", "max_depth",
+                 "min_denominator")
+
+
+def config_of(process: TimeSurfaceProcess, ctx: ModelContext) -> TimeSurfaceConfig:
+    """The estimator's configuration: the process's parameters, the clock, and ``A t``'s sampling
+    and the intrinsics from the descriptions of what feeds ``a_t`` (and ``b_w``)."""
+    field = ctx.input_meta(process, "a_t")
+    rotation = ctx.input_meta(process, "b_w") if ctx.inputs.get("b_w") else None
+    return TimeSurfaceConfig(tuple(ctx.sensor_size), tuple(field.intrinsics),
+                             **{name: getattr(process, name) for name in CONFIG_PARAMS},
+                             timestep=ctx.timestep_s, latency_steps=LATENCY_STEPS, update_every=1,
+                             per_pixel=field.per_pixel, patch_size=field.patch_size,
+                             rotation_intrinsics=None if rotation is None else tuple(rotation.intrinsics),
+                             lens=field.lens)
+
+
+class HeldUpdates:
+    """The updates of a field port as a step holds them: the last record sent before the step (zeros before any)."""
+
+    def __init__(self, columns: tuple[str, ...]):
+        self.columns = columns
+        self.steps = np.empty(0, np.int64)
+        self.values = np.empty((0, len(columns)))
+
+    def add(self, received: np.ndarray) -> None:
+        if len(received):
+            self.steps = np.concatenate([self.steps, received["step"].astype(np.int64)])
+            self.values = np.concatenate([self.values, np.stack([received[c] for c in self.columns], axis=1)])
+
+    def held(self, sent_by: np.ndarray) -> np.ndarray:
+        """Per entry of ``sent_by`` (steps): the last update sent at or before it, one row each."""
+        i = np.searchsorted(self.steps, sent_by, side="right") - 1
+        out = np.zeros((len(sent_by), len(self.columns)))
+        have = i >= 0
+        out[have] = self.values[i[have]]
+        return out
+
+    def forget_before(self, step: int) -> None:
+        """Drop the updates no step from ``step`` on can hold (keeps the one held at ``step``)."""
+        keep = max(int(np.searchsorted(self.steps, step, side="right")) - 1, 0)
+        self.steps, self.values = self.steps[keep:], self.values[keep:]
+
+
+class TimeSurfaceModel(Model):
+    """Buffers the camera's events and runs them through ``TimeSurfaceEstimator`` when their answer's step runs."""
+
+    reads_events = True
+
+    def __init__(self, process: TimeSurfaceProcess, ctx: ModelContext):
+        super().__init__(process, ctx)
+        self.config = config_of(process, ctx)
+        self.estimator = TimeSurfaceEstimator(self.config, ctx.t0_us)
+        self.rotating = bool(ctx.inputs.get("b_w"))
+        self.velocity = HeldUpdates(("tx", "ty", "tz"))
+        self.rotation = HeldUpdates(("wx", "wy", "wz"))
+        self._waiting: list[tuple[np.ndarray, ...]] = []  # event columns (t, x, y, p) not run yet
+        self._latest_us: int | None = None
+        self._depth, self._quality = Payload.DEPTH.dtype, QUALITY.dtype
+
+    @classmethod
+    def latency_steps(cls, process: TimeSurfaceProcess) -> int:
+        return LATENCY_STEPS
+
+    # -- events -------------------------------------------------------------------------------
+    def feed(self, events: np.ndarray) -> None:
+        if len(events) == 0:
+            return
+        check_time_order(events, self._latest_us, self.process.name)
+        self._waiting.append(event_columns(events))  # copies: the caller may reuse its buffer
+        self._latest_us = int(events["t"][-1])
+
+    def complete_until(self) -> int | None:
+        if self._latest_us is None or self._latest_us < self.ctx.t0_us:
+            return None
+        return (self._latest_us - self.ctx.t0_us) // self.ctx.timestep_us
+
+    def _take_events(self, before_us: int) -> list[tuple[np.ndarray, ...]]:
+        """The waiting events earlier than ``before_us`` µs, as column pieces (removed from the queue)."""
+        taken = []
+        while self._waiting:
+            columns = self._waiting[0]
+            cut = int(np.searchsorted(columns[0], before_us, side="left"))
+            if cut:
+                taken.append(tuple(c[:cut] for c in columns))
+            if cut < len(columns[0]):
+                self._waiting[0] = tuple(c[cut:] for c in columns)
+                break
+            self._waiting.pop(0)
+        return taken
+
+    # -- running ------------------------------------------------------------------------------
+    def _rows(self, first_update: int, count: int) -> tuple[np.ndarray, int]:
+        """Velocity rows for updates ``first_update ..``: update ``j`` is what output step ``j + 1`` holds,
+        the last update sent at or before step ``j`` (``update_every`` 1 in the estimator's terms)."""
+        sent_by = np.arange(first_update, first_update + count, dtype=np.int64)
+        table = self.velocity.held(sent_by)
+        if self.rotating:
+            table = np.concatenate([table, self.rotation.held(sent_by)], axis=1)
+        return table, first_update
+
+    def run(self, first: int, end: int, inputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        self.velocity.add(inputs["a_t"])
+        if self.rotating:
+            self.rotation.add(inputs["b_w"])
+        # The events answered in steps [first, end): input steps before end - LATENCY_STEPS.
+        pieces = self._take_events(self.ctx.t0_us + (end - LATENCY_STEPS) * self.ctx.timestep_us)
+        answers = [self.estimator.feed_columns(*columns, self._rows) for columns in pieces]
+        self.velocity.forget_before(end - 1)
+        self.rotation.forget_before(end - 1)
+        if not answers:
+            return {"depth": np.empty(0, self._depth), "quality": np.empty(0, self._quality)}
+        depth = np.concatenate([d for d, _ in answers])
+        quality = np.concatenate([q for _, q in answers])
+        # The canonical order (step, y, x; events in time order within a pixel's step), sorted once for both.
+        width, height = self.ctx.sensor_size
+        key = (depth["step"] * height + depth["y"]) * width + depth["x"]
+        order = np.argsort(key, kind="stable")
+        depth, quality = depth[order], quality[order]
+        fit = records(self._quality, step=depth["step"], x=depth["x"], y=depth["y"], t_event=quality["t_event"],
+                      points=quality["points"], rms_px=quality["rms_px"], gx=quality["gx"], gy=quality["gy"])
+        return {"depth": depth, "quality": fit}
+
+    def counts(self) -> dict[str, int]:
+        counts = self.estimator.counts
+        return {"events_in": self.estimator.events_in, "accepted": self.estimator.first_events, **counts}
+
+    # -- state between runs -------------------------------------------------------------------
+    def _surface(self) -> np.ndarray:
+        """A view of the surface ``[2, H, W]`` (µs) inside the kernel's border."""
+        width, height = self.ctx.sensor_size
+        r = self.config.radius
+        return self.estimator._surface.reshape(2, height + 2 * r, width + 2 * r)[:, r:r + height, r:r + width]
+
+    def _hold(self) -> np.ndarray:
+        width, height = self.ctx.sensor_size
+        return self.estimator._hold.reshape(height, width, 2)
+
+    def get_var(self, name: str, step: int) -> np.ndarray:
+        if name == "last_first_event":
+            return self._surface().copy()
+        if name == "hold":
+            return np.moveaxis(self._hold(), 2, 0).astype(np.int64)
+        return super().get_var(name, step)
+
+    def set_var(self, name: str, value: np.ndarray, step: int) -> None:
+        if name == "last_first_event":
+            self._surface()[...] = value
+            return
+        if name == "hold":
+            self._hold()[...] = np.moveaxis(np.clip(value, 0, np.iinfo(np.int32).max), 0, 2)
+            return
+        super().set_var(name, value, step)

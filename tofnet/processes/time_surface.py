@@ -1,0 +1,108 @@
+"""TimeSurfaceProcess: depth from the local slope of the time surface (beyond the paper; docs/time_surface.md)."""
+
+from __future__ import annotations
+
+from tofnet.core.params import Param
+from tofnet.core.ports import Payload, PortSpec
+from tofnet.core.process import Process
+from tofnet.core.vars import Var
+from tofnet.errors import NetworkError
+
+#: Per estimate, beside its depth record (same step, pixel and order): the event's own time (µs),
+#: the points the fit kept, their rms distance from it (px) and the gradient ∇T (s/px).
+QUALITY = Payload("time_surface_quality", (("t_event", "<i8"), ("points", "<u2"), ("rms_px", "<f4"),
+                                           ("gx", "<f4"), ("gy", "<f4")),
+                  "the fit behind each time-surface estimate: event time µs, points kept, rms residual px, "
+                  "gradient ∇T s/px (gx along u, gy along v)")
+
+#: Fit models: lines of pixels along the image motion with their own offsets, or one plane.
+MODELS = ("rows", "plane")
+
+
+class TimeSurfaceProcess(Process):
+    """Reads the camera's events and fits, per first event of an edge, the local time surface.
+
+    ``td = ∇T`` (s/px) is the time of travel, so ``Z = (A t)·∇T`` (paper eq. 8), or
+    ``(A t)·∇T / (1 − (B ω)·∇T)`` (eq. 7) with ``b_w`` connected. Per event, in time order
+    and with microsecond times (no 1 ms quantisation): an event whose pixel and polarity
+    had a first event less than its hold ago is part of that edge's burst (dropped); else
+    the recent first events of the same polarity within ``radius`` px that the edge has
+    crossed are fitted (lines along the image motion, or a plane), outliers dropped, and
+    the fit checked (points, spread, rms). A host process (off-chip): it reads the events
+    itself, like the input process, and answers in the step after each event (latency 1).
+    ``A t`` comes from ``a_t`` as the sender samples it (per pixel or per patch); the
+    defaults were chosen by sweeps over every built-in scenario (docs/time_surface.md).
+    Every event ends in one count: ``events_in = accepted + out_of_bounds + before_t0 +
+    burst``, ``accepted`` = first events = ``emitted`` + the rejections.
+    """
+
+    inports = (
+        PortSpec("a_t", Payload.VELOCITY_TERM, 2, "A t from the velocity process, px*m/s"),
+        PortSpec("b_w", Payload.ROTATION_TERM, 2, "B ω from an angular velocity process, px/s: eq. 7 when "
+                 "connected, eq. 8 when not", required=False),
+    )
+    outports = (
+        PortSpec("depth", Payload.DEPTH, 1, "depth estimate per accepted first event, metres", required=False),
+        PortSpec("quality", QUALITY, 1, "the fit behind each estimate (aligned with depth)", required=False),
+    )
+    params = (
+        Param("sensor_size", "size", (240, 180), unit="px", doc="sensor (width, height)"),
+        Param("timestep", "duration", "1ms", unit="s", doc="duration of one network step", minimum=1e-9),
+        Param("t0", "duration", None, unit="s", optional=True,
+              doc="start of step 0; the first event's time when omitted"),
+        Param("model", "str", "rows", doc="fit lines along the image motion with their own offsets (rows) or one "
+              "plane (Benosman et al. 2014)", choices=MODELS),
+        Param("radius", "int", 3, unit="px", doc="the fit looks at the (2 radius + 1)² square around the event",
+              minimum=1),
+        Param("ahead_px", "float", -0.5, unit="px", doc="pixels more than this ahead of the event along the image "
+              "motion are not used (they still hold an older edge's times)"),
+        Param("window", "duration", 0.0, unit="s", doc="a fixed lower bound on the age of the oldest point used",
+              minimum=0.0),
+        Param("window_depth", "length", 5.0, unit="m", doc="oldest point used: the time a surface this deep takes "
+              "to move radius px", minimum=0.0),
+        Param("turn", "float", 0.2, doc="a velocity change beyond this fraction of the speed starts a new motion "
+              "epoch; no point from before it is used (0: never)", minimum=0.0),
+        Param("min_points", "int", 8, doc="points on lines of two or more a fit needs", minimum=1),
+        Param("min_spread", "float", 0.5, unit="px²", doc="variance along the motion within the lines a fit needs",
+              minimum=0.0),
+        Param("outlier_px", "float", 0.25, unit="px", doc="drop the farthest point while farther than this from the "
+              "fit", minimum=0.0),
+        Param("iterations", "int", 3, doc="at most this many points dropped as outliers", minimum=0),
+        Param("max_rms_px", "float", 0.25, unit="px", doc="fits with a larger rms distance are rejected (bad_fit)",
+              minimum=0.0),
+        Param("trim_px", "float", 0.0, unit="px", doc="plane model: drop points fitted within this of the window's "
+              "ends and refit (0: off)", minimum=0.0),
+        Param("hold_px", "float", 3.0, unit="px", doc="a pixel's burst hold: this many times the time per pixel "
+              "its last fit measured", minimum=0.0),
+        Param("hold_fit_rms_px", "float", 1.0, unit="px", doc="only a fit at most this far (rms) from its points "
+              "sets the pixel's hold: a worse one, e.g. in noise, measured no crossing time", minimum=0.0),
+        Param("refractory_depth", "length", 10.0, unit="m", doc="before a pixel has a fit, its hold is the time a "
+              "surface this deep takes to move one pixel", minimum=0.0),
+        Param("refractory", "duration", 0.0, unit="s", doc="a fixed lower bound on that first hold", minimum=0.0),
+        Param("max_hold", "duration", 1.0, unit="s", doc="upper bound of any hold", minimum=0.0),
+        Param("consistency", "float", 0.0, doc="emit only when the pixel's previous estimate agrees within this "
+              "fraction (0: off)", minimum=0.0),
+        Param("consistency_window", "duration", 0.25, unit="s", doc="how recent that previous estimate must be",
+              minimum=0.0),
+        Param("min_depth", "length", 0.05, unit="m", doc="estimates at or below are rejected", minimum=0.0),
+        Param("max_depth", "length", 20.0, unit="m", doc="estimates at or above are rejected", minimum=0.0),
+        Param("min_denominator", "float", 0.1, doc="with b_w: estimates whose translational share 1 - (B ω)·∇T is "
+              "below are rejected (rotation_dominated)", minimum=0.0),
+    )
+    vars = (Var("last_first_event", "channels", "int64", "µs", "time of the pixel's last first event of an edge, "
+                "per polarity (channel 0 OFF, 1 ON): the time surface; -2**62 before the first",
+                channels=2, settable=True),
+            Var("hold", "channels", "int64", "µs", "the burst hold the pixel's last fit measured, per polarity "
+                "(0: none yet, the refractory_depth hold applies)", channels=2, settable=True))
+    placement = "host"
+
+    def _check(self) -> None:
+        values = self._values
+        if values["min_depth"] >= values["max_depth"]:
+            raise NetworkError(f"{self.name}: min_depth ({values['min_depth']:g} m) must be below "
+                               f"max_depth ({values['max_depth']:g} m)")
+        if values["window"] <= 0 and values["window_depth"] <= 0:
+            raise NetworkError(f"{self.name}: window (s) or window_depth (m) must be above 0: the fit needs a window")
+        if values["min_denominator"] >= 1.0:
+            raise NetworkError(f"{self.name}.min_denominator: expected a share below 1, got "
+                               f"{values['min_denominator']:g}")
