@@ -2,6 +2,7 @@
 
     python benchmarks/versions.py                 # against e2dc198 (before the open process graph)
     python benchmarks/versions.py --base v0.1 --rounds 7
+    python benchmarks/versions.py --instructions  # CPU instructions under valgrind: the machine's load does not count
 
 Checks the base commit out into a temporary git worktree, writes the same streams to
 disk once (benchmarks/streams.py: the slider and fast_slider scenes, uniform and moving
@@ -9,6 +10,13 @@ edges at 1 M and 20 M events/s, 240x180), and then times both code trees in alte
 subprocesses, ``--rounds`` times each (a slow spell of a shared machine then hits both):
 the ``fixed`` backend's ``run`` on each whole stream (CPU time) and the stream fed in
 1 ms packets (mean µs per packet). Best round per tree; the ratio is now / base.
+
+``--instructions`` counts instead the instructions one ``run`` executes (valgrind's
+callgrind, the difference between 1 and 1 + ``--runs`` runs in one process, so imports and
+set-up cancel out), on the slider scene and the edges stream at 1 M events/s: a measure
+that a loaded machine does not disturb (instructions are not time: memory stalls are not
+counted). Both trees compile for a generic x86-64 CPU (``NUMBA_CPU_NAME=generic``) in
+caches of their own, warmed outside valgrind. About 10 minutes.
 """
 
 from __future__ import annotations
@@ -64,6 +72,59 @@ print(json.dumps(out))
 '''
 
 
+COUNTER = r'''
+import sys
+import numpy as np
+from tofnet.backends.event_driven import FixedBackend
+from tofnet.io.recording import ConstantVelocity, Intrinsics, Recording
+from tofnet.networks import depth_network
+
+path, runs = sys.argv[1], int(sys.argv[2])
+intrinsics, velocity = Intrinsics(199.1, 198.5, 119.5, 89.5), (-0.5, 0.05, 0.1)
+events = np.load(path)
+recording = Recording(events, intrinsics=intrinsics, trajectory=ConstantVelocity(velocity), sensor_size=(240, 180))
+net = depth_network((240, 180), velocity={"source": "constant", "velocity": list(velocity)})
+for _ in range(runs):
+    FixedBackend().run(net, recording)
+'''
+INSTRUCTION_STREAMS = ("slider", "edges 1M")
+
+
+def count_instructions(tree: Path, script: Path, path: str, runs: int, cache: Path) -> int:
+    """Instructions of ``runs`` fused runs plus the process's start (callgrind's ``Collected``)."""
+    import re
+    env = {**os.environ, "PYTHONPATH": str(tree), "NUMBA_CPU_NAME": "generic", "NUMBA_CACHE_DIR": str(cache)}
+    subprocess.run([sys.executable, str(script), path, "1"], env=env, check=True, capture_output=True, cwd=tree)
+    done = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", sys.executable,
+                           str(script), path, str(runs)], env=env, capture_output=True, text=True, cwd=tree)
+    found = re.search(r"Collected : (\d+)", done.stderr)
+    if done.returncode or not found:
+        raise SystemExit(f"valgrind on {tree} failed:\n{done.stderr[-3000:]}")
+    return int(found.group(1))
+
+
+def instructions(base_tree: Path, tmp: Path, files: dict[str, str], extra_runs: int) -> None:
+    script = tmp / "counter.py"
+    script.write_text(COUNTER)
+    rows = []
+    for name in INSTRUCTION_STREAMS:
+        per_run = {}
+        for label, tree in (("base", base_tree), ("now", ROOT)):
+            print(f"{name}: {label}", flush=True)
+            one = count_instructions(tree, script, files[name], 1, tmp / f"cache-{label}")
+            more = count_instructions(tree, script, files[name], 1 + extra_runs, tmp / f"cache-{label}")
+            per_run[label] = (more - one) / extra_runs
+        events = len(np.load(files[name], mmap_mode="r"))
+        rows.append((name, events, per_run["base"], per_run["now"]))
+    print(f"\n## Instructions per run of the paper's network (fixed, fused), base vs now; difference of 1 and "
+          f"{1 + extra_runs} runs under callgrind, generic x86-64 code\n")
+    print("| stream | events | base M instructions | now M instructions | per event base / now | now / base |")
+    print("| --- | --- | --- | --- | --- | --- |")
+    for name, events, base, now in rows:
+        print(f"| {name} | {events:,} | {base / 1e6:.1f} | {now / 1e6:.1f} | {base / events:.0f} / {now / events:.0f} "
+              f"| {now / base:.3f} |")
+
+
 def write_streams(folder: Path, duration: float) -> dict[str, str]:
     files = {}
     for kind, rate in STREAMS:
@@ -90,6 +151,8 @@ def main() -> None:
     parser.add_argument("--base", default=DEFAULT_BASE, help=f"git commit to compare with (default {DEFAULT_BASE})")
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--duration", type=float, default=1.0, help="seconds per stream")
+    parser.add_argument("--instructions", action="store_true", help="count instructions under valgrind instead")
+    parser.add_argument("--runs", type=int, default=5, help="--instructions: runs counted beyond the first")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -97,9 +160,12 @@ def main() -> None:
         subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(base_tree), args.base],
                        check=True, capture_output=True)
         try:
+            files = write_streams(tmp, args.duration)
+            if args.instructions:
+                instructions(base_tree, tmp, files, args.runs)
+                return
             script = tmp / "timer.py"
             script.write_text(TIMER)
-            files = write_streams(tmp, args.duration)
             best: dict[str, dict] = {"base": {}, "now": {}}
             for r in range(args.rounds):
                 for label, tree in (("base", base_tree), ("now", ROOT)):
