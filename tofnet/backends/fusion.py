@@ -18,6 +18,7 @@ import numpy as np
 from tofnet.backends.base import DROP_REASONS, RunResult
 from tofnet.backends.graph import canonical
 from tofnet.backends.runtime import UpdateRows, velocity_table
+from tofnet.backends.stream import check_events
 from tofnet.core.network import Network
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, TOT_DTYPE
@@ -167,48 +168,54 @@ class FusedStream:
 
     def _admit(self, events: np.ndarray) -> None:
         """Checks before anything changes (the kernel checks the time order itself)."""
-        from tofnet.backends.stream import check_events
         if self._closed:
             raise BackendError("stream is closed")
         check_events(events)
 
-    def _kernel_call(self, events: np.ndarray, until_us: int | None, call):
-        """``call()`` on the kernel; the stream's own state changes only once it succeeded."""
-        first = self.t0_us is None and len(events) > 0
+    def _kernel_call(self, events: np.ndarray, until_us: int | None, into: np.ndarray, offset: int,
+                     output: bool):
+        """The kernel on a non-empty packet, writing ``into[offset:]``: ``run_events``' result, or with
+        ``output`` its ``KernelOutput``. The stream's own state changes only once it succeeded."""
+        first = self.t0_us is None
+        kernel = self.kernel
         if first:
-            self.kernel.t0_us = int(events["t"][0])
+            kernel.t0_us = int(events["t"][0])
         try:
-            result = call() if len(events) else None
+            if output:
+                result = kernel.process_events(events, self._rows, record_tot=self.record_tot, into=into,
+                                               offset=offset, copy=False)
+            else:
+                result = kernel.run_events(events, self._rows, into, offset, self.record_tot)
         except BaseException:
             if first:
-                self.kernel.t0_us = 0
+                kernel.t0_us = 0
             raise
         if first:
-            self.t0_us = self.kernel.t0_us
-        if len(events):
-            self._last_event_us = int(events["t"][-1])
-            self._events_in += len(events)
+            self.t0_us = kernel.t0_us
+        self._last_event_us = int(events["t"][-1])
+        self._events_in += len(events)
         if until_us is not None:
-            self.kernel.promise(until_us)
+            kernel.promise(until_us)
         return result
 
     def feed(self, events: np.ndarray, until_us: int | None = None) -> np.ndarray:
         """Depth estimates (``DEPTH_DTYPE``) produced by ``events`` (``EVENT_DTYPE``, time-ordered)."""
         self._admit(events)
         into = np.empty(len(events), DEPTH_DTYPE)  # the kernel writes the caller's array: no copy
-        done = self._kernel_call(events, until_us,
-                                 lambda: self.kernel.run_events(events, self._rows, into, 0, self.record_tot))
-        if done is None:
+        if not len(events):
+            if until_us is not None:
+                self.kernel.promise(until_us)
             self.tot = np.empty(0, TOT_DTYPE) if self.record_tot else None
-            return np.empty(0, DEPTH_DTYPE)
-        end, n_tot = done
+            return into
+        end, n_tot = self._kernel_call(events, until_us, into, 0, False)
         self.tot = copy_records(self.kernel.buffers()[2][:n_tot]) if self.record_tot else None
-        # a view would keep the whole packet-sized buffer alive: a copy when the estimates are few
-        return into[:end] if 2 * end >= len(into) else copy_records(into[:end])
+        return into[:end]
 
     def feed_all(self, events: np.ndarray, until_us: int | None = None) -> dict[str, np.ndarray]:
         """The records of the steps this packet completed, canonical order (as ``GraphStream``)."""
-        new = {self.depth_name: self.feed(events, until_us)}
+        depth = self.feed(events, until_us)
+        # kept beyond the packet: a view would hold the whole packet-sized buffer
+        new = {self.depth_name: copy_records(depth) if 2 * len(depth) < len(events) else depth}
         if self.record_tot:
             new[self.tot_name] = self.tot
         horizon = None  # records of steps from here on wait (a later event or until_us completes them)
@@ -235,8 +242,7 @@ class FusedStream:
         call, no ``z_raw``), None for an empty packet. Spares a copy when the caller collects the estimates.
         """
         self._admit(events)
-        return self._kernel_call(events, None, lambda: self.kernel.process_events(
-            events, self._rows, record_tot=self.record_tot, into=into, offset=offset, copy=False))
+        return self._kernel_call(events, None, into, offset, True) if len(events) else None
 
     def _empty(self, name: str) -> np.ndarray:
         return np.empty(0, DEPTH_DTYPE if name == self.depth_name else TOT_DTYPE)

@@ -32,7 +32,8 @@ def check_events(events) -> None:
     Only the first and last times are looked at: a packet whose times are not in order is
     refused by the time-order check anyway, so in an accepted one they bound the rest.
     """
-    if not isinstance(events, np.ndarray) or events.dtype != EVENT_DTYPE or events.ndim != 1:
+    if not isinstance(events, np.ndarray) or (events.dtype is not EVENT_DTYPE and events.dtype != EVENT_DTYPE) \
+            or events.ndim != 1:
         got = events.dtype if isinstance(events, np.ndarray) else type(events).__name__
         raise BackendError(f"events must be a one-dimensional numpy array of dtype {EVENT_DTYPE} "
                            f"(tofnet.events.EVENT_DTYPE), got {got}")

@@ -1,11 +1,15 @@
 """The canonical order of outputs: by step, then y, then x (docs/semantics.md, "Output order").
 
-The fused kernel writes estimates in the order of the events that triggered them; this puts
-each step's estimates in pixel order in place, in time linear in the estimates plus the
-sensor's rows (a counting sort by row, then an insertion sort by column within rows, which
-hold one or two estimates each). Records move as raw 32-bit words: a depth record
-(``DEPTH_DTYPE``: t i8, x u2, y u2, z f8, step i8; 28 bytes, packed) is 7 words, and its
-word 2 is ``(y << 16) | x`` on little-endian machines, the sort key itself.
+The fused kernel writes estimates in the order of the events that triggered them;
+``sort_by_pixel`` puts each step's estimates in pixel order in place, in time linear in
+the estimates plus the sensor's rows (a counting sort by row, then an insertion sort by
+column within rows, which hold one or two estimates each), called from inside the kernel
+so that a packet pays no extra dispatch. ``pixel_order`` is the same order as a
+permutation, for records of any payload (``backends.graph.canonical``).
+
+``sort_by_pixel`` moves records as raw 32-bit words: a depth record (``DEPTH_DTYPE``: t i8,
+x u2, y u2, z f8, step i8; 28 bytes, packed) is 7 words, and its word 2 is ``(y << 16) | x``
+on little-endian machines, the sort key itself.
 """
 
 from __future__ import annotations
@@ -59,12 +63,11 @@ def _sort_words(words, lo, hi, height, scratch, row_start):
         i = j
 
 
-def sort_steps_by_pixel(out: np.ndarray, lo: int, hi: int, height: int, scratch: np.ndarray,
-                        row_start: np.ndarray) -> None:
-    """Sort depth records ``out[lo:hi]`` (sorted by step) by (step, y, x), in place.
+@njit(cache=True)
+def sort_by_pixel(out, lo, hi, height, scratch, row_start):
+    """Sort depth records ``out[lo:hi]`` (sorted by step) by (step, y, x) in place, stably.
 
-    ``scratch``: ``(at least hi - lo, 7)`` uint32; ``row_start``: at least ``height + 1`` int64.
-    Estimates of one step and pixel keep their order (stable).
+    ``scratch``: ``(at least hi - lo, WORDS)`` uint32; ``row_start``: at least ``height + 1`` int64.
     """
     _sort_words(out.view(np.uint32).reshape(-1, WORDS), lo, hi, height, scratch, row_start)
 

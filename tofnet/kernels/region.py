@@ -17,7 +17,7 @@ from tofnet.kernels import time_of_travel as tt
 from tofnet.kernels.kernel_config import (MAX_VELOCITY_ROWS, KernelConfig, KernelOutput, Region,  # noqa: F401
                                           VelocityRows, _sample_tables, copy_records, velocity_rows)
 from tofnet.kernels.input_filter import ACCEPTED, NEVER
-from tofnet.kernels.order import WORDS as ORDER_WORDS, sort_steps_by_pixel
+from tofnet.kernels.order import WORDS as ORDER_WORDS, sort_by_pixel
 
 
 class TimeOfTravelKernel:
@@ -222,17 +222,21 @@ class TimeOfTravelKernel:
             out, raw = into, self._no_raw
         if n == 0:
             return offset, 0
+        if len(self._scratch) < n:  # the kernel sorts a call's estimates (at most one per event)
+            self._scratch = np.empty((max(n, 2 * len(self._scratch)), ORDER_WORDS), np.uint32)
         t = events["t"]
         first, last = int(t[0]), int(t[-1])
         if last - first < self._span_us:  # one velocity table is enough (the usual case)
             n_out, n_tot = self._events(events, t, first, last, velocity, out, raw, offset, record_tot, 0)
-        else:
-            n_out, n_tot = offset, 0
-            for lo, hi in self._pieces(t):
-                piece = events[lo:hi]
-                n_out, n_tot = self._events(piece, piece["t"], int(piece["t"][0]), int(piece["t"][-1]), velocity,
-                                            out, raw, n_out, record_tot, n_tot)
-        self._order(out, raw, offset, n_out)
+            if len(raw):  # the kernel sorts estimates alone; with their fixed-point values, here
+                self._order(out, raw, offset, n_out)
+            return n_out, n_tot
+        n_out, n_tot = offset, 0
+        for lo, hi in self._pieces(t):
+            piece = events[lo:hi]
+            n_out, n_tot = self._events(piece, piece["t"], int(piece["t"][0]), int(piece["t"][-1]), velocity,
+                                        out, raw, n_out, record_tot, n_tot)
+        self._order(out, raw, offset, n_out)  # a step may run across pieces
         return n_out, n_tot
 
     def _order(self, out: np.ndarray, raw: np.ndarray, lo: int, hi: int) -> None:
@@ -245,7 +249,7 @@ class TimeOfTravelKernel:
             return
         if len(self._scratch) < hi - lo:
             self._scratch = np.empty((max(hi - lo, 2 * len(self._scratch)), ORDER_WORDS), np.uint32)
-        sort_steps_by_pixel(out, lo, hi, self.config.sensor_size[1], self._scratch, self._row_start)
+        sort_by_pixel(out, lo, hi, self.config.sensor_size[1], self._scratch, self._row_start)
 
     def join_packets(self, depth: np.ndarray, seams: list[int]) -> np.ndarray:
         """Estimates of consecutive calls (each in canonical order), put in canonical order in place:
@@ -289,13 +293,13 @@ class TimeOfTravelKernel:
             table, first = self._no_velocity, 0
         state = self._ints, self._floats
         n_out2, n_tot2, status = tt.process_events(events, *state, table, first, out, raw, n_out, record_tot,
-                                                   self._tot, n_tot)
+                                                   self._tot, n_tot, self._scratch, self._row_start)
         if status == tt.OK:
             return n_out2, n_tot2
         if status == tt.NO_VELOCITY:  # events out of time order outside the sensor: ask for what is needed
             table, first = velocity(*self._updates(int(self._cursor[tt.NEED_FIRST]), int(self._cursor[tt.NEED_LAST])))
             n_out2, n_tot2, status = tt.process_events(events, *state, table, first, out, raw, n_out, record_tot,
-                                                       self._tot, n_tot)
+                                                       self._tot, n_tot, self._scratch, self._row_start)
         self._raise_for(status, table, first)
         return n_out2, n_tot2
 

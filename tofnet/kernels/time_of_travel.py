@@ -51,6 +51,7 @@ from tofnet.kernels.depth import float_depth
 from tofnet.kernels.fixed_point import fixed_depth, quantize
 from tofnet.kernels.input_filter import ACCEPTED, BEFORE_T0, OUT_OF_BOUNDS, admit
 from tofnet.kernels.lens import SAMPLE_COLUMNS
+from tofnet.kernels.order import sort_by_pixel
 from tofnet.kernels.velocity import sampled_velocity_term
 
 #: Stamp of an idle unit (never facilitated, sent since, or overflowed at a rebase).
@@ -269,10 +270,16 @@ def views(ints, floats):
 
 
 @njit(cache=True)
-def process_events(events, ints, floats, velocity, first_update, out, out_raw, n_out, record_tot, tot, n_tot):
-    """Raw events (``EVENT_DTYPE``) through the input filter and the region (``process``)."""
-    return process(events["t"], events["x"], events["y"], events["p"], True, ints, floats, velocity, first_update,
-                   out, out_raw, n_out, record_tot, tot, n_tot)
+def process_events(events, ints, floats, velocity, first_update, out, out_raw, n_out, record_tot, tot, n_tot,
+                   scratch, row_start):
+    """Raw events (``EVENT_DTYPE``) through the input filter and the region (``process``); the
+    estimates in the canonical order (``order.sort_by_pixel``, with ``scratch`` and ``row_start``)
+    unless their fixed-point values are kept too (``out_raw`` not empty: the caller sorts)."""
+    n_out2, n_tot2, status = process(events["t"], events["x"], events["y"], events["p"], True, ints, floats,
+                                     velocity, first_update, out, out_raw, n_out, record_tot, tot, n_tot)
+    if status == OK and out_raw.shape[0] == 0 and n_out2 - n_out > 1:
+        sort_by_pixel(out, n_out, n_out2, ints[HEIGHT], scratch, row_start)
+    return n_out2, n_tot2, status
 
 
 @njit(cache=True)
