@@ -13,10 +13,11 @@ the ``fixed`` backend's ``run`` on each whole stream (CPU time) and the stream f
 
 ``--instructions`` counts instead the instructions one ``run`` executes (valgrind's
 callgrind, the difference between 1 and 1 + ``--runs`` runs in one process, so imports and
-set-up cancel out), on the slider scene and the edges stream at 1 M events/s: a measure
-that a loaded machine does not disturb (instructions are not time: memory stalls are not
-counted). Both trees compile for a generic x86-64 CPU (``NUMBA_CPU_NAME=generic``) in
-caches of their own, warmed outside valgrind. About 10 minutes.
+set-up cancel out), on the slider scene and the edges stream at 1 M events/s, each by
+``run`` and fed in 1 ms packets: a measure that a loaded machine does not disturb
+(instructions are not time: memory stalls are not counted). Both trees compile for a
+generic x86-64 CPU (``NUMBA_CPU_NAME=generic``) in caches of their own, warmed outside
+valgrind, with one BLAS thread. About 20 minutes.
 """
 
 from __future__ import annotations
@@ -79,24 +80,36 @@ from tofnet.backends.event_driven import FixedBackend
 from tofnet.io.recording import ConstantVelocity, Intrinsics, Recording
 from tofnet.networks import depth_network
 
-path, runs = sys.argv[1], int(sys.argv[2])
+path, runs, packets = sys.argv[1], int(sys.argv[2]), sys.argv[3] == "packets"
 intrinsics, velocity = Intrinsics(199.1, 198.5, 119.5, 89.5), (-0.5, 0.05, 0.1)
 events = np.load(path)
 recording = Recording(events, intrinsics=intrinsics, trajectory=ConstantVelocity(velocity), sensor_size=(240, 180))
 net = depth_network((240, 180), velocity={"source": "constant", "velocity": list(velocity)})
+t = events["t"]
+bounds = np.searchsorted(t, np.arange(int(t[0]), int(t[-1]) + 1001, 1000))
+parts = [events[lo:hi] for lo, hi in zip(bounds[:-1], bounds[1:])]
 for _ in range(runs):
-    FixedBackend().run(net, recording)
+    if packets:
+        stream = FixedBackend().open_stream(net, intrinsics=intrinsics, velocity_source=ConstantVelocity(velocity),
+                                            t0_us=int(t[0]))
+        for part in parts:
+            stream.feed(part)
+    else:
+        FixedBackend().run(net, recording)
 '''
-INSTRUCTION_STREAMS = ("slider", "edges 1M")
+#: (stream, how it is fed): ``run`` on the whole stream, or ``feed`` of 1 ms packets
+INSTRUCTION_STREAMS = (("slider", "run"), ("edges 1M", "run"), ("slider", "packets"), ("edges 1M", "packets"))
 
 
-def count_instructions(tree: Path, script: Path, path: str, runs: int, cache: Path) -> int:
-    """Instructions of ``runs`` fused runs plus the process's start (callgrind's ``Collected``)."""
+def count_instructions(tree: Path, script: Path, path: str, runs: int, cache: Path, how: str) -> int:
+    """Instructions of ``runs`` fused runs (or packet streams) plus the process's start (callgrind's ``Collected``)."""
     import re
-    env = {**os.environ, "PYTHONPATH": str(tree), "NUMBA_CPU_NAME": "generic", "NUMBA_CACHE_DIR": str(cache)}
-    subprocess.run([sys.executable, str(script), path, "1"], env=env, check=True, capture_output=True, cwd=tree)
+    # one BLAS thread: idle BLAS threads spin, and their instructions would depend on timing
+    env = {**os.environ, "PYTHONPATH": str(tree), "NUMBA_CPU_NAME": "generic", "NUMBA_CACHE_DIR": str(cache),
+           "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    subprocess.run([sys.executable, str(script), path, "1", how], env=env, check=True, capture_output=True, cwd=tree)
     done = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", sys.executable,
-                           str(script), path, str(runs)], env=env, capture_output=True, text=True, cwd=tree)
+                           str(script), path, str(runs), how], env=env, capture_output=True, text=True, cwd=tree)
     found = re.search(r"Collected : (\d+)", done.stderr)
     if done.returncode or not found:
         raise SystemExit(f"valgrind on {tree} failed:\n{done.stderr[-3000:]}")
@@ -107,18 +120,19 @@ def instructions(base_tree: Path, tmp: Path, files: dict[str, str], extra_runs: 
     script = tmp / "counter.py"
     script.write_text(COUNTER)
     rows = []
-    for name in INSTRUCTION_STREAMS:
+    for name, how in INSTRUCTION_STREAMS:
         per_run = {}
         for label, tree in (("base", base_tree), ("now", ROOT)):
-            print(f"{name}: {label}", flush=True)
-            one = count_instructions(tree, script, files[name], 1, tmp / f"cache-{label}")
-            more = count_instructions(tree, script, files[name], 1 + extra_runs, tmp / f"cache-{label}")
+            print(f"{name} ({how}): {label}", flush=True)
+            one = count_instructions(tree, script, files[name], 1, tmp / f"cache-{label}", how)
+            more = count_instructions(tree, script, files[name], 1 + extra_runs, tmp / f"cache-{label}", how)
             per_run[label] = (more - one) / extra_runs
         events = len(np.load(files[name], mmap_mode="r"))
-        rows.append((name, events, per_run["base"], per_run["now"]))
-    print(f"\n## Instructions per run of the paper's network (fixed, fused), base vs now; difference of 1 and "
-          f"{1 + extra_runs} runs under callgrind, generic x86-64 code\n")
-    print("| stream | events | base M instructions | now M instructions | per event base / now | now / base |")
+        rows.append((f"{name}, {'1 ms packets' if how == 'packets' else 'run'}", events, per_run["base"],
+                     per_run["now"]))
+    print(f"\n## Instructions per pass over a stream of the paper's network (fixed, fused), base vs now; "
+          f"difference of 1 and {1 + extra_runs} passes under callgrind, generic x86-64 code\n")
+    print("| stream, fed by | events | base M instructions | now M instructions | per event base / now | now / base |")
     print("| --- | --- | --- | --- | --- | --- |")
     for name, events, base, now in rows:
         print(f"| {name} | {events:,} | {base / 1e6:.1f} | {now / 1e6:.1f} | {base / events:.0f} / {now / events:.0f} "
