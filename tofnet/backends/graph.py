@@ -54,11 +54,11 @@ def canonical(records: np.ndarray) -> np.ndarray:
     if len(records) < 2:
         return records
     names = records.dtype.names
-    step = np.ascontiguousarray(records["step"])
+    step = records["step"]  # strided views of the records: numba reads them in place
     if "x" not in names or "y" not in names:
         return records if np.all(step[1:] >= step[:-1]) else records[np.argsort(step, kind="stable")]
-    y, x = np.ascontiguousarray(records["y"]), np.ascontiguousarray(records["x"])
-    minor = np.ascontiguousarray(records["direction"]) if "direction" in names else np.zeros(len(records), np.uint8)
+    y, x = records["y"], records["x"]
+    minor = records["direction"] if "direction" in names else np.zeros(len(records), np.uint8)
     first = _first_disorder(step, y, x, minor)
     if first < 0:
         return records

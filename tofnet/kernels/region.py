@@ -20,6 +20,13 @@ from tofnet.kernels.input_filter import ACCEPTED, NEVER
 from tofnet.kernels.order import WORDS as ORDER_WORDS, sort_by_pixel
 
 
+def _as_array(values, kept: tuple, dtype) -> np.ndarray:
+    """``values`` itself when a numpy array of one of the ``kept`` types, else a contiguous ``dtype`` copy."""
+    if isinstance(values, np.ndarray) and values.ndim == 1 and values.dtype in kept:
+        return values
+    return np.ascontiguousarray(values, dtype=dtype)
+
+
 class TimeOfTravelKernel:
     """Units and depth neurons of one region, fed accepted spikes or raw events packet by packet.
 
@@ -170,10 +177,11 @@ class TimeOfTravelKernel:
         if self._broken:
             raise BackendError("kernel state is invalid after an earlier error; start a new one")
         spikes_before = self.tot_spikes
-        steps = np.ascontiguousarray(steps, dtype=np.int64)
-        xs = np.ascontiguousarray(xs, dtype=np.int64)
-        ys = np.ascontiguousarray(ys, dtype=np.int64)
-        ps = np.ascontiguousarray(ps, dtype=np.uint8)
+        # the fields of spike records (int64 steps, uint16 pixels) go in as they are, strided
+        # views included, with the types the fused kernel reads events with: no copies
+        steps = _as_array(steps, (np.int64,), np.int64)
+        xs, ys = _as_array(xs, (np.uint16, np.int64), np.int64), _as_array(ys, (np.uint16, np.int64), np.int64)
+        ps = _as_array(ps, (np.uint8,), np.uint8)
         table = np.ascontiguousarray(velocity_table, dtype=np.float64)
         self._reserve(len(steps), len(steps) if record_tot else 0)
         n_out, n_tot, status = self._call(steps, xs, ys, ps, False, table, first_update, self._out, self._raw, 0,
@@ -330,10 +338,8 @@ class TimeOfTravelKernel:
         w_step = np.zeros(0, np.int64) if rotation is None else np.ascontiguousarray(rotation["step"])
         if rotation is not None and len(rotation):
             w_omega[:, 0], w_omega[:, 1], w_omega[:, 2] = rotation["wx"], rotation["wy"], rotation["wz"]
-        n_out, status = depth_from_counts(
-            np.ascontiguousarray(counts["step"]), np.ascontiguousarray(counts["x"]),
-            np.ascontiguousarray(counts["y"]), np.ascontiguousarray(counts["direction"]),
-            np.ascontiguousarray(counts["count"]), np.ascontiguousarray(velocity["step"]), v_t,
+        n_out, status = depth_from_counts(  # the records' fields as strided views, read in place
+            counts["step"], counts["x"], counts["y"], counts["direction"], counts["count"], velocity["step"], v_t,
             self._held_velocity, w_step, w_omega, self._held_omega, self._rotation, self._ints, self._floats,
             self._out, self._raw, 0)
         if status:
