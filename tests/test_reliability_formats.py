@@ -220,6 +220,22 @@ def test_a_corrupt_ros_message_is_one_line(tmp_path):
     _one_line(err)
 
 
+def test_a_corrupt_side_topic_message_is_one_line(tmp_path):
+    # found by benchmarks/fuzz.py (seed 2): rosbags raised SerdeError from a camera_info message
+    pytest.importorskip("rosbags")
+    from rosbags.rosbag1 import Writer
+
+    from tofnet.io.rosbag import typestore
+    store = typestore()
+    with Writer(tmp_path / "rec.bag") as writer:
+        info = writer.add_connection("/dvs/camera_info", "sensor_msgs/msg/CameraInfo", typestore=store)
+        writer.add_connection("/dvs/events", "dvs_msgs/msg/EventArray", typestore=store)
+        writer.write(info, 1000, bytes(12) + (158).to_bytes(4, "little") + bytes(40))  # a sequence longer than the message
+    with pytest.raises(DataError, match="rec.bag: not a readable ROS1 bag file") as err:
+        read_recording(tmp_path / "rec.bag")
+    _one_line(err)
+
+
 def test_aedat4_with_a_non_utf8_description_is_refused_before_faery_sees_it(tmp_path):
     # faery 0.7 aborts the process (a panic that cannot unwind) on such a header.
     pytest.importorskip("faery")

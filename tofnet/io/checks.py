@@ -21,7 +21,7 @@ from tofnet.events import MAX_TIME_US, sensor_size_problem
 
 
 #: What decoding libraries raise on a bad file (h5py: OSError, KeyError, ValueError,
-#: TypeError; faery: RuntimeError; numpy on cut buffers: ValueError; rosbags: ReaderError).
+#: TypeError; faery: RuntimeError; numpy on cut buffers: ValueError; rosbags: ReaderError, SerdeError).
 _LIBRARY_ERRORS = (OSError, EOFError, ValueError, KeyError, TypeError, IndexError, RuntimeError, OverflowError,
                    struct.error, zlib.error)
 #: Formats tofnet parses itself: a stray exception there is a bug to fix, not translated.
@@ -37,7 +37,8 @@ def decode_errors(kind: str) -> tuple[type[BaseException], ...]:
         errors += (AssertionError,)  # rosbags checks some record fields with assert
         try:
             from rosbags.rosbag1 import ReaderError
-            errors += (ReaderError,)
+            from rosbags.serde import SerdeError  # a message that does not deserialise
+            errors += (ReaderError, SerdeError)
         except ImportError:
             pass
     return errors
