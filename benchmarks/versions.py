@@ -3,6 +3,7 @@
     python benchmarks/versions.py                 # against e2dc198 (before the open process graph)
     python benchmarks/versions.py --base v0.1 --rounds 7
     python benchmarks/versions.py --instructions  # CPU instructions under valgrind: the machine's load does not count
+    python benchmarks/versions.py --instructions --cache-sim   # and cache misses (L1i, L1d), about 2x slower
 
 Checks the base commit out into a temporary git worktree, writes the same streams to
 disk once (benchmarks/streams.py: the slider and fast_slider scenes, uniform and moving
@@ -101,22 +102,25 @@ for _ in range(runs):
 INSTRUCTION_STREAMS = (("slider", "run"), ("edges 1M", "run"), ("slider", "packets"), ("edges 1M", "packets"))
 
 
-def count_instructions(tree: Path, script: Path, path: str, runs: int, cache: Path, how: str) -> int:
-    """Instructions of ``runs`` fused runs (or packet streams) plus the process's start (callgrind's ``Collected``)."""
+def count_instructions(tree: Path, script: Path, path: str, runs: int, cache: Path, how: str,
+                       cache_sim: bool) -> np.ndarray:
+    """Callgrind's ``Collected`` counts of ``runs`` fused runs (or packet streams) plus the process's
+    start: instructions, and with ``cache_sim`` also Dr Dw I1mr D1mr D1mw ILmr DLmr DLmw."""
     import re
     # one BLAS thread: idle BLAS threads spin, and their instructions would depend on timing
     env = {**os.environ, "PYTHONPATH": str(tree), "NUMBA_CPU_NAME": "generic", "NUMBA_CACHE_DIR": str(cache),
            "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
     subprocess.run([sys.executable, str(script), path, "1", how], env=env, check=True, capture_output=True, cwd=tree)
-    done = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", sys.executable,
+    done = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null",
+                           *(["--cache-sim=yes"] if cache_sim else []), sys.executable,
                            str(script), path, str(runs), how], env=env, capture_output=True, text=True, cwd=tree)
-    found = re.search(r"Collected : (\d+)", done.stderr)
+    found = re.search(r"Collected : ([\d ]+)", done.stderr)
     if done.returncode or not found:
         raise SystemExit(f"valgrind on {tree} failed:\n{done.stderr[-3000:]}")
-    return int(found.group(1))
+    return np.array([int(v) for v in found.group(1).split()], dtype=np.float64)
 
 
-def instructions(base_tree: Path, tmp: Path, files: dict[str, str], extra_runs: int) -> None:
+def instructions(base_tree: Path, tmp: Path, files: dict[str, str], extra_runs: int, cache_sim: bool) -> None:
     script = tmp / "counter.py"
     script.write_text(COUNTER)
     rows = []
@@ -124,19 +128,24 @@ def instructions(base_tree: Path, tmp: Path, files: dict[str, str], extra_runs: 
         per_run = {}
         for label, tree in (("base", base_tree), ("now", ROOT)):
             print(f"{name} ({how}): {label}", flush=True)
-            one = count_instructions(tree, script, files[name], 1, tmp / f"cache-{label}", how)
-            more = count_instructions(tree, script, files[name], 1 + extra_runs, tmp / f"cache-{label}", how)
+            one = count_instructions(tree, script, files[name], 1, tmp / f"cache-{label}", how, cache_sim)
+            more = count_instructions(tree, script, files[name], 1 + extra_runs, tmp / f"cache-{label}", how,
+                                      cache_sim)
             per_run[label] = (more - one) / extra_runs
         events = len(np.load(files[name], mmap_mode="r"))
         rows.append((f"{name}, {'1 ms packets' if how == 'packets' else 'run'}", events, per_run["base"],
                      per_run["now"]))
     print(f"\n## Instructions per pass over a stream of the paper's network (fixed, fused), base vs now; "
           f"difference of 1 and {1 + extra_runs} passes under callgrind, generic x86-64 code\n")
-    print("| stream, fed by | events | base M instructions | now M instructions | per event base / now | now / base |")
-    print("| --- | --- | --- | --- | --- | --- |")
+    misses = " | base / now L1i misses (k) | base / now L1d read misses (k)" if cache_sim else ""
+    print(f"| stream, fed by | events | base M instructions | now M instructions | per event base / now "
+          f"| now / base{misses} |")
+    print("| --- " * (6 + 2 * cache_sim) + "|")
     for name, events, base, now in rows:
-        print(f"| {name} | {events:,} | {base / 1e6:.1f} | {now / 1e6:.1f} | {base / events:.0f} / {now / events:.0f} "
-              f"| {now / base:.3f} |")
+        extra = (f" | {base[3] / 1e3:.0f} / {now[3] / 1e3:.0f} | {base[4] / 1e3:.0f} / {now[4] / 1e3:.0f}"
+                 if cache_sim else "")
+        print(f"| {name} | {events:,} | {base[0] / 1e6:.1f} | {now[0] / 1e6:.1f} | {base[0] / events:.0f} / "
+              f"{now[0] / events:.0f} | {now[0] / base[0]:.3f}{extra} |")
 
 
 def write_streams(folder: Path, duration: float) -> dict[str, str]:
@@ -167,6 +176,8 @@ def main() -> None:
     parser.add_argument("--duration", type=float, default=1.0, help="seconds per stream")
     parser.add_argument("--instructions", action="store_true", help="count instructions under valgrind instead")
     parser.add_argument("--runs", type=int, default=5, help="--instructions: runs counted beyond the first")
+    parser.add_argument("--cache-sim", action="store_true",
+                        help="--instructions: also simulate the caches (L1i, L1d misses; about 2x slower)")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -176,7 +187,7 @@ def main() -> None:
         try:
             files = write_streams(tmp, args.duration)
             if args.instructions:
-                instructions(base_tree, tmp, files, args.runs)
+                instructions(base_tree, tmp, files, args.runs, args.cache_sim)
                 return
             script = tmp / "timer.py"
             script.write_text(TIMER)
