@@ -67,9 +67,8 @@ class UndistortEventModel(Model):
         spikes = inputs["events"]
         out = np.empty(len(spikes), self._dtype)
         received = np.ascontiguousarray(spikes["step"]) + 1  # sent in step k - 1, here in step k
-        n = remap_spikes(received, np.ascontiguousarray(spikes["x"]), np.ascontiguousarray(spikes["y"]),
-                         np.ascontiguousarray(spikes["p"]), self.targets, self.width, self.last_step, out,
-                         self._counts)
+        n = remap_spikes(received, spikes["x"], spikes["y"], spikes["p"],  # strided views, read in place
+                         self.targets, self.width, self.last_step, out, self._counts)
         return {"undistorted": out[:n]}
 
     def counts(self) -> dict[str, int]:
