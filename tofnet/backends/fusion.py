@@ -157,63 +157,68 @@ class FusedStream:
         self._last_event_us: int | None = None
         self._held: dict[str, np.ndarray] = {}  # feed_all: records of steps not complete yet
         p = pipeline
+        # velocity updates (``VelocityRows``: ``self._updates.rows``), computed ``VELOCITY_LOOKAHEAD`` ahead
         self._updates = UpdateRows(lambda first, count: velocity_table(
             self.velocity_source, self.kernel.t0_us, p.timestep_us, p.update_every, count, first), VELOCITY_LOOKAHEAD)
         self._started = time.perf_counter()
         self._closed = False
 
-    def _rows(self, first: int, count: int) -> tuple[np.ndarray, int]:
-        """Velocity updates ``first .. first+count-1`` (``VelocityRows``), computed ``VELOCITY_LOOKAHEAD`` ahead."""
-        return self._updates.rows(first, count)
-
-    def _admit(self, events: np.ndarray) -> None:
-        """Checks before anything changes (the kernel checks the time order itself)."""
+    def _admit(self, events: np.ndarray) -> tuple[int, int] | None:
+        """Checks before anything changes (the kernel checks the time order itself); the packet's
+        first and last times (µs), None when it is empty."""
         if self._closed:
             raise BackendError("stream is closed")
-        check_events(events)
+        return check_events(events)
 
-    def _kernel_call(self, events: np.ndarray, until_us: int | None, into: np.ndarray, offset: int,
-                     output: bool):
-        """The kernel on a non-empty packet, writing ``into[offset:]``: ``run_events``' result, or with
-        ``output`` its ``KernelOutput``. The stream's own state changes only once it succeeded."""
+    def _kernel_call(self, events: np.ndarray, span: tuple[int, int], until_us: int | None, into: np.ndarray,
+                     offset: int, output: bool, canonical: bool = True):
+        """The kernel on a non-empty packet (first and last times ``span``, µs), writing ``into[offset:]``:
+        ``run_events``' result (estimates in canonical order or, without ``canonical``, in their
+        trigger events' order), or with ``output`` its ``KernelOutput``. The stream's own state
+        changes only once it succeeded."""
         first = self.t0_us is None
         kernel = self.kernel
         if first:
-            kernel.t0_us = int(events["t"][0])
+            kernel.t0_us = span[0]
         try:
             if output:
-                result = kernel.process_events(events, self._rows, record_tot=self.record_tot, into=into,
+                result = kernel.process_events(events, self._updates.rows, record_tot=self.record_tot, into=into,
                                                offset=offset, copy=False)
             else:
-                result = kernel.run_events(events, self._rows, into, offset, self.record_tot)
+                result = kernel.run_events(events, self._updates.rows, into, offset, self.record_tot, span,
+                                            canonical)
         except BaseException:
             if first:
                 kernel.t0_us = 0
             raise
         if first:
             self.t0_us = kernel.t0_us
-        self._last_event_us = int(events["t"][-1])
+        self._last_event_us = span[1]
         self._events_in += len(events)
         if until_us is not None:
             kernel.promise(until_us)
         return result
 
     def feed(self, events: np.ndarray, until_us: int | None = None) -> np.ndarray:
-        """Depth estimates (``DEPTH_DTYPE``) produced by ``events`` (``EVENT_DTYPE``, time-ordered)."""
-        self._admit(events)
+        """Depth estimates (``DEPTH_DTYPE``) produced by ``events`` (``EVENT_DTYPE``, time-ordered),
+        in the order of the events that triggered them."""
+        return self._feed(events, until_us, False)
+
+    def _feed(self, events: np.ndarray, until_us: int | None, canonical: bool) -> np.ndarray:
+        span = self._admit(events)
         into = np.empty(len(events), DEPTH_DTYPE)  # the kernel writes the caller's array: no copy
-        if not len(events):
+        if span is None:
             if until_us is not None:
                 self.kernel.promise(until_us)
             self.tot = np.empty(0, TOT_DTYPE) if self.record_tot else None
             return into
-        end, n_tot = self._kernel_call(events, until_us, into, 0, False)
+        end, n_tot = self._kernel_call(events, span, until_us, into, 0, False, canonical)
         self.tot = copy_records(self.kernel.buffers()[2][:n_tot]) if self.record_tot else None
         return into[:end]
 
     def feed_all(self, events: np.ndarray, until_us: int | None = None) -> dict[str, np.ndarray]:
         """The records of the steps this packet completed, canonical order (as ``GraphStream``)."""
-        depth = self.feed(events, until_us)
+        depth = self._feed(events, until_us, True)
         # kept beyond the packet: a view would hold the whole packet-sized buffer
         new = {self.depth_name: copy_records(depth) if 2 * len(depth) < len(events) else depth}
         if self.record_tot:
@@ -241,8 +246,8 @@ class FusedStream:
         Returns the kernel's output (``depth`` a view of ``into``; ``tot`` valid until the next
         call, no ``z_raw``), None for an empty packet. Spares a copy when the caller collects the estimates.
         """
-        self._admit(events)
-        return self._kernel_call(events, None, into, offset, True) if len(events) else None
+        span = self._admit(events)
+        return self._kernel_call(events, span, None, into, offset, True) if span is not None else None
 
     def _empty(self, name: str) -> np.ndarray:
         return np.empty(0, DEPTH_DTYPE if name == self.depth_name else TOT_DTYPE)

@@ -26,20 +26,25 @@ def primary_output(sinks: list[str], payloads: dict[str, str]) -> str | None:
     return depth[0] if len(depth) == 1 else None
 
 
-def check_events(events) -> None:
+def check_events(events) -> tuple[int, int] | None:
     """Refuse a packet that is not an event array, or whose times leave ``|t| < MAX_TIME_US``.
 
     Only the first and last times are looked at: a packet whose times are not in order is
     refused by the time-order check anyway, so in an accepted one they bound the rest.
+    Returns those two times (µs), None for an empty packet.
     """
     if not isinstance(events, np.ndarray) or (events.dtype is not EVENT_DTYPE and events.dtype != EVENT_DTYPE) \
             or events.ndim != 1:
         got = events.dtype if isinstance(events, np.ndarray) else type(events).__name__
         raise BackendError(f"events must be a one-dimensional numpy array of dtype {EVENT_DTYPE} "
                            f"(tofnet.events.EVENT_DTYPE), got {got}")
-    if len(events) and not (-MAX_TIME_US < int(events["t"][0]) and int(events["t"][-1]) < MAX_TIME_US):
-        raise BackendError(f"event times must satisfy |t| < 2**61 µs (docs/reliability.md), got "
-                           f"{int(events['t'][0])} .. {int(events['t'][-1])} µs")
+    if not len(events):
+        return None
+    t = events["t"]
+    first, last = int(t[0]), int(t[-1])
+    if not (-MAX_TIME_US < first and last < MAX_TIME_US):
+        raise BackendError(f"event times must satisfy |t| < 2**61 µs (docs/reliability.md), got {first} .. {last} µs")
+    return first, last
 
 
 class GraphStream:

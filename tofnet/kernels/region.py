@@ -208,11 +208,15 @@ class TimeOfTravelKernel:
         return self._output(into, self._no_raw, offset, end, n_tot, record_tot, spikes_before, copy)
 
     def run_events(self, events: np.ndarray, velocity: VelocityRows, into: np.ndarray | None = None,
-                   offset: int = 0, record_tot: bool = False) -> tuple[int, int]:
+                   offset: int = 0, record_tot: bool = False, span: tuple[int, int] | None = None,
+                   canonical: bool = True) -> tuple[int, int]:
         """``process_events`` without the ``KernelOutput`` (the per-packet path of a stream).
 
         Returns the end of the estimates in ``into`` (from ``offset``), or in ``buffers()[0]``
         (from 0) when ``into`` is None, and how many time-of-travel spikes ``buffers()[2]`` holds.
+        ``span``: the packet's first and last event times (µs) when the caller has them already.
+        ``canonical=False`` leaves the estimates in the order of their trigger events (a live
+        stream's caller who does not need each step in pixel order spares the sort).
         """
         if self._broken or not self._full:
             raise BackendError("kernel state is invalid after an earlier error; start a new one" if self._broken else
@@ -232,19 +236,22 @@ class TimeOfTravelKernel:
             return offset, 0
         if len(self._scratch) < n:  # the kernel sorts a call's estimates (at most one per event)
             self._scratch = np.empty((max(n, 2 * len(self._scratch)), ORDER_WORDS), np.uint32)
-        t = events["t"]
-        first, last = int(t[0]), int(t[-1])
+        if span is None:
+            t = events["t"]
+            span = int(t[0]), int(t[-1])
+        first, last = span
         if last - first < self._span_us:  # one velocity table is enough (the usual case)
-            n_out, n_tot = self._events(events, t, first, last, velocity, out, raw, offset, record_tot, 0)
-            if len(raw):  # the kernel sorts estimates alone; with their fixed-point values, here
+            n_out, n_tot = self._events(events, first, last, velocity, out, raw, offset, record_tot, 0, canonical)
+            if canonical and len(raw):  # the kernel sorts estimates alone; with their fixed-point values, here
                 self._order(out, raw, offset, n_out)
             return n_out, n_tot
         n_out, n_tot = offset, 0
-        for lo, hi in self._pieces(t):
+        for lo, hi in self._pieces(events["t"]):
             piece = events[lo:hi]
-            n_out, n_tot = self._events(piece, piece["t"], int(piece["t"][0]), int(piece["t"][-1]), velocity,
-                                        out, raw, n_out, record_tot, n_tot)
-        self._order(out, raw, offset, n_out)  # a step may run across pieces
+            n_out, n_tot = self._events(piece, int(piece["t"][0]), int(piece["t"][-1]), velocity, out, raw, n_out,
+                                        record_tot, n_tot, False)
+        if canonical:
+            self._order(out, raw, offset, n_out)  # a step may run across pieces
         return n_out, n_tot
 
     def _order(self, out: np.ndarray, raw: np.ndarray, lo: int, hi: int) -> None:
@@ -291,23 +298,25 @@ class TimeOfTravelKernel:
             yield lo, hi
             lo = hi
 
-    def _events(self, events, t, first_t: int, last_t: int, velocity: VelocityRows, out, raw, n_out: int,
-                record_tot: bool, n_tot: int) -> tuple[int, int]:
-        """One piece of ``run_events`` (``first_t``, ``last_t``: its first and last event times)."""
+    def _events(self, events, first_t: int, last_t: int, velocity: VelocityRows, out, raw, n_out: int,
+                record_tot: bool, n_tot: int, canonical: bool) -> tuple[int, int]:
+        """One piece of ``run_events`` (``first_t``, ``last_t``: its first and last event times;
+        ``canonical``: the kernel sorts the piece's estimates)."""
         t0 = self._t0
         if last_t >= t0:  # rows for every event from the first to the last (exact when in order)
             table, first = velocity(*self._updates((max(first_t, t0) - t0) // self._dt, (last_t - t0) // self._dt))
         else:
             table, first = self._no_velocity, 0
-        state = self._ints, self._floats
-        n_out2, n_tot2, status = tt.process_events(events, *state, table, first, out, raw, n_out, record_tot,
-                                                   self._tot, n_tot, self._scratch, self._row_start)
+        n_out2, n_tot2, status = tt.process_events(events, self._ints, self._floats, table, first, out, raw, n_out,
+                                                   record_tot, self._tot, n_tot, self._scratch, self._row_start,
+                                                   canonical)
         if status == tt.OK:
             return n_out2, n_tot2
         if status == tt.NO_VELOCITY:  # events out of time order outside the sensor: ask for what is needed
             table, first = velocity(*self._updates(int(self._cursor[tt.NEED_FIRST]), int(self._cursor[tt.NEED_LAST])))
-            n_out2, n_tot2, status = tt.process_events(events, *state, table, first, out, raw, n_out, record_tot,
-                                                       self._tot, n_tot, self._scratch, self._row_start)
+            n_out2, n_tot2, status = tt.process_events(events, self._ints, self._floats, table, first, out, raw,
+                                                       n_out, record_tot, self._tot, n_tot, self._scratch,
+                                                       self._row_start, canonical)
         self._raise_for(status, table, first)
         return n_out2, n_tot2
 

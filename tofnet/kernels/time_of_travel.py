@@ -271,13 +271,14 @@ def views(ints, floats):
 
 @njit(cache=True)
 def process_events(events, ints, floats, velocity, first_update, out, out_raw, n_out, record_tot, tot, n_tot,
-                   scratch, row_start):
-    """Raw events (``EVENT_DTYPE``) through the input filter and the region (``process``); the
-    estimates in the canonical order (``order.sort_by_pixel``, with ``scratch`` and ``row_start``)
-    unless their fixed-point values are kept too (``out_raw`` not empty: the caller sorts)."""
+                   scratch, row_start, canonical):
+    """Raw events (``EVENT_DTYPE``) through the input filter and the region (``process``); with
+    ``canonical`` the estimates in the canonical order (``order.sort_by_pixel``, with ``scratch``
+    and ``row_start``) unless their fixed-point values are kept too (``out_raw`` not empty: the
+    caller sorts), else in the order their trigger events came."""
     n_out2, n_tot2, status = process(events["t"], events["x"], events["y"], events["p"], True, ints, floats,
                                      velocity, first_update, out, out_raw, n_out, record_tot, tot, n_tot)
-    if status == OK and out_raw.shape[0] == 0 and n_out2 - n_out > 1:
+    if canonical and status == OK and out_raw.shape[0] == 0 and n_out2 - n_out > 1:
         sort_by_pixel(out, n_out, n_out2, ints[HEIGHT], scratch, row_start)
     return n_out2, n_tot2, status
 
