@@ -122,8 +122,9 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
     j = 0
     n_events, plane_size = ts.shape[0], surface.shape[1]
     flat_surface, flat_hold = surface.reshape(-1), hold.reshape(-1)
+    flat_points, points_columns = points.reshape(-1), points.shape[1]
     for i in range(n_events):
-        if i + PREFETCH < n_events:  # the lines a first event would read (the rows of its square)
+        if i + PREFETCH < n_events:  # what a first event would read: the rows of its square, its A t's sample
             xq, yq = np.int64(xs[i + PREFETCH]), np.int64(ys[i + PREFETCH])
             if xq < width and yq < height:
                 pq = 1 if ps[i + PREFETCH] != 0 else 0
@@ -131,6 +132,9 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
                 cq = pq * plane_size + (yq + radius) * row + xq + radius
                 for dq in range(-radius, radius + 1):
                     prefetch(flat_surface, cq + dq * row)
+                sq = yq * width + xq if per_pixel else sample_of[yq * width + xq]
+                prefetch(flat_points, sq * points_columns)
+                prefetch(flat_points, sq * points_columns + points_columns - 1)
         t = ts[i]
         if t < t_hi:
             return n_out, UNSORTED, t_hi
