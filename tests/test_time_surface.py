@@ -227,6 +227,26 @@ def test_only_a_fit_close_to_its_points_sets_the_hold():
     assert (clean._hold > 0).sum() > 100  # exact fits (rms 0) of an ideal edge still set it
 
 
+def test_a_first_event_with_nothing_behind_it_is_not_fitted():
+    """behind_depth: an edge crossed the two pixels behind an event along the motion; noise did not."""
+    rng = np.random.default_rng(5)
+    n = 100_000
+    noise = make_events(np.sort(rng.integers(0, 1_000_000, n)), rng.integers(0, SENSOR[0], n),
+                        rng.integers(0, SENSOR[1], n), rng.integers(0, 2, n))
+    fits = {}
+    for behind in (0.0, 2.0):  # 2 m: the pixels behind must have fired within 20 ms per pixel
+        _, _, estimator = run(noise, (-0.5, 0.0, 0.0), behind_depth=behind)
+        fits[behind] = estimator.first_events - estimator.counts["nothing_behind"]
+        assert (estimator.counts["nothing_behind"] > 0) == (behind > 0)
+    assert fits[2.0] < 0.5 * fits[0.0]
+    for direction in [(1, 0), (0, -1), (0.6, 0.8), (-0.8, 0.6)]:  # a clean edge keeps every estimate
+        events, velocity = edge_events(direction, speed=50.0, depth=2.0)
+        depth, _, estimator = run(events, velocity, behind_depth=10.0)
+        depth0, _, _ = run(events, velocity, behind_depth=0.0)
+        assert len(depth) > 100 and estimator.counts["nothing_behind"] > 0  # the first columns
+        np.testing.assert_array_equal(depth, depth0)
+
+
 def test_points_from_before_a_turn_are_not_used():
     """After the camera reverses, the old surface is another motion's: no estimate comes from it."""
     right, velocity = edge_events((1, 0), speed=50.0, depth=2.0, start_us=0)
@@ -268,3 +288,6 @@ def test_a_bad_configuration_is_one_error_naming_the_fields():
         TimeSurfaceConfig(SENSOR, INTRINSICS, model="cubic", radius=0)
     with pytest.raises(BackendError, match="max_depth"):
         TimeSurfaceConfig(SENSOR, INTRINSICS, min_depth=5.0, max_depth=1.0)
+    with pytest.raises(BackendError, match="behind_depth: needs radius >= 2"):
+        TimeSurfaceConfig(SENSOR, INTRINSICS, radius=1)
+    TimeSurfaceConfig(SENSOR, INTRINSICS, radius=1, behind_depth=0.0)

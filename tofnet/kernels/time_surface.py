@@ -9,6 +9,8 @@ the last *first event* of an edge: the surface ``T(u, v)``. Per event:
    than its hold (``hold_px`` times the time per pixel the last fit there measured, if that
    fit was within ``hold_fit_rms_px`` of its points, else the refractory period) is part of
    the same edge's burst: dropped;
+   a first event is fitted only when the two pixels just behind it along the image motion fired
+   within the time a surface at ``behind_depth`` takes to move that far (``nothing_behind``);
 2. gather the first events of the same polarity within ``radius`` pixels that the edge has
    already crossed (at most ``ahead_px`` along the image motion ``A t``), no older than the
    window nor than the camera's last turn;
@@ -36,10 +38,11 @@ from tofnet.kernels.velocity import sampled_velocity_term
 NEVER = -(1 << 62)  # "no first event yet" (µs)
 
 #: Count slots: where each event ended. Drops of events, rejections of estimates, emitted.
-(OUT_OF_BOUNDS, BEFORE_T0, BURST, NO_MOTION, TOO_FEW_POINTS, ILL_CONDITIONED, BAD_FIT, ROTATION_DOMINATED,
- TOO_NEAR, TOO_FAR, INCONSISTENT, SAME_STEP, EMITTED, N_COUNTS) = range(14)
-COUNT_NAMES = ("out_of_bounds", "before_t0", "burst", "no_motion", "too_few_points", "ill_conditioned",
-               "bad_fit", "rotation_dominated", "too_near", "too_far", "inconsistent", "same_step", "emitted")
+(OUT_OF_BOUNDS, BEFORE_T0, BURST, NO_MOTION, NOTHING_BEHIND, TOO_FEW_POINTS, ILL_CONDITIONED, BAD_FIT,
+ ROTATION_DOMINATED, TOO_NEAR, TOO_FAR, INCONSISTENT, SAME_STEP, EMITTED, N_COUNTS) = range(15)
+COUNT_NAMES = ("out_of_bounds", "before_t0", "burst", "no_motion", "nothing_behind", "too_few_points",
+               "ill_conditioned", "bad_fit", "rotation_dominated", "too_near", "too_far", "inconsistent", "same_step",
+               "emitted")
 DROP_SLOTS = (OUT_OF_BOUNDS, BEFORE_T0, BURST)  # not the first event of an edge
 REJECT_SLOTS = tuple(range(NO_MOTION, EMITTED))  # a first event whose estimate was rejected
 
@@ -48,7 +51,7 @@ REJECT_SLOTS = tuple(range(NO_MOTION, EMITTED))  # a first event whose estimate 
  I_REFRACTORY, I_WINDOW, I_CONSISTENCY_WINDOW, I_MAX_HOLD, I_RECORD_REJECTED, I_MODEL, I_PER_PIXEL, N_IP) = range(17)
 (F_FX, F_FY, F_CX, F_CY, F_OUTLIER, F_MAX_RMS, F_MIN_SPREAD, F_MIN_DEPTH, F_MAX_DEPTH, F_MIN_DENOMINATOR,
  F_WINDOW_DEPTH, F_REFRACTORY_DEPTH, F_CONSISTENCY, F_HOLD_PX, F_AHEAD_PX, F_TURN, F_TRIM_PX,
- F_RFX, F_RFY, F_RCX, F_RCY, F_HOLD_RMS, N_FP) = range(23)  # F_R*: the intrinsics B ω is evaluated with
+ F_RFX, F_RFY, F_RCX, F_RCY, F_HOLD_RMS, F_BEHIND_DEPTH, N_FP) = range(24)  # F_R*: B ω's intrinsics
 # Motion state: the velocity the current epoch started with, its start (µs), the last update seen.
 M_VX, M_VY, M_VZ, M_SINCE, M_UPDATE, N_MOTION = range(6)
 # Fit models (``I_MODEL``): a plane, or lines along the motion with a shared slope.
@@ -111,7 +114,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
     min_depth, max_depth, min_denominator = fp[F_MIN_DEPTH], fp[F_MAX_DEPTH], fp[F_MIN_DENOMINATOR]
     window_depth, refractory_depth, consistency = fp[F_WINDOW_DEPTH], fp[F_REFRACTORY_DEPTH], fp[F_CONSISTENCY]
     hold_px, ahead_px, turn, trim_px = fp[F_HOLD_PX], fp[F_AHEAD_PX], fp[F_TURN], fp[F_TRIM_PX]
-    hold_rms = fp[F_HOLD_RMS]
+    hold_rms, behind_depth = fp[F_HOLD_RMS], fp[F_BEHIND_DEPTH]
     rotation = velocity.shape[1] >= 6
     row = width + 2 * radius
     middle = (lines.shape[0] - 1) // 2
@@ -119,8 +122,9 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
     j = 0
     n_events, plane_size = ts.shape[0], surface.shape[1]
     flat_surface, flat_hold = surface.reshape(-1), hold.reshape(-1)
+    flat_points, points_columns = points.reshape(-1), points.shape[1]
     for i in range(n_events):
-        if i + PREFETCH < n_events:  # the lines a first event would read (the rows of its square)
+        if i + PREFETCH < n_events:  # what a first event would read: the rows of its square, its A t's sample
             xq, yq = np.int64(xs[i + PREFETCH]), np.int64(ys[i + PREFETCH])
             if xq < width and yq < height:
                 pq = 1 if ps[i + PREFETCH] != 0 else 0
@@ -128,6 +132,9 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
                 cq = pq * plane_size + (yq + radius) * row + xq + radius
                 for dq in range(-radius, radius + 1):
                     prefetch(flat_surface, cq + dq * row)
+                sq = yq * width + xq if per_pixel else sample_of[yq * width + xq]
+                prefetch(flat_points, sq * points_columns)
+                prefetch(flat_points, sq * points_columns + points_columns - 1)
         t = ts[i]
         if t < t_hi:
             return n_out, UNSORTED, t_hi
@@ -181,52 +188,66 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
         if turn > 0.0:  # nothing from before the camera's last turn: another motion made it
             window = min(window, t - np.int64(motion[M_SINCE]))
         plane = surface[polarity]
-        inverse_fu = 1.0 / fu if abs(fu) > 1e-9 else 0.0
-        n = 0
-        for dv in range(-radius, radius + 1):
-            lo, hi = -radius, radius  # the columns with du * fu + dv * fv <= ahead_px
-            limit = ahead_px - dv * fv
-            if fu > 1e-9:
-                hi = min(hi, np.int64(math.floor(limit * inverse_fu)))
-            elif fu < -1e-9:
-                lo = max(lo, np.int64(math.ceil(limit * inverse_fu)))
-            elif limit < 0.0:
-                hi = lo - 1
-            base = cell + dv * row
-            along0, across0 = dv * fv, dv * fu
-            for du in range(lo, hi + 1):
-                age = t - plane[base + du]
-                if age <= window:
-                    across = across0 - du * fv
-                    ps_[n], pw[n], pt[n] = along0 + du * fu, across, -age
-                    pg[n] = middle + np.int64(math.floor(across + 0.5))
-                    n += 1
-            if dv == 0 and not lo <= 0 <= hi:  # the event itself always counts
-                ps_[n], pw[n], pt[n], pg[n] = 0.0, 0.0, 0.0, middle
-                n += 1
-        # 3. Fit and check.
-        if rows_model:
-            fit, tau_s, tau_w, c, kept, rms = fit_rows(ps_, pt, pg, n, min_points, min_spread, outlier_px,
-                                                        iterations, lines, used)
+        # An edge crossed the two pixels just behind this one along the motion, the farther one
+        # first, each about a crossing time per pixel ago; in noise they fired at unrelated times.
+        if behind_depth > 0.0:
+            du1, dv1 = np.int64(math.floor(fu + 0.5)), np.int64(math.floor(fv + 0.5))
+            du2, dv2 = np.int64(math.floor(2.0 * fu + 0.5)), np.int64(math.floor(2.0 * fv + 0.5))
+            age1, age2 = t - plane[cell - dv1 * row - du1], t - plane[cell - dv2 * row - du2]
+            per_px = behind_depth / speed * 1e6  # µs a surface at behind_depth takes per pixel
+            supported = age1 <= per_px * (du1 * fu + dv1 * fv) and age2 <= per_px * (du2 * fu + dv2 * fv)
         else:
-            fit, tau_s, tau_w, c, kept, rms = fit_plane(ps_, pw, pt, n, min_points, min_spread, outlier_px,
-                                                        iterations)
-            if trim_px > 0.0 and fit == 0:
-                # The window cuts on measured times: near its ends only the points that fired
-                # late (old end) or early (the present) are in, which flattens the plane.
-                # Cutting on the fitted times is unbiased: drop the points the plane puts
-                # within ``trim_px`` pixels of either end, and refit.
-                margin = trim_px * math.sqrt(tau_s * tau_s + tau_w * tau_w)
-                m = 0
-                for i2 in range(kept):
-                    fitted = c + tau_s * ps_[i2] + tau_w * pw[i2]
-                    if -window + margin <= fitted <= -margin:
-                        ps_[m], pw[m], pt[m] = ps_[i2], pw[i2], pt[i2]
-                        m += 1
-                if m < kept:
-                    fit, tau_s, tau_w, c, kept, rms = fit_plane(ps_, pw, pt, m, min_points, min_spread, outlier_px,
-                                                                iterations)
-        slot = TOO_FEW_POINTS if fit == FIT_TOO_FEW else ILL_CONDITIONED if fit == FIT_ILL_CONDITIONED else EMITTED
+            supported = True
+        if not supported:
+            fit, tau_s, tau_w, c, kept, rms = FIT_TOO_FEW, 0.0, 0.0, 0.0, 0, 0.0
+            slot = NOTHING_BEHIND
+        else:
+            inverse_fu = 1.0 / fu if abs(fu) > 1e-9 else 0.0
+            n = 0
+            for dv in range(-radius, radius + 1):
+                lo, hi = -radius, radius  # the columns with du * fu + dv * fv <= ahead_px
+                limit = ahead_px - dv * fv
+                if fu > 1e-9:
+                    hi = min(hi, np.int64(math.floor(limit * inverse_fu)))
+                elif fu < -1e-9:
+                    lo = max(lo, np.int64(math.ceil(limit * inverse_fu)))
+                elif limit < 0.0:
+                    hi = lo - 1
+                base = cell + dv * row
+                along0, across0 = dv * fv, dv * fu
+                for du in range(lo, hi + 1):
+                    age = t - plane[base + du]
+                    if age <= window:
+                        across = across0 - du * fv
+                        ps_[n], pw[n], pt[n] = along0 + du * fu, across, -age
+                        pg[n] = middle + np.int64(math.floor(across + 0.5))
+                        n += 1
+                if dv == 0 and not lo <= 0 <= hi:  # the event itself always counts
+                    ps_[n], pw[n], pt[n], pg[n] = 0.0, 0.0, 0.0, middle
+                    n += 1
+            # 3. Fit and check.
+            if rows_model:
+                fit, tau_s, tau_w, c, kept, rms = fit_rows(ps_, pt, pg, n, min_points, min_spread, outlier_px,
+                                                            iterations, lines, used)
+            else:
+                fit, tau_s, tau_w, c, kept, rms = fit_plane(ps_, pw, pt, n, min_points, min_spread, outlier_px,
+                                                            iterations)
+                if trim_px > 0.0 and fit == 0:
+                    # The window cuts on measured times: near its ends only the points that fired
+                    # late (old end) or early (the present) are in, which flattens the plane.
+                    # Cutting on the fitted times is unbiased: drop the points the plane puts
+                    # within ``trim_px`` pixels of either end, and refit.
+                    margin = trim_px * math.sqrt(tau_s * tau_s + tau_w * tau_w)
+                    m = 0
+                    for i2 in range(kept):
+                        fitted = c + tau_s * ps_[i2] + tau_w * pw[i2]
+                        if -window + margin <= fitted <= -margin:
+                            ps_[m], pw[m], pt[m] = ps_[i2], pw[i2], pt[i2]
+                            m += 1
+                    if m < kept:
+                        fit, tau_s, tau_w, c, kept, rms = fit_plane(ps_, pw, pt, m, min_points, min_spread, outlier_px,
+                                                                    iterations)
+            slot = TOO_FEW_POINTS if fit == FIT_TOO_FEW else ILL_CONDITIONED if fit == FIT_ILL_CONDITIONED else EMITTED
         a, b = tau_s * fu - tau_w * fv, tau_s * fv + tau_w * fu  # ∇T at the event, µs/px along u and v
         if slot == EMITTED and hold_px > 0.0 and rms <= hold_rms:
             # this edge's burst lasts about its ramp's width: hold_px pixels (a fit far off the

@@ -54,6 +54,10 @@ class TimeSurfaceConfig:
       from the fit, drop it and refit, at most ``iterations`` times.
     - ``trim_px`` px (plane only): drop the points the plane puts within that distance of
       the window's ends and refit (``0``: off).
+    - ``behind_depth`` m: fit a first event only when the two pixels just behind it along the
+      image motion (1 and 2 px) had first events of its polarity, the farther one first, no
+      longer ago than the time a surface at that depth takes to move that far (an edge crossed
+      them; in noise they fired at unrelated times); otherwise ``nothing_behind`` (0: off).
     - First events: ``hold_px`` times the time per pixel the last fit at a pixel measured is
       its hold (a fit whose rms distance exceeds ``hold_fit_rms_px`` px measured nothing and
       leaves the hold as it was); before a fit, the larger of ``refractory`` and the time a
@@ -86,6 +90,7 @@ class TimeSurfaceConfig:
     refractory_depth: float = 10.0
     hold_px: float = 3.0
     hold_fit_rms_px: float = 1.0
+    behind_depth: float = 10.0
     max_hold: float = 1.0
     ahead_px: float = -0.5
     turn: float = 0.2
@@ -116,13 +121,15 @@ class TimeSurfaceConfig:
                 problems.append(f"{name}: expected an integer >= 0, got {getattr(self, name)!r}")
         for name in ("window", "window_depth", "outlier_px", "max_rms_px", "min_spread", "refractory",
                      "refractory_depth", "consistency", "consistency_window", "min_depth", "hold_px",
-                     "max_hold", "hold_fit_rms_px"):
+                     "max_hold", "hold_fit_rms_px", "behind_depth"):
             if not float(getattr(self, name)) >= 0:
                 problems.append(f"{name}: expected a number >= 0, got {getattr(self, name)!r}")
         if not self.timestep > 0:
             problems.append(f"timestep: expected seconds > 0, got {self.timestep!r}")
         if not self.max_depth > self.min_depth:
             problems.append(f"max_depth ({self.max_depth:g} m) must exceed min_depth ({self.min_depth:g} m)")
+        if self.behind_depth > 0 and int(self.radius) < 2:
+            problems.append(f"behind_depth: needs radius >= 2 (two pixels behind), got radius {self.radius!r}")
         if self.window <= 0 and self.window_depth <= 0:
             problems.append("window: give window (s) or window_depth (m) > 0")
         if problems:
@@ -162,10 +169,11 @@ class TimeSurfaceEstimator:
         self._fp[[ts.F_FX, ts.F_FY, ts.F_CX, ts.F_CY, ts.F_OUTLIER, ts.F_MAX_RMS, ts.F_MIN_SPREAD, ts.F_MIN_DEPTH,
                   ts.F_MAX_DEPTH, ts.F_MIN_DENOMINATOR, ts.F_WINDOW_DEPTH, ts.F_REFRACTORY_DEPTH, ts.F_CONSISTENCY,
                   ts.F_HOLD_PX, ts.F_AHEAD_PX, ts.F_TURN, ts.F_TRIM_PX, ts.F_RFX, ts.F_RFY, ts.F_RCX, ts.F_RCY,
-                  ts.F_HOLD_RMS]] = (
+                  ts.F_HOLD_RMS, ts.F_BEHIND_DEPTH]] = (
             *c.intrinsics, c.outlier_px, c.max_rms_px, c.min_spread, c.min_depth, c.max_depth, c.min_denominator,
             c.window_depth, c.refractory_depth, c.consistency, c.hold_px, c.ahead_px, c.turn, c.trim_px,
-            *(c.intrinsics if c.rotation_intrinsics is None else c.rotation_intrinsics), c.hold_fit_rms_px)
+            *(c.intrinsics if c.rotation_intrinsics is None else c.rotation_intrinsics), c.hold_fit_rms_px,
+            c.behind_depth)
         r, pixels = int(c.radius), width * height
         self._surface = np.full((2, (height + 2 * r) * (width + 2 * r)), ts.NEVER, np.int64)
         self._hold = np.zeros((pixels, 2), np.int32)

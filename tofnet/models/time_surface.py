@@ -23,7 +23,8 @@ from tofnet.processes.time_surface import QUALITY, TimeSurfaceProcess
 LATENCY_STEPS = 1
 #: Process parameters that are ``TimeSurfaceConfig`` fields of the same name and unit.
 CONFIG_PARAMS = ("model", "radius", "ahead_px", "window", "window_depth", "turn", "min_points", "min_spread",
-                 "outlier_px", "iterations", "max_rms_px", "trim_px", "hold_px", "hold_fit_rms_px", "refractory_depth",
+                 "outlier_px", "iterations", "max_rms_px", "trim_px", "hold_px", "hold_fit_rms_px", "behind_depth",
+                 "refractory_depth",
                  "refractory", "max_hold", "consistency", "consistency_window", "min_depth", "max_depth",
                  "min_denominator")
 

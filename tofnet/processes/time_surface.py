@@ -76,6 +76,9 @@ class TimeSurfaceProcess(Process):
               "its last fit measured", minimum=0.0),
         Param("hold_fit_rms_px", "float", 1.0, unit="px", doc="only a fit at most this far (rms) from its points "
               "sets the pixel's hold: a worse one, e.g. in noise, measured no crossing time", minimum=0.0),
+        Param("behind_depth", "length", 10.0, unit="m", doc="fit a first event only when the two pixels just "
+              "behind it along the motion fired, the farther first, within the time a surface this deep takes to "
+              "move that far (an edge crossed them; noise did not; 0: off)", minimum=0.0),
         Param("refractory_depth", "length", 10.0, unit="m", doc="before a pixel has a fit, its hold is the time a "
               "surface this deep takes to move one pixel", minimum=0.0),
         Param("refractory", "duration", 0.0, unit="s", doc="a fixed lower bound on that first hold", minimum=0.0),
