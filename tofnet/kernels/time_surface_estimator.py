@@ -55,9 +55,9 @@ class TimeSurfaceConfig:
     - ``trim_px`` px (plane only): drop the points the plane puts within that distance of
       the window's ends and refit (``0``: off).
     - ``behind_depth`` m: fit a first event only when the two pixels just behind it along the
-      image motion (1 and 2 px) had first events of its polarity, the farther one first, no
-      longer ago than the time a surface at that depth takes to move that far (an edge crossed
-      them; in noise they fired at unrelated times); otherwise ``nothing_behind`` (0: off).
+      image motion (1 and 2 px) had first events of its polarity no longer ago than the time
+      a surface at that depth takes to move that far (an edge crossed them; in noise they
+      fired at unrelated times), in either order; otherwise ``nothing_behind`` (0: off).
     - First events: ``hold_px`` times the time per pixel the last fit at a pixel measured is
       its hold (a fit whose rms distance exceeds ``hold_fit_rms_px`` px measured nothing and
       leaves the hold as it was); before a fit, the larger of ``refractory`` and the time a
