@@ -19,7 +19,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from accuracy import _key, default_backend, recording_for, run_network, scenario_config  # noqa: E402
-from tofnet.backends.runtime import velocity_table  # noqa: E402
+from tofnet.backends.runtime import UpdateRows, velocity_table  # noqa: E402
 from tofnet.eval.metrics import evaluate  # noqa: E402
 from tofnet.io.recording import Recording  # noqa: E402
 from tofnet.kernels.time_surface_estimator import TimeSurfaceConfig, TimeSurfaceEstimator  # noqa: E402
@@ -35,11 +35,10 @@ def config_for(recording: Recording, **changes) -> TimeSurfaceConfig:
 
 
 def trajectory_rows(recording: Recording, t0_us: int, config: TimeSurfaceConfig):
-    """``VelocityRows`` from the recording's exact trajectory (update j at the start of step j*U)."""
-    def rows(first: int, count: int):
-        return velocity_table(recording.trajectory, t0_us, config.timestep_us, config.update_every, count,
-                              first), first
-    return rows
+    """``VelocityRows`` from the recording's exact trajectory (update j at the start of step j*U),
+    computed ahead and cached as the velocity process of a network does (``UpdateRows``)."""
+    return UpdateRows(lambda first, count: velocity_table(recording.trajectory, t0_us, config.timestep_us,
+                                                          config.update_every, count, first)).rows
 
 
 def run_time_surface(recording: Recording, **changes) -> dict:

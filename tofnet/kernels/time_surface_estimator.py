@@ -269,6 +269,8 @@ class TimeSurfaceEstimator:
         c = self.config
         span = (MAX_VELOCITY_ROWS - 2) * c.update_every * c.timestep_us
         start = max(int(t[lo]), self._t_hi, self._t0)
+        if int(t[-1]) < start + span:  # the usual packet: all of it
+            return len(t)
         return max(int(np.searchsorted(t, start + span, side="left")), lo + 1)
 
     def _table(self, velocity: VelocityRows, t_first: int, t_last: int) -> tuple[np.ndarray, int]:
