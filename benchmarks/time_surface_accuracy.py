@@ -2,9 +2,11 @@
 
     python benchmarks/time_surface_accuracy.py
     python benchmarks/time_surface_accuracy.py --scenarios slider,all_axes --set 'max_rms_px=0.2'
+    python benchmarks/time_surface_accuracy.py --scenarios pan,wobble_slider,tracking_slider --eq7
 
 Each scenario (1 s, seed 0, cached as ``accuracy.py`` does; by default every scenario whose
-camera does not turn: ``accuracy.py`` has the turning ones, with eq. 7) runs through the estimator with
+camera does not turn: ``accuracy.py`` has the turning ones, with eq. 7; here a turning one runs with
+eq. 8 unless ``--eq7``, which compensates the rotation in both as ``accuracy.py`` does) runs through the estimator with
 its defaults (``TimeSurfaceConfig``, changed by ``--set``) and through the paper's network
 (``accuracy.run_network``: 1 ms steps, 8-bit counters, refractory 60 ms), both scored by
 ``tofnet.eval.metrics.evaluate``. Then the issue's targets: on slider and all_axes a
@@ -38,6 +40,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--duration", type=float, default=1.0)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--cache", default=str(default_cache()))
+    parser.add_argument("--eq7", action="store_true",
+                        help="turning scenarios: compensate the rotation (eq. 7, ω from the poses) in both")
     args = parser.parse_args(argv)
     names = [s for s in args.scenarios.split(",") if s]
     cache = Path(args.cache) if args.cache else None
@@ -47,13 +51,14 @@ def main(argv: list[str] | None = None) -> int:
               "median / paper's"]
     rows, verdicts = [], []
     for name in names:
-        rec = scenario_recording(name, args.duration, cache, args.seed)
-        m = run_time_surface(rec, **changes)
-        p = paper_metrics(name, args.duration, cache, args.seed)
+        eq7 = args.eq7 and name in ROTATION_SCENARIOS
+        rec = scenario_recording(name, args.duration, cache, args.seed, rotation=eq7)
+        m = run_time_surface(rec, rotation=eq7, **changes)
+        p = paper_metrics(name, args.duration, cache, args.seed, rotation=eq7)
         ratio = m["median_rel_pct"] / p["median_rel_pct"]
         log(f"  {name:14s} median {m['median_rel_pct']:5.1f} % (paper {p['median_rel_pct']:5.1f} %), "
             f"bias {m['bias_pct']:+5.1f} %, coverage {m['coverage_pct']:5.1f} %")
-        rows.append([name, fmt(m["events"]), fmt(m["estimates"]), fmt(m["coverage_pct"]), fmt(m["median_rel_pct"]),
+        rows.append([name + (", eq. 7" if eq7 else ""), fmt(m["events"]), fmt(m["estimates"]), fmt(m["coverage_pct"]), fmt(m["median_rel_pct"]),
                      fmt(m["mean_rel_pct"]), f"{m['bias_pct']:+.1f}", fmt(m["median_abs_m"], 3),
                      fmt(p["coverage_pct"]), fmt(p["median_rel_pct"]), fmt(p["mean_rel_pct"]),
                      f"{p['bias_pct']:+.1f}", fmt(ratio, 2)])
@@ -74,6 +79,8 @@ def main(argv: list[str] | None = None) -> int:
         cmd += f" --scenarios {args.scenarios}"
     if args.set:
         cmd += f" --set '{args.set}'"
+    if args.eq7:
+        cmd += " --eq7"
     print("reproduce: " + cmd)
     return 0
 

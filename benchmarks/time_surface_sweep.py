@@ -3,6 +3,7 @@
     python benchmarks/time_surface_sweep.py --factors radius,min_points
     python benchmarks/time_surface_sweep.py --factors hold_px --values hold_px=0,2,3 --scenarios slider,room_slider
     python benchmarks/time_surface_sweep.py --base radius=2 --factors window_depth
+    python benchmarks/time_surface_sweep.py --factors behind_depth --eq7    # turning scenes with eq. 7
 
 Every built-in scenario (simulated once and cached as ``accuracy.py`` does, 1 s, seed
 0) runs through ``TimeSurfaceEstimator`` with the defaults of ``TimeSurfaceConfig``
@@ -13,8 +14,11 @@ scenario, and a summary over the scenarios with realistic pixels (all but ``pape
 mean of the medians and of the means, their average (the criterion docs/accuracy.md
 uses for the refractory period), the worst ratio of a scenario's median to the paper
 network's (> 1: worse than the paper's network somewhere; over all ten scenarios), the
-worst |bias| and the mean coverage, and the CPU speed over all scenarios. Text then
-markdown; progress on stderr. docs/time_surface.md quotes the tables.
+worst |bias| and the mean coverage, and the CPU speed over all scenarios. The scenarios
+whose camera turns (``ROTATION_SCENARIOS``) run with eq. 8 (rotation read as depth) unless
+``--eq7``: then both the estimator and the paper's network compensate the rotation as
+``accuracy.py`` does (poses at 1 kHz, ω from them). Text then markdown; progress on stderr.
+docs/time_surface.md quotes the tables.
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from accuracy import ALL_SCENARIOS, default_cache, fmt, log, markdown_table, text_table  # noqa: E402
 from time_surface_runs import paper_metrics, run_time_surface, scenario_recording  # noqa: E402
+from tofnet.sim.scenarios import ROTATION_SCENARIOS  # noqa: E402
 
 #: The values each factor is swept over (the defaults' value is added when missing).
 FACTORS = {
@@ -49,6 +54,7 @@ FACTORS = {
     "trim_px": [0.0, 0.5],
     "consistency": [0.0, 0.1, 0.2, 0.3],
     "per_pixel": [False, True],
+    "behind_depth": [0.0, 5.0, 10.0, 20.0, 40.0],
 }
 
 
@@ -97,6 +103,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--duration", type=float, default=1.0)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--cache", default=str(default_cache()))
+    parser.add_argument("--eq7", action="store_true",
+                        help="turning scenarios: compensate the rotation (eq. 7, ω from the poses) in both")
     args = parser.parse_args(argv)
     names = [s for s in args.scenarios.split(",") if s]
     cache = Path(args.cache) if args.cache else None
@@ -108,8 +116,9 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         parser.error(f"unknown factor(s) {unknown}; known: {', '.join(FACTORS)}")
     start = time.perf_counter()
-    recordings = {n: scenario_recording(n, args.duration, cache, args.seed) for n in names}
-    paper = {n: paper_metrics(n, args.duration, cache, args.seed) for n in names}
+    eq7 = {n: args.eq7 and n in ROTATION_SCENARIOS for n in names}
+    recordings = {n: scenario_recording(n, args.duration, cache, args.seed, rotation=eq7[n]) for n in names}
+    paper = {n: paper_metrics(n, args.duration, cache, args.seed, rotation=eq7[n]) for n in names}
 
     configs = [("defaults" + (f" + {args.base}" if base else ""), base)]
     for factor in factors:
@@ -125,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
         if key in seen:  # a factor's value equal to the base: same run
             results = seen[key]
         else:
-            results = {n: run_time_surface(recordings[n], **changes) for n in names}
+            results = {n: run_time_surface(recordings[n], rotation=eq7[n], **changes) for n in names}
             seen[key] = results
         s = summary(results, paper, names)
         log(f"  {label:28s} objective {s['objective']:5.1f}  worst/paper {s['ratio']:.2f}  "
@@ -134,7 +143,8 @@ def main(argv: list[str] | None = None) -> int:
                fmt(s["coverage"]), fmt(s["mevs"])] + [cell(results[n]) for n in names]
         rows.append(row)
     paper_row = ["paper's network", "", "", "", "1.00", "", "", ""] + [cell(paper[n]) for n in names]
-    print(f"Time-surface sweep: {args.duration:g} s per scenario, seed {args.seed}; cells: median rel % / bias % / "
+    print(f"Time-surface sweep: {args.duration:g} s per scenario, seed {args.seed}"
+          f"{'; turning scenarios with eq. 7' if any(eq7.values()) else ''}; cells: median rel % / bias % / "
           f"coverage %; summary over the scenarios with realistic pixels (ratio over all); "
           f"{time.perf_counter() - start:.0f} s")
     print()
@@ -148,6 +158,8 @@ def main(argv: list[str] | None = None) -> int:
             cmd += f" {flag} '{value}'"
     if args.scenarios != ",".join(ALL_SCENARIOS):
         cmd += f" --scenarios {args.scenarios}"
+    if args.eq7:
+        cmd += " --eq7"
     print("reproduce: " + cmd)
     return 0
 
