@@ -126,22 +126,18 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
     """
     middle = (lines.shape[0] - 1) // 2
     n_used = 0
-    i = 0
-    while i < n:  # runs of points on one line: its sums stay in registers (the same additions, in order)
+    # each point added to its line's sums in memory, in order (no branch on where a run of one line ends:
+    # in noise the runs are as long as chance makes them); at most 2 round(radius √2) + 1 lines are used
+    for i in range(n):
         g = pg[i]
-        if lines[g, L_M] == 0.0:
-            used[n_used] = g
-            n_used += 1
-        m, sum_s, sum_t, sum_ss, sum_st = lines[g, L_M], lines[g, L_S], lines[g, L_T], lines[g, L_SS], lines[g, L_ST]
-        while i < n and pg[i] == g:
-            s, t = ps[i], pt[i]
-            m += 1.0
-            sum_s += s
-            sum_t += t
-            sum_ss += s * s
-            sum_st += s * t
-            i += 1
-        lines[g, L_M], lines[g, L_S], lines[g, L_T], lines[g, L_SS], lines[g, L_ST] = m, sum_s, sum_t, sum_ss, sum_st
+        s, t = ps[i], pt[i]
+        used[n_used] = g
+        n_used += np.int64(lines[g, L_M] == 0.0)  # lines in the order of their first point
+        lines[g, L_M] += 1.0
+        lines[g, L_S] += s
+        lines[g, L_T] += t
+        lines[g, L_SS] += s * s
+        lines[g, L_ST] += s * t
     sxx = sxy = 0.0
     kept = 0
     for j in range(n_used):
@@ -169,8 +165,7 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
             r = abs(pt[i] - lines[g, L_MEAN_T] - tau_s * (ps[i] - lines[g, L_MEAN_S]))
             if r > worst_r:  # False for NaN: a line of one point carries no slope
                 worst, worst_r = i, r
-            if r == r:
-                sq += r * r
+            sq += r * r if r == r else 0.0  # a select, not a branch, on the sum's dependency chain
         slope = abs(tau_s)
         rms_px = math.sqrt(sq / kept) / slope if slope > 0.0 else math.inf
         if worst_r <= outlier_px * slope:
