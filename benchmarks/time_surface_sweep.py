@@ -55,6 +55,7 @@ FACTORS = {
     "consistency": [0.0, 0.1, 0.2, 0.3],
     "per_pixel": [False, True],
     "behind_depth": [0.0, 5.0, 10.0, 20.0, 40.0],
+    "window_px": [0.0, 4.0, 5.0, 6.0, 8.0, 12.0],
 }
 
 

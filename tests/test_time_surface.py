@@ -167,6 +167,25 @@ def test_the_output_does_not_depend_on_how_the_stream_is_split():
     assert whole[2].counts == split[2].counts
 
 
+def test_the_pinhole_shortcut_reads_what_the_sample_table_holds():
+    # Per pixel without a lens the kernel computes A t at the pixel instead of reading the
+    # lens sample table; the table's path must give the same bytes on a stream that turns.
+    events, velocity = noisy_stream()
+
+    def rows(first, count):  # the stream's velocity, drifting a little, with a z part: A t varies per pixel
+        drift = 1.0 + 1e-4 * np.arange(first, first + count)[:, None]
+        return np.array([velocity[0], velocity[1], 0.05]) * drift, first
+    outputs = []
+    for pinhole in (True, False):
+        estimator = TimeSurfaceEstimator(config(), t0_us=0)
+        assert estimator._ip[ts.I_PINHOLE] == 1
+        estimator._ip[ts.I_PINHOLE] = int(pinhole)
+        outputs.append((*estimator.feed(events, rows, record_rejected=True), estimator.counts))
+    (d1, q1, c1), (d2, q2, c2) = outputs
+    assert c1["emitted"] > 50
+    assert d1.tobytes() == d2.tobytes() and q1.tobytes() == q2.tobytes() and c1 == c2
+
+
 def test_a_packet_out_of_time_order_is_refused():
     events, velocity = edge_events((1, 0), speed=50.0, depth=2.0)
     estimator = TimeSurfaceEstimator(config(), t0_us=0)
@@ -247,6 +266,23 @@ def test_a_first_event_with_nothing_behind_it_is_not_fitted():
         np.testing.assert_array_equal(depth, depth0)
 
 
+def test_points_older_than_the_edges_own_pace_allows_are_not_used():
+    """window_px: a pixel the present edge did not fire still holds an older edge's time; the
+    two pixels behind measured the present edge's pace, and the window stops at window_px
+    crossings of it (here 80 ms), before the older edge (100 ms back, within window_depth's 150)."""
+    first, velocity = edge_events((1, 0), speed=50.0, depth=2.0)  # 20 ms per pixel
+    second, _ = edge_events((1, 0), speed=50.0, depth=2.0, start_us=101_000)
+    second = second[np.random.default_rng(3).random(len(second)) > 0.3]  # 30 % of its pixels stay silent
+    events = np.concatenate([first, second])
+    events = events[np.argsort(events["t"], kind="stable")]
+    runs = {w: run(events, velocity, window_px=w, iterations=2) for w in (0.0, 4.0)}
+    for depth, quality, _ in runs.values():
+        np.testing.assert_allclose(depth["z"], 2.0, rtol=1e-4)
+    paced, unbounded = runs[4.0][2].counts, runs[0.0][2].counts
+    assert paced["bad_fit"] < 0.5 * unbounded["bad_fit"]  # the older edge's points pulled those fits off
+    assert paced["emitted"] > unbounded["emitted"] + 50
+
+
 def test_points_from_before_a_turn_are_not_used():
     """After the camera reverses, the old surface is another motion's: no estimate comes from it."""
     right, velocity = edge_events((1, 0), speed=50.0, depth=2.0, start_us=0)
@@ -290,4 +326,6 @@ def test_a_bad_configuration_is_one_error_naming_the_fields():
         TimeSurfaceConfig(SENSOR, INTRINSICS, min_depth=5.0, max_depth=1.0)
     with pytest.raises(BackendError, match="behind_depth: needs radius >= 2"):
         TimeSurfaceConfig(SENSOR, INTRINSICS, radius=1)
-    TimeSurfaceConfig(SENSOR, INTRINSICS, radius=1, behind_depth=0.0)
+    with pytest.raises(BackendError, match="window_px: needs radius >= 2"):
+        TimeSurfaceConfig(SENSOR, INTRINSICS, radius=1, behind_depth=0.0, window_px=6.0)
+    TimeSurfaceConfig(SENSOR, INTRINSICS, radius=1, behind_depth=0.0, window_px=0.0)

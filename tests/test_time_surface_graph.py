@@ -171,7 +171,9 @@ def test_the_surface_is_a_variable_read_and_set_between_runs():
         s.set("time_surface.hold", 0)
         result = s.finish()
     untouched, _ = run(RECORDING, network(), backend="fixed")
-    assert result.counts["time_surface"]["too_few_points"] > untouched.counts["time_surface"]["too_few_points"]
+    forgot, kept = result.counts["time_surface"], untouched.counts["time_surface"]
+    # with no edge behind them the next first events are not fitted, and fewer estimates come out
+    assert forgot["nothing_behind"] > kept["nothing_behind"] + 100 and forgot["emitted"] < kept["emitted"] - 100
 
 
 def test_multiproc_runs_it_in_the_parent_and_equals_fixed(workers):

@@ -13,7 +13,8 @@ the last *first event* of an edge: the surface ``T(u, v)``. Per event:
    within the time a surface at ``behind_depth`` takes to move that far (``nothing_behind``);
 2. gather the first events of the same polarity within ``radius`` pixels that the edge has
    already crossed (at most ``ahead_px`` along the image motion ``A t``), no older than the
-   window nor than the camera's last turn;
+   window (the scene's depth scale, ``window_depth``, or ``window_px`` crossings at the pace the
+   two pixels behind measured, whichever is shorter) nor than the camera's last turn;
 3. fit the time along the motion, per line of pixels parallel to it (``fit_rows``) or as a
    plane (``fit_plane``), dropping the farthest point while it is more than ``outlier_px``
    pixels off, at most ``iterations`` times; check points, spread and rms;
@@ -33,7 +34,7 @@ from numba import njit
 from tofnet.kernels.time_of_travel import prefetch
 from tofnet.kernels.rotation import rotational_flow
 from tofnet.kernels.time_surface_fit import FIT_ILL_CONDITIONED, FIT_TOO_FEW, fit_plane, fit_rows
-from tofnet.kernels.velocity import sampled_velocity_term
+from tofnet.kernels.velocity import sampled_velocity_term, velocity_term
 
 NEVER = -(1 << 62)  # "no first event yet" (µs)
 
@@ -48,10 +49,11 @@ REJECT_SLOTS = tuple(range(NO_MOTION, EMITTED))  # a first event whose estimate 
 
 # Integer parameters (``ip``) and float parameters (``fp``), by slot.
 (I_WIDTH, I_HEIGHT, I_RADIUS, I_T0, I_DT, I_LATENCY, I_UPDATE_EVERY, I_MIN_POINTS, I_ITERATIONS,
- I_REFRACTORY, I_WINDOW, I_CONSISTENCY_WINDOW, I_MAX_HOLD, I_RECORD_REJECTED, I_MODEL, I_PER_PIXEL, N_IP) = range(17)
+ I_REFRACTORY, I_WINDOW, I_CONSISTENCY_WINDOW, I_MAX_HOLD, I_RECORD_REJECTED, I_MODEL, I_PER_PIXEL, I_PINHOLE,
+ N_IP) = range(18)
 (F_FX, F_FY, F_CX, F_CY, F_OUTLIER, F_MAX_RMS, F_MIN_SPREAD, F_MIN_DEPTH, F_MAX_DEPTH, F_MIN_DENOMINATOR,
  F_WINDOW_DEPTH, F_REFRACTORY_DEPTH, F_CONSISTENCY, F_HOLD_PX, F_AHEAD_PX, F_TURN, F_TRIM_PX,
- F_RFX, F_RFY, F_RCX, F_RCY, F_HOLD_RMS, F_BEHIND_DEPTH, N_FP) = range(24)  # F_R*: B ω's intrinsics
+ F_RFX, F_RFY, F_RCX, F_RCY, F_HOLD_RMS, F_BEHIND_DEPTH, F_WINDOW_PX, N_FP) = range(25)  # F_R*: B ω's intrinsics
 # Motion state: the velocity the current epoch started with, its start (µs), the last update seen.
 M_VX, M_VY, M_VZ, M_SINCE, M_UPDATE, N_MOTION = range(6)
 # Fit models (``I_MODEL``): a plane, or lines along the motion with a shared slope.
@@ -77,13 +79,58 @@ def follow_motion(motion, row, update: int, update_start_us: int, turn: float) -
 
 
 @njit(cache=True, inline="always")
-def _velocity_term_at(x, y, pixel, per_pixel, sample_of, points, velocity, j, fx, fy, cx, cy):
+def _velocity_term_at(x, y, pixel, per_pixel, pinhole, sample_of, points, velocity, j, fx, fy, cx, cy):
     """``A t`` (px*m/s) and ``|A t|`` for pixel (x, y) under velocity row ``j``, through the lens of
-    ``points`` (one ``tofnet.kernels.lens.sample_table`` row per sample: the pixel or its patch)."""
-    sample = pixel if per_pixel else sample_of[pixel]
-    at_x, at_y = sampled_velocity_term(velocity[j, 0], velocity[j, 1], velocity[j, 2], points[sample], fx, fy, cx, cy)
+    ``points`` (one ``tofnet.kernels.lens.sample_table`` row per sample: the pixel or its patch);
+    ``pinhole`` (per pixel, no lens): at the pixel itself, the same numbers without reading the table."""
+    if pinhole:
+        at_x, at_y = velocity_term(velocity[j, 0], velocity[j, 1], velocity[j, 2], float(x), float(y), fx, fy, cx, cy)
+    else:
+        sample = pixel if per_pixel else sample_of[pixel]
+        at_x, at_y = sampled_velocity_term(velocity[j, 0], velocity[j, 1], velocity[j, 2], points[sample], fx, fy, cx,
+                                           cy)
     return at_x, at_y, math.sqrt(at_x * at_x + at_y * at_y)
 
+
+
+@njit(cache=True)
+def gather(surface, cell: int, row: int, radius: int, t: int, window: int, fu: float, fv: float, ahead_px: float,
+           middle: int, ps_, pw, pt, pg) -> int:
+    """Step 2: the first events no older than ``window`` µs at the pixels of the square around
+    ``surface[cell]`` (the flat surface, ``cell`` in the event's polarity's plane) that the edge
+    has crossed (at most ``ahead_px`` ahead along the motion ``(fu, fv)``; the event itself
+    always counts), in row order, as points: ``s`` px along the motion, ``w`` px across it,
+    ``t`` µs (before the event: negative) and the index of their line across the motion (the
+    event's: ``middle``). Returns their count.
+
+    Branch-free over the cells: each is written and the count advanced by its age test (on
+    noise that test is a coin toss for a branch predictor). The indices are unsigned, which
+    spares numba's negative-index fix-ups: every cell is inside the bordered plane and every
+    point inside the scratch arrays."""
+    inverse_fu = 1.0 / fu if abs(fu) > 1e-9 else 0.0
+    n = 0
+    for dv in range(-radius, radius + 1):
+        lo, hi = -radius, radius  # the columns with du * fu + dv * fv <= ahead_px
+        limit = ahead_px - dv * fv
+        if fu > 1e-9:
+            hi = min(hi, np.int64(math.floor(limit * inverse_fu)))
+        elif fu < -1e-9:
+            lo = max(lo, np.int64(math.ceil(limit * inverse_fu)))
+        elif limit < 0.0:
+            hi = lo - 1
+        base = cell + dv * row
+        along0, across0 = dv * fv, dv * fu
+        for du in range(lo, hi + 1):
+            age = t - surface[np.uint64(base + du)]
+            across = across0 - du * fv
+            at = np.uint64(n)
+            ps_[at], pw[at], pt[at] = along0 + du * fu, across, -age
+            pg[at] = middle + np.int64(math.floor(across + 0.5))
+            n += np.int64(age <= window)
+        if dv == 0 and not lo <= 0 <= hi:  # the event itself always counts
+            ps_[n], pw[n], pt[n], pg[n] = 0.0, 0.0, 0.0, middle
+            n += 1
+    return n
 
 @njit(cache=True)
 def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, sample_of, points, velocity, first_update,
@@ -108,13 +155,13 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
     min_points, iterations = ip[I_MIN_POINTS], ip[I_ITERATIONS]
     refractory_us, window_us = ip[I_REFRACTORY], ip[I_WINDOW]
     consistency_us, max_hold, record_rejected = ip[I_CONSISTENCY_WINDOW], ip[I_MAX_HOLD], ip[I_RECORD_REJECTED] != 0
-    rows_model, per_pixel = ip[I_MODEL] == MODEL_ROWS, ip[I_PER_PIXEL] != 0
+    rows_model, per_pixel, pinhole = ip[I_MODEL] == MODEL_ROWS, ip[I_PER_PIXEL] != 0, ip[I_PINHOLE] != 0
     fx, fy, cx, cy = fp[F_FX], fp[F_FY], fp[F_CX], fp[F_CY]
     outlier_px, max_rms, min_spread = fp[F_OUTLIER], fp[F_MAX_RMS], fp[F_MIN_SPREAD]
     min_depth, max_depth, min_denominator = fp[F_MIN_DEPTH], fp[F_MAX_DEPTH], fp[F_MIN_DENOMINATOR]
     window_depth, refractory_depth, consistency = fp[F_WINDOW_DEPTH], fp[F_REFRACTORY_DEPTH], fp[F_CONSISTENCY]
     hold_px, ahead_px, turn, trim_px = fp[F_HOLD_PX], fp[F_AHEAD_PX], fp[F_TURN], fp[F_TRIM_PX]
-    hold_rms, behind_depth = fp[F_HOLD_RMS], fp[F_BEHIND_DEPTH]
+    hold_rms, behind_depth, window_px = fp[F_HOLD_RMS], fp[F_BEHIND_DEPTH], fp[F_WINDOW_PX]
     rotation = velocity.shape[1] >= 6
     row = width + 2 * radius
     middle = (lines.shape[0] - 1) // 2
@@ -132,9 +179,10 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
                 cq = pq * plane_size + (yq + radius) * row + xq + radius
                 for dq in range(-radius, radius + 1):
                     prefetch(flat_surface, cq + dq * row)
-                sq = yq * width + xq if per_pixel else sample_of[yq * width + xq]
-                prefetch(flat_points, sq * points_columns)
-                prefetch(flat_points, sq * points_columns + points_columns - 1)
+                if not pinhole:
+                    sq = yq * width + xq if per_pixel else sample_of[yq * width + xq]
+                    prefetch(flat_points, sq * points_columns)
+                    prefetch(flat_points, sq * points_columns + points_columns - 1)
         t = ts[i]
         if t < t_hi:
             return n_out, UNSORTED, t_hi
@@ -163,8 +211,8 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
         held = np.int64(hold[pixel, polarity])
         speed = -1.0  # A t not computed yet
         if held == 0:
-            at_x, at_y, speed = _velocity_term_at(x, y, pixel, per_pixel, sample_of, points, velocity, j, fx, fy, cx,
-                                                  cy)
+            at_x, at_y, speed = _velocity_term_at(x, y, pixel, per_pixel, pinhole, sample_of, points, velocity, j, fx,
+                                                  fy, cx, cy)
             held = refractory_us
             if refractory_depth > 0.0 and speed > 0.0:
                 held = max(held, np.int64(math.floor(refractory_depth / speed * 1e6)))
@@ -174,8 +222,8 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
             continue
         surface[polarity, cell] = t
         if speed < 0.0:
-            at_x, at_y, speed = _velocity_term_at(x, y, pixel, per_pixel, sample_of, points, velocity, j, fx, fy, cx,
-                                                  cy)
+            at_x, at_y, speed = _velocity_term_at(x, y, pixel, per_pixel, pinhole, sample_of, points, velocity, j, fx,
+                                                  fy, cx, cy)
         if speed <= 0.0:
             counts[NO_MOTION] += 1
             continue
@@ -187,44 +235,27 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
             window = max(window, np.int64(math.floor(window_depth * radius / speed * 1e6)))
         if turn > 0.0:  # nothing from before the camera's last turn: another motion made it
             window = min(window, t - np.int64(motion[M_SINCE]))
-        plane = surface[polarity]
-        # An edge crossed the two pixels just behind this one along the motion, the farther one
-        # first, each about a crossing time per pixel ago; in noise they fired at unrelated times.
-        if behind_depth > 0.0:
+        at_cell = polarity * plane_size + cell  # in the flat surface: no view of the plane (a refcount per event)
+        # An edge crossed the two pixels just behind this one along the motion, each about a
+        # crossing time per pixel ago; in noise they fired at unrelated times. Their ages also
+        # give the edge's own time per pixel, which bounds the window (``window_px``).
+        supported = True
+        if behind_depth > 0.0 or window_px > 0.0:
             du1, dv1 = np.int64(math.floor(fu + 0.5)), np.int64(math.floor(fv + 0.5))
             du2, dv2 = np.int64(math.floor(2.0 * fu + 0.5)), np.int64(math.floor(2.0 * fv + 0.5))
-            age1, age2 = t - plane[cell - dv1 * row - du1], t - plane[cell - dv2 * row - du2]
-            per_px = behind_depth / speed * 1e6  # µs a surface at behind_depth takes per pixel
-            supported = age1 <= per_px * (du1 * fu + dv1 * fv) and age2 <= per_px * (du2 * fu + dv2 * fv)
-        else:
-            supported = True
+            age1, age2 = t - flat_surface[at_cell - dv1 * row - du1], t - flat_surface[at_cell - dv2 * row - du2]
+            d1, d2 = du1 * fu + dv1 * fv, du2 * fu + dv2 * fv  # their distances behind along the motion, px
+            if behind_depth > 0.0:
+                per_px = behind_depth / speed * 1e6  # µs a surface at behind_depth takes per pixel
+                supported = age1 <= per_px * d1 and age2 <= per_px * d2
+            local = window_px * max(age1 / d1, age2 / d2)  # µs: window_px crossings at the edge's pace
+            if window_px > 0.0 and local < window:
+                window = np.int64(math.ceil(local))
         if not supported:
             fit, tau_s, tau_w, c, kept, rms = FIT_TOO_FEW, 0.0, 0.0, 0.0, 0, 0.0
             slot = NOTHING_BEHIND
         else:
-            inverse_fu = 1.0 / fu if abs(fu) > 1e-9 else 0.0
-            n = 0
-            for dv in range(-radius, radius + 1):
-                lo, hi = -radius, radius  # the columns with du * fu + dv * fv <= ahead_px
-                limit = ahead_px - dv * fv
-                if fu > 1e-9:
-                    hi = min(hi, np.int64(math.floor(limit * inverse_fu)))
-                elif fu < -1e-9:
-                    lo = max(lo, np.int64(math.ceil(limit * inverse_fu)))
-                elif limit < 0.0:
-                    hi = lo - 1
-                base = cell + dv * row
-                along0, across0 = dv * fv, dv * fu
-                for du in range(lo, hi + 1):
-                    age = t - plane[base + du]
-                    if age <= window:
-                        across = across0 - du * fv
-                        ps_[n], pw[n], pt[n] = along0 + du * fu, across, -age
-                        pg[n] = middle + np.int64(math.floor(across + 0.5))
-                        n += 1
-                if dv == 0 and not lo <= 0 <= hi:  # the event itself always counts
-                    ps_[n], pw[n], pt[n], pg[n] = 0.0, 0.0, 0.0, middle
-                    n += 1
+            n = gather(flat_surface, at_cell, row, radius, t, window, fu, fv, ahead_px, middle, ps_, pw, pt, pg)
             # 3. Fit and check.
             if rows_model:
                 fit, tau_s, tau_w, c, kept, rms = fit_rows(ps_, pt, pg, n, min_points, min_spread, outlier_px,

@@ -47,6 +47,9 @@ class TimeSurfaceConfig:
       ``window`` and the time a surface at ``window_depth`` takes to move ``radius`` px;
       never one from before the camera's last turn (``turn``: a change of velocity larger
       than that fraction of the speed; 0 = never).
+    - ``window_px`` px: nor one older than the time the edge takes to move that far at its own
+      pace, the larger of the two pixels just behind's (1 and 2 px) ages per pixel: an older
+      point is another edge's (0: off).
     - ``min_points``, ``min_spread`` px², ``max_rms_px`` px: a fit needs that many points on
       lines of two or more, that variance along the motion within the lines (the plane: left
       over by the position across it), and at most that rms distance from the fit.
@@ -83,7 +86,7 @@ class TimeSurfaceConfig:
     window_depth: float = 5.0
     min_points: int = 8
     outlier_px: float = 0.25
-    iterations: int = 3
+    iterations: int = 2
     max_rms_px: float = 0.25
     min_spread: float = 0.5
     refractory: float = 0.0
@@ -91,6 +94,7 @@ class TimeSurfaceConfig:
     hold_px: float = 3.0
     hold_fit_rms_px: float = 1.0
     behind_depth: float = 10.0
+    window_px: float = 6.0
     max_hold: float = 1.0
     ahead_px: float = -0.5
     turn: float = 0.2
@@ -121,15 +125,16 @@ class TimeSurfaceConfig:
                 problems.append(f"{name}: expected an integer >= 0, got {getattr(self, name)!r}")
         for name in ("window", "window_depth", "outlier_px", "max_rms_px", "min_spread", "refractory",
                      "refractory_depth", "consistency", "consistency_window", "min_depth", "hold_px",
-                     "max_hold", "hold_fit_rms_px", "behind_depth"):
+                     "max_hold", "hold_fit_rms_px", "behind_depth", "window_px"):
             if not float(getattr(self, name)) >= 0:
                 problems.append(f"{name}: expected a number >= 0, got {getattr(self, name)!r}")
         if not self.timestep > 0:
             problems.append(f"timestep: expected seconds > 0, got {self.timestep!r}")
         if not self.max_depth > self.min_depth:
             problems.append(f"max_depth ({self.max_depth:g} m) must exceed min_depth ({self.min_depth:g} m)")
-        if self.behind_depth > 0 and int(self.radius) < 2:
-            problems.append(f"behind_depth: needs radius >= 2 (two pixels behind), got radius {self.radius!r}")
+        for name in ("behind_depth", "window_px"):
+            if getattr(self, name) > 0 and int(self.radius) < 2:
+                problems.append(f"{name}: needs radius >= 2 (two pixels behind), got radius {self.radius!r}")
         if self.window <= 0 and self.window_depth <= 0:
             problems.append("window: give window (s) or window_depth (m) > 0")
         if problems:
@@ -161,19 +166,19 @@ class TimeSurfaceEstimator:
         self._ip = np.zeros(ts.N_IP, np.int64)
         self._ip[[ts.I_WIDTH, ts.I_HEIGHT, ts.I_RADIUS, ts.I_DT, ts.I_LATENCY, ts.I_UPDATE_EVERY, ts.I_MIN_POINTS,
                   ts.I_ITERATIONS, ts.I_REFRACTORY, ts.I_WINDOW, ts.I_CONSISTENCY_WINDOW, ts.I_MAX_HOLD, ts.I_MODEL,
-                  ts.I_PER_PIXEL]] = (
+                  ts.I_PER_PIXEL, ts.I_PINHOLE]] = (
             width, height, c.radius, c.timestep_us, c.latency_steps, c.update_every, c.min_points, c.iterations,
             _us(c.refractory), _us(c.window), _us(c.consistency_window), _us(c.max_hold), ts.MODELS.index(c.model),
-            c.per_pixel)
+            c.per_pixel, c.per_pixel and c.lens is None)
         self._fp = np.zeros(ts.N_FP, np.float64)
         self._fp[[ts.F_FX, ts.F_FY, ts.F_CX, ts.F_CY, ts.F_OUTLIER, ts.F_MAX_RMS, ts.F_MIN_SPREAD, ts.F_MIN_DEPTH,
                   ts.F_MAX_DEPTH, ts.F_MIN_DENOMINATOR, ts.F_WINDOW_DEPTH, ts.F_REFRACTORY_DEPTH, ts.F_CONSISTENCY,
                   ts.F_HOLD_PX, ts.F_AHEAD_PX, ts.F_TURN, ts.F_TRIM_PX, ts.F_RFX, ts.F_RFY, ts.F_RCX, ts.F_RCY,
-                  ts.F_HOLD_RMS, ts.F_BEHIND_DEPTH]] = (
+                  ts.F_HOLD_RMS, ts.F_BEHIND_DEPTH, ts.F_WINDOW_PX]] = (
             *c.intrinsics, c.outlier_px, c.max_rms_px, c.min_spread, c.min_depth, c.max_depth, c.min_denominator,
             c.window_depth, c.refractory_depth, c.consistency, c.hold_px, c.ahead_px, c.turn, c.trim_px,
             *(c.intrinsics if c.rotation_intrinsics is None else c.rotation_intrinsics), c.hold_fit_rms_px,
-            c.behind_depth)
+            c.behind_depth, c.window_px)
         r, pixels = int(c.radius), width * height
         self._surface = np.full((2, (height + 2 * r) * (width + 2 * r)), ts.NEVER, np.int64)
         self._hold = np.zeros((pixels, 2), np.int32)

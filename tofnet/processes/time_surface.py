@@ -60,6 +60,9 @@ class TimeSurfaceProcess(Process):
               minimum=0.0),
         Param("window_depth", "length", 5.0, unit="m", doc="oldest point used: the time a surface this deep takes "
               "to move radius px", minimum=0.0),
+        Param("window_px", "float", 6.0, unit="px", doc="nor older than the time the edge takes to move this far "
+              "at its own pace, as the two pixels behind it measured (an older point is another edge's; 0: off)",
+              minimum=0.0),
         Param("turn", "float", 0.2, doc="a velocity change beyond this fraction of the speed starts a new motion "
               "epoch; no point from before it is used (0: never)", minimum=0.0),
         Param("min_points", "int", 8, doc="points on lines of two or more a fit needs", minimum=1),
@@ -67,7 +70,7 @@ class TimeSurfaceProcess(Process):
               minimum=0.0),
         Param("outlier_px", "float", 0.25, unit="px", doc="drop the farthest point while farther than this from the "
               "fit", minimum=0.0),
-        Param("iterations", "int", 3, doc="at most this many points dropped as outliers", minimum=0),
+        Param("iterations", "int", 2, doc="at most this many points dropped as outliers", minimum=0),
         Param("max_rms_px", "float", 0.25, unit="px", doc="fits with a larger rms distance are rejected (bad_fit)",
               minimum=0.0),
         Param("trim_px", "float", 0.0, unit="px", doc="plane model: drop points fitted within this of the window's "
@@ -77,8 +80,8 @@ class TimeSurfaceProcess(Process):
         Param("hold_fit_rms_px", "float", 1.0, unit="px", doc="only a fit at most this far (rms) from its points "
               "sets the pixel's hold: a worse one, e.g. in noise, measured no crossing time", minimum=0.0),
         Param("behind_depth", "length", 10.0, unit="m", doc="fit a first event only when the two pixels just "
-              "behind it along the motion fired, the farther first, within the time a surface this deep takes to "
-              "move that far (an edge crossed them; noise did not; 0: off)", minimum=0.0),
+              "behind it along the motion fired, in either order, within the time a surface this deep takes to move "
+              "that far (an edge crossed them; noise did not; 0: off)", minimum=0.0),
         Param("refractory_depth", "length", 10.0, unit="m", doc="before a pixel has a fit, its hold is the time a "
               "surface this deep takes to move one pixel", minimum=0.0),
         Param("refractory", "duration", 0.0, unit="s", doc="a fixed lower bound on that first hold", minimum=0.0),
