@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from tofnet.core.ports import Payload
+from tofnet.kernels.order import pixel_order
 from tofnet.kernels.time_surface_estimator import TimeSurfaceConfig, TimeSurfaceEstimator, event_columns
 from tofnet.models.base import Model, ModelContext, records
 from tofnet.models.input import check_time_order
@@ -137,13 +138,17 @@ class TimeSurfaceModel(Model):
         self.rotation.forget_before(end - 1)
         if not answers:
             return {"depth": np.empty(0, self._depth), "quality": np.empty(0, self._quality)}
-        depth = np.concatenate([d for d, _ in answers])
-        quality = np.concatenate([q for _, q in answers])
-        # The canonical order (step, y, x; events in time order within a pixel's step), sorted once for both.
-        width, height = self.ctx.sensor_size
-        key = (depth["step"] * height + depth["y"]) * width + depth["x"]
-        order = np.argsort(key, kind="stable")
-        depth, quality = depth[order], quality[order]
+        if len(answers) == 1:
+            depth, quality = answers[0]
+        else:
+            depth = np.concatenate([d for d, _ in answers])
+            quality = np.concatenate([q for _, q in answers])
+        # The canonical order (step, y, x; events in time order within a pixel's step), sorted once for both:
+        # the estimates come in event order, so by step already. np.take moves whole records (indexing a
+        # structured array with an index array gathers it field by field, 20x slower).
+        order = pixel_order(depth["step"], depth["y"], depth["x"], np.zeros(len(depth), np.uint8),
+                            self.ctx.sensor_size[1])
+        depth, quality = np.take(depth, order), np.take(quality, order)
         fit = records(self._quality, step=depth["step"], x=depth["x"], y=depth["y"], t_event=quality["t_event"],
                       points=quality["points"], rms_px=quality["rms_px"], gx=quality["gx"], gy=quality["gy"])
         return {"depth": depth, "quality": fit}
