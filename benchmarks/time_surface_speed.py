@@ -10,8 +10,8 @@ fed the whole stream in one packet and in 1 ms packets (the per-packet wall time
 and 99th percentile too), the share of events that are first events (each costs a fit),
 and, measured in the same rounds for comparison, the paper network's fused kernel
 (``FixedBackend`` stream, ``run``'s packets). Best of ``--rounds`` rounds; CPU time, not
-wall time, since the machine is shared. ``--before`` (default ``hold_fit_rms_px=inf``, the
-estimator before that parameter existed: every converged fit set the pixel's hold) is
+wall time, since the machine is shared. ``--before`` (default ``window_px=0;iterations=3``, the
+defaults before ``window_px``: the window from the scene's depth scale only) is
 measured in the same rounds, one packet, for a before/after comparison. Text then markdown.
 """
 
@@ -75,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--streams", default=STREAMS)
     parser.add_argument("--rounds", type=int, default=3)
-    parser.add_argument("--before", default="hold_fit_rms_px=inf",
+    parser.add_argument("--before", default="window_px=0;iterations=3",
                         help="'name=value;...': the configuration to compare with ('' for none)")
     args = parser.parse_args(argv)
     before = parse_assignments(args.before)

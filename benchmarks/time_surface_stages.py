@@ -11,7 +11,7 @@ The kernel is not instrumented: each stage is cut off by a parameter, on the sam
 - *gather*: ``min_points`` 999: the square is read and the lines' sums added, then the
   fit stops (``too_few_points``);
 - *one pass*: ``iterations`` 0: one residual pass, no outlier dropped;
-- *defaults*: up to ``iterations`` (3) more passes, one dropped point each.
+- *defaults*: up to ``iterations`` (2) more passes, one dropped point each.
 
 The stages change the holds a little (a rejected fit sets none), so the share of fitted
 events differs by a few points between rows; the per-fit costs divide by each row's own
