@@ -127,9 +127,10 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
     middle = (lines.shape[0] - 1) // 2
     n_used = 0
     # each point added to its line's sums in memory, in order (no branch on where a run of one line ends:
-    # in noise the runs are as long as chance makes them); at most 2 round(radius √2) + 1 lines are used
+    # in noise the runs are as long as chance makes them); at most 2 round(radius √2) + 1 lines are used.
+    # Line indices are read as unsigned: numba fixes up every signed index for negative values.
     for i in range(n):
-        g = pg[i]
+        g = np.uint64(pg[i])
         s, t = ps[i], pt[i]
         used[n_used] = g
         n_used += np.int64(lines[g, L_M] == 0.0)  # lines in the order of their first point
@@ -141,7 +142,7 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
     sxx = sxy = 0.0
     kept = 0
     for j in range(n_used):
-        g = used[j]
+        g = np.uint64(used[j])
         _line_stats(lines, g)
         sxx += lines[g, L_CSS]
         sxy += lines[g, L_CST]
@@ -161,7 +162,7 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
         sq = 0.0
         worst, worst_r = 0, 0.0
         for i in range(k):
-            g = pg[i]
+            g = np.uint64(pg[i])
             r = abs(pt[i] - lines[g, L_MEAN_T] - tau_s * (ps[i] - lines[g, L_MEAN_S]))
             if r > worst_r:  # False for NaN: a line of one point carries no slope
                 worst, worst_r = i, r
@@ -170,7 +171,7 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
         rms_px = math.sqrt(sq / kept) / slope if slope > 0.0 else math.inf
         if worst_r <= outlier_px * slope:
             break
-        s, t, g = ps[worst], pt[worst], pg[worst]
+        s, t, g = ps[worst], pt[worst], np.uint64(pg[worst])
         sxx -= lines[g, L_CSS]
         sxy -= lines[g, L_CST]
         kept -= np.int64(lines[g, L_M]) if lines[g, L_M] >= 2.0 else 0
@@ -185,15 +186,15 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
         kept += np.int64(lines[g, L_M]) if lines[g, L_M] >= 2.0 else 0
         k -= 1
         ps[worst], pt[worst], pg[worst] = ps[k], pt[k], pg[k]
-        ps[k], pt[k], pg[k] = s, t, g
+        ps[k], pt[k], pg[k] = s, t, np.int64(g)
     if code == FIT_OK:
         # The lines' offsets against their position across the motion: τ_w (weighted by points).
         sw = so = sww = swo = total = 0.0
         for j in range(n_used):
-            g = used[j]
+            g = np.uint64(used[j])
             m = lines[g, L_M]
             if m >= 1.0:
-                w, offset = float(g - middle), (lines[g, L_T] - tau_s * lines[g, L_S]) / m
+                w, offset = float(np.int64(g) - middle), (lines[g, L_T] - tau_s * lines[g, L_S]) / m
                 total += m
                 sw += m * w
                 so += m * offset
@@ -206,6 +207,6 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
         else:
             c = so / total - tau_w * sw / total
     for j in range(n_used):  # leave the table empty for the next fit
-        g = used[j]
+        g = np.uint64(used[j])
         lines[g, L_M] = lines[g, L_S] = lines[g, L_T] = lines[g, L_SS] = lines[g, L_ST] = 0.0
     return code, tau_s, tau_w, c, kept, rms_px
