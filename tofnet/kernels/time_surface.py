@@ -33,7 +33,7 @@ from numba import njit
 
 from tofnet.kernels.time_of_travel import prefetch
 from tofnet.kernels.rotation import rotational_flow
-from tofnet.kernels.time_surface_fit import FIT_ILL_CONDITIONED, FIT_TOO_FEW, fit_plane, fit_rows
+from tofnet.kernels.time_surface_fit import FIT_ILL_CONDITIONED, FIT_OVER_RMS, FIT_TOO_FEW, fit_plane, fit_rows
 from tofnet.kernels.velocity import sampled_velocity_term, velocity_term
 
 NEVER = -(1 << 62)  # "no first event yet" (µs)
@@ -163,6 +163,8 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
     hold_px, ahead_px, turn, trim_px = fp[F_HOLD_PX], fp[F_AHEAD_PX], fp[F_TURN], fp[F_TRIM_PX]
     hold_rms, behind_depth, window_px = fp[F_HOLD_RMS], fp[F_BEHIND_DEPTH], fp[F_WINDOW_PX]
     rotation = velocity.shape[1] >= 6
+    # a fit this far off its points is rejected (bad_fit) and sets no hold: unless it is recorded, the fit may stop
+    give_up_rms = math.inf if record_rejected else max(max_rms, hold_rms) if hold_px > 0.0 else max_rms
     row = width + 2 * radius
     middle = (lines.shape[0] - 1) // 2
     step, step_start, step_end, update = np.int64(0), np.int64(1), np.int64(0), np.int64(0)
@@ -251,15 +253,21 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
             local = window_px * max(age1 / d1, age2 / d2)  # µs: window_px crossings at the edge's pace
             if window_px > 0.0 and local < window:
                 window = np.int64(math.ceil(local))
+        if not supported and not record_rejected:  # nothing to fit, nothing to record
+            counts[NOTHING_BEHIND] += 1
+            continue
         if not supported:
             fit, tau_s, tau_w, c, kept, rms = FIT_TOO_FEW, 0.0, 0.0, 0.0, 0, 0.0
             slot = NOTHING_BEHIND
         else:
             n = gather(flat_surface, at_cell, row, radius, t, window, fu, fv, ahead_px, middle, ps_, pw, pt, pg)
+            if n < min_points and not record_rejected:  # fewer points than a fit keeps: too few, whatever the fit
+                counts[TOO_FEW_POINTS] += 1
+                continue
             # 3. Fit and check.
             if rows_model:
                 fit, tau_s, tau_w, c, kept, rms = fit_rows(ps_, pt, pg, n, min_points, min_spread, outlier_px,
-                                                            iterations, lines, used)
+                                                            iterations, lines, used, give_up_rms)
             else:
                 fit, tau_s, tau_w, c, kept, rms = fit_plane(ps_, pw, pt, n, min_points, min_spread, outlier_px,
                                                             iterations)
@@ -278,7 +286,8 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
                     if m < kept:
                         fit, tau_s, tau_w, c, kept, rms = fit_plane(ps_, pw, pt, m, min_points, min_spread, outlier_px,
                                                                     iterations)
-            slot = TOO_FEW_POINTS if fit == FIT_TOO_FEW else ILL_CONDITIONED if fit == FIT_ILL_CONDITIONED else EMITTED
+            slot = (TOO_FEW_POINTS if fit == FIT_TOO_FEW else ILL_CONDITIONED if fit == FIT_ILL_CONDITIONED
+                    else BAD_FIT if fit == FIT_OVER_RMS else EMITTED)
         a, b = tau_s * fu - tau_w * fv, tau_s * fv + tau_w * fu  # ∇T at the event, µs/px along u and v
         if slot == EMITTED and hold_px > 0.0 and rms <= hold_rms:
             # this edge's burst lasts about its ramp's width: hold_px pixels (a fit far off the

@@ -15,7 +15,7 @@ import math
 import numpy as np
 from numba import njit
 
-FIT_OK, FIT_TOO_FEW, FIT_ILL_CONDITIONED = range(3)
+FIT_OK, FIT_TOO_FEW, FIT_ILL_CONDITIONED, FIT_OVER_RMS = range(4)
 # Per line of a ``fit_rows`` fit: raw sums (count, s, t, s², s t), means of s and t, centred sums.
 L_M, L_S, L_T, L_SS, L_ST, L_MEAN_S, L_MEAN_T, L_CSS, L_CST, N_L = range(10)
 
@@ -108,7 +108,7 @@ def _line_stats(lines, g):
 
 
 @njit(cache=True)
-def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, lines, used):
+def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, lines, used, give_up_rms=math.inf):
     """Time per pixel along the image motion from lines of pixels parallel to it, robustly.
 
     Under a pure translation a pixel sees the signal of the pixel behind it along the motion,
@@ -122,7 +122,9 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
     ``used`` are scratch. Returns ``(code, τ_s, τ_w, c, kept, rms_px)`` like ``fit_plane``:
     ``kept`` counts the points on lines of two or more (the others carry no slope), the
     spread is their variance along ``s`` within their lines, ``τ_w`` the slope of the lines'
-    offsets across the motion and ``c`` the offset of the event's line.
+    offsets across the motion and ``c`` the offset of the event's line. A fit whose last pass
+    leaves it above ``give_up_rms`` px rms returns ``FIT_OVER_RMS`` at once (with that pass's
+    ``τ_s`` and rms): the caller rejects it whatever its offsets.
     """
     middle = (lines.shape[0] - 1) // 2
     n_used = 0
@@ -151,7 +153,7 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
     k = n
     tau_s = tau_w = c = rms_px = 0.0
     code = FIT_OK
-    for _ in range(iterations + 1):
+    for iteration in range(iterations + 1):
         if kept < min_points:
             code = FIT_TOO_FEW
             break
@@ -170,6 +172,9 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
         slope = abs(tau_s)
         rms_px = math.sqrt(sq / kept) / slope if slope > 0.0 else math.inf
         if worst_r <= outlier_px * slope:
+            break
+        if iteration == iterations and rms_px > give_up_rms:  # its last removal and offsets would go unused
+            code = FIT_OVER_RMS
             break
         s, t, g = ps[worst], pt[worst], np.uint64(pg[worst])
         sxx -= lines[g, L_CSS]
