@@ -208,9 +208,11 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
                 follow_motion(motion, velocity[j], update, t0 + update * update_every * dt, turn)
         polarity = 1 if ps[i] != 0 else 0
         pixel = y * width + x
+        cell = (y + radius) * row + x + radius
         # 1. First-event rule: a hold measured by the last fit here, else the refractory period:
         # the time a surface at ``refractory_depth`` takes per pixel.
-        held = np.int64(hold[pixel, polarity])
+        up, ucell, upol = np.uint64(pixel), np.uint64(cell), np.uint64(polarity)  # unsigned: no negative-index fix-ups
+        held = np.int64(hold[up, upol])
         speed = -1.0  # A t not computed yet
         if held == 0:
             at_x, at_y, speed = _velocity_term_at(x, y, pixel, per_pixel, pinhole, sample_of, points, velocity, j, fx,
@@ -218,11 +220,10 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
             held = refractory_us
             if refractory_depth > 0.0 and speed > 0.0:
                 held = max(held, np.int64(math.floor(refractory_depth / speed * 1e6)))
-        cell = (y + radius) * row + x + radius
-        if t - surface[polarity, cell] < held:
+        if t - surface[upol, ucell] < held:
             counts[BURST] += 1
             continue
-        surface[polarity, cell] = t
+        surface[upol, ucell] = t
         if speed < 0.0:
             at_x, at_y, speed = _velocity_term_at(x, y, pixel, per_pixel, pinhole, sample_of, points, velocity, j, fx,
                                                   fy, cx, cy)
@@ -245,7 +246,8 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
         if behind_depth > 0.0 or window_px > 0.0:
             du1, dv1 = np.int64(math.floor(fu + 0.5)), np.int64(math.floor(fv + 0.5))
             du2, dv2 = np.int64(math.floor(2.0 * fu + 0.5)), np.int64(math.floor(2.0 * fv + 0.5))
-            age1, age2 = t - flat_surface[at_cell - dv1 * row - du1], t - flat_surface[at_cell - dv2 * row - du2]
+            age1 = t - flat_surface[np.uint64(at_cell - dv1 * row - du1)]
+            age2 = t - flat_surface[np.uint64(at_cell - dv2 * row - du2)]
             d1, d2 = du1 * fu + dv1 * fv, du2 * fu + dv2 * fv  # their distances behind along the motion, px
             if behind_depth > 0.0:
                 per_px = behind_depth / speed * 1e6  # µs a surface at behind_depth takes per pixel
@@ -292,7 +294,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
         if slot == EMITTED and hold_px > 0.0 and rms <= hold_rms:
             # this edge's burst lasts about its ramp's width: hold_px pixels (a fit far off the
             # points, e.g. in noise, measured no crossing time: it leaves the hold as it was)
-            hold[pixel, polarity] = min(max_hold, np.int64(hold_px * math.sqrt(a * a + b * b)) + 1)
+            hold[up, upol] = min(max_hold, np.int64(hold_px * math.sqrt(a * a + b * b)) + 1)
         if slot == EMITTED and rms > max_rms:
             slot = BAD_FIT
         z = 0.0
@@ -318,10 +320,10 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
             if t - when > consistency_us or abs(z - before) > consistency * before:
                 slot = INCONSISTENT
         if slot == EMITTED:  # one estimate per pixel and step, as a depth neuron: the first
-            if last_step[pixel] == step:
+            if last_step[up] == step:
                 slot = SAME_STEP
             else:
-                last_step[pixel] = step
+                last_step[up] = step
         counts[slot] += 1
         if slot != EMITTED:
             if not record_rejected:
