@@ -8,8 +8,9 @@ The kernel is not instrumented: each stage is cut off by a parameter, on the sam
 
 - *no fit*: ``behind_depth`` 1 µm, so almost every first event ends ``nothing_behind``
   before its square is read: the event loop, the first-event rule and the check behind;
-- *gather*: ``min_points`` 999: the square is read and the lines' sums added, then the
-  fit stops (``too_few_points``);
+- *gather*: ``min_points`` 999: the square is read, then the event is counted
+  ``too_few_points`` (fewer gathered points than ``min_points``: no sums, no fit; before
+  that early exit this stage also added the lines' sums);
 - *one pass*: ``iterations`` 0: one residual pass, no outlier dropped;
 - *defaults*: up to ``iterations`` (2) more passes, one dropped point each.
 
