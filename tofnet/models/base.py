@@ -176,6 +176,12 @@ def concat(chunks: list[np.ndarray], dtype: np.dtype) -> np.ndarray:
     return np.concatenate([np.ascontiguousarray(c).view(raw) for c in chunks]).view(chunks[0].dtype)
 
 
+def take(records: np.ndarray, order: np.ndarray) -> np.ndarray:
+    """``records[order]``, moved whole: numpy gathers packed records field by field when a record
+    array is indexed with an index array (about 20x slower)."""
+    return np.take(records, order)
+
+
 def records(dtype: np.dtype, n: int = 0, **columns: Any) -> np.ndarray:
     """A record array of ``n`` rows (or as long as the columns) with the given columns filled."""
     if columns:

@@ -16,7 +16,7 @@ import numpy as np
 from tofnet.core.ports import Payload
 from tofnet.kernels.order import pixel_order
 from tofnet.kernels.time_surface_estimator import TimeSurfaceConfig, TimeSurfaceEstimator, event_columns
-from tofnet.models.base import Model, ModelContext, records
+from tofnet.models.base import Model, ModelContext, concat, records, take
 from tofnet.models.input import check_time_order
 from tofnet.processes.time_surface import QUALITY, TimeSurfaceProcess
 
@@ -138,17 +138,13 @@ class TimeSurfaceModel(Model):
         self.rotation.forget_before(end - 1)
         if not answers:
             return {"depth": np.empty(0, self._depth), "quality": np.empty(0, self._quality)}
-        if len(answers) == 1:
-            depth, quality = answers[0]
-        else:
-            depth = np.concatenate([d for d, _ in answers])
-            quality = np.concatenate([q for _, q in answers])
+        depth = concat([d for d, _ in answers], self._depth)
+        quality = concat([q for _, q in answers], answers[0][1].dtype)  # the estimator's, not the port's
         # The canonical order (step, y, x; events in time order within a pixel's step), sorted once for both:
-        # the estimates come in event order, so by step already. np.take moves whole records (indexing a
-        # structured array with an index array gathers it field by field, 20x slower).
+        # the estimates come in event order, so by step already.
         order = pixel_order(depth["step"], depth["y"], depth["x"], np.zeros(len(depth), np.uint8),
                             self.ctx.sensor_size[1])
-        depth, quality = np.take(depth, order), np.take(quality, order)
+        depth, quality = take(depth, order), take(quality, order)
         fit = records(self._quality, step=depth["step"], x=depth["x"], y=depth["y"], t_event=quality["t_event"],
                       points=quality["points"], rms_px=quality["rms_px"], gx=quality["gx"], gy=quality["gy"])
         return {"depth": depth, "quality": fit}
