@@ -329,3 +329,18 @@ def test_a_bad_configuration_is_one_error_naming_the_fields():
     with pytest.raises(BackendError, match="window_px: needs radius >= 2"):
         TimeSurfaceConfig(SENSOR, INTRINSICS, radius=1, behind_depth=0.0, window_px=6.0)
     TimeSurfaceConfig(SENSOR, INTRINSICS, radius=1, behind_depth=0.0, window_px=0.0)
+
+
+def test_what_is_emitted_does_not_depend_on_recording_the_rejections():
+    # Without record_rejected the kernel stops early where nothing is to be recorded (nothing
+    # behind, fewer points than min_points, a last pass over both rms limits); the estimates
+    # and every count must be those of the run that records them all.
+    events, velocity = noisy_stream()
+    recorded = run(events, velocity, record_rejected=True)
+    emitted_only = run(events, velocity)
+    counts = recorded[2].counts
+    assert min(counts["nothing_behind"], counts["too_few_points"], counts["bad_fit"], counts["emitted"]) > 0
+    kept = recorded[1]["reason"] == ts.EMITTED
+    assert recorded[0][kept].tobytes() == emitted_only[0].tobytes()
+    assert recorded[1][kept].tobytes() == emitted_only[1].tobytes()
+    assert emitted_only[2].counts == counts
