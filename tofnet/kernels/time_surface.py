@@ -80,7 +80,7 @@ def follow_motion(motion, row, update: int, update_start_us: int, turn: float) -
 
 @njit(cache=True, inline="always")
 def _velocity_term_at(x, y, pixel, per_pixel, pinhole, sample_of, points, velocity, j, fx, fy, cx, cy):
-    """``A t`` (px*m/s) and ``|A t|`` for pixel (x, y) under velocity row ``j``, through the lens of
+    """``A t`` (px*m/s) for pixel (x, y) under velocity row ``j``, through the lens of
     ``points`` (one ``tofnet.kernels.lens.sample_table`` row per sample: the pixel or its patch);
     ``pinhole`` (per pixel, no lens): at the pixel itself, the same numbers without reading the table."""
     if pinhole:
@@ -89,7 +89,7 @@ def _velocity_term_at(x, y, pixel, per_pixel, pinhole, sample_of, points, veloci
         sample = pixel if per_pixel else sample_of[pixel]
         at_x, at_y = sampled_velocity_term(velocity[j, 0], velocity[j, 1], velocity[j, 2], points[sample], fx, fy, cx,
                                            cy)
-    return at_x, at_y, math.sqrt(at_x * at_x + at_y * at_y)
+    return at_x, at_y
 
 
 
@@ -213,20 +213,26 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
         # the time a surface at ``refractory_depth`` takes per pixel.
         up, ucell, upol = np.uint64(pixel), np.uint64(cell), np.uint64(polarity)  # unsigned: no negative-index fix-ups
         held = np.int64(hold[up, upol])
-        speed = -1.0  # A t not computed yet
+        age = t - surface[upol, ucell]
         if held == 0:
-            at_x, at_y, speed = _velocity_term_at(x, y, pixel, per_pixel, pinhole, sample_of, points, velocity, j, fx,
-                                                  fy, cx, cy)
-            held = refractory_us
-            if refractory_depth > 0.0 and speed > 0.0:
-                held = max(held, np.int64(math.floor(refractory_depth / speed * 1e6)))
-        if t - surface[upol, ucell] < held:
+            at_x, at_y = _velocity_term_at(x, y, pixel, per_pixel, pinhole, sample_of, points, velocity, j, fx, fy, cx,
+                                           cy)
+            # age < refractory_depth / |A t| (µs, whole) without a root or a division, which would stand
+            # between the hold's load and this unpredictable branch: age + 1 <= D / |A t| squared
+            speed2, reach = at_x * at_x + at_y * at_y, refractory_depth * 1e6
+            after = float(age + 1)
+            burst = age < refractory_us or (refractory_depth > 0.0 and speed2 > 0.0 and (
+                after <= 0.0 or after * after * speed2 <= reach * reach))
+        else:
+            burst = age < held
+        if burst:
             counts[BURST] += 1
             continue
         surface[upol, ucell] = t
-        if speed < 0.0:
-            at_x, at_y, speed = _velocity_term_at(x, y, pixel, per_pixel, pinhole, sample_of, points, velocity, j, fx,
-                                                  fy, cx, cy)
+        if held != 0:
+            at_x, at_y = _velocity_term_at(x, y, pixel, per_pixel, pinhole, sample_of, points, velocity, j, fx, fy, cx,
+                                           cy)
+        speed = math.sqrt(at_x * at_x + at_y * at_y)
         if speed <= 0.0:
             counts[NO_MOTION] += 1
             continue

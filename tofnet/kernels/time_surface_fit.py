@@ -107,6 +107,12 @@ def _line_stats(lines, g):
         lines[g, L_CSS] = lines[g, L_CST] = 0.0
 
 
+@njit(cache=True, inline="always")
+def _rms(sq, kept, slope):
+    """rms distance (px) of ``kept`` points with sum of squared time residuals ``sq`` (µs²) from a slope (µs/px)."""
+    return math.sqrt(sq / kept) / slope if slope > 0.0 else math.inf
+
+
 @njit(cache=True)
 def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, lines, used, give_up_rms=math.inf):
     """Time per pixel along the image motion from lines of pixels parallel to it, robustly.
@@ -151,7 +157,10 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
         if lines[g, L_M] >= 2.0:
             kept += np.int64(lines[g, L_M])
     k = n
-    tau_s = tau_w = c = rms_px = 0.0
+    tau_s = tau_w = c = 0.0
+    # the last pass's sum of squares, points and |τ_s|: its rms, a root and a division, is taken once at the end
+    # (off the passes' critical path); no pass yet: 0
+    pass_sq, pass_kept, slope = 0.0, 1, -1.0
     code = FIT_OK
     for iteration in range(iterations + 1):
         if kept < min_points:
@@ -169,12 +178,11 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
             if r > worst_r:  # False for NaN: a line of one point carries no slope
                 worst, worst_r = i, r
             sq += r * r if r == r else 0.0  # a select, not a branch, on the sum's dependency chain
-        slope = abs(tau_s)
-        rms_px = math.sqrt(sq / kept) / slope if slope > 0.0 else math.inf
+        slope, pass_sq, pass_kept = abs(tau_s), sq, kept
         if worst_r <= outlier_px * slope:
             break
-        if iteration == iterations and rms_px > give_up_rms:  # its last removal and offsets would go unused
-            code = FIT_OVER_RMS
+        if iteration == iterations and _rms(pass_sq, pass_kept, slope) > give_up_rms:
+            code = FIT_OVER_RMS  # its last removal and offsets would go unused
             break
         s, t, g = ps[worst], pt[worst], np.uint64(pg[worst])
         sxx -= lines[g, L_CSS]
@@ -214,4 +222,4 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
     for j in range(n_used):  # leave the table empty for the next fit
         g = np.uint64(used[j])
         lines[g, L_M] = lines[g, L_S] = lines[g, L_T] = lines[g, L_SS] = lines[g, L_ST] = 0.0
-    return code, tau_s, tau_w, c, kept, rms_px
+    return code, tau_s, tau_w, c, kept, _rms(pass_sq, pass_kept, slope) if slope >= 0.0 else 0.0
