@@ -93,6 +93,19 @@ def _velocity_term_at(x, y, pixel, per_pixel, pinhole, sample_of, points, veloci
 
 
 
+@njit(cache=True, inline="always")
+def _behind(a: float, speed2: float) -> tuple[int, int]:
+    """``floor(f + 0.5)`` and ``floor(2 f + 0.5)`` of the unit motion's component ``f = a / √speed2``
+    (``|f| <= 1``), from squares and without branches: the steps (px) to the pixels 1 and 2 px
+    behind along one axis (a tie rounds up, as ``floor``)."""
+    a2 = a * a
+    quarter, half, three = 0.0625 * speed2, 0.25 * speed2, 0.5625 * speed2  # |f| = 1/4, 1/2, 3/4
+    up_one, up_two = np.int64(a2 >= half), np.int64(a2 >= quarter) + np.int64(a2 >= three)
+    down_one, down_two = np.int64(a2 > half), np.int64(a2 > quarter) + np.int64(a2 > three)
+    positive = a > 0.0
+    return (up_one if positive else -down_one), (up_two if positive else -down_two)
+
+
 @njit(cache=True)
 def gather(surface, cell: int, row: int, radius: int, t: int, window: int, fu: float, fv: float, ahead_px: float,
            middle: int, ps_, pw, pt, pg) -> int:
@@ -232,7 +245,8 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
         if held != 0:
             at_x, at_y = _velocity_term_at(x, y, pixel, per_pixel, pinhole, sample_of, points, velocity, j, fx, fy, cx,
                                            cy)
-        speed = math.sqrt(at_x * at_x + at_y * at_y)
+            speed2 = at_x * at_x + at_y * at_y
+        speed = math.sqrt(speed2)
         if speed <= 0.0:
             counts[NO_MOTION] += 1
             continue
@@ -250,14 +264,17 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
         # give the edge's own time per pixel, which bounds the window (``window_px``).
         supported = True
         if behind_depth > 0.0 or window_px > 0.0:
-            du1, dv1 = np.int64(math.floor(fu + 0.5)), np.int64(math.floor(fv + 0.5))
-            du2, dv2 = np.int64(math.floor(2.0 * fu + 0.5)), np.int64(math.floor(2.0 * fv + 0.5))
+            # round(f) and round(2 f) per axis from A t's squares: no root or division on the way to the
+            # unpredictable branch on ``supported``
+            du1, du2 = _behind(at_x, speed2)
+            dv1, dv2 = _behind(at_y, speed2)
             age1 = t - flat_surface[np.uint64(at_cell - dv1 * row - du1)]
             age2 = t - flat_surface[np.uint64(at_cell - dv2 * row - du2)]
+            if behind_depth > 0.0:  # age <= (behind_depth / |A t|) * d, with d = (du, dv)·A t / |A t| px behind
+                reach = behind_depth * 1e6
+                supported = (float(age1) * speed2 <= reach * (du1 * at_x + dv1 * at_y)
+                             and float(age2) * speed2 <= reach * (du2 * at_x + dv2 * at_y))
             d1, d2 = du1 * fu + dv1 * fv, du2 * fu + dv2 * fv  # their distances behind along the motion, px
-            if behind_depth > 0.0:
-                per_px = behind_depth / speed * 1e6  # µs a surface at behind_depth takes per pixel
-                supported = age1 <= per_px * d1 and age2 <= per_px * d2
             local = window_px * max(age1 / d1, age2 / d2)  # µs: window_px crossings at the edge's pace
             if window_px > 0.0 and local < window:
                 window = np.int64(math.ceil(local))
