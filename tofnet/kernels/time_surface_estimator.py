@@ -299,12 +299,11 @@ def sample_tables(per_pixel: bool, patch_size: int, width: int, height: int,
     ``points`` (per sample, the ``tofnet.kernels.lens.sample_table`` row of each pixel or of its
     patch: where ``A t`` is evaluated, through the lens)."""
     table = sample_table(per_pixel, patch_size, (width, height), camera, lens).reshape(-1, SAMPLE_COLUMNS)
-    if per_pixel:
-        sample_of = np.arange(width * height, dtype=np.int64)
-    else:
-        ys, xs = np.mgrid[0:height, 0:width]
-        columns = -(-width // patch_size)
-        sample_of = ((ys // patch_size) * columns + xs // patch_size).ravel().astype(np.int64)
+    if per_pixel:  # one sample per pixel, in pixel order
+        return np.arange(width * height, dtype=np.int64), np.ascontiguousarray(table)
+    ys, xs = np.mgrid[0:height, 0:width]
+    columns = -(-width // patch_size)
+    sample_of = ((ys // patch_size) * columns + xs // patch_size).ravel().astype(np.int64)
     first = np.unique(sample_of, return_index=True)[1]
     return sample_of, np.ascontiguousarray(table[first])
 

@@ -96,7 +96,8 @@ class Model:
         return {}
 
     def feed(self, events: np.ndarray) -> None:
-        """Take camera events (``EVENT_DTYPE``, time order); only for ``reads_events`` models."""
+        """Take camera events (``EVENT_DTYPE``, time order: ``GraphStream.feed_all`` checked); only for
+        ``reads_events`` models."""
         raise BackendError(f"{self.process.name}: {type(self).__name__} does not read events")
 
     def complete_until(self) -> int | None:

@@ -17,7 +17,6 @@ from tofnet.core.ports import Payload
 from tofnet.kernels.order import pixel_order
 from tofnet.kernels.time_surface_estimator import TimeSurfaceConfig, TimeSurfaceEstimator, event_columns
 from tofnet.models.base import Model, ModelContext, concat, records, take
-from tofnet.models.input import check_time_order
 from tofnet.processes.time_surface import QUALITY, TimeSurfaceProcess
 
 #: A host process answers in the step after the event (the estimator's ``latency_steps``).
@@ -94,7 +93,8 @@ class TimeSurfaceModel(Model):
     def feed(self, events: np.ndarray) -> None:
         if len(events) == 0:
             return
-        check_time_order(events, self._latest_us, self.process.name)
+        # the stream, the only feeder, refused a packet out of time order (and the kernel checks again): no
+        # third pass over the events here
         self._waiting.append(event_columns(events))  # copies: the caller may reuse its buffer
         self._latest_us = int(events["t"][-1])
 
