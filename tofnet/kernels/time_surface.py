@@ -251,13 +251,6 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
             counts[NO_MOTION] += 1
             continue
         fu, fv = at_x / speed, at_y / speed
-        # 2. Gather the recent first events of the pixels the edge has crossed: at most
-        # ``ahead_px`` along the motion (the pixels ahead still hold an older edge's times).
-        window = window_us  # the time a surface at ``window_depth`` takes to move ``radius`` pixels
-        if window_depth > 0.0:
-            window = max(window, np.int64(math.floor(window_depth * radius / speed * 1e6)))
-        if turn > 0.0:  # nothing from before the camera's last turn: another motion made it
-            window = min(window, t - np.int64(motion[M_SINCE]))
         at_cell = polarity * plane_size + cell  # in the flat surface: no view of the plane (a refcount per event)
         # An edge crossed the two pixels just behind this one along the motion, each about a
         # crossing time per pixel ago; in noise they fired at unrelated times. Their ages also
@@ -274,10 +267,6 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
                 reach = behind_depth * 1e6
                 supported = (float(age1) * speed2 <= reach * (du1 * at_x + dv1 * at_y)
                              and float(age2) * speed2 <= reach * (du2 * at_x + dv2 * at_y))
-            d1, d2 = du1 * fu + dv1 * fv, du2 * fu + dv2 * fv  # their distances behind along the motion, px
-            local = window_px * max(age1 / d1, age2 / d2)  # µs: window_px crossings at the edge's pace
-            if window_px > 0.0 and local < window:
-                window = np.int64(math.ceil(local))
         if not supported and not record_rejected:  # nothing to fit, nothing to record
             counts[NOTHING_BEHIND] += 1
             continue
@@ -285,6 +274,17 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
             fit, tau_s, tau_w, c, kept, rms = FIT_TOO_FEW, 0.0, 0.0, 0.0, 0, 0.0
             slot = NOTHING_BEHIND
         else:
+            # 2. Gather the recent first events of the pixels the edge has crossed: at most
+            # ``ahead_px`` along the motion (the pixels ahead still hold an older edge's times).
+            window = window_us  # the time a surface at ``window_depth`` takes to move ``radius`` pixels
+            if window_depth > 0.0:
+                window = max(window, np.int64(math.floor(window_depth * radius / speed * 1e6)))
+            if turn > 0.0:  # nothing from before the camera's last turn: another motion made it
+                window = min(window, t - np.int64(motion[M_SINCE]))
+            if window_px > 0.0:  # window_px crossings at the edge's pace (µs), without a branch
+                d1, d2 = du1 * fu + dv1 * fv, du2 * fu + dv2 * fv  # their distances behind along the motion, px
+                local = window_px * max(age1 / d1, age2 / d2)
+                window = np.int64(math.ceil(min(local, float(window))))
             n = gather(flat_surface, at_cell, row, radius, t, window, fu, fv, ahead_px, middle, ps_, pw, pt, pg)
             if n < min_points and not record_rejected:  # fewer points than a fit keeps: too few, whatever the fit
                 counts[TOO_FEW_POINTS] += 1
