@@ -95,16 +95,16 @@ def fit_plane(ps, pw, pt, n, min_points, min_spread, outlier_px, iterations):
 
 @njit(cache=True, inline="always")
 def _line_stats(lines, g):
-    """Means and centred sums of line ``g`` from its raw sums (NaN means: fewer than 2 points)."""
+    """Means and centred sums of line ``g`` from its raw sums (NaN means: fewer than 2 points).
+
+    Selects, not a branch: whether a line has two points is a coin toss in noise."""
     m = lines[g, L_M]
-    if m >= 2.0:
-        inv = 1.0 / m
-        lines[g, L_MEAN_S], lines[g, L_MEAN_T] = lines[g, L_S] * inv, lines[g, L_T] * inv
-        lines[g, L_CSS] = lines[g, L_SS] - lines[g, L_S] * lines[g, L_MEAN_S]
-        lines[g, L_CST] = lines[g, L_ST] - lines[g, L_S] * lines[g, L_MEAN_T]
-    else:
-        lines[g, L_MEAN_S] = lines[g, L_MEAN_T] = math.nan
-        lines[g, L_CSS] = lines[g, L_CST] = 0.0
+    many = m >= 2.0
+    inv = 1.0 / (m if many else 1.0)
+    mean_s, mean_t = lines[g, L_S] * inv, lines[g, L_T] * inv
+    css, cst = lines[g, L_SS] - lines[g, L_S] * mean_s, lines[g, L_ST] - lines[g, L_S] * mean_t
+    lines[g, L_MEAN_S], lines[g, L_MEAN_T] = (mean_s if many else math.nan), (mean_t if many else math.nan)
+    lines[g, L_CSS], lines[g, L_CST] = (css if many else 0.0), (cst if many else 0.0)
 
 
 @njit(cache=True, inline="always")
@@ -154,9 +154,11 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
         _line_stats(lines, g)
         sxx += lines[g, L_CSS]
         sxy += lines[g, L_CST]
-        if lines[g, L_M] >= 2.0:
-            kept += np.int64(lines[g, L_M])
+        kept += np.int64(lines[g, L_M]) if lines[g, L_M] >= 2.0 else 0
     k = n
+    # Line 0 is never used (|w| <= radius √2 < middle): with a NaN mean it makes a point at k + 1 that
+    # pads a pass to an even count, which spares a mispredicted branch on the parity per pass.
+    lines[0, L_MEAN_T] = math.nan
     tau_s = tau_w = c = 0.0
     # the last pass's sum of squares, points and |τ_s|: its rms, a root and a division, is taken once at the end
     # (off the passes' critical path); no pass yet: 0
@@ -172,7 +174,8 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
         tau_s = sxy / sxx
         sq = 0.0
         worst, worst_r = 0, 0.0
-        for i in range(k):
+        pg[k] = 0  # the padding point (its residual is NaN: not the worst, not summed)
+        for i in range(k + (k & 1)):
             g = np.uint64(pg[i])
             r = abs(pt[i] - lines[g, L_MEAN_T] - tau_s * (ps[i] - lines[g, L_MEAN_S]))
             if r > worst_r:  # False for NaN: a line of one point carries no slope
@@ -222,4 +225,5 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
     for j in range(n_used):  # leave the table empty for the next fit
         g = np.uint64(used[j])
         lines[g, L_M] = lines[g, L_S] = lines[g, L_T] = lines[g, L_SS] = lines[g, L_ST] = 0.0
+    lines[0, L_MEAN_T] = 0.0
     return code, tau_s, tau_w, c, kept, _rms(pass_sq, pass_kept, slope) if slope >= 0.0 else 0.0
