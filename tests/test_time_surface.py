@@ -344,3 +344,19 @@ def test_what_is_emitted_does_not_depend_on_recording_the_rejections():
     assert recorded[0][kept].tobytes() == emitted_only[0].tobytes()
     assert recorded[1][kept].tobytes() == emitted_only[1].tobytes()
     assert emitted_only[2].counts == counts
+
+
+def test_the_pixels_behind_are_the_rounded_unit_motion_found_from_squares():
+    # the check behind rounds f and 2 f (f = a / |A t|) without a root: the same steps as floor(x + 0.5),
+    # on random directions and on the exact ties (|f| = 1/4, 1/2, 3/4 of a power-of-two speed)
+    behind = ts._behind.py_func
+    rng = np.random.default_rng(3)
+    angles = np.concatenate([rng.uniform(0, 2 * np.pi, 4000), np.arccos([0.25, 0.5, 0.75, -0.25, -0.5, -0.75])])
+    for angle in angles:
+        a, b = 4.0 * math.cos(angle), 4.0 * math.sin(angle)
+        speed2 = a * a + b * b
+        for component in (a, b):
+            f = component / math.sqrt(speed2)
+            assert behind(component, speed2) == (math.floor(f + 0.5), math.floor(2 * f + 0.5)), (component, f)
+    for f in (0.25, 0.5, 0.75, -0.25, -0.5, -0.75, 1.0, -1.0, 0.0):  # ties, exactly representable
+        assert behind(f * 2.0, 4.0) == (math.floor(f + 0.5), math.floor(2 * f + 0.5)), f
