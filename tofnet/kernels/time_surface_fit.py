@@ -124,9 +124,10 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
     a curved edge bends the surface across the motion only. So each line (``pg``: index of
     the point's line across the motion, the event's is ``middle``) gets its own offset and
     only the slope along ``ps`` is shared: ``t = c_line + τ_s s``. Outliers go one at a time
-    as in ``fit_plane``. ``lines`` (``N_L`` columns, zero on entry and on return) and
-    ``used`` are scratch. Returns ``(code, τ_s, τ_w, c, kept, rms_px)`` like ``fit_plane``:
-    ``kept`` counts the points on lines of two or more (the others carry no slope), the
+    as in ``fit_plane``. ``lines`` (``N_L`` columns, zero on entry and on return; its line 0
+    must be one no point is on, as with the estimator's ``4 radius + 3`` lines) and ``used``
+    are scratch, and so is ``pg`` past the points kept. Returns ``(code, τ_s, τ_w, c, kept,
+    rms_px)`` like ``fit_plane``: ``kept`` counts the points on lines of two or more (the others carry no slope), the
     spread is their variance along ``s`` within their lines, ``τ_w`` the slope of the lines'
     offsets across the motion and ``c`` the offset of the event's line. A fit whose last pass
     leaves it above ``give_up_rms`` px rms returns ``FIT_OVER_RMS`` at once (with that pass's
@@ -156,7 +157,7 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
         sxy += lines[g, L_CST]
         kept += np.int64(lines[g, L_M]) if lines[g, L_M] >= 2.0 else 0
     k = n
-    # Line 0 is never used (|w| <= radius √2 < middle): with a NaN mean it makes a point at k + 1 that
+    # Line 0 is never used (|w| <= radius √2 < middle): with a NaN mean it makes a point at index k that
     # pads a pass to an even count, which spares a mispredicted branch on the parity per pass.
     lines[0, L_MEAN_T] = math.nan
     tau_s = tau_w = c = 0.0

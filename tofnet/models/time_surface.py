@@ -93,8 +93,7 @@ class TimeSurfaceModel(Model):
     def feed(self, events: np.ndarray) -> None:
         if len(events) == 0:
             return
-        # the stream, the only feeder, refused a packet out of time order (and the kernel checks again): no
-        # third pass over the events here
+        # no time-order check here: the stream, the only feeder, refused such a packet, and the kernel checks too
         self._waiting.append(event_columns(events))  # copies: the caller may reuse its buffer
         self._latest_us = int(events["t"][-1])
 
