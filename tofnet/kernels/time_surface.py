@@ -232,10 +232,10 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
                                            cy)
             # age < refractory_depth / |A t| (µs, whole) without a root or a division, which would stand
             # between the hold's load and this unpredictable branch: age + 1 <= D / |A t| squared
-            speed2, reach = at_x * at_x + at_y * at_y, refractory_depth * 1e6
+            speed2, held_reach = at_x * at_x + at_y * at_y, refractory_depth * 1e6  # µs px·m/s
             after = float(age + 1)
             burst = age < refractory_us or (refractory_depth > 0.0 and speed2 > 0.0 and (
-                after <= 0.0 or after * after * speed2 <= reach * reach))
+                after <= 0.0 or after * after * speed2 <= held_reach * held_reach))
         else:
             burst = age < held
         if burst:
@@ -264,9 +264,9 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
             age1 = t - flat_surface[np.uint64(at_cell - dv1 * row - du1)]
             age2 = t - flat_surface[np.uint64(at_cell - dv2 * row - du2)]
             if behind_depth > 0.0:  # age <= (behind_depth / |A t|) * d, with d = (du, dv)·A t / |A t| px behind
-                reach = behind_depth * 1e6
-                supported = (float(age1) * speed2 <= reach * (du1 * at_x + dv1 * at_y)
-                             and float(age2) * speed2 <= reach * (du2 * at_x + dv2 * at_y))
+                behind_reach = behind_depth * 1e6
+                supported = (float(age1) * speed2 <= behind_reach * (du1 * at_x + dv1 * at_y)
+                             and float(age2) * speed2 <= behind_reach * (du2 * at_x + dv2 * at_y))
         if not supported and not record_rejected:  # nothing to fit, nothing to record
             counts[NOTHING_BEHIND] += 1
             continue
