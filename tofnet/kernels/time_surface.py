@@ -232,7 +232,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
                                            cy)
             # age < refractory_depth / |A t| (µs, whole) without a root or a division, which would stand
             # between the hold's load and this unpredictable branch: age + 1 <= D / |A t| squared
-            speed2, held_reach = at_x * at_x + at_y * at_y, refractory_depth * 1e6  # µs px·m/s
+            speed2, held_reach = at_x * at_x + at_y * at_y, refractory_depth * 1e6
             after = float(age + 1)
             burst = age < refractory_us or (refractory_depth > 0.0 and speed2 > 0.0 and (
                 after <= 0.0 or after * after * speed2 <= held_reach * held_reach))
