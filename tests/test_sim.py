@@ -175,3 +175,34 @@ def test_occluding_contours_can_be_labelled_with_the_nearer_surface():
     assert relabelled.any() and np.all(nearer.gt_depth[relabelled] < in_time.gt_depth[relabelled])
     with pytest.raises(SimError, match="occlusion_depth: expected one of"):
         config.replace(occlusion_depth="farther")
+
+
+def test_the_simulator_modules_import_one_another_without_a_cycle():
+    """The two engines share their common part from below (``sim/result.py``), so no module of
+    ``tofnet.sim`` reaches itself through imports, at module level or inside a function."""
+    import ast
+    from pathlib import Path
+
+    import tofnet.sim
+    root = Path(tofnet.sim.__file__).parent
+    graph = {}
+    for path in root.glob("*.py"):
+        names = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("tofnet.sim."):
+                names.add(node.module.split(".")[2])
+            elif isinstance(node, ast.Import):
+                names.update(a.name.split(".")[2] for a in node.names if a.name.startswith("tofnet.sim."))
+        graph[path.stem] = names
+    assert "engine_rotating" in graph["engine"]  # the graph is read (a lazy import counts too)
+
+    def reaches(start: str) -> set[str]:
+        seen, todo = set(), list(graph.get(start, ()))
+        while todo:
+            name = todo.pop()
+            if name not in seen:
+                seen.add(name)
+                todo.extend(graph.get(name, ()))
+        return seen
+
+    assert [name for name in sorted(graph) if name in reaches(name)] == []

@@ -11,7 +11,8 @@ contrast thresholds (ESIM's method). See ``docs/simulator.md``.
 
 from tofnet.sim.camera import DEFAULT_INTRINSICS, DEFAULT_SENSOR_SIZE, Segment, Trajectory, constant
 from tofnet.sim.config import SimConfig
-from tofnet.sim.engine import SimResult, generate
+from tofnet.sim.engine import generate
+from tofnet.sim.result import SimResult
 from tofnet.sim.errors import SimError
 from tofnet.sim.run import resolve, simulate, summarize, write_result
 from tofnet.sim.rotation import ImuModel, RotatingTrajectory, Sway

@@ -3,90 +3,20 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
-from dataclasses import dataclass, field
 
 import numpy as np
 
-from tofnet.events import EVENT_DTYPE
-from tofnet.io.recording import Intrinsics, Recording
 from tofnet.sim.config import SimConfig
+from tofnet.sim.dvs import DEPTH_JUMP, count_crossings, emit_crossings, thresholds
+from tofnet.sim.engine_rotating import generate_rotating
 from tofnet.sim.errors import SimError
 from tofnet.sim.lens import pixel_rays
-from tofnet.sim.dvs import DEPTH_JUMP, count_crossings, emit_crossings, thresholds
 from tofnet.sim.render import Renderer, max_flow, render_times
+from tofnet.sim.result import EventBuffers, Progress, SimResult, merge_events, noise_events, pose_times
 from tofnet.sim.rotation import imu_samples
 from tofnet.sim.scene import pack_scene
 
-#: ``progress(renders_done, renders_total)``, called at most ten times a second.
-Progress = Callable[[int, int], None]
-
-
-@dataclass
-class SimResult:
-    """Simulated events with ground truth.
-
-    ``events`` (``EVENT_DTYPE``, sorted by time), ``gt_depth`` (float32 m, one per
-    event: camera-frame z of the surface at that pixel and time), poses sampled at
-    ``config.pose_rate`` (``pose_times`` s, ``positions`` m, ``quaternions`` qx qy qz qw,
-    identity unless the camera turns), ``stats`` (renders, ``max_render_step_px``, wall
-    time ...) and ``imu`` (``imu.txt`` rows ``t ax ay az gx gy gz``, or None).
-    """
-
-    config: SimConfig
-    seed: int
-    events: np.ndarray
-    gt_depth: np.ndarray
-    pose_times: np.ndarray
-    positions: np.ndarray
-    quaternions: np.ndarray
-    stats: dict = field(default_factory=dict)
-    imu: np.ndarray | None = None
-
-    @property
-    def intrinsics(self) -> Intrinsics:
-        return self.config.intrinsics
-
-    @property
-    def sensor_size(self) -> tuple[int, int]:
-        return self.config.sensor_size
-
-    def to_recording(self) -> Recording:
-        """The result as a ``Recording`` (trajectory = the exact piecewise-constant velocity)."""
-        return Recording(events=self.events, intrinsics=self.intrinsics, trajectory=self.config.trajectory,
-                         sensor_size=self.sensor_size, gt_depth=self.gt_depth.astype(np.float64), imu=self.imu,
-                         source=f"sim:{self.config.name}:seed={self.seed}")
-
-
-class _Buffers:
-    """Growable event columns."""
-
-    def __init__(self, capacity: int) -> None:
-        self.n = 0
-        self._alloc(capacity)
-
-    def _alloc(self, capacity: int) -> None:
-        old = getattr(self, "t", None)
-        cols = {"t": np.int64, "x": np.uint16, "y": np.uint16, "p": np.uint8, "d": np.float32}
-        for name, dtype in cols.items():
-            new = np.empty(capacity, dtype=dtype)
-            if old is not None:
-                new[:self.n] = getattr(self, name)[:self.n]
-            setattr(self, name, new)
-
-    def reserve(self, extra: int) -> None:
-        if self.n + extra > self.t.shape[0]:
-            self._alloc(max(2 * self.t.shape[0], self.n + extra))
-
-
-def _noise(config: SimConfig, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Background-activity events: a Poisson process per pixel, random polarity; sorted by time (s)."""
-    width, height = config.sensor_size
-    count = int(rng.poisson(config.noise_rate * width * height * config.duration)) if config.noise_rate > 0 else 0
-    t = np.sort(rng.uniform(0.0, config.duration, size=count))
-    pixel = rng.integers(0, width * height, size=count)
-    p = rng.integers(0, 2, size=count).astype(np.uint8)
-    return t, pixel, p, np.empty(count, dtype=np.float32)
+__all__ = ["Progress", "SimResult", "generate"]
 
 
 def generate(config: SimConfig, *, seed: int = 0, progress: Progress | None = None) -> SimResult:
@@ -99,7 +29,6 @@ def generate(config: SimConfig, *, seed: int = 0, progress: Progress | None = No
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise SimError(f"seed: expected a whole number >= 0, got {seed!r}")
     if getattr(config.trajectory, "rotates", False):
-        from tofnet.sim.engine_rotating import generate_rotating  # it builds on this module
         return generate_rotating(config, seed=seed, progress=progress)
     start = time.perf_counter()
     k = config.intrinsics
@@ -120,12 +49,12 @@ def generate(config: SimConfig, *, seed: int = 0, progress: Progress | None = No
     threshold_rng, noise_rng = (np.random.default_rng([seed, 104729, i]) for i in range(2))
     c_on = thresholds(npix, config.contrast_on, config.contrast_sigma, threshold_rng)
     c_off = thresholds(npix, config.contrast_off, config.contrast_sigma, threshold_rng)
-    noise_t, noise_pixel, noise_p, noise_d = _noise(config, noise_rng)
+    noise_t, noise_pixel, noise_p, noise_d = noise_events(config, noise_rng)
     noise_cut = np.searchsorted(noise_t, times, side="left")
 
     log0, depth0 = renderer.render(positions[0])
     ref = log0.copy()
-    buf = _Buffers(max(1 << 16, 4 * npix))
+    buf = EventBuffers(max(1 << 16, 4 * npix))
     max_step = 0.0
     last_report = time.perf_counter()
     for i in range(times.size - 1):
@@ -150,28 +79,14 @@ def generate(config: SimConfig, *, seed: int = 0, progress: Progress | None = No
             last_report = time.perf_counter()
             progress(i + 1, times.size - 1)
 
-    events, gt_depth, n_contrast = _merge(buf, noise_t, noise_pixel, noise_p, noise_d, width)
-    pose_times = np.arange(int(np.floor(config.duration * config.pose_rate + 1e-9)) + 1) / config.pose_rate
-    quaternions = np.zeros((pose_times.size, 4))
+    events, gt_depth, n_contrast = merge_events(buf, noise_t, noise_pixel, noise_p, noise_d, width)
+    times_of_poses = pose_times(config)
+    quaternions = np.zeros((times_of_poses.size, 4))
     quaternions[:, 3] = 1.0  # no rotation: identity (qx qy qz qw)
     stats = {"renders": int(times.size), "max_render_step_px": float(max_step), "contrast_events": n_contrast,
              "noise_events": int(noise_t.size), "faces": len(scene.names),
              "wall_time_s": time.perf_counter() - start}
-    return SimResult(config=config, seed=seed, events=events, gt_depth=gt_depth, pose_times=pose_times,
-                     positions=traj.position_at(pose_times), quaternions=quaternions, stats=stats,
+    return SimResult(config=config, seed=seed, events=events, gt_depth=gt_depth, pose_times=times_of_poses,
+                     positions=traj.position_at(times_of_poses), quaternions=quaternions, stats=stats,
                      imu=imu_samples(config, seed))
 
-
-def _merge(buf: _Buffers, noise_t, noise_pixel, noise_p, noise_d, width: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """Contrast and noise events in one array, stably sorted by time; ties keep generation order."""
-    n = buf.n
-    total = n + noise_t.size
-    events = np.empty(total, dtype=EVENT_DTYPE)
-    events["t"][:n], events["x"][:n], events["y"][:n], events["p"][:n] = buf.t[:n], buf.x[:n], buf.y[:n], buf.p[:n]
-    events["t"][n:] = np.floor(noise_t * 1e6 + 0.5).astype(np.int64)
-    events["x"][n:] = noise_pixel % width
-    events["y"][n:] = noise_pixel // width
-    events["p"][n:] = noise_p
-    depth = np.concatenate([buf.d[:n], noise_d])
-    order = np.argsort(events["t"], kind="stable")
-    return events[order], depth[order], n

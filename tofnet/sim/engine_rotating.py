@@ -21,10 +21,10 @@ from tofnet.kernels.rotation import rotational_flow
 from tofnet.kernels.velocity import velocity_term
 from tofnet.sim.config import SimConfig
 from tofnet.sim.dvs import DEPTH_JUMP, count_crossings, emit_crossings, thresholds
-from tofnet.sim.engine import Progress, SimResult, _Buffers, _merge, _noise
 from tofnet.sim.errors import SimError
 from tofnet.sim.render import Renderer
 from tofnet.sim.rotation import imu_samples
+from tofnet.sim.result import EventBuffers, Progress, SimResult, merge_events, noise_events, pose_times
 from tofnet.sim.scene import pack_scene
 
 #: The next interval is ``max_step_px / (SAFETY * speed now)`` long.
@@ -87,7 +87,7 @@ def generate_rotating(config: SimConfig, *, seed: int = 0, progress: Progress | 
     threshold_rng, noise_rng = (np.random.default_rng([seed, 104729, i]) for i in range(2))
     c_on = thresholds(npix, config.contrast_on, config.contrast_sigma, threshold_rng)
     c_off = thresholds(npix, config.contrast_off, config.contrast_sigma, threshold_rng)
-    noise_t, noise_pixel, noise_p, noise_d = _noise(config, noise_rng)
+    noise_t, noise_pixel, noise_p, noise_d = noise_events(config, noise_rng)
     stops = np.unique(np.concatenate([bounds[(bounds > 0) & (bounds < config.duration)], [config.duration]]))
 
     def render(t: float):
@@ -100,7 +100,7 @@ def generate_rotating(config: SimConfig, *, seed: int = 0, progress: Progress | 
     t0 = 0.0
     log0, depth0 = render(t0)
     ref = log0.copy()
-    buf = _Buffers(max(1 << 16, 4 * npix))
+    buf = EventBuffers(max(1 << 16, 4 * npix))
     renders, max_step, last_report = 1, 0.0, time.perf_counter()
     while t0 < config.duration:
         speed0 = speed(depth0, t0)
@@ -129,10 +129,10 @@ def generate_rotating(config: SimConfig, *, seed: int = 0, progress: Progress | 
             # The render count is not known in advance: extrapolated from the time simulated so far.
             progress(renders, max(renders, int(renders * config.duration / t0)))
 
-    events, gt_depth, n_contrast = _merge(buf, noise_t, noise_pixel, noise_p, noise_d, width)
-    pose_times = np.arange(int(np.floor(config.duration * config.pose_rate + 1e-9)) + 1) / config.pose_rate
+    events, gt_depth, n_contrast = merge_events(buf, noise_t, noise_pixel, noise_p, noise_d, width)
+    times_of_poses = pose_times(config)
     stats = {"renders": renders, "max_render_step_px": float(max_step), "contrast_events": n_contrast,
              "noise_events": int(noise_t.size), "faces": len(scene.names), "wall_time_s": time.perf_counter() - start}
-    return SimResult(config=config, seed=seed, events=events, gt_depth=gt_depth, pose_times=pose_times,
-                     positions=traj.position_at(pose_times), quaternions=traj.quaternion_at(pose_times), stats=stats,
+    return SimResult(config=config, seed=seed, events=events, gt_depth=gt_depth, pose_times=times_of_poses,
+                     positions=traj.position_at(times_of_poses), quaternions=traj.quaternion_at(times_of_poses), stats=stats,
                      imu=imu_samples(config, seed))

@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from tofnet.sim.config import SimConfig
-from tofnet.sim.engine import Progress, SimResult, generate
+from tofnet.sim.engine import generate
 from tofnet.sim.errors import SimError
+from tofnet.sim.result import Progress, SimResult
 from tofnet.sim.scenarios import scenario
 
 
