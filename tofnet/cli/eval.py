@@ -27,6 +27,8 @@ def register(subparsers) -> None:
     p.add_argument("--json", metavar="OUT", help="also write the metrics as JSON to OUT ('-' for stdout only)")
     p.add_argument("--force", action="store_true", help="overwrite an existing --json file")
     add_timing_options(p)
+    from tofnet.cli.inputs import add_window_options
+    add_window_options(p)
     p.set_defaults(handler=handle)
 
 
@@ -42,17 +44,21 @@ def add_timing_options(p: argparse.ArgumentParser) -> None:
 
 
 def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = None,
-                latency_steps: int | None = None):
+                latency_steps: int | None = None, window=None):
     """Read a recording and a depth file; complete the depth timing from the options.
 
     Returns ``(recording, depth, meta)``. The options fill what the file lacks and must
     agree with what it has; ``t0_us`` is then recovered from the stamps
-    (``t = t0 + (step + 1) * dt``).
+    (``t = t0 + (step + 1) * dt``). With a time ``window`` only its events are read and
+    only the estimates whose input step lies in it are kept.
     """
-    from tofnet.io import read_depth, read_recording
+    from tofnet.io import read_depth
+    from tofnet.io.source import open_recording
     from tofnet.units import seconds
 
-    recording = read_recording(recording_path)
+    with open_recording(recording_path, window=window) as source:
+        recording = source.read()
+        bounds = source.window
     depth, meta = read_depth(depth_path)
     meta = dict(meta)
     given = {}
@@ -71,7 +77,21 @@ def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = 
         meta[key] = value
     if meta.get("t0_us") is None and meta.get("timestep_us") is not None:
         meta["t0_us"] = _t0_from_stamps(depth, int(meta["timestep_us"]), recording, depth_path)
+    if bounds is not None:
+        depth = _estimates_in_window(depth, meta, *bounds, depth_path)
     return recording, depth, meta
+
+
+def _estimates_in_window(depth: np.ndarray, meta: dict, start: int, stop: int | None, depth_path: str) -> np.ndarray:
+    """The estimates whose input step (``step - latency_steps``) overlaps ``[start, stop)`` µs."""
+    if meta.get("t0_us") is None or meta.get("timestep_us") is None or meta.get("latency_steps") is None:
+        raise DataError(f"{depth_path}: a time window needs the run's timing (give --timestep and --latency-steps)")
+    dt = int(meta["timestep_us"])
+    step_start = int(meta["t0_us"]) + (depth["step"].astype(np.int64) - int(meta["latency_steps"])) * dt
+    keep = step_start + dt > start
+    if stop is not None:
+        keep &= step_start < stop
+    return depth[keep]
 
 
 def _t0_from_stamps(depth: np.ndarray, timestep_us: int, recording, depth_path: str) -> int:
@@ -96,8 +116,9 @@ def handle(args) -> int:
         from tofnet.io.files import check_output
         check_output(args.json, force=args.force, inputs=[*recording_files(args.recording), Path(args.depth)],
                      what="--json")
+    from tofnet.cli.inputs import window_option
     recording, depth, meta = load_inputs(args.recording, args.depth, timestep=args.timestep,
-                                         latency_steps=args.latency_steps)
+                                         latency_steps=args.latency_steps, window=window_option(args))
     undistortion = (meta.get("summary") or {}).get("undistortion")
     if undistortion:  # the estimates are at undistorted pixels: match them to events moved there too
         from tofnet.eval.undistorted import lens_from_summary, undistorted_recording

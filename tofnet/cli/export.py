@@ -31,10 +31,13 @@ def register(subparsers) -> None:
     p.add_argument("--no-color", action="store_true", help="no depth colours in the .ply")
     p.add_argument("--sensor-size", metavar="WxH", help="map size in pixels (default: the recording's)")
     p.add_argument("--force", action="store_true", help="replace existing maps and .ply (never an input)")
+    from tofnet.cli.inputs import add_window_options
+    add_window_options(p)
     p.set_defaults(handler=handle)
 
 
 def handle(args) -> int:
+    from tofnet.cli.inputs import window_option
     from tofnet.core.params import parse_size
     from tofnet.io.depth import read_depth
     from tofnet.units import seconds
@@ -44,12 +47,20 @@ def handle(args) -> int:
     check_export_outputs(args)
     depth, meta = read_depth(args.depth)
     recording_path = args.recording or (meta.get("summary") or {}).get("recording")
-    recording = None
+    recording, bounds = None, None
+    window = window_option(args)
     if recording_path:
-        from tofnet.io import read_recording
-        recording = read_recording(recording_path)
-    elif args.ply or not args.sensor_size:
+        from tofnet.io.source import open_recording
+        with open_recording(recording_path, window=window) as source:
+            # The camera only; the events only when the sensor size must come from their extent.
+            recording = source.metadata() if source.sensor_size is not None else source.read()
+            bounds = source.window
+    elif args.ply or not args.sensor_size or window is not None:
         raise TofnetError("--recording is needed (the depth file does not name its recording)")
+    if bounds is not None:
+        start, stop = bounds
+        depth = depth[(depth["t"] >= start) & ((depth["t"] < stop) if stop is not None else True)]
+        meta = {**meta, "t0_us": start}  # maps count their windows from the window's start
     sensor = parse_size(args.sensor_size, "--sensor-size") if args.sensor_size else \
         (recording.sensor_size or (240, 180))
     if args.maps:

@@ -1,4 +1,5 @@
-"""Options that say how to read an input recording, shared by ``run``, ``info`` and ``convert``."""
+"""Options that say how to read an input recording, shared by ``run``, ``info``, ``convert``
+(all of them) and ``export``, ``eval`` (the time window)."""
 
 from __future__ import annotations
 
@@ -16,6 +17,23 @@ def add_input_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--topic", action="append", default=[], metavar="ROLE=NAME",
                    help="ROS bag topic for a role (events, pose, imu, camera_info), "
                         "e.g. --topic events=/davis/left/events; repeatable (default: found by message type)")
+    add_window_options(p)
+
+
+def add_window_options(p: argparse.ArgumentParser) -> None:
+    """``--start``, ``--duration``, ``--until``: read only a time window of the recording."""
+    g = p.add_argument_group("time window")
+    g.add_argument("--start", metavar="T",
+                   help="first time to read: seconds from the recording's first event (12.5s, 500ms, 12.5) "
+                        "or absolute on the file's clock (@1627000012.5s); default: the first event")
+    g.add_argument("--duration", metavar="T", help="length of the window (2s, 500ms); default: to the end")
+    g.add_argument("--until", metavar="T", help="end of the window (excluded), as --start; instead of --duration")
+
+
+def window_option(args):
+    """The ``TimeWindow`` of ``--start/--duration/--until``, or ``None``."""
+    from tofnet.io.window import parse_window
+    return parse_window(getattr(args, "start", None), getattr(args, "duration", None), getattr(args, "until", None))
 
 
 def input_options(args) -> dict:
@@ -26,4 +44,4 @@ def input_options(args) -> dict:
         if not sep or not role or not name:
             raise TofnetError(f"--topic: expected ROLE=NAME (e.g. events=/dvs/events), got {item!r}")
         topics[role.strip()] = name.strip()
-    return {"columns": getattr(args, "columns", None), "topics": topics or None}
+    return {"columns": getattr(args, "columns", None), "topics": topics or None, "window": window_option(args)}

@@ -52,7 +52,7 @@ EVENT_SUFFIXES = (".txt", ".npy", ".npz", ".aedat4", ".raw", ".dat", ".es", ".h5
 
 def read_recording(path: str | Path, sensor_size: tuple[int, int] | None = None, *,
                    columns: str | tuple[str, ...] | None = None, topics: dict[str, str] | None = None,
-                   progress=None) -> Recording:
+                   progress=None, window=None) -> Recording:
     """Read a whole recording in any format ``tofnet.io.detect`` knows (see ``docs/formats.md``).
 
     An ECD folder, an events ``.txt``, ``.npy``/``.npz`` arrays, AEDAT4, Prophesee RAW/DAT,
@@ -61,13 +61,15 @@ def read_recording(path: str | Path, sensor_size: tuple[int, int] | None = None,
     in the same folder fill in what the file does not hold, and ``<stem>_depth.npy``
     gives the true depth per event of text/numpy files. ``sensor_size`` (width, height
     px) overrides the recording's; ``columns`` orders a plain ``(n, 4)`` array; ``topics``
-    overrides ROS bag topics; ``progress(done, total)`` is called as events are read.
+    overrides ROS bag topics; ``progress(done, total)`` is called as events are read;
+    ``window`` (``tofnet.io.window.TimeWindow``) reads only that time window.
     Raises ``DataError`` for a missing path, an unknown format or no events. For large
     files, ``open_recording`` reads in chunks.
     """
     from tofnet.io.source import open_recording
 
-    with open_recording(path, sensor_size=sensor_size, columns=columns, topics=topics) as source:
+    with open_recording(path, sensor_size=sensor_size, columns=columns, topics=topics,
+                        window=window) as source:
         return source.read(progress)
 
 

@@ -38,10 +38,14 @@ class AedatSource(EventSource):
                 tracks = decoder.tracks()
                 try:
                     counts: dict[int, int] = {}
+                    starts: dict[int, int] = {}
                     for definition in decoder.file_data_definitions():
                         counts[definition.track_id] = counts.get(definition.track_id, 0) + definition.elements_count
+                        if definition.elements_count:
+                            starts[definition.track_id] = min(starts.get(definition.track_id, definition.start_t),
+                                                              definition.start_t)
                 except RuntimeError:
-                    counts = {}  # no index table (an interrupted recording): counts unknown
+                    counts, starts = {}, {}  # no index table (an interrupted recording): counts unknown
         except RuntimeError as err:
             raise DataError(located(self.path, None, f"not a readable AEDAT4 file ({reason(err)})")) from None
         events = [track for track in tracks if track.data_type == "events"]
@@ -52,6 +56,7 @@ class AedatSource(EventSource):
         self.track_id = events[0].id
         self.sensor_size = tuple(events[0].dimensions)
         self.n_events = counts.get(self.track_id)
+        self._first_t = starts.get(self.track_id)
         self.detail = f"events track {self.track_id}"
         for track in tracks:
             if track.id == self.track_id:
@@ -66,17 +71,27 @@ class AedatSource(EventSource):
         from faery.extension import aedat
 
         imu = []
-        with aedat.Decoder(self.path) as decoder:
-            try:
-                for track, packet in decoder:
-                    if track.id == self.track_id and len(packet):
-                        yield packet
-                    elif track.data_type == "imus" and len(packet):
-                        imu.append(imu_to_ecd(packet))
-            except RuntimeError as err:
-                raise DataError(located(self.path, None, f"cannot decode ({reason(err)})")) from None
-        if imu:
-            self.imu = np.concatenate(imu)
+        try:
+            with aedat.Decoder(self.path) as decoder:
+                try:
+                    for track, packet in decoder:
+                        if track.id == self.track_id and len(packet):
+                            yield packet
+                        elif track.data_type == "imus" and len(packet):
+                            imu.append(imu_to_ecd(packet))
+                except RuntimeError as err:
+                    raise DataError(located(self.path, None, f"cannot decode ({reason(err)})")) from None
+        finally:  # also when a time window stops reading early: the IMU read so far, cut to the window
+            if imu:
+                from tofnet.io.window import window_rows
+                rows = np.concatenate(imu)
+                self.imu = rows if self.window is None else window_rows(rows, *self.window)
+
+    def first_time(self) -> int | None:
+        # The index table gives each packet's first time: no decoding (a file without it is decoded).
+        if self._first_t is not None:
+            return self._first_t
+        return super().first_time()
 
 
 #: Longest AEDAT4 header (its XML description) read: DV writes a few KB.

@@ -102,16 +102,57 @@ class ColumnsSource(EventSource):
         if self.columns["t"].dtype.kind not in "iu":
             raise DataError(located(path, None, f"{group}/t: expected integer microseconds, "
                                                 f"got {self.columns['t'].dtype}"))
-        self.n_events = int(lengths["t"][0])
+        self.n_events = self.n_rows = int(lengths["t"][0])  # n_events becomes the window's count
         self.t_offset = int(t_offset)
         if abs(self.t_offset) >= MAX_TIME_US:
             raise DataError(located(path, None, f"t_offset {self.t_offset} µs is out of range (|t| < 2**61 µs)"))
 
+    #: The file's millisecond index (``ms_to_idx``; M3ED's ``ms_map_idx``), a dataset or None.
+    ms_index = None
+
     def _packets(self, size_hint: int) -> Iterable[np.ndarray]:
+        return self._rows(0, self.n_rows, size_hint)
+
+    def _times(self, lo: int, hi: int) -> np.ndarray:
+        """Event times ``lo..hi-1`` in µs on the file's clock."""
+        return self.columns["t"][lo:hi].astype(np.int64) + self.t_offset
+
+    def first_time(self) -> int | None:
+        return int(self._times(0, 1)[0]) if self.n_rows else None
+
+    def _window_end_us(self) -> int | None:
+        return int(self._times(self.n_rows - 1, self.n_rows)[0]) if self.n_rows else None
+
+    def _index_at(self, us: int) -> int:
+        """The first event at or after ``us``: the ms index narrows it, a binary search finds it."""
+        from tofnet.io.source import first_at_or_after
+
+        bracket = None
+        k = (us - self.t_offset) // 1000
+        if self.ms_index is not None and 0 <= k < self.ms_index.shape[0]:
+            pair = self.ms_index[k:k + 2]
+            bracket = (int(pair[0]), int(pair[1]) if len(pair) > 1 else self.n_rows)
+        return first_at_or_after(self._times, self.n_rows, us, bracket)
+
+    def _window_range(self, start: int, stop: int | None) -> tuple[int, int]:
+        lo = self._index_at(start)
+        return lo, self.n_rows if stop is None else max(self._index_at(stop), lo)
+
+    def _window_count(self, start: int, stop: int | None) -> int | None:
+        lo, hi = self._window_range(start, stop)
+        return hi - lo
+
+    def _window_packets(self, size_hint: int, start: int, stop: int | None) -> Iterable[np.ndarray]:
+        # Only the window's rows are read (a 10 s window of a 20 GB file reads about 10 s of it).
+        lo, hi = self._window_range(start, stop)
+        self._first_index = lo
+        return self._rows(lo, hi, size_hint)
+
+    def _rows(self, first: int, last: int, size_hint: int) -> Iterable[np.ndarray]:
         from tofnet.io.events import events_from_columns
 
-        for start in range(0, self.n_events, size_hint):
-            stop = min(start + size_hint, self.n_events)
+        for start in range(first, last, size_hint):
+            stop = min(start + size_hint, last)
             arrays = {name: dataset[start:stop] for name, dataset in self.columns.items()}
             t = arrays["t"]
             # In range before the cast and the sum, so neither wraps (uint64 past 2**63).
@@ -133,8 +174,9 @@ class DsecSource(ColumnsSource):
     def __init__(self, path: Path, handle):
         super().__init__(path, handle, "events", t_offset=scalar(handle, "t_offset", 0))
         self.detail = "DSEC layout"
-        if "ms_to_idx" in handle:
-            self.streams["ms_to_idx"] = f"{handle['ms_to_idx'].shape[0]} ms index entries"
+        if "ms_to_idx" in handle and handle["ms_to_idx"].ndim == 1:
+            self.ms_index = handle["ms_to_idx"]
+            self.streams["ms_to_idx"] = f"{handle['ms_to_idx'].shape[0]} ms index entries (used for time windows)"
         self.intrinsics, self.sensor_size = read_calib_group(handle, "calib", path)
         if "poses" in handle:
             from tofnet.io.groundtruth import Trajectory

@@ -115,7 +115,7 @@ class MvsecSource(_GroundTruthMixin, ColumnsSource):
         if self.rows.ndim != 2 or self.rows.shape[1] != 4:
             raise DataError(located(path, None, f"davis/left/events: expected (n, 4) rows x, y, t, p; "
                                                 f"got shape {self.rows.shape}"))
-        self.n_events = int(self.rows.shape[0])
+        self.n_events = self.n_rows = int(self.rows.shape[0])
         if "davis/left/image_raw" in handle and handle["davis/left/image_raw"].ndim == 3:
             height, width = handle["davis/left/image_raw"].shape[1:]
             self.sensor_size = (int(width), int(height))
@@ -138,11 +138,16 @@ class MvsecSource(_GroundTruthMixin, ColumnsSource):
             self.has_depth = True
         self.notes.append(f"poses and depth from {gt_path.name}")
 
-    def _packets(self, size_hint: int) -> Iterable[np.ndarray]:
+    def _times(self, lo: int, hi: int) -> np.ndarray:
+        # As events_from_columns converts them: seconds to µs, halves away from zero.
+        scaled = self.rows[lo:hi, 2].astype(np.float64) * 1e6
+        return np.sign(scaled) * np.floor(np.abs(scaled) + 0.5)
+
+    def _rows(self, first: int, last: int, size_hint: int) -> Iterable[np.ndarray]:
         from tofnet.io.events import events_from_columns
 
-        for start in range(0, self.n_events, size_hint):
-            rows = self.rows[start:start + size_hint]
+        for start in range(first, last, size_hint):
+            rows = self.rows[start:min(start + size_hint, last)]
             yield events_from_columns({"x": rows[:, 0], "y": rows[:, 1], "t": rows[:, 2], "p": rows[:, 3]},
                                       f"{self.path} (davis/left/events rows {start}..{start + len(rows) - 1})")
 
@@ -155,6 +160,8 @@ class M3edSource(_GroundTruthMixin, ColumnsSource):
         self.gt_handle = None
         self.detail = "M3ED layout, prophesee/left"
         self.intrinsics, self.sensor_size = read_calib_group(handle, "prophesee/left/calib", path)
+        if "prophesee/left/ms_map_idx" in handle and handle["prophesee/left/ms_map_idx"].ndim == 1:
+            self.ms_index = handle["prophesee/left/ms_map_idx"]  # M3ED's ms_to_idx (µs from 0: t_offset 0)
         for key in sorted(set(handle.keys()) - {"prophesee"}):
             self.streams[key] = "not read"
         gt_path = _companion(path, "_depth_gt", (".h5", ".hdf5")) or _companion(path, "_pose_gt", (".h5", ".hdf5"))

@@ -56,6 +56,10 @@ class EventSource:
         self.has_depth = False
         self.streams: dict[str, str] = {}  # other streams in the file: name -> what
         self.notes: list[str] = []
+        self.window: tuple[int, int | None] | None = None  # [start, stop) µs on the file's clock (set_window)
+        self._origin_us = 0  # the file's first event, which relative window times count from
+        self._first_index = 0  # file index of the first event in the window (for _depth)
+        self._last_seen_us: int | None = None  # latest time decoded, for "the window is past the end"
 
     # --- to implement -------------------------------------------------------------
     def _packets(self, size_hint: int) -> Iterable[np.ndarray]:
@@ -65,6 +69,55 @@ class EventSource:
     def _depth(self, events: np.ndarray, first_index: int) -> np.ndarray | None:
         """True depth (m, NaN unknown) of ``events``, which start at event ``first_index`` of the file."""
         return None
+
+    def first_time(self) -> int | None:
+        """The file's first event time (µs), ``None`` without events. Readers with an index override
+        this; the default decodes the first packet."""
+        packets = iter(self._packets(1 << 16))
+        try:
+            for packet in packets:
+                if len(packet):
+                    return int(packet[packet.dtype.names[0]][0])
+            return None
+        finally:
+            getattr(packets, "close", lambda: None)()
+
+    def _window_packets(self, size_hint: int, start: int, stop: int | None) -> Iterable[np.ndarray]:
+        """The events of ``[start, stop)``. The default decodes from the beginning, skips whole packets
+        before ``start`` uncopied and stops at the first packet past ``stop``; readers with an index
+        (HDF5) override it to read only the window's rows."""
+        yield from window_filter(self, self._packets(size_hint), start, stop)
+
+    def _window_end_us(self) -> int | None:
+        """The file's last event time when it is cheap to know (else what decoding saw)."""
+        return self._last_seen_us
+
+    # --- time windows -------------------------------------------------------------
+    def set_window(self, window) -> None:
+        """Read only the events of ``window`` (a ``tofnet.io.window.TimeWindow``); poses and IMU are
+        cut to the samples covering it. Relative times count from the file's first event."""
+        from tofnet.io.window import window_rows, window_trajectory
+
+        first = self.first_time()
+        if first is None:
+            raise DataError(located(self.path, None, "no events"))
+        start, stop = window.resolve(first)
+        self.window, self._origin_us = (start, stop), first
+        self.trajectory = window_trajectory(self.trajectory, start, stop)
+        self.imu = window_rows(self.imu, start, stop)
+        self.n_events = self._window_count(start, stop)
+        self.notes.append(f"time window {self.window_text()} ({window.text()})")
+
+    def _window_count(self, start: int, stop: int | None) -> int | None:
+        """Events in the window when the file's index says so without decoding."""
+        return None
+
+    def window_text(self) -> str:
+        """``12.5 .. 14.5 s from the first event`` for notes and messages."""
+        start, stop = self.window
+        rel = (start - self._origin_us) * 1e-6
+        end = "the end" if stop is None else f"{(stop - self._origin_us) * 1e-6:g} s"
+        return f"{rel:g} s .. {end} from the first event"
 
     # --- the interface ------------------------------------------------------------
     def chunks(self, n_events: int = DEFAULT_CHUNK, progress: ProgressHook | None = None) -> Iterator[np.ndarray]:
@@ -89,10 +142,15 @@ class EventSource:
             if progress is not None:
                 progress(done, self.n_events)
             yield chunk
+        if done == 0 and self.window is not None:
+            end = self._window_end_us()
+            spans = "" if end is None else f"; the recording ends {(end - self._origin_us) * 1e-6:g} s after its first event"
+            raise DataError(located(self.path, None, f"no events in the time window {self.window_text()}{spans}"))
 
     def _checked_packets(self, size_hint: int) -> Iterator[np.ndarray]:
         """``_packets``, each checked by ``check_packet``; decoding libraries' errors as ``DataError``."""
-        packets = iter(self._packets(size_hint))
+        packets = iter(self._packets(size_hint) if self.window is None
+                       else self._window_packets(size_hint, *self.window))
         done = 0
         while True:
             try:
@@ -121,7 +179,7 @@ class EventSource:
         for chunk in self.chunks(DEFAULT_CHUNK, progress):
             parts.append(chunk)
             if self.has_depth:
-                depths.append(self._depth(chunk, done))
+                depths.append(self._depth(chunk, self._first_index + done))
             done += len(chunk)
         if not parts:
             raise DataError(located(self.path, None, "no events"))
@@ -157,6 +215,55 @@ class EventSource:
     def __exit__(self, *exc) -> None:
         self.close()
 
+
+
+def window_filter(source: EventSource, packets: Iterable[np.ndarray], start: int,
+                  stop: int | None) -> Iterator[np.ndarray]:
+    """``packets`` cut to ``[start, stop)`` µs (sorted files): packets wholly before ``start`` are skipped
+    (``source._first_index`` counts them), iteration stops at the first packet reaching ``stop``. Once
+    inside the window nothing is dropped for being early, so ``chunks`` still sees a time going back."""
+    skipped, started = 0, False
+    for packet in packets:
+        if not len(packet):
+            continue
+        t = packet[packet.dtype.names[0]]
+        first, last = int(t[0]), int(t[-1])
+        source._last_seen_us = last
+        lo = 0
+        if not started:
+            if last < start:
+                skipped += len(packet)
+                source._first_index = skipped
+                continue
+            lo = int(np.searchsorted(t, start, side="left")) if first < start else 0
+            skipped += lo
+            source._first_index = skipped
+        hi = len(packet)
+        if stop is not None and last >= stop:
+            hi = lo if stop <= first else max(int(np.searchsorted(t, stop, side="left")), lo)
+        if hi > lo:
+            started = True
+            yield packet[lo:hi]
+        if stop is not None and last >= stop:
+            return
+
+
+def first_at_or_after(times, n: int, value: int, bracket: tuple[int, int] | None = None) -> int:
+    """Index of the first of ``n`` sorted times at or after ``value`` (µs). ``times(lo, hi)`` reads
+    times ``lo..hi-1`` as µs; ``bracket`` is a guess from the file's index (``ms_to_idx``), used only
+    when the times at its ends confirm it, so a wrong index cannot give wrong events."""
+    lo, hi = 0, n
+    if bracket is not None:
+        a, b = bracket
+        if 0 <= a <= b <= n and (a == 0 or times(a - 1, a)[0] < value) and (b == n or times(b, b + 1)[0] >= value):
+            lo, hi = a, b
+    while hi - lo > 1 << 16:  # bisect on single reads until the rest is one small read
+        mid = (lo + hi) // 2
+        if times(mid, mid + 1)[0] < value:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo + int(np.searchsorted(times(lo, hi), value, side="left")) if hi > lo else lo
 
 
 def _rechunk(packets: Iterable[np.ndarray], n: int) -> Iterator[tuple[np.ndarray, int]]:
@@ -236,6 +343,35 @@ class RecordingSource(EventSource):
     def _depth(self, events: np.ndarray, first_index: int) -> np.ndarray | None:
         return self.recording.gt_depth[first_index:first_index + len(events)]
 
+    def first_time(self) -> int | None:
+        events = self.recording.events
+        return int(events["t"][0]) if len(events) else None
+
+    def _window_end_us(self) -> int | None:
+        return int(self.recording.events["t"][-1])
+
+    def set_window(self, window) -> None:
+        # Loaded whole already (text and numpy have no index): the window is a slice, found by
+        # binary search on the sorted times (a time going back is caught by the reader first).
+        super().set_window(window)
+        start, stop = self.window
+        t = self.recording.events["t"]
+        lo = int(np.searchsorted(t, start, side="left"))
+        hi = len(t) if stop is None else max(int(np.searchsorted(t, stop, side="left")), lo)
+        if hi == lo:
+            raise DataError(located(self.path, None, f"no events in the time window {self.window_text()}; the "
+                                                     f"recording ends {(int(t[-1]) - self._origin_us) * 1e-6:g} s "
+                                                     "after its first event"))
+        recording = self.recording
+        self.recording = Recording(events=recording.events[lo:hi], intrinsics=recording.intrinsics,
+                                   trajectory=recording.trajectory, sensor_size=recording.sensor_size,
+                                   gt_depth=None if recording.gt_depth is None else recording.gt_depth[lo:hi],
+                                   imu=recording.imu, source=recording.source, notes=recording.notes)
+        self.n_events = hi - lo
+
+    def _window_packets(self, size_hint: int, start: int, stop: int | None) -> Iterable[np.ndarray]:
+        return self._packets(size_hint)  # already the window's slice (set_window)
+
     def read(self, progress: ProgressHook | None = None) -> Recording:
         recording = self.recording
         # Attributes set after opening (a sensor size override) win over what was read.
@@ -270,12 +406,13 @@ def fill_from_side_files(source: EventSource) -> EventSource:
 
 def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = None,
                    columns: str | tuple[str, ...] | None = None,
-                   topics: dict[str, str] | None = None) -> EventSource:
+                   topics: dict[str, str] | None = None, window=None) -> EventSource:
     """Open any recording ``detect_format`` knows; see the module docstring.
 
     ``sensor_size`` (width, height px) overrides the file's; ``columns`` gives the column
     order of a plain ``(n, 4)`` numpy array (e.g. ``"x,y,t,p"``); ``topics`` overrides the
-    ROS bag topics found automatically (keys ``events``, ``pose``, ``imu``, ``camera_info``).
+    ROS bag topics found automatically (keys ``events``, ``pose``, ``imu``, ``camera_info``);
+    ``window`` (a ``tofnet.io.window.TimeWindow``) reads only the events of that time window.
     """
     from tofnet.io.detect import detect_format
 
@@ -312,6 +449,8 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
                 raise DataError(f"sensor size: {problem}")
             source.sensor_size = (width, height)
         check_metadata(source, path)
+        if window is not None:
+            source.set_window(window)
     except BaseException as err:
         source.close()
         if not is_decode_error(err, kind):

@@ -1,0 +1,192 @@
+"""Time windows (--start/--duration/--until): parsed once, applied by the readers, the same for every format."""
+
+import numpy as np
+import pytest
+
+from tofnet.cli import main
+from tofnet.errors import DataError, TofnetError
+from tofnet.io import read_recording, write_ecd
+from tofnet.io.source import first_at_or_after, open_recording
+from tofnet.io.window import TimePoint, TimeWindow, parse_time, parse_window
+
+from formats_helpers import pattern_recording
+
+
+@pytest.fixture(scope="module")
+def recording():
+    return pattern_recording()
+
+
+def test_times_parse_exactly():
+    assert parse_time("12.5s", "--start") == TimePoint(12_500_000)
+    assert parse_time("500ms", "--start") == TimePoint(500_000)
+    assert parse_time("0.0000015", "--start") == TimePoint(2)  # halves away from zero, from the decimal text
+    assert parse_time("@1627000012.123457s", "--start") == TimePoint(1_627_000_012_123_457, True)
+    assert parse_time("250us", "--start").us == 250
+    for bad in ("soon", "12 parsecs", "@", "1e400", True):
+        with pytest.raises(TofnetError, match="^--start: "):
+            parse_time(bad, "--start")
+    with pytest.raises(TofnetError, match="--duration: expected a time like 12.5s or 500ms, got '@1s'"):
+        parse_window(duration="@1s")
+    with pytest.raises(TofnetError, match="--duration and --until: give one of them"):
+        parse_window(start="1s", duration="1s", until="3s")
+    with pytest.raises(TofnetError, match="--duration: expected a positive duration"):
+        parse_window(duration="0s")
+    with pytest.raises(TofnetError, match="--until: 1 s is not after --start 2 s"):
+        parse_window(start="2s", until="1s")
+    assert parse_window() is None
+    window = parse_window(start="@100s", duration="2s")
+    assert window.resolve(5) == (100_000_000, 102_000_000)
+    assert parse_window(start="1s", until="3s").resolve(10) == (1_000_010, 3_000_010)
+
+
+def convert_recording(path, out):
+    from tofnet.io.convert import convert
+
+    with open_recording(path) as source:
+        convert(source, out)
+
+
+def _expected(events, start, stop):
+    t = events["t"]
+    return events[(t >= start) & (t < stop)]
+
+
+def _formats(tmp_path, recording):
+    """The same recording as an ECD folder, .npz, HDF5 (ms_to_idx) and AEDAT4 (when the extras are there)."""
+    ecd = tmp_path / "ecd"
+    write_ecd(ecd, recording.events, intrinsics=recording.intrinsics, times=recording.trajectory.times,
+              positions=recording.trajectory.positions, quaternions=recording.trajectory.quaternions,
+              sensor_size=recording.sensor_size)
+    np.savetxt(ecd / "imu.txt", recording.imu, fmt="%.17g")
+    paths = [ecd]
+    for name, module in (("rec.npz", None), ("rec.h5", "h5py"), ("rec.aedat4", "faery")):
+        if module is not None:
+            pytest.importorskip(module)
+        convert_recording(ecd, tmp_path / name)
+        paths.append(tmp_path / name)
+    return paths
+
+
+def test_every_format_reads_the_same_window(tmp_path, recording):
+    events = recording.events
+    first = int(events["t"][0])
+    start, stop = first + 100_000, first + 150_000
+    want = _expected(events, start, stop)
+    assert 0 < len(want) < len(events)
+    for path in _formats(tmp_path, recording):
+        whole = read_recording(path)
+        for window in (parse_window(start="100ms", duration="50ms"), parse_window(start="0.1", until="150ms"),
+                       parse_window(start=f"@{start}us", duration="50000us")):
+            with open_recording(path, window=window) as source:
+                read = source.read()
+                assert source.window == (start, stop)
+            assert np.array_equal(read.events, want), path
+            assert any("time window 0.1 s .. 0.15 s from the first event" in n for n in read.notes)
+            # Poses cut to those covering the window: the velocity inside it is unchanged.
+            inside = np.linspace(start, stop - 1, 7) * 1e-6
+            assert np.array_equal(read.trajectory.velocity_at(inside), whole.trajectory.velocity_at(inside))
+            assert len(read.trajectory) < len(whole.trajectory)
+            if path.suffix == ".aedat4":  # tofnet writes the IMU after the events: not reached
+                assert read.imu is None
+                continue
+            assert read.imu[0, 0] * 1e6 <= start and read.imu[-1, 0] * 1e6 >= stop - 1
+            assert np.all(np.diff(np.searchsorted(read.imu[:, 0] * 1e6, [start, stop])) > 0)
+
+
+def test_windowed_ground_truth_depth_follows_the_events(tmp_path, recording):
+    depth = np.linspace(1.0, 5.0, len(recording.events))
+    write_ecd(tmp_path / "r", recording.events, intrinsics=None, sensor_size=recording.sensor_size, gt_depth=depth)
+    read = read_recording(tmp_path / "r", window=parse_window(start="200ms"))
+    keep = recording.events["t"] >= int(recording.events['t'][0]) + 200_000
+    assert np.array_equal(read.events, recording.events[keep]) and np.array_equal(read.gt_depth, depth[keep])
+
+
+def test_hdf5_reads_only_the_window_rows(tmp_path, recording, monkeypatch):
+    h5py = pytest.importorskip("h5py")
+    from tofnet.io.hdf5 import ColumnsSource
+
+    write_ecd(tmp_path / "r", recording.events, intrinsics=None, sensor_size=recording.sensor_size)
+    convert_recording(tmp_path / "r", tmp_path / "r.h5")
+    asked = []
+    rows = ColumnsSource._rows
+    monkeypatch.setattr(ColumnsSource, "_rows", lambda self, lo, hi, n: asked.append((lo, hi)) or rows(self, lo, hi, n))
+    window = parse_window(start="250ms", duration="10ms")
+    with open_recording(tmp_path / "r.h5", window=window) as source:
+        first = int(recording.events["t"][0])
+        want = _expected(recording.events, first + 250_000, first + 260_000)
+        assert source.n_events == len(want)  # from the index, before reading
+        assert np.array_equal(source.read().events, want)
+    lo = int(np.searchsorted(recording.events["t"], first + 250_000))
+    assert asked == [(lo, lo + len(want))]
+    # A wrong ms_to_idx cannot give wrong events: the search checks the times at its ends.
+    with h5py.File(tmp_path / "r.h5", "r+") as f:
+        f["ms_to_idx"][...] = 7
+    assert np.array_equal(read_recording(tmp_path / "r.h5", window=window).events, want)
+
+
+def test_binary_search_is_exact():
+    t = np.sort(np.random.default_rng(1).integers(0, 10_000, 300_000))
+    for value in (-5, 0, 17, 5000, 9999, 10_000, 20_000):
+        want = int(np.searchsorted(t, value))
+        assert first_at_or_after(lambda a, b: t[a:b], len(t), value) == want
+        assert first_at_or_after(lambda a, b: t[a:b], len(t), value, bracket=(0, 3)) == want
+
+
+def test_empty_and_past_the_end_windows_are_one_line(tmp_path, recording, capsys):
+    write_ecd(tmp_path / "r", recording.events, intrinsics=None, sensor_size=recording.sensor_size)
+    with pytest.raises(DataError, match=r"no events in the time window 5 s \.\. 6 s from the first event; "
+                                        r"the recording ends 0\.29987 s after its first event"):
+        read_recording(tmp_path / "r", window=parse_window(start="5s", duration="1s"))
+    for args in (["info", str(tmp_path / "r"), "--start", "5s"],
+                 ["run", str(tmp_path / "r"), "--start", "@1s", "--duration", "1s", "--out", str(tmp_path / "d.npz")],
+                 ["info", str(tmp_path / "r"), "--start", "later"]):
+        assert main(args) != 0
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and ("no events in the time window" in err or "--start" in err), err
+    pytest.importorskip("h5py")
+    convert_recording(tmp_path / "r", tmp_path / "r.h5")
+    with pytest.raises(DataError, match="no events in the time window 0.3 s .. the end"):
+        read_recording(tmp_path / "r.h5", window=TimeWindow(start=TimePoint(300_000)))
+
+
+def test_run_of_a_window_equals_the_run_of_the_cut_recording(tmp_path, recording, capsys):
+    from tofnet.io.depth import read_depth
+
+    events = recording.events
+    cut = _expected(events, int(events["t"][0]) + 50_000, int(events["t"][0]) + 200_000)
+    for name, part in (("whole", events), ("cut", cut)):
+        write_ecd(tmp_path / name, part, intrinsics=recording.intrinsics, times=recording.trajectory.times,
+                  positions=recording.trajectory.positions, quaternions=recording.trajectory.quaternions,
+                  sensor_size=recording.sensor_size)
+    assert main(["run", str(tmp_path / "whole"), "--start", "50ms", "--until", "200ms", "--quiet",
+                 "--out", str(tmp_path / "w.npz")]) == 0
+    assert main(["run", str(tmp_path / "cut"), "--quiet", "--out", str(tmp_path / "c.npz")]) == 0
+    out = capsys.readouterr().out
+    windowed, _ = read_depth(tmp_path / "w.npz")
+    whole_cut, _ = read_depth(tmp_path / "c.npz")
+    assert len(windowed) > 0 and np.array_equal(windowed, whole_cut)
+    assert main(["info", str(tmp_path / "whole"), "--start", "50ms", "--until", "200ms"]) == 0
+    assert f"{len(cut):,}" in capsys.readouterr().out
+
+
+def test_eval_and_export_window_the_estimates(tmp_path, capsys):
+    from tofnet.io.depth import read_depth
+
+    rec = tmp_path / "sim"
+    assert main(["simulate", "slider", str(rec), "--duration", "0.3"]) == 0
+    assert main(["run", str(rec), "--quiet", "--out", str(tmp_path / "d.npz")]) == 0
+    capsys.readouterr()
+    assert main(["eval", str(rec), str(tmp_path / "d.npz"), "--start", "100ms", "--duration", "100ms",
+                 "--json", "-"]) == 0
+    import json
+    windowed = json.loads(capsys.readouterr().out)
+    assert main(["eval", str(rec), str(tmp_path / "d.npz"), "--json", "-"]) == 0
+    whole = json.loads(capsys.readouterr().out)
+    assert 0 < windowed["estimates"] < whole["estimates"]
+    assert main(["export", str(tmp_path / "d.npz"), "--maps", str(tmp_path / "maps"), "--window", "50ms",
+                 "--start", "100ms", "--duration", "100ms", "--no-png"]) == 0
+    index = (tmp_path / "maps" / "index.csv").read_text().splitlines()
+    assert len(index) == 1 + 2  # two 50 ms maps in the 100 ms window
+    depth, meta = read_depth(tmp_path / "d.npz")
+    assert int(index[1].split(",")[4]) > 0
