@@ -31,13 +31,14 @@ def register(subparsers) -> None:
     p.add_argument("--no-color", action="store_true", help="no depth colours in the .ply")
     p.add_argument("--sensor-size", metavar="WxH", help="map size in pixels (default: the recording's)")
     p.add_argument("--force", action="store_true", help="replace existing maps and .ply (never an input)")
-    from tofnet.cli.inputs import add_window_options
+    from tofnet.cli.inputs import add_camera_options, add_window_options
+    add_camera_options(p)
     add_window_options(p)
     p.set_defaults(handler=handle)
 
 
 def handle(args) -> int:
-    from tofnet.cli.inputs import window_option
+    from tofnet.cli.inputs import camera_options, window_option
     from tofnet.core.params import parse_size
     from tofnet.io.depth import read_depth
     from tofnet.units import seconds
@@ -51,7 +52,7 @@ def handle(args) -> int:
     window = window_option(args)
     if recording_path:
         from tofnet.io.source import open_recording
-        with open_recording(recording_path, window=window) as source:
+        with open_recording(recording_path, window=window, **camera_options(args)) as source:
             # The camera only; the events only when the sensor size must come from their extent.
             recording = source.metadata() if source.sensor_size is not None else source.read()
             bounds = source.window

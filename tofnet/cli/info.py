@@ -23,11 +23,11 @@ def register(subparsers) -> None:
     p.set_defaults(handler=handle)
 
 
-def describe(path, *, sensor_size=None, columns=None, topics=None, progress=None, window=None) -> dict:
+def describe(path, *, sensor_size=None, progress=None, **options) -> dict:
     """The facts ``tofnet info`` prints, as plain data (one pass over the events)."""
     from tofnet.io.source import open_recording
 
-    with open_recording(path, sensor_size=sensor_size, columns=columns, topics=topics, window=window) as source:
+    with open_recording(path, sensor_size=sensor_size, **options) as source:
         count = on = 0
         t_first = t_last = None
         x_max = y_max = -1

@@ -17,7 +17,33 @@ def add_input_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--topic", action="append", default=[], metavar="ROLE=NAME",
                    help="ROS bag topic for a role (events, pose, imu, camera_info), "
                         "e.g. --topic events=/davis/left/events; repeatable (default: found by message type)")
+    add_camera_options(p)
     add_window_options(p)
+
+
+def add_camera_options(p: argparse.ArgumentParser) -> None:
+    """``--intrinsics`` or ``--calib FILE`` (``--camera``): the camera when the recording has none (or another)."""
+    g = p.add_argument_group("camera")
+    g.add_argument("--intrinsics", metavar="FX,FY,CX,CY[,K1,K2,P1,P2[,K3]]",
+                   help="camera intrinsics in pixels, with radtan distortion (as calib.txt); instead of the "
+                        "recording's or a calib.txt beside it")
+    g.add_argument("--calib", metavar="FILE",
+                   help="calibration file: ECD calib.txt, Kalibr or DSEC camera YAML (cam_to_cam.yaml), "
+                        "TUM-VIE calibration JSON or ROS camera_info YAML")
+    g.add_argument("--camera", metavar="NAME",
+                   help="which camera of a --calib file with several (cam3, or an index); default: the first "
+                        "whose resolution is the recording's sensor size, else the first")
+
+
+def camera_options(args) -> dict:
+    """``intrinsics``, ``calib``, ``camera`` for ``open_recording`` from the parsed options."""
+    from tofnet.io.calibration import parse_intrinsics
+
+    text = getattr(args, "intrinsics", None)
+    if getattr(args, "camera", None) and not getattr(args, "calib", None):
+        raise TofnetError("--camera picks a camera of a --calib file; give --calib FILE")
+    return {"intrinsics": parse_intrinsics(text) if text else None, "calib": getattr(args, "calib", None),
+            "camera": getattr(args, "camera", None)}
 
 
 def add_window_options(p: argparse.ArgumentParser) -> None:
@@ -44,4 +70,5 @@ def input_options(args) -> dict:
         if not sep or not role or not name:
             raise TofnetError(f"--topic: expected ROLE=NAME (e.g. events=/dvs/events), got {item!r}")
         topics[role.strip()] = name.strip()
-    return {"columns": getattr(args, "columns", None), "topics": topics or None, "window": window_option(args)}
+    return {"columns": getattr(args, "columns", None), "topics": topics or None, "window": window_option(args),
+            **camera_options(args)}

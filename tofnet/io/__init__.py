@@ -52,7 +52,8 @@ EVENT_SUFFIXES = (".txt", ".npy", ".npz", ".aedat4", ".raw", ".dat", ".es", ".h5
 
 def read_recording(path: str | Path, sensor_size: tuple[int, int] | None = None, *,
                    columns: str | tuple[str, ...] | None = None, topics: dict[str, str] | None = None,
-                   progress=None, window=None) -> Recording:
+                   progress=None, window=None, intrinsics: Intrinsics | None = None,
+                   calib: str | Path | None = None, camera: str | None = None) -> Recording:
     """Read a whole recording in any format ``tofnet.io.detect`` knows (see ``docs/formats.md``).
 
     An ECD folder, an events ``.txt``, ``.npy``/``.npz`` arrays, AEDAT4, Prophesee RAW/DAT,
@@ -62,14 +63,15 @@ def read_recording(path: str | Path, sensor_size: tuple[int, int] | None = None,
     gives the true depth per event of text/numpy files. ``sensor_size`` (width, height
     px) overrides the recording's; ``columns`` orders a plain ``(n, 4)`` array; ``topics``
     overrides ROS bag topics; ``progress(done, total)`` is called as events are read;
-    ``window`` (``tofnet.io.window.TimeWindow``) reads only that time window.
+    ``window`` (``tofnet.io.window.TimeWindow``) reads only that time window; ``intrinsics``
+    or a calibration file ``calib`` (``camera`` picks one of several) replace the camera's.
     Raises ``DataError`` for a missing path, an unknown format or no events. For large
     files, ``open_recording`` reads in chunks.
     """
     from tofnet.io.source import open_recording
 
     with open_recording(path, sensor_size=sensor_size, columns=columns, topics=topics,
-                        window=window) as source:
+                        window=window, intrinsics=intrinsics, calib=calib, camera=camera) as source:
         return source.read(progress)
 
 

@@ -1,7 +1,8 @@
-"""Camera intrinsics in the ECD ``calib.txt`` format."""
+"""Camera intrinsics: ECD ``calib.txt``, ``--intrinsics`` text, and the calibration files datasets ship."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from tofnet.errors import DataError, located
@@ -46,3 +47,154 @@ def write_calibration(path: str | Path, intrinsics: Intrinsics) -> None:
                                             f"got {len(intrinsics.distortion)}"))
     # repr() is the shortest text that reads back to the same float.
     write_text_atomic(path, " ".join(repr(float(v)) for v in values) + "\n")
+
+
+def parse_intrinsics(text: str, what: str = "--intrinsics") -> Intrinsics:
+    """``fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]`` (pixels; radtan coefficients, k3 = 0 when absent)."""
+    from tofnet.errors import TofnetError, quote
+
+    fields = [f.strip() for f in str(text).replace(" ", ",").split(",") if f.strip()]
+    if len(fields) not in (4, 8, 9):
+        raise TofnetError(f"{what}: expected fx,fy,cx,cy or fx,fy,cx,cy,k1,k2,p1,p2[,k3] (pixels), "
+                          f"got {len(fields)} numbers in {quote(text)}")
+    values = []
+    for name, field in zip(_NAMES, fields):
+        try:
+            value = float(field)
+        except ValueError:
+            value = float("nan")
+        if not math.isfinite(value):
+            raise TofnetError(f"{what}: '{name}' is not a finite number: {quote(field)}")
+        values.append(value)
+    if values[0] <= 0 or values[1] <= 0:
+        raise TofnetError(f"{what}: fx and fy must be positive (pixels), got {values[0]:g}, {values[1]:g}")
+    distortion = tuple(values[4:]) + ((0.0,) if len(values) == 8 else ())
+    return Intrinsics(*values[:4], distortion=distortion if any(distortion) else ())
+
+
+def read_camera_file(path: str | Path, camera: str | None = None,
+                     sensor_size: tuple[int, int] | None = None) -> tuple[Intrinsics, tuple[int, int] | None, str]:
+    """Intrinsics (and the image size, when given) from a calibration file, by its content:
+
+    - ECD ``calib.txt``: ``fx fy cx cy [k1 k2 p1 p2 k3]``;
+    - Kalibr camchain YAML (MVSEC's ``camchain-imucam``): ``camN: {intrinsics: [fu, fv, pu, pv],
+      distortion_model, distortion_coeffs, resolution}``;
+    - DSEC ``cam_to_cam.yaml``: ``intrinsics: {camN: {camera_matrix, distortion_model, distortion_coeffs,
+      resolution}}`` (events: cam0 left, cam3 right);
+    - a TUM-VIE / Basalt calibration JSON: ``value0: {intrinsics: [{camera_type, intrinsics: {fx, ..., k4}}],
+      resolution: [[w, h], ...]}``;
+    - a ROS ``camera_info`` YAML: ``image_width``, ``image_height``, ``camera_matrix.data`` (3x3),
+      ``distortion_model``, ``distortion_coefficients.data``.
+
+    With several cameras, ``camera`` picks one (a name such as ``cam3``, or an index); without it,
+    the first whose resolution equals ``sensor_size``, else the first. Returns ``(intrinsics, (width,
+    height) or None, what was used)``; errors are one line naming the file and the key.
+    """
+    import json
+
+    from tofnet.io.files import read_text as read_limited
+
+    path = Path(path)
+    text = read_limited(path, "calibration file", limit=1 << 20)
+    if text.lstrip().startswith("{"):
+        try:
+            data = json.loads(text)
+        except ValueError as err:
+            raise DataError(located(path, None, f"not valid JSON ({err})")) from None
+    else:
+        if _looks_like_calib_txt(text):
+            return read_calibration(path), None, "calib.txt"
+        from tofnet.io.safe_yaml import read_yaml_file
+        data = read_yaml_file(path, "calibration")
+    try:
+        return _camera_from(data, camera, sensor_size)
+    except (KeyError, IndexError, TypeError, ValueError, AttributeError, OverflowError) as err:
+        raise DataError(located(path, None, f"{_reason(err)}; expected a calib.txt, a Kalibr/DSEC camera YAML, "
+                                            "a TUM-VIE calibration JSON or a ROS camera_info YAML")) from None
+
+
+def _reason(err: BaseException) -> str:
+    if isinstance(err, KeyError):
+        return f"no key {err.args[0]!r}" if err.args else "a key is missing"
+    return str(err).split("\n")[0][:160] or type(err).__name__
+
+
+def _looks_like_calib_txt(text: str) -> bool:
+    lines = [line.strip() for line in text.splitlines() if line.strip() and not line.strip().startswith("#")]
+    return len(lines) == 1 and all(_is_number(f) for f in lines[0].split())
+
+
+def _is_number(field: str) -> bool:
+    try:
+        float(field)
+        return True
+    except ValueError:
+        return False
+
+
+def _camera_from(data, camera, sensor_size):
+    from tofnet.io.hdf5 import intrinsics_from  # the one model-name table (radtan, plumb_bob, equidistant, kb4)
+
+    if not isinstance(data, dict):
+        raise ValueError(f"expected a mapping at the top, got {type(data).__name__}")
+    if "value0" in data:  # TUM-VIE / Basalt JSON
+        body = data["value0"]
+        cameras = {str(k): (entry, body.get("resolution", [None] * (k + 1))[k])
+                   for k, entry in enumerate(body["intrinsics"])}
+        name, (entry, size) = _pick(cameras, camera, sensor_size)
+        kind, values = entry["camera_type"], entry["intrinsics"]
+        if kind not in ("kb4", "pinhole"):
+            raise ValueError(f"value0.intrinsics[{name}].camera_type {kind!r}: only kb4 and pinhole are supported")
+        coefficients = [values[k] for k in ("k1", "k2", "k3", "k4")] if kind == "kb4" else []
+        return (intrinsics_from([values["fx"], values["fy"], values["cx"], values["cy"]], coefficients, "kb4"),
+                _size(size), f"camera {name} ({kind})")
+    if "camera_matrix" in data and "image_width" in data:  # ROS camera_info
+        k = [float(v) for v in data["camera_matrix"]["data"]]
+        if len(k) != 9:
+            raise ValueError(f"camera_matrix.data: expected 9 numbers (3x3), got {len(k)}")
+        coefficients = (data.get("distortion_coefficients") or {}).get("data") or []
+        model = data.get("distortion_model") or "plumb_bob"
+        if model in ("plumb_bob", "radtan"):
+            coefficients = list(coefficients)[:5]  # rational_polynomial is refused below, by name
+        return (intrinsics_from([k[0], k[4], k[2], k[5]], coefficients, model),
+                _size([data["image_width"], data["image_height"]]), f"camera_info {data.get('camera_name', '')}".strip())
+    if isinstance(data.get("intrinsics"), dict):  # DSEC cam_to_cam.yaml
+        cameras = {name: (entry, entry.get("resolution")) for name, entry in data["intrinsics"].items()
+                   if isinstance(entry, dict) and "distortion_coeffs" in entry}
+        name, (entry, size) = _pick(cameras, camera, sensor_size)
+        return (intrinsics_from(entry["camera_matrix"], entry["distortion_coeffs"],
+                                entry.get("distortion_model", "radtan")), _size(size), f"intrinsics.{name}")
+    cameras = {name: (entry, entry.get("resolution")) for name, entry in data.items()
+               if str(name).startswith("cam") and isinstance(entry, dict) and "intrinsics" in entry}
+    if cameras:  # Kalibr camchain
+        name, (entry, size) = _pick(cameras, camera, sensor_size)
+        if entry.get("camera_model", "pinhole") != "pinhole":
+            raise ValueError(f"{name}.camera_model {entry['camera_model']!r}: only pinhole is supported")
+        return (intrinsics_from(entry["intrinsics"], entry.get("distortion_coeffs", ()),
+                                entry.get("distortion_model", "radtan")), _size(size), name)
+    raise ValueError("no camera found (no value0, camera_matrix, intrinsics or camN keys)")
+
+
+def _pick(cameras: dict, camera, sensor_size):
+    if not cameras:
+        raise ValueError("no camera with intrinsics in the file")
+    if camera is not None:
+        key = str(camera)
+        if key not in cameras and key.isdigit() and int(key) < len(cameras):
+            key = list(cameras)[int(key)]
+        if key not in cameras:
+            raise ValueError(f"no camera {camera!r}; the file has {', '.join(map(str, cameras))}")
+        return key, cameras[key]
+    if sensor_size is not None:
+        for key, (entry, size) in cameras.items():
+            if size is not None and _size(size) == tuple(sensor_size):
+                return key, (entry, size)
+    key = next(iter(cameras))
+    return key, cameras[key]
+
+
+def _size(size) -> tuple[int, int] | None:
+    if size is None:
+        return None
+    width, height = (int(v) for v in list(size)[:2])
+    return width, height

@@ -406,13 +406,16 @@ def fill_from_side_files(source: EventSource) -> EventSource:
 
 def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = None,
                    columns: str | tuple[str, ...] | None = None,
-                   topics: dict[str, str] | None = None, window=None) -> EventSource:
+                   topics: dict[str, str] | None = None, window=None, intrinsics: Intrinsics | None = None,
+                   calib: str | Path | None = None, camera: str | None = None) -> EventSource:
     """Open any recording ``detect_format`` knows; see the module docstring.
 
     ``sensor_size`` (width, height px) overrides the file's; ``columns`` gives the column
     order of a plain ``(n, 4)`` numpy array (e.g. ``"x,y,t,p"``); ``topics`` overrides the
     ROS bag topics found automatically (keys ``events``, ``pose``, ``imu``, ``camera_info``);
-    ``window`` (a ``tofnet.io.window.TimeWindow``) reads only the events of that time window.
+    ``window`` (a ``tofnet.io.window.TimeWindow``) reads only the events of that time window;
+    ``intrinsics``, or a calibration file ``calib`` (``read_camera_file``; ``camera`` picks one of
+    several), replace the recording's camera (the image size of the file fills a missing sensor size).
     """
     from tofnet.io.detect import detect_format
 
@@ -448,6 +451,8 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
             if problem:
                 raise DataError(f"sensor size: {problem}")
             source.sensor_size = (width, height)
+        if intrinsics is not None or calib is not None:
+            set_camera(source, intrinsics, calib, camera)
         check_metadata(source, path)
         if window is not None:
             source.set_window(window)
@@ -458,6 +463,25 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
         raise DataError(located(path, None, f"not a readable {FORMAT_NAMES.get(kind, kind)} file: "
                                             f"{reason(err)}")) from None
     return source
+
+
+def set_camera(source: EventSource, intrinsics: Intrinsics | None, calib: str | Path | None,
+               camera: str | None) -> None:
+    """Give ``source`` the camera of ``--intrinsics`` or ``--calib FILE`` (which win over the file's)."""
+    if intrinsics is not None and calib is not None:
+        raise DataError("--intrinsics and --calib: give one of them, not both")
+    had = source.intrinsics is not None
+    if calib is not None:
+        from tofnet.io.calibration import read_camera_file
+        intrinsics, size, what = read_camera_file(calib, camera, source.sensor_size)
+        if source.sensor_size is None and size is not None:
+            source.sensor_size = size
+            source.notes.append(f"sensor size {size[0]}x{size[1]} from {calib}")
+        used = f"{calib} ({what})"
+    else:
+        used = "--intrinsics"
+    source.intrinsics = intrinsics
+    source.notes.append(f"intrinsics from {used}" + (", instead of the recording's" if had else ""))
 
 
 #: Format names for messages.
