@@ -15,12 +15,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
+from tofnet.batch.reading import READ_KEYS
 from tofnet.errors import SpecError, TofnetError, located
 from tofnet.io.safe_yaml import _line, _parse_yaml, yaml_source
 
-TOP_KEYS = ("name", "description", "output", "cache", "recordings", "networks", "grid", "backend", "keep")
-PATH_KEYS = ("path", "name")
-GLOB_KEYS = ("glob",)
+TOP_KEYS = ("name", "description", "output", "cache", "recordings", "networks", "grid", "backend", "keep",
+            *READ_KEYS)
+PATH_KEYS = ("path", "name", *READ_KEYS)
+GLOB_KEYS = ("glob", *READ_KEYS)
 SCENARIO_KEYS = ("scenario", "name", "duration", "seed", "sensor_size")
 NETWORK_KEYS = ("spec", "name", "backend", "estimator")
 KEEP = ("summary", "metrics", "depth")
@@ -45,6 +47,12 @@ class RecordingSource:
     duration: float = 1.0
     seed: int = 0
     sensor_size: tuple[int, int] | None = None
+    #: How a file is read (``tofnet.batch.reading``: intrinsics, calib, velocity, start, ...), as plain values.
+    reading: tuple[tuple[str, Any], ...] = ()
+
+    @property
+    def options(self) -> dict[str, Any]:
+        return dict(self.reading)
 
     @property
     def label(self) -> str:
@@ -114,6 +122,7 @@ class _PlanReader:
     def __init__(self, tree: Any, source: str, base: Path):
         self.tree, self.source, self.base = tree, source, base
         self.names: dict[str, int | None] = {}
+        self.defaults: dict[str, Any] = {}  # plan-wide reading keys
 
     def fail(self, container: Any, key: Any, path: str, message: str) -> PlanError:
         return PlanError(located(self.source, _line(container, key), f"{path}: {message}"))
@@ -143,6 +152,7 @@ class _PlanReader:
         cache = self.resolve(self.text(tree, "cache", "cache")) if "cache" in tree else out / "scenarios"
         backend = self.backend(tree, "backend", "backend")
         keep = self.keep(tree)
+        self.defaults = self.read_options(tree, {}, "")
         recordings = self.recordings(tree)
         networks = self.networks(tree)
         grid = self.grid(tree)
@@ -187,17 +197,19 @@ class _PlanReader:
         for i, entry in enumerate(section):
             path = f"recordings[{i}]"
             if isinstance(entry, str):
-                found = self.glob(section, i, path, entry) if globbing.has_magic(entry) else \
-                    [self.path(section, i, path, entry, None)]
+                found = self.glob(section, i, path, entry, self.defaults) if globbing.has_magic(entry) else \
+                    [self.path(section, i, path, entry, None, self.defaults)]
             elif isinstance(entry, Mapping) and "scenario" in entry:
                 found = self.scenarios(entry, path)
             elif isinstance(entry, Mapping) and "glob" in entry:
                 self.only(entry, GLOB_KEYS, path, "a glob")
-                found = self.glob(entry, "glob", f"{path}.glob", self.text(entry, "glob", f"{path}.glob"))
+                found = self.glob(entry, "glob", f"{path}.glob", self.text(entry, "glob", f"{path}.glob"),
+                                  self.read_options(entry, self.defaults, f"{path}."))
             elif isinstance(entry, Mapping) and "path" in entry:
                 self.only(entry, PATH_KEYS, path, "a path")
                 found = [self.path(entry, "path", f"{path}.path", self.text(entry, "path", f"{path}.path"),
-                                   self.text(entry, "name", f"{path}.name"))]
+                                   self.text(entry, "name", f"{path}.name"),
+                                   self.read_options(entry, self.defaults, f"{path}."))]
             else:
                 raise self.fail(section, i, path, f"expected a path, a glob, {{path: P, name: N}}, {{glob: G}} or "
                                 f"{{scenario: NAME, duration: S, seed: N, sensor_size: WxH}}; got {entry!r}")
@@ -218,20 +230,28 @@ class _PlanReader:
                             f"{f' (line {first})' if first else ''}; give this one a name:")
         self.names[name] = _line(container, key)
 
-    def path(self, container: Any, key: Any, path: str, value: str, name: str | None) -> RecordingSource:
+    def read_options(self, entry: Mapping, defaults: dict[str, Any], where: str) -> dict[str, Any]:
+        from tofnet.batch.reading import read_options
+        return read_options(entry, defaults, where, self.fail, self.resolve)
+
+    def path(self, container: Any, key: Any, path: str, value: str, name: str | None,
+             options: dict[str, Any]) -> RecordingSource:
         if not isinstance(value, str) or not value.strip():
             raise self.fail(container, key, path, f"expected a path, got {value!r}")
         resolved = self.resolve(value)
         if not resolved.exists():
             raise self.fail(container, key, path, f"{resolved}: no such file or folder")
-        return RecordingSource(name=name or _recording_name(resolved), path=str(resolved))
+        return RecordingSource(name=name or _recording_name(resolved), path=str(resolved),
+                               reading=tuple(options.items()))
 
-    def glob(self, container: Any, key: Any, path: str, pattern: str) -> list[RecordingSource]:
+    def glob(self, container: Any, key: Any, path: str, pattern: str,
+             options: dict[str, Any]) -> list[RecordingSource]:
         full = self.resolve(pattern)
         matches = sorted(Path(m) for m in globbing.glob(str(full), recursive=True))
         if not matches:
             raise self.fail(container, key, path, f"{pattern!r} matches nothing (looked for {full})")
-        return [RecordingSource(name=_recording_name(m), path=str(m)) for m in matches]
+        return [RecordingSource(name=_recording_name(m), path=str(m), reading=tuple(options.items()))
+                for m in matches]
 
     def scenarios(self, entry: Mapping, path: str) -> list[RecordingSource]:
         from tofnet.core.params import parse_size

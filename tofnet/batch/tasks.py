@@ -82,6 +82,8 @@ def make_task_id(recording: RecordingSource, network: NetworkChoice, point: dict
                               "sensor_size": recording.sensor_size} if recording.scenario else recording.path,
                 "network": network.spec, "spec_sha": _file_sha(network.spec), "backend": backend,
                 "params": {k: _plain(v) for k, v in point.items()}}
+    if recording.reading:  # only then: the ids of plans without reading keys stay as they were
+        identity["reading"] = recording.options
     digest = hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()[:10]
     readable = ".".join([recording.name, network.name, *(f"{k}={_plain(v)}" for k, v in point.items())])
     return f"{_UNSAFE.sub('_', readable)[:120]}-{digest}"

@@ -98,11 +98,17 @@ def _run(task: Task, recording_path: str, folder: Path) -> dict[str, Any]:
     from tofnet.api import DEFAULT_BACKEND, apply_overrides, load_network, run
     from tofnet.io import read_recording
 
-    recording = read_recording(recording_path)
-    # The same network `tofnet run RECORDING [--spec S] [--refractory R ...]` builds.
+    from tofnet.batch.reading import open_options
+
+    options = task.recording.options
+    recording = read_recording(recording_path, **open_options(options))
+    # The same network `tofnet run RECORDING [--spec S] [--refractory R ...] [--velocity V]` builds.
     network, compile_options, spec_backend, backend_options = load_network(
         task.network.spec, sensor_size=None if task.network.spec else recording.sensor_size)
     apply_overrides(network, **task.parameters)
+    if options.get("velocity"):
+        from tofnet.api import constant_velocity
+        constant_velocity(network, options["velocity"])
     backend = task.backend or spec_backend or DEFAULT_BACKEND
     if task.backend and task.backend != spec_backend:
         backend_options = {}  # the spec's options belong to the spec's backend
