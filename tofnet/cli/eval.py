@@ -130,6 +130,12 @@ def handle(args) -> int:
     data["share_split"] = None if shares is None else [{k: (v if np.isfinite(v) else None) for k, v in row.items()}
                                                        for row in shares]
     data["share_split_note"] = what
+    from tofnet.eval.breakdown import by_depth_band, by_motion_phase, format_groups
+    bands = by_depth_band(depth, result.matches, recording.gt_depth)
+    phases = None if recording.trajectory is None else by_motion_phase(depth, result.matches, recording.events,
+                                                                       recording.trajectory)
+    data["depth_bands"] = [g.to_dict() for g in bands]
+    data["motion_phases"] = None if phases is None else [g.to_dict() for g in phases]
     text = json.dumps(data, indent=2, allow_nan=False)
     if args.json == "-":
         print(text)
@@ -137,6 +143,11 @@ def handle(args) -> int:
     print(result.table())
     print()
     print(format_share_split(shares, what) if shares is not None else f"error by translational share: not available ({what})")
+    print()
+    print(format_groups("by true depth (coverage: estimates over the band's events)", bands))
+    print()
+    print(format_groups("by motion phase (reversal: turned > 90 deg in 100 ms, or slow)", phases) if phases is not None
+          else "by motion phase: not available (the recording has no poses)")
     if args.json:
         from tofnet.io.files import write_text_atomic
         write_text_atomic(args.json, text + "\n")

@@ -28,7 +28,7 @@ def register(subparsers) -> None:
 
 
 def handle(args) -> int:
-    from tofnet.sim import built_in_scenarios, simulate
+    from tofnet.sim import built_in_scenarios, scenario, simulate
 
     scenarios = built_in_scenarios()
     if args.list:
@@ -36,8 +36,7 @@ def handle(args) -> int:
         return 0
     if not args.scenario or not args.out_dir:
         raise TofnetError(f"expected SCENARIO and OUT_DIR; scenarios: {', '.join(scenarios)}")
-    if args.scenario not in scenarios:
-        raise TofnetError(f"unknown scenario {args.scenario!r}; expected one of {', '.join(scenarios)}")
+    scenario(args.scenario)  # a one-line SimError for an unknown name or variant, before anything is written
     sensor = None
     if args.sensor_size:
         from tofnet.core.params import parse_size

@@ -17,6 +17,7 @@ from collections.abc import Callable
 from tofnet.sim.camera import Segment, Trajectory, constant
 from tofnet.sim.config import SimConfig
 from tofnet.sim.errors import SimError
+from tofnet.sim.motion import MOTION_SCENARIOS
 from tofnet.sim.rotation import ImuModel, RotatingTrajectory, Sway
 from tofnet.sim.scene import Box, Plane, Scene
 from tofnet.sim.texture import Texture
@@ -260,18 +261,35 @@ ROTATION_SCENARIOS: dict[str, Callable[[float], SimConfig]] = {
 
 def built_in_scenarios() -> dict[str, Callable[[float], SimConfig]]:
     """Every built-in scenario by name: ``SCENARIOS`` (desk, 0.3-3.5 m), ``ROOM_SCENARIOS`` (2.5-10 m),
-    then ``ROTATION_SCENARIOS`` (desk, turning camera)."""
-    return {**SCENARIOS, **ROOM_SCENARIOS, **ROTATION_SCENARIOS}
+    ``ROTATION_SCENARIOS`` (desk, turning camera), then ``MOTION_SCENARIOS`` (random scenes under
+    general motion, ``tofnet.sim.motion``: variant 0 by default, ``name:N`` for variant N)."""
+    return {**SCENARIOS, **ROOM_SCENARIOS, **ROTATION_SCENARIOS, **MOTION_SCENARIOS}
 
 
 def scenario(name: str, duration: float | None = None) -> SimConfig:
-    """The config of a built-in scenario (``built_in_scenarios``); a ``SimError`` lists the names."""
+    """The config of a built-in scenario (``built_in_scenarios``); a ``SimError`` lists the names.
+
+    A random scenario takes its variant after a colon: ``random_shake:3``.
+    """
     known = built_in_scenarios()
+    base, colon, variant = name.partition(":")
+    if colon and base in MOTION_SCENARIOS:
+        if not variant.isdigit():
+            raise SimError(f"scenario {name!r}: expected a variant number >= 0 after the colon, got {variant!r}")
+        if duration is not None:
+            _check_duration(duration)
+        return MOTION_SCENARIOS[base](1.0 if duration is None else float(duration), int(variant))
     if name not in known:
-        raise SimError(f"scenario: unknown name {name!r}; expected one of {', '.join(known)}")
-    if duration is not None and not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
+        raise SimError(f"unknown scenario {name!r}; expected one of {', '.join(known)} "
+                       f"(random_*: add :N for variant N)")
+    if duration is not None:
+        _check_duration(duration)
+    return known[name](1.0 if duration is None else float(duration))
+
+
+def _check_duration(duration: object) -> None:
+    if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
         raise SimError(f"duration: expected a positive number of seconds, got {duration!r}")
     from tofnet.sim.config import MAX_DURATION_S
-    if duration is not None and duration > MAX_DURATION_S:
+    if duration > MAX_DURATION_S:
         raise SimError(f"duration: expected at most {MAX_DURATION_S:g} s, got {duration!r}")
-    return known[name](1.0 if duration is None else float(duration))
