@@ -27,6 +27,11 @@ class BackendError(TofnetError):
     """A backend that cannot run the network, or failed while running it."""
 
 
+class UnsupportedError(BackendError):
+    """A backend that cannot hold a kind of process the network has (e.g. a host-side estimator in
+    Lava): the network does not apply to it, which the conformance suite reports as such."""
+
+
 def located(path: object, line: int | None, message: str) -> str:
     """Format ``path:line: message`` (line omitted when unknown; an absurdly long path is
     shortened in the middle so that the message stays one readable line)."""

@@ -84,10 +84,7 @@ class LocalBackend(Backend):
                 return self._fused_stream(network, pipeline, known, t0, f"{pipeline.names[1]}.counts" in probes)
 
         def build(start_us: int) -> GraphExecutor:
-            from tofnet.backends.registry import backends_by_family
-            return GraphExecutor(network, family=self.family, backend=self.name, t0_us=start_us,
-                                 timestep_us=clock.timestep_us, recording=known, fixed_format=self._format(),
-                                 probes=probes, backends_by_family=backends_by_family)
+            return self._executor(network, start_us, clock.timestep_us, known, probes)
 
         sinks = sinks_of(network)
         stream = GraphStream(self.name, build, t0, clock.timestep_us, sinks,
@@ -98,6 +95,14 @@ class LocalBackend(Backend):
         if fmt is not None:
             stream.extra.update(frac_bits=fmt.frac_bits, payload_bits=fmt.payload_bits)
         return stream
+
+    def _executor(self, network: Network, t0_us: int, timestep_us: int, recording: Recording,
+                  probes: list[str]) -> GraphExecutor:
+        """What runs the models of a stream: a ``GraphExecutor`` here (the lava backend gives its own)."""
+        from tofnet.backends.registry import backends_by_family
+        return GraphExecutor(network, family=self.family, backend=self.name, t0_us=t0_us, timestep_us=timestep_us,
+                             recording=recording, fixed_format=self._format(), probes=probes,
+                             backends_by_family=backends_by_family)
 
     def _fused_stream(self, network: Network, pipeline: PipelineParams, known: Recording, t0_us: int | None,
                       record_tot: bool) -> FusedStream:

@@ -20,6 +20,11 @@ _BUILTIN = {
     "fixed": "tofnet.backends.event_driven:FixedBackend",
     "multiproc": "tofnet.backends.multiproc:MultiprocBackend",
 }
+#: Built-ins that need an optional install (``tofnet[lava]``, Python 3.10): asked for by name,
+#: not listed by ``available_backends`` (every backend listed there runs in any tofnet install).
+_OPTIONAL = {
+    "lava": "tofnet.backends.lava_backend:LavaBackend",
+}
 _registered: dict[str, Callable[[], Backend]] = {}
 
 
@@ -36,9 +41,9 @@ def _lazy(target: str) -> Callable[..., Backend]:
     return load
 
 
-def available_backends() -> list[str]:
-    """Names of every backend that can be asked for."""
-    names = dict.fromkeys(list(_BUILTIN) + list(_registered))
+def available_backends(optional: bool = False) -> list[str]:
+    """Names of every backend that can be asked for (``optional``: with those needing an optional install)."""
+    names = dict.fromkeys(list(_BUILTIN) + (list(_OPTIONAL) if optional else []) + list(_registered))
     for ep in entry_points(group="tofnet.backends"):
         names.setdefault(ep.name)
     return list(names)
@@ -49,8 +54,8 @@ def get_backend(name: str, **options) -> Backend:
     the available ones, or the options the backend does not take."""
     if name in _registered:
         factory = _registered[name]
-    elif name in _BUILTIN:
-        factory = _lazy(_BUILTIN[name])
+    elif name in _BUILTIN or name in _OPTIONAL:
+        factory = _lazy({**_OPTIONAL, **_BUILTIN}[name])
     else:
         factory = next((ep.load() for ep in entry_points(group="tofnet.backends") if ep.name == name), None)
     if factory is not None:
@@ -60,7 +65,7 @@ def get_backend(name: str, **options) -> Backend:
             if not options:
                 raise
             raise BackendError(f"backend {name!r} does not take the options {sorted(options)}: {err}") from None
-    raise BackendError(f"unknown backend {name!r}; available: {', '.join(available_backends())}")
+    raise BackendError(f"unknown backend {name!r}; available: {', '.join(available_backends(optional=True))}")
 
 
 def backends_by_family() -> dict[str, list[str]]:

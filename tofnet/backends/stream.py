@@ -114,6 +114,13 @@ class GraphStream:
     def abort(self) -> None:
         """Give up the stream (after its caller failed): release what it holds, return nothing."""
         self._closed = True
+        self._release()
+
+    def _release(self) -> None:
+        """Let the executor free what it holds outside this process (the lava backend's runtime)."""
+        release = getattr(self.executor, "release", None)
+        if release is not None:
+            release()
 
     def close(self) -> RunResult:
         """Run the steps still in flight; their outputs (``outputs``) and every count so far."""
@@ -126,9 +133,13 @@ class GraphStream:
         last = ex.complete_until()
         last = -1 if last is None else last  # the step of the latest event; it is complete now
         steps = last + 1 + ex.drain_steps  # every output of every event is out after these
-        outputs = ex.advance(max(ex.clock, steps))
+        try:
+            outputs = ex.advance(max(ex.clock, steps))
+            counts = ex.counts()
+        finally:
+            self._release()
         wanted = [name for name in ex.sinks + ex.probes]
-        return RunResult(self.backend, outputs, ex.counts(), steps, self.t0_us, self.timestep_us,
+        return RunResult(self.backend, outputs, counts, steps, self.t0_us, self.timestep_us,
                          {name: ex.output_latency(name) for name in wanted},
                          {name: ex.payload_of(name) for name in wanted},
                          wall_time=time.perf_counter() - self._started, extra=dict(self.extra))

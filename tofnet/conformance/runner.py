@@ -13,7 +13,7 @@ from tofnet.conformance.cases import CASES, Case, get_case
 from tofnet.conformance.compare import compare, mode_of
 from tofnet.conformance.variables import compare_variables
 from tofnet.core.ports import OutPort
-from tofnet.errors import BackendError, TofnetError
+from tofnet.errors import BackendError, TofnetError, UnsupportedError
 
 DEFAULT_BASELINE = "reference"
 
@@ -21,7 +21,9 @@ DEFAULT_BASELINE = "reference"
 @dataclass
 class CaseResult:
     """One case on one backend: ``ok``, the comparison mode, estimate counts
-    (backend, baseline) and the first difference (or error) when it failed."""
+    (backend, baseline) and the first difference (or error) when it failed. ``applies`` is
+    False (and ``ok`` True) when the backend cannot hold a process of the case's network
+    (``UnsupportedError``; ``first`` says why)."""
 
     case: str
     backend: str
@@ -31,6 +33,7 @@ class CaseResult:
     estimates: tuple[int, int]
     first: str
     seconds: float
+    applies: bool = True
 
     def to_dict(self) -> dict:
         return dict(self.__dict__, estimates=list(self.estimates))
@@ -120,6 +123,9 @@ def run_suite(backend: str | Backend, against: str | Backend = DEFAULT_BASELINE,
                                                                 runners["base"], case.variables_at)
                 outcome = CaseResult(case.name, test.name, base.name, mode, comparison.ok, comparison.estimates,
                                      comparison.first, time.perf_counter() - started)
+            except UnsupportedError as err:
+                outcome = CaseResult(case.name, test.name, base.name, mode, True, (0, 0), f"n/a: {err}",
+                                     time.perf_counter() - started, applies=False)
             except Exception as err:  # a backend's bug is a failed case, not the end of the suite
                 what = str(err) if isinstance(err, TofnetError) else f"{type(err).__name__}: {err}"
                 outcome = CaseResult(case.name, test.name, base.name, mode, False, (0, 0),
@@ -140,7 +146,8 @@ def rotation_probes(network) -> list[str]:
 def format_row(r: CaseResult, width: int = 24) -> str:
     estimates = f"{r.estimates[0]}/{r.estimates[1]}"
     first = r.first.splitlines()[0] if r.first else ""
-    return f"{r.case:<{width}} {r.mode:<10} {'pass' if r.ok else 'FAIL':<5} {estimates:>11}  {first}"
+    verdict = "n/a" if not r.applies else "pass" if r.ok else "FAIL"
+    return f"{r.case:<{width}} {r.mode:<10} {verdict:<5} {estimates:>11}  {first}"
 
 
 def header(width: int = 24) -> str:
@@ -155,9 +162,11 @@ def format_table(results: list[CaseResult]) -> str:
 
 def summary_line(results: list[CaseResult]) -> str:
     failed = sum(not r.ok for r in results)
+    skipped = sum(not r.applies for r in results)
     pair = f"{results[0].backend} vs {results[0].baseline}" if results else ""
     seconds = sum(r.seconds for r in results)
-    return (f"{len(results)} cases: {len(results) - failed} passed, {failed} failed "
+    apart = f", {skipped} not applicable" if skipped else ""
+    return (f"{len(results)} cases: {len(results) - failed - skipped} passed{apart}, {failed} failed "
             f"({pair}, {seconds:.1f} s)")
 
 

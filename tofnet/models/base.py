@@ -78,6 +78,9 @@ class Model:
     reads_events: ClassVar[bool] = False
     #: True when one instance may hold a region of the sensor (``multiproc`` cores).
     supports_regions: ClassVar[bool] = False
+    #: Why the model can only run on a host computer beside a neuromorphic chip, never as a process
+    #: of one (empty: it can); a backend that builds chip processes (``lava``) refuses it with this.
+    host_only: ClassVar[str] = ""
 
     def __init__(self, process: Process, ctx: ModelContext):
         self.process = process

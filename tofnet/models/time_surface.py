@@ -73,6 +73,7 @@ class TimeSurfaceModel(Model):
     """Buffers the camera's events and runs them through ``TimeSurfaceEstimator`` when their answer's step runs."""
 
     reads_events = True
+    host_only = "is a float64 estimator that reads the camera's events itself (host-side, no chip arithmetic)"
 
     def __init__(self, process: TimeSurfaceProcess, ctx: ModelContext):
         super().__init__(process, ctx)

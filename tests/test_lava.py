@@ -1,0 +1,91 @@
+"""The lava backend: tofnet graphs as Lava processes, byte for byte what the fixed backend computes.
+
+Needs lava-nc 0.10 (Python 3.10): `.ci/run` makes that venv when a Python 3.10 exists. Under
+any other interpreter only the one-line refusal is checked.
+"""
+
+import importlib.util
+import sys
+
+import numpy as np
+import pytest
+
+from tofnet.backends.registry import available_backends, get_backend
+from tofnet.conformance import format_table, run_suite
+from tofnet.conformance.cases import get_case
+from tofnet.errors import BackendError, UnsupportedError
+from tofnet.session import Session
+
+LAVA = sys.version_info[:2] == (3, 10) and importlib.util.find_spec("lava") is not None
+needs_lava = pytest.mark.skipif(not LAVA, reason="lava-nc 0.10 is not importable here (it needs Python 3.10)")
+
+#: Cases that cover every kind of graph and port the suite has (the whole suite: `tofnet conformance
+#: --backend lava --against fixed`, docs/lava.md): one chain, counter overflow, core seams, fan-out
+#: and fan-in, a core-placed filter, a user's process, eq. 7, a host remap, variables through Var.get.
+CASES = ["edge+u", "speed-4bit-16", "patch-d2-ragged", "graph-two-distances", "graph-denoised",
+         "graph-user-process", "graph-undistort", "rotation-edges", "variables-update-every", "empty"]
+
+
+@pytest.mark.skipif(LAVA, reason="checks the refusal where Lava cannot run; Lava runs here")
+def test_without_lava_the_backend_says_in_one_line_what_it_needs():
+    case = get_case("edge+u").build()
+    with pytest.raises(BackendError) as err:
+        get_backend("lava").run(case.network, case.recording)
+    text = str(err.value)
+    assert "\n" not in text and "Python 3.10" in text and "pip install 'tofnet[lava]'" in text
+
+
+def test_lava_is_asked_for_by_name_and_not_listed_with_the_backends_every_install_runs():
+    assert "lava" not in available_backends()
+    assert "lava" in available_backends(optional=True)
+    assert get_backend("lava").arithmetic == "fixed" and get_backend("lava", arithmetic="float").family == "float"
+    with pytest.raises(BackendError, match="arithmetic must be 'fixed' or 'float'"):
+        get_backend("lava", arithmetic="double")
+
+
+@needs_lava
+def test_lava_equals_the_fixed_backend_byte_for_byte():
+    results = run_suite("lava", "fixed", CASES)
+    assert [r.case for r in results] == CASES and {r.mode for r in results} == {"exact"}
+    assert all(r.ok and r.applies for r in results), "\n" + format_table(results)
+    assert sum(r.estimates[0] for r in results) > 1000  # the cases produce estimates, and they were compared
+
+
+@needs_lava
+def test_lava_floating_pt_equals_the_float_backend():
+    (result,) = run_suite(get_backend("lava", arithmetic="float"), "float", ["texture-checker"])
+    assert result.ok and result.mode == "float" and result.estimates[0] > 100, result.first
+
+
+@needs_lava
+def test_a_host_side_estimator_is_refused_in_one_line_naming_it_and_the_suite_calls_it_not_applicable():
+    case = get_case("time-surface-texture").build()
+    with pytest.raises(UnsupportedError) as err:
+        get_backend("lava").run(case.network, case.recording)
+    assert "\n" not in str(err.value) and "'time_surface' (TimeSurfaceProcess) cannot run in Lava" in str(err.value)
+    (result,) = run_suite("lava", "fixed", ["time-surface-texture"])
+    assert result.ok and not result.applies and result.first.startswith("n/a: ")
+
+
+@needs_lava
+def test_var_set_reaches_the_model_as_a_session_set_does_on_fixed():
+    case = get_case("texture-blobs").build()
+    runs = {}
+    for name in ("fixed", "lava"):
+        with Session(case.network, case.recording, backend=name, record_tot=True) as s:
+            s.run(steps=20)
+            counter = s.get("time_of_travel.counter")
+            s.set("time_of_travel.counter", np.zeros_like(counter))  # Var.set on lava
+            assert np.array_equal(s.get("time_of_travel.counter"), np.zeros_like(counter))
+            runs[name] = (counter, s.finish())
+    (c_fixed, fixed), (c_lava, lava) = runs["fixed"], runs["lava"]
+    assert c_fixed.any() and np.array_equal(c_fixed, c_lava)
+    assert fixed.counts == lava.counts and len(lava.depth) > 100
+    assert fixed.depth.tobytes() == lava.depth.tobytes()
+
+
+@needs_lava
+def test_a_step_busier_than_the_source_holds_is_refused_naming_the_option():
+    case = get_case("texture-blobs").build()
+    with pytest.raises(BackendError, match="raise the backend's source_capacity"):
+        get_backend("lava", source_capacity=2).run(case.network, case.recording)
