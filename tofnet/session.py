@@ -16,7 +16,6 @@ docs/sessions.md.
 from __future__ import annotations
 
 import copy
-import time
 from typing import Any, Iterable
 
 import numpy as np
@@ -28,6 +27,7 @@ from tofnet.backends.stream import Collected
 from tofnet.core.network import Network
 from tofnet.errors import BackendError, TofnetError
 from tofnet.io.recording import Recording
+from tofnet.kernels.compilation import Stopwatch
 from tofnet.monitor import Monitor
 
 
@@ -69,7 +69,7 @@ class Session:
         self._cursor = 0  # next event of the recording to feed
         self._collected = Collected()
         self._state = "open"
-        self._started = time.perf_counter()
+        self._clock = Stopwatch()
         self._sample()
 
     # -- opening and closing --------------------------------------------------------------------
@@ -233,7 +233,7 @@ class Session:
         result = self._guard(self.stream.close)
         self._keep(result.outputs)
         result.outputs = self._collected.joined(result.payloads, self.stream._empty)
-        result.wall_time = time.perf_counter() - self._started
+        result.timed_by(self._clock)
         self._state = "finished"
         self.stop()
         return result

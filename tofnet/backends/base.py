@@ -18,7 +18,7 @@ DROP_REASONS = ("out_of_bounds", "before_t0", "refractory", "same_step")
 REJECT_REASONS = ("no_measurement", "too_near", "too_far", "rotation_dominated")
 
 #: Summary keys that depend on how and where a run went, not on what it computed.
-RUN_SPECIFIC = ("backend", "wall_time_s")
+RUN_SPECIFIC = ("backend", "wall_time_s", "compile_time_s", "kernels_compiled")
 
 #: ``progress(done, total)``: called now and then with events processed so far.
 ProgressCallback = Callable[[int, int], None]
@@ -47,6 +47,16 @@ class RunResult:
     payloads: dict[str, str] = field(default_factory=dict)
     wall_time: float = 0.0
     extra: dict = field(default_factory=dict)
+    #: Seconds the run spent compiling kernels or loading numba's cache (not in ``wall_time``), and
+    #: the kernels it compiled (0 once numba's cache holds them: first run only).
+    compile_time: float = 0.0
+    kernels_compiled: int = 0
+
+    def timed_by(self, clock) -> "RunResult":
+        """Take the times of a ``tofnet.kernels.compilation.Stopwatch`` started with the run."""
+        self.wall_time, self.compile_time, self.kernels_compiled = (clock.network_seconds(), clock.compile_seconds,
+                                                                    clock.compiled)
+        return self
 
     # -- the paper network's view -------------------------------------------------------------
     def _named(self, payload: str) -> list[str]:
@@ -145,7 +155,8 @@ class RunResult:
             "outputs": {name: int(len(records)) for name, records in self.outputs.items()},
             "counts": {name: dict(c) for name, c in self.counts.items()},
             "steps": self.steps, "timestep_s": self.timestep_us * 1e-6, "latency_steps": self.latency_steps,
-            "latency_s": self.latency_seconds, "wall_time_s": self.wall_time})
+            "latency_s": self.latency_seconds, "wall_time_s": self.wall_time,
+            "compile_time_s": self.compile_time, "kernels_compiled": self.kernels_compiled})
         return out
 
 

@@ -10,7 +10,6 @@ probe inside the chain, runs the models one by one.
 
 from __future__ import annotations
 
-import time
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -23,6 +22,7 @@ from tofnet.core.network import Network
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, TOT_DTYPE
 from tofnet.io.recording import VelocitySource
+from tofnet.kernels.compilation import Stopwatch
 from tofnet.kernels.region import KernelConfig, KernelOutput, TimeOfTravelKernel, copy_records
 from tofnet.models.base import concat
 from tofnet.models.depth import OUTCOMES
@@ -160,7 +160,7 @@ class FusedStream:
         # velocity updates (``VelocityRows``: ``self._updates.rows``), computed ``VELOCITY_LOOKAHEAD`` ahead
         self._updates = UpdateRows(lambda first, count: velocity_table(
             self.velocity_source, self.kernel.t0_us, p.timestep_us, p.update_every, count, first), VELOCITY_LOOKAHEAD)
-        self._started = time.perf_counter()
+        self._clock = Stopwatch()
         self._closed = False
 
     def _admit(self, events: np.ndarray) -> tuple[int, int] | None:
@@ -283,5 +283,4 @@ class FusedStream:
             self.backend, outputs, counts, last_step + 1 + self.pipeline.latency_steps,
             t0, self.timestep_us,
             {name: self._latency(name) for name in outputs}, dict(self.payloads),
-            wall_time=time.perf_counter() - self._started,
-            extra={"frac_bits": fmt.frac_bits, "payload_bits": fmt.payload_bits} if fmt else {})
+            extra={"frac_bits": fmt.frac_bits, "payload_bits": fmt.payload_bits} if fmt else {}).timed_by(self._clock)

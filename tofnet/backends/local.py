@@ -8,7 +8,6 @@ the paper's chain through the fused kernel when they recognise it (``fusion.pape
 
 from __future__ import annotations
 
-import time
 from typing import Iterable
 
 import numpy as np
@@ -23,6 +22,7 @@ from tofnet.core.network import Network
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, EVENT_DTYPE, TOT_DTYPE
 from tofnet.io.recording import Intrinsics, Recording, VelocitySource
+from tofnet.kernels.compilation import Stopwatch
 from tofnet.kernels.region import KernelConfig
 
 #: Initial size of a fused run's result buffer in estimates (at most one per event); 4M x 28 B
@@ -124,7 +124,7 @@ class LocalBackend(Backend):
         return run_in_packets(stream, recording.events, self.packet_events, progress)
 
     def _run_fused(self, stream: FusedStream, events: np.ndarray, progress: ProgressCallback | None) -> RunResult:
-        started = time.perf_counter()
+        clock = Stopwatch()
         total = len(events)
         depth = _Collector(DEPTH_DTYPE, min(total, RESULT_CAPACITY))
         tot = _Collector(TOT_DTYPE, 0)
@@ -144,8 +144,7 @@ class LocalBackend(Backend):
         result.outputs[stream.depth_name] = stream.kernel.join_packets(depth.array(), seams)
         if stream.record_tot:
             result.outputs[stream.tot_name] = canonical(tot.array())
-        result.wall_time = time.perf_counter() - started
-        return result
+        return result.timed_by(clock)
 
 
 class _Collector:

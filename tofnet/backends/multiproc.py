@@ -26,6 +26,7 @@ from tofnet.backends.remote import RemoteModel, plan_workers, placements_for
 from tofnet.backends.runtime import clock_of, start_time_us
 from tofnet.backends.stream import Collected, GraphStream
 from tofnet.compiler.compiled import CompiledNetwork, network_of
+from tofnet.kernels.compilation import Stopwatch
 from tofnet.errors import BackendError
 from tofnet.io.recording import Intrinsics, Recording, VelocitySource
 from tofnet.kernels.fixed_point import DEFAULT_FRAC_BITS, DEFAULT_PAYLOAD_BITS, FixedPointFormat
@@ -93,11 +94,10 @@ class MultiprocBackend(Backend):
 
     def run(self, compiled, recording: Recording, *, probes: Iterable[str] = (), record_tot: bool = False,
             progress: ProgressCallback | None = None) -> RunResult:
-        started = time.perf_counter()
+        clock = Stopwatch()
         with self.session(compiled) as session:
             result = session.run(recording, probes=probes, record_tot=record_tot, progress=progress)
-        result.wall_time = time.perf_counter() - started  # this run paid for starting the workers too
-        return result
+        return result.timed_by(clock)  # this run paid for starting the workers too
 
     def open_stream(self, compiled, **options) -> GraphStream:
         """A stream on workers of its own; ``close()`` stops them. Options as ``LocalBackend.open_stream``."""
@@ -257,7 +257,7 @@ class MultiprocSession:
             progress: ProgressCallback | None = None) -> RunResult:
         """Run ``compiled`` (default: the session's) on ``recording``; outputs in canonical order."""
         compiled = self._check_open(compiled)
-        started = time.perf_counter()
+        clock = Stopwatch()
         t0 = start_time_us(clock_of(compiled.network).t0_us, recording)
         stream = self.open_stream(compiled, recording=recording, t0_us=t0, probes=probes, record_tot=record_tot)
         collected = Collected()
@@ -278,8 +278,7 @@ class MultiprocSession:
         # Chunks end past the run's last step; what host fields sent there is not the run's (as on the other backends).
         result.outputs = {name: r[r["step"] < result.steps] if len(r) and r["step"][-1] >= result.steps else r
                           for name, r in result.outputs.items()}
-        result.wall_time = time.perf_counter() - started
-        return result
+        return result.timed_by(clock)
 
 
 class _GuardedStream(GraphStream):

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from typing import Callable, Iterable
 
 import numpy as np
@@ -11,6 +10,7 @@ from tofnet.backends.base import ProgressCallback, RunResult
 from tofnet.backends.graph import GraphExecutor
 from tofnet.errors import BackendError
 from tofnet.events import EVENT_DTYPE, MAX_TIME_US
+from tofnet.kernels.compilation import Stopwatch
 from tofnet.models.base import concat
 from tofnet.models.input import check_time_order
 
@@ -69,7 +69,7 @@ class GraphStream:
         self.primary = primary_output(sinks, payloads)
         self._latest_us: int | None = None
         self._events_in = 0
-        self._started = time.perf_counter()
+        self._clock = Stopwatch()
         self._closed = False
         #: Backend facts added to the result (e.g. the fixed-point format).
         self.extra: dict = {}
@@ -142,7 +142,7 @@ class GraphStream:
         return RunResult(self.backend, outputs, counts, steps, self.t0_us, self.timestep_us,
                          {name: ex.output_latency(name) for name in wanted},
                          {name: ex.payload_of(name) for name in wanted},
-                         wall_time=time.perf_counter() - self._started, extra=dict(self.extra))
+                         extra=dict(self.extra)).timed_by(self._clock)
 
 
 class Collected:
@@ -200,7 +200,7 @@ class Collected:
 def run_in_packets(stream: GraphStream, events: np.ndarray, packet_events: int,
                    progress: ProgressCallback | None) -> RunResult:
     """Feed ``events`` in packets; the result holds every output's records and the counts."""
-    started = time.perf_counter()
+    clock = Stopwatch()
     collected = Collected()
     total = len(events)
     for lo in range(0, total, packet_events):
@@ -210,5 +210,4 @@ def run_in_packets(stream: GraphStream, events: np.ndarray, packet_events: int,
     result = stream.close()
     collected.add(result.outputs)
     result.outputs = collected.joined(result.payloads, stream._empty)
-    result.wall_time = time.perf_counter() - started
-    return result
+    return result.timed_by(clock)

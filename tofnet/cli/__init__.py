@@ -10,7 +10,7 @@ from tofnet.errors import TofnetError
 
 #: Subcommand modules, in the order ``tofnet --help`` lists them.
 SUBCOMMANDS = ("demo", "run", "simulate", "eval", "plot", "compile", "conformance", "info", "convert", "export",
-               "batch")
+               "batch", "warmup")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -38,6 +38,8 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "handler", None):
         parser.print_help()
         return 2
+    from tofnet.cli.progress import log_to_stderr
+    log_to_stderr(args.command)
     try:
         return int(args.handler(args) or 0)
     except TofnetError as err:

@@ -1,9 +1,40 @@
-"""Progress on stderr for long runs: a live line on a terminal, a few lines in a log."""
+"""Progress on stderr for long runs: a live line on a terminal, a few lines in a log; and notes
+(tofnet's log, e.g. "compiling kernels") on stderr between them."""
 
 from __future__ import annotations
 
+import logging
 import sys
 import time
+
+#: True while a terminal's live progress line has no newline yet (a note must start a new line).
+_open_line = [False]
+
+
+def note(text: str, stream=None) -> None:
+    """One line on stderr (or ``stream``), below a live progress line if one is showing."""
+    stream = stream or sys.stderr
+    stream.write(("\n" if _open_line[0] else "") + text + "\n")
+    stream.flush()
+    _open_line[0] = False
+
+
+class _NoteHandler(logging.Handler):
+    def emit(self, record: logging.LogRecord) -> None:
+        note(self.format(record))
+
+
+def log_to_stderr(command: str) -> None:
+    """Show tofnet's log (INFO and up: e.g. the first compile of kernels) as notes on stderr, never
+    on stdout, where some commands write data: ``tofnet COMMAND: message``."""
+    logger = logging.getLogger("tofnet")
+    for old in [h for h in logger.handlers if isinstance(h, _NoteHandler)]:
+        logger.removeHandler(old)
+    handler = _NoteHandler()
+    handler.setFormatter(logging.Formatter(f"tofnet {command}: %(message)s"))
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    logger.propagate = False
 
 
 class Progress:
@@ -13,6 +44,7 @@ class Progress:
         self.label, self.unit, self.delay = label, unit, delay
         self.stream = stream or sys.stderr
         self.started = time.perf_counter()
+        self.compiled0 = _compile_seconds()
         self.last_print = 0.0
         self.printed = False
         self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
@@ -27,17 +59,27 @@ class Progress:
             line = f"{self.label}: {_si(done)} {self.unit}  {now:5.1f} s elapsed"
         else:
             share = done / total if total else 1.0
-            eta = now / share - now if share > 0 else float("nan")
+            working = now - (_compile_seconds() - self.compiled0)  # compiling kernels is not the pace of the run
+            eta = working / share - working if share > 0 else float("nan")
             line = (f"{self.label}: {share:6.1%}  {_si(done)}/{_si(total)} {self.unit}  "
                     f"{now:5.1f} s elapsed, ~{eta:4.0f} s left")
         self.stream.write(("\r" + line) if self.tty else line + "\n")
         self.stream.flush()
         self.printed = True
+        _open_line[0] = self.tty and self.stream is sys.stderr
 
     def done(self) -> None:
-        if self.printed and self.tty:
+        if self.printed and self.tty and _open_line[0]:
             self.stream.write("\n")
             self.stream.flush()
+        _open_line[0] = False
+
+
+def _compile_seconds() -> float:
+    """Seconds this process spent compiling kernels so far (0 before any kernel was imported)."""
+    if "tofnet.kernels.compilation" not in sys.modules:  # importing it imports numba: not for that
+        return 0.0
+    return sys.modules["tofnet.kernels.compilation"].compile_seconds()
 
 
 def _si(n: int) -> str:

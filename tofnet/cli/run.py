@@ -87,9 +87,10 @@ def handle(args) -> int:
     from tofnet.cli.outputs import check_more_outputs, check_run_outputs
     from tofnet.cli.progress import Progress
     from tofnet.io.source import open_recording
+    from tofnet.kernels.compilation import Stopwatch
     from tofnet.monitor import Monitor
 
-    started = time.perf_counter()
+    clock = Stopwatch()
     check_run_outputs(args)
     monitors = [Monitor.parse(text, args.monitor_every) for text in args.monitor]
     with open_recording(args.recording, **input_options(args)) as source:
@@ -117,7 +118,8 @@ def handle(args) -> int:
     summary["rotation"] = rotation_line(network, recording, args)
     summary["undistortion"] = undistortion_of(network, recording, result, args)
     summary["notes"] = list(recording.notes)
-    summary["total_time_s"] = time.perf_counter() - started
+    summary["total_time_s"] = time.perf_counter() - clock.started
+    summary["compile_time_s"], summary["kernels_compiled"] = clock.compile_seconds, clock.compiled
     written = write_outputs(out, result, summary, args.record_tot, check=lambda paths: check_more_outputs(args, paths))
     summary["files"] = {name: str(path) for name, path in written.items()}
     print(format_summary(summary, result, written, network_width=network.sensor_size))
@@ -127,6 +129,12 @@ def handle(args) -> int:
         from tofnet.io.files import write_text_atomic
         write_text_atomic(args.json, json.dumps(summary, indent=2) + "\n")
     return 0
+
+
+def compile_line(seconds: float, kernels: int) -> str:
+    """The summary's line on kernels compiled during the command (first run only: numba caches them)."""
+    return (f"compile        {seconds:.3f} s  {kernels} kernels compiled, not counted in the network's time "
+            "(first run only: numba caches them; 'tofnet warmup' does it ahead)")
 
 
 def rotation_line(network, recording, args) -> str | None:
@@ -285,6 +293,8 @@ def format_summary(summary: dict, result, written: dict, network_width) -> str:
     lines.append(f"latency        {summary['latency_steps']} steps ({summary['latency_s'] * 1e3:g} ms)")
     lines.append(f"wall time      {summary['wall_time_s']:.3f} s network ({rate / 1e6:.2f} M events/s), "
                  f"{summary['total_time_s']:.3f} s in all")
+    if summary.get("kernels_compiled"):
+        lines.append(compile_line(summary["compile_time_s"], summary["kernels_compiled"]))
     out_of_bounds = summary["dropped"].get("out_of_bounds", 0)
     if out_of_bounds:
         lines.append(f"warning        {out_of_bounds:,} events lay outside the {width}x{height} sensor; "

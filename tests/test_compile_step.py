@@ -1,0 +1,80 @@
+"""The compile step is visible and apart: numba's first compile is announced on stderr (never stdout),
+counted by ``Stopwatch`` and kept out of the network's time; ``tofnet warmup`` runs registered warmers."""
+
+import logging
+import time
+
+import pytest
+from numba import njit
+
+from tofnet.cli import main
+from tofnet.errors import TofnetError
+from tofnet.kernels import compilation
+from tofnet.kernels.compilation import COMPILING, Stopwatch
+from tofnet.warmup import WARMERS, register_warmer, warm_up
+
+
+def fresh_kernel():
+    """A kernel numba has never seen (no cache): calling it compiles."""
+    @njit(cache=False)
+    def add_one(x):
+        return x + 1
+    return add_one
+
+
+def test_stopwatch_counts_a_compile_and_keeps_it_out_of_the_network_time():
+    kernel = fresh_kernel()
+    clock = Stopwatch()
+    assert kernel(1) == 2
+    assert clock.compiled == 1 and clock.compile_seconds > 0
+    compiled, seconds = clock.compiled, clock.compile_seconds
+    time.sleep(0.05)
+    kernel(2)  # compiled now: no new compile
+    assert clock.compiled == compiled and clock.compile_seconds == seconds
+    elapsed = time.perf_counter() - clock.started
+    assert clock.network_seconds() == pytest.approx(elapsed - seconds, abs=0.02)
+    assert clock.network_seconds() >= 0.05 - 0.01
+
+
+def test_first_compile_of_a_process_is_logged_once(caplog):
+    compilation._said.clear()
+    with caplog.at_level(logging.INFO, logger="tofnet.kernels"):
+        fresh_kernel()(1)
+        fresh_kernel()(1)
+    said = [r.getMessage() for r in caplog.records if r.name == "tofnet.kernels"]
+    assert said == [COMPILING]
+
+
+def test_warmup_command_reports_each_warmer_and_announces_on_stderr_only(capsys):
+    compilation._said.clear()
+    register_warmer("test-probe", lambda: fresh_kernel()(1) and "one fresh kernel")
+    try:
+        assert main(["warmup", "test-probe"]) == 0
+    finally:
+        del WARMERS["test-probe"]
+    out, err = capsys.readouterr()
+    assert "tofnet warmup: compiling kernels, first run only" in err
+    assert "compiling kernels" not in out
+    line = next(line for line in out.splitlines() if line.startswith("test-probe"))
+    assert "1 kernels compiled" in line and "one fresh kernel" in line
+    assert "done in" in out.splitlines()[-1]
+
+
+def test_warm_up_refuses_an_unknown_warmer():
+    with pytest.raises(TofnetError, match="unknown warmer 'nope'; expected one of backends"):
+        warm_up(["nope"])
+
+
+def test_run_summary_keeps_compile_time_apart_and_out_of_the_depth_file_facts():
+    from tofnet.api import run
+    from tofnet.io.recording import Recording
+    from tofnet.networks import depth_network
+    from tofnet.testing import TEST_INTRINSICS, moving_edge
+
+    recording = Recording(moving_edge((16, 12), -50.0, "u"), intrinsics=TEST_INTRINSICS)
+    network = depth_network((16, 12), velocity={"source": "constant", "velocity": [-0.1, 0.0, 0.0]})
+    result, _ = run(recording, network)
+    summary = result.summary()
+    assert summary["compile_time_s"] == result.compile_time >= 0
+    assert summary["kernels_compiled"] == result.kernels_compiled
+    assert not {"compile_time_s", "kernels_compiled", "wall_time_s"} & set(result.facts())

@@ -1,0 +1,28 @@
+"""``tofnet warmup``: compile every kernel ahead (numba caches them on disk), so no later run waits for it."""
+
+from __future__ import annotations
+
+import time
+
+
+def register(subparsers) -> None:
+    from tofnet.warmup import WARMERS
+
+    p = subparsers.add_parser("warmup", help="compile every kernel ahead (once per install; later runs start at once)",
+                              description="Compile the numba kernels of every backend family and of the simulator "
+                                          "(20-60 s on a fresh install; numba caches them, so this runs once). Runs "
+                                          "compile what they need themselves; this only moves the wait ahead.")
+    p.add_argument("only", nargs="*", metavar="WARMER", help=f"warm only these ({', '.join(WARMERS)}; default: all)")
+    p.set_defaults(handler=handle)
+
+
+def handle(args) -> int:
+    from tofnet.warmup import warm_up
+
+    started = time.perf_counter()
+    print("warming up every kernel tofnet runs (once per install: numba caches them) ...", flush=True)
+    done = warm_up(args.only or None, report=lambda warmed: print(warmed.line(), flush=True))
+    compiled = sum(w.compiled for w in done)
+    print(f"done in {time.perf_counter() - started:.1f} s: {compiled} kernels compiled"
+          + ("" if compiled else " (all were already in numba's cache)"))
+    return 0

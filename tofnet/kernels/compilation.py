@@ -1,0 +1,97 @@
+"""Watching numba compile (or load from its cache) tofnet's kernels, so runs can say so and not count it.
+
+numba compiles a kernel on its first call with new argument types and keeps the machine
+code on disk (``cache=True``): the first run on a fresh install pays 20-40 s, later runs
+load the cache in a fraction of a second. numba announces both through its event API: the
+compiler lock is held for a compile or a cache load (``numba:compiler_lock``), and a real
+compile, a cache miss, is ``numba:compile``. One listener per process, registered when this
+package is imported, adds up the seconds under the lock and counts the misses; a
+``Stopwatch`` takes the difference over a run. The first miss of a process is logged (logger
+``tofnet.kernels``, level INFO) the moment it starts, so a command can say "compiling kernels".
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import Callable
+
+from numba.core import event
+
+__all__ = ["COMPILING", "Stopwatch", "compile_seconds", "kernels_compiled"]
+
+#: What the log says when a process starts compiling its first kernel.
+COMPILING = "compiling kernels, first run only (20-60 s; numba caches them; 'tofnet warmup' does it ahead) ..."
+
+
+class _Watch(event.Listener):
+    """Adds up the time of the outermost events of one kind (numba nests them) and counts them."""
+
+    def __init__(self, on_first_start: Callable[[], None] | None = None):
+        self.seconds, self.count = 0.0, 0
+        self._depth: dict[int, int] = {}
+        self._opened: dict[int, float] = {}
+        self.on_start_hook = on_first_start
+
+    def on_start(self, ev) -> None:
+        me = threading.get_ident()
+        self._depth[me] = self._depth.get(me, 0) + 1
+        if self._depth[me] == 1:
+            self._opened[me] = time.perf_counter()
+            if self.on_start_hook is not None:
+                self.on_start_hook()
+
+    def on_end(self, ev) -> None:
+        me = threading.get_ident()
+        self._depth[me] -= 1
+        if self._depth[me] == 0:
+            self.seconds += time.perf_counter() - self._opened.pop(me)
+            self.count += 1
+
+
+_said: list[bool] = []
+
+
+def _first_compile() -> None:
+    if not _said:  # once per process: later compiles are part of the same wait
+        _said.append(True)
+        logging.getLogger("tofnet.kernels").info(COMPILING)
+
+
+_LOCK = _Watch()                                  # compiles and cache loads: the time a run did not spend running
+_COMPILES = _Watch(on_first_start=_first_compile)  # cache misses only: real compilation
+event.register("numba:compiler_lock", _LOCK)
+event.register("numba:compile", _COMPILES)
+
+
+def compile_seconds() -> float:
+    """Seconds this process has spent compiling kernels or loading them from numba's cache."""
+    return _LOCK.seconds
+
+
+def kernels_compiled() -> int:
+    """Kernels this process compiled (numba cache misses), not counting those loaded from the cache."""
+    return _COMPILES.count
+
+
+class Stopwatch:
+    """Wall time since creation, split into the network's time and the time spent on kernels (s)."""
+
+    def __init__(self) -> None:
+        self.started = time.perf_counter()
+        self._compile0, self._count0 = _LOCK.seconds, _COMPILES.count
+
+    @property
+    def compile_seconds(self) -> float:
+        """Seconds spent compiling or loading kernels since the start."""
+        return _LOCK.seconds - self._compile0
+
+    @property
+    def compiled(self) -> int:
+        """Kernels compiled (cache misses) since the start."""
+        return _COMPILES.count - self._count0
+
+    def network_seconds(self) -> float:
+        """Seconds since the start, less those spent on kernels (never below 0)."""
+        return max(0.0, time.perf_counter() - self.started - self.compile_seconds)

@@ -1,0 +1,130 @@
+"""Compiling every kernel ahead (``tofnet warmup``), so that no run pays numba's first-call compile.
+
+numba compiles a kernel the first time it is called with new argument types and caches the
+machine code on disk (``tofnet.kernels.compilation``). A warmer is a function that calls some
+kernels on tiny inputs through the code paths real runs take, so that numba compiles exactly
+the signatures they need; ``register_warmer`` adds one (a new area of tofnet, or a user's
+package with kernels of its own). The built-in warmers are generic: every conformance case
+(which covers every built-in process and graph) on each in-process backend family, and every
+built-in simulator scenario for a few milliseconds through the pipeline of ``tofnet demo``
+(simulate, write, read, run each built-in estimator, score).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Callable, Iterable
+
+from tofnet.errors import TofnetError
+
+#: name -> warmer: a function that exercises some kernels and returns what it ran, in a few words.
+WARMERS: dict[str, Callable[[], str]] = {}
+
+
+def register_warmer(name: str, warm: Callable[[], str]) -> None:
+    """Make ``warm()`` part of ``tofnet warmup`` as ``name`` (replacing a warmer of that name)."""
+    WARMERS[name] = warm
+
+
+@dataclass
+class Warmed:
+    """What one warmer did: what it ran, its seconds in all, the seconds spent compiling or loading
+    kernels from numba's cache, and the kernels it compiled (0: all were in the cache)."""
+
+    name: str
+    what: str
+    seconds: float
+    compile_seconds: float
+    compiled: int
+
+    def line(self) -> str:
+        how = (f"{self.compiled} kernels compiled in {self.compile_seconds:.1f} s" if self.compiled
+               else f"already compiled (cache loaded in {self.compile_seconds:.1f} s)")
+        return f"{self.name:<12} {self.seconds:6.1f} s  {how}: {self.what}"
+
+
+def warm_up(names: Iterable[str] | None = None, report: Callable[[Warmed], None] | None = None) -> list[Warmed]:
+    """Run the warmers called ``names`` (all when None), calling ``report`` after each; what each did."""
+    from tofnet.kernels.compilation import Stopwatch
+
+    chosen = list(WARMERS) if names is None else list(names)
+    unknown = [name for name in chosen if name not in WARMERS]
+    if unknown:
+        raise TofnetError(f"unknown warmer {unknown[0]!r}; expected one of {', '.join(WARMERS)}")
+    done = []
+    for name in chosen:
+        clock = Stopwatch()
+        what = WARMERS[name]()
+        done.append(Warmed(name, what, time.perf_counter() - clock.started, clock.compile_seconds, clock.compiled))
+        if report is not None:
+            report(done[-1])
+    return done
+
+
+def _families_warmer(backends: tuple[str, ...]) -> Callable[[], str]:
+    def warm() -> str:
+        from tofnet.backends.registry import get_backend
+        from tofnet.compiler import compile_network
+        from tofnet.conformance import CASES
+
+        scenes = {}
+        for case in CASES:  # one case per code path: many differ only in numbers (speeds, sizes)
+            scene = case.build()
+            scenes.setdefault(_code_path(scene), scene)
+        for backend in backends:
+            runner = get_backend(backend)
+            for scene in scenes.values():
+                runner.run(compile_network(scene.network, patch=scene.patch), scene.recording, record_tot=True)
+        return (f"{len(scenes)} of the {len(CASES)} conformance cases (every built-in process and graph) "
+                f"on {', '.join(backends)}")
+    return warm
+
+
+def _code_path(scene) -> tuple:
+    """What decides which kernels a scene calls: its processes' types, connections and choices (the
+    parameters that are words or flags; numbers only change values), and what its recording carries."""
+    network = scene.network
+    processes = tuple(sorted((type(p).__name__, tuple(sorted((k, repr(v)) for k, v in p.values.items()
+                                                             if isinstance(v, (str, bool)) or v is None)))
+                             for p in network.processes))
+    edges = tuple(sorted((type(a.process).__name__, a.name, type(b.process).__name__, b.name)
+                         for a, b in network.connections()))
+    recording = scene.recording
+    return processes, edges, recording.trajectory is not None, recording.imu is not None
+
+
+def _pipeline() -> str:
+    import tempfile
+    from pathlib import Path
+
+    from tofnet.api import ESTIMATORS, run
+    from tofnet.eval.metrics import evaluate
+    from tofnet.io import read_recording
+    from tofnet.io.source import open_recording
+    from tofnet.sim import built_in_scenarios
+    from tofnet.sim.run import simulate
+
+    names = list(built_in_scenarios())
+    with tempfile.TemporaryDirectory(prefix="tofnet-warmup-") as tmp:
+        for name in names:
+            folder = Path(tmp) / name
+            if not simulate(name, folder, duration=PIPELINE_S, sensor_size=(24, 18))["events"]:
+                continue  # a far scene sees no edge this soon; the others call the same kernels
+            with open_recording(folder) as source:  # streamed, as `tofnet run` reads a file that names its size
+                for _ in source.chunks():
+                    pass
+            recording = read_recording(folder)
+            for estimator in ESTIMATORS:
+                result, _ = run(recording, estimator=estimator)
+                evaluate(recording, result.depth, {"t0_us": result.t0_us, "timestep_us": result.timestep_us,
+                                                   "latency_steps": result.latency_steps})
+    return (f"{len(names)} simulator scenarios ({PIPELINE_S * 1e3:g} ms at 24x18 px) written, read, run with "
+            f"{len(ESTIMATORS)} built-in estimators and scored")
+
+
+#: Seconds of each scenario the pipeline warmer simulates (enough for events in every one).
+PIPELINE_S = 0.02
+
+register_warmer("backends", _families_warmer(("float", "fixed")))
+register_warmer("pipeline", _pipeline)
