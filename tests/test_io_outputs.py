@@ -113,7 +113,7 @@ def test_cli_export_maps_and_cloud(tmp_path, capsys):
                  "--ply", str(tmp_path / "cloud.ply")]) == 0
     out = capsys.readouterr().out
     assert "2 windows of 10ms" in out and "2 points (camera frame)" in out
-    assert sorted(p.name for p in (tmp_path / "maps").iterdir())[:3] == ["age_000000.npy", "age_000001.npy",
-                                                                        "depth_000000.npy"]
+    assert sorted(p.name for p in (tmp_path / "maps").iterdir())[:4] == [".tofnet-manifest.json", "age_000000.npy",
+                                                                        "age_000001.npy", "depth_000000.npy"]
     assert main(["export", str(tmp_path / "depth.npz")]) == 2
     assert "nothing to do" in capsys.readouterr().err

@@ -299,7 +299,7 @@ def test_export_and_info_refuse_to_clobber(tmp_path, capsys):
     (tmp_path / "maps").mkdir()
     (tmp_path / "maps" / "index.csv").write_text("old")
     assert main(["export", str(depth), "--recording", str(path), "--maps", str(tmp_path / "maps")]) == 2
-    assert "already holds maps" in capsys.readouterr().err
+    assert "'index.csv', which tofnet did not write" in capsys.readouterr().err
     assert (tmp_path / "cloud.ply").read_text() == "precious"
 
 

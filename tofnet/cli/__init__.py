@@ -39,9 +39,12 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     from tofnet.cli.progress import log_to_stderr
+    from tofnet.io.guard import reading
+
     log_to_stderr(args.command)
     try:
-        return int(args.handler(args) or 0)
+        with reading():  # the files the command reads, which no output may replace
+            return int(args.handler(args) or 0)
     except TofnetError as err:
         print(f"tofnet {args.command}: error: {err}", file=sys.stderr)
         return 2

@@ -56,6 +56,7 @@ def handle(args) -> int:
             # The camera only; the events only when the sensor size must come from their extent.
             recording = source.metadata() if source.sensor_size is not None else source.read()
             bounds = source.window
+        check_export_outputs(args)  # the files it read (groundtruth.txt, ...) are inputs too
     elif args.ply or not args.sensor_size or window is not None:
         raise TofnetError("--recording is needed (the depth file does not name its recording)")
     if bounds is not None:
@@ -94,21 +95,15 @@ def pixels_of(option: str | None, meta: dict) -> str:
 
 
 def check_export_outputs(args) -> None:
-    """Before any work: ``--ply`` like every output (``tofnet.io.files.check_output``), and a
-    ``--maps`` folder that can be written and holds no maps yet (unless ``--force``)."""
+    """``--ply`` and ``--maps`` like every output (``tofnet.io.files.check_output``): never
+    an input (the depth file, the recording's files, and every file read so far), and a
+    ``--maps`` folder only when new, empty, or an earlier export's (with ``--force``).
+    Run before any work, and again once the recording is read (its side files)."""
     from tofnet.io.ecd import recording_files
-    from tofnet.io.files import check_folder_writable, check_output
+    from tofnet.io.files import check_output
 
     inputs = [Path(args.depth)] + (recording_files(args.recording) if args.recording else [])
     if args.ply:
         check_output(args.ply, force=args.force, inputs=inputs, what="--ply")
     if args.maps:
-        folder = Path(args.maps)
-        if folder.exists() and not folder.is_dir():
-            raise TofnetError(f"--maps: {folder} exists and is not a folder")
-        if folder.is_dir() and not args.force:
-            old = [p.name for p in folder.iterdir() if p.name == "index.csv" or
-                   p.name.startswith(("depth_", "age_")) and p.suffix in (".npy", ".png")]
-            if old:
-                raise TofnetError(f"--maps: {folder} already holds maps ({old[0]}, ...); pass --force to replace them")
-        check_folder_writable(folder, "--maps")
+        check_output(args.maps, force=args.force, inputs=inputs, what="--maps", folder=True)

@@ -7,16 +7,17 @@ from pathlib import Path
 from tofnet.errors import TofnetError, quote
 
 
-def check_run_outputs(args) -> None:
+def check_run_outputs(args, network=None) -> None:
     """``tofnet run``: refuse, before reading anything, outputs that cannot or must not be
     written (``--out``, ``--json``, the ``--record-tot`` and ``--probe`` files); the run would otherwise
-    fail only at its end. See ``tofnet.io.files.check_output``."""
+    fail only at its end. Run again once the ``network`` is built: the files its processes
+    will read, and the files read so far, are inputs too. See ``tofnet.io.files.check_output``."""
     from tofnet.io.files import check_output, distinct_outputs
 
     out = Path(args.out)
     outputs = _early_outputs(args)
     distinct_outputs(outputs)
-    inputs = _run_inputs(args)
+    inputs = _run_inputs(args) + (network_files(network) if network is not None else [])
     for option, path in outputs.items():
         if path is not None:
             check_output(path, force=args.force, inputs=inputs, what=option)
@@ -28,6 +29,17 @@ def _run_inputs(args) -> list[Path]:
     from tofnet.io.ecd import recording_files
 
     return recording_files(args.recording) + ([Path(args.spec)] if args.spec else [])
+
+
+def network_files(network) -> list[Path]:
+    """The files the processes of ``network`` will read (parameters declared ``reads_file``)."""
+    files = []
+    for process in network.processes:
+        for param in process.params:
+            value = process.values.get(param.name) if param.reads_file else None
+            if value is not None:
+                files.append(Path(value))
+    return files
 
 
 def _early_outputs(args) -> dict[str, Path | None]:

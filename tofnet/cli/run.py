@@ -100,6 +100,7 @@ def handle(args) -> int:
         recording = source.metadata() if streaming else source.read()
         network, compile_options, spec_backend, backend_options = build_network(args, recording.sensor_size,
                                                                                  recording)
+        check_run_outputs(args, network)  # again: the files the recording, the spec and the network read
         backend = args.backend or spec_backend or DEFAULT_BACKEND
         if args.backend and args.backend != spec_backend:
             backend_options = {}  # the spec's options belong to the spec's backend

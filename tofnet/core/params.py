@@ -33,6 +33,7 @@ class Param:
     minimum: float | None = None
     maximum: float | None = None
     optional: bool = False  # None is an accepted value
+    reads_file: bool = False  # the value names a file the process reads (protected from outputs)
 
     def coerce(self, value: Any, owner: str) -> Any:
         """Return ``value`` converted to this parameter's kind, or raise naming the field."""

@@ -178,20 +178,36 @@ def write_aedat4(path: str | Path, chunks: Iterable[np.ndarray], meta) -> int:
     description = [aedat.DescriptionNode(name="outInfo", path="/mainloop/Recorder/outInfo/", attributes={},
                                          nodes=tracks)]
     written = 0
-    with aedat.Encoder(path=path, description=description, compression=aedat.LZ4_DEFAULT) as encoder:
-        for chunk in chunks:
-            if len(chunk) == 0:
-                continue
-            if chunk["t"][0] < 0:
-                raise DataError(located(path, None, f"AEDAT4 stores times >= 0 µs, got {int(chunk['t'][0])}"))
-            packet = np.empty(len(chunk), dtype=faery.EVENTS_DTYPE)
-            packet["t"], packet["x"], packet["y"], packet["on"] = chunk["t"], chunk["x"], chunk["y"], chunk["p"] == 1
-            encoder.write(0, packet)
-            written += len(chunk)
-        if meta.imu is not None:
-            for packet in _imu_packets(meta.imu):
-                encoder.write(1, packet)
+    try:
+        with aedat.Encoder(path=path, description=description, compression=aedat.LZ4_DEFAULT) as encoder:
+            for chunk in chunks:
+                if len(chunk) == 0:
+                    continue
+                if chunk["t"][0] < 0:
+                    raise DataError(located(path, None, f"AEDAT4 stores times >= 0 µs, got {int(chunk['t'][0])}"))
+                packet = np.empty(len(chunk), dtype=faery.EVENTS_DTYPE)
+                packet["t"], packet["x"], packet["y"], packet["on"] = (chunk["t"], chunk["x"], chunk["y"],
+                                                                       chunk["p"] == 1)
+                encoder.write(0, packet)
+                written += len(chunk)
+            if meta.imu is not None:
+                for packet in _imu_packets(meta.imu):
+                    encoder.write(1, packet)
+    except RuntimeError as err:  # faery reports I/O errors as "... (os error N)"
+        raise _os_error(err, path) from None
     return written
+
+
+def _os_error(err: RuntimeError, path) -> Exception:
+    """The ``OSError`` behind the encoder's ``RuntimeError`` (a full disk), else a one-line ``DataError``."""
+    import os
+    import re
+
+    found = re.search(r"\(os error (\d+)\)", str(err))
+    if found:
+        code = int(found.group(1))
+        return OSError(code, os.strerror(code))
+    return DataError(located(path, None, f"the AEDAT4 encoder failed: {quote(reason(err), 80)}"))
 
 
 def _track_node(track: int, type_id: str, name: str, info: dict):

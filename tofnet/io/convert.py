@@ -68,7 +68,7 @@ def convert(source: EventSource, out: str | Path, *, force: bool = False,
             write_npy(_depth_path(out), recording.gt_depth)
             messages.append(f"true depth per event -> {_depth_path(out)}")
     else:
-        with atomic_path(out, folder=kind == "ecd") as partial:
+        with atomic_path(out, folder=kind == "ecd", written_by="tofnet convert") as partial:
             if kind == "ecd":
                 meta = recording = source.read(progress)
                 count = len(recording.events)
@@ -88,7 +88,7 @@ def convert(source: EventSource, out: str | Path, *, force: bool = False,
             if count == 0:
                 raise DataError(located(source.path, None, "no events"))
     if kind == "aedat4":
-        _side_files(out.parent, meta, messages, force)
+        _side_files(out.parent, meta, messages, force, source.path)
     return [f"wrote {count:,} events to {out} ({kind})"] + messages
 
 
@@ -121,10 +121,12 @@ def _write_imu(path: Path, imu) -> None:
     _write_rows(path, imu, "# t ax ay az gx gy gz  (s, m/s², rad/s)")
 
 
-def _side_files(folder: Path, meta, messages: list[str], force: bool) -> None:
-    """ECD ``calib.txt``/``groundtruth.txt`` next to a file that cannot hold them."""
+def _side_files(folder: Path, meta, messages: list[str], force: bool, input_path: Path) -> None:
+    """ECD ``calib.txt``/``groundtruth.txt`` next to a file that cannot hold them (never over an input)."""
     from tofnet.io.calibration import write_calibration
+    from tofnet.io.ecd import recording_files
     from tofnet.io.groundtruth import write_groundtruth
+    from tofnet.io.guard import input_among
 
     writes = []
     intrinsics = _text_calibration(meta.intrinsics, messages)
@@ -133,7 +135,11 @@ def _side_files(folder: Path, meta, messages: list[str], force: bool) -> None:
     if meta.trajectory is not None and hasattr(meta.trajectory, "quaternions"):
         t = meta.trajectory
         writes.append(("groundtruth.txt", lambda p: write_groundtruth(p, t.times, t.positions, t.quaternions)))
+    inputs = [input_path, *recording_files(input_path)]
     for name, write in writes:
+        if input_among(folder / name, inputs) is not None:
+            messages.append(f"NOT written: {folder / name} is an input of this conversion")
+            continue
         if (folder / name).exists() and not force:
             messages.append(f"NOT written: {folder / name} exists (use --force to replace it)")
             continue

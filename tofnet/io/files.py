@@ -19,7 +19,8 @@ import tempfile
 from pathlib import Path
 from typing import IO, Iterable, Iterator
 
-from tofnet.errors import DataError, located
+from tofnet.errors import DataError, located, quote
+from tofnet.io.guard import MANIFEST, foreign_entries, input_among, inputs_under, note_read, write_manifest
 
 
 def _reason(err: OSError) -> str:
@@ -56,6 +57,7 @@ def open_regular(path: str | Path, what: str = "file") -> IO[bytes]:
             raise DataError(located(path, None, f"is {_kind(mode)}, expected a regular {what}"))
         if hasattr(os, "set_blocking"):
             os.set_blocking(fd, True)
+        note_read(path, fd)  # protected from this command's outputs (tofnet.io.guard)
         return os.fdopen(fd, "rb")
     except BaseException:
         os.close(fd)
@@ -126,6 +128,7 @@ def atomic_write(path: str | Path, mode: str = "wb", encoding: str | None = None
             handle.flush()
             os.fsync(handle.fileno())
         os.chmod(tmp, 0o666 & ~_umask())
+        refuse_input(path)
         os.replace(tmp, path)
     except BaseException as err:
         with contextlib.suppress(OSError):
@@ -147,13 +150,14 @@ def _sync_folder(folder: Path) -> None:
 
 
 @contextlib.contextmanager
-def atomic_path(path: str | Path, folder: bool = False) -> Iterator[Path]:
-    """``atomic_write`` for writers that need a name (h5py, faery) or a whole folder (ECD).
+def atomic_path(path: str | Path, folder: bool = False, written_by: str = "tofnet") -> Iterator[Path]:
+    """``atomic_write`` for writers that need a name (h5py, faery) or a whole folder (ECD, maps).
 
     Yields a temporary path in the destination folder (an empty folder when ``folder``);
-    on success the file is ``fsync``-ed and renamed to ``path`` (an existing folder at
-    ``path`` is removed first: callers check ``--force`` before), on any error it is
-    removed and ``path`` is untouched.
+    on success the file is ``fsync``-ed and renamed to ``path``, on any error it is
+    removed and ``path`` is untouched. A folder gets a manifest (``tofnet.io.guard``,
+    ``written_by`` says what wrote it) and replaces an existing folder at ``path`` only
+    when that holds nothing but what tofnet wrote there (callers check ``--force`` before).
     """
     path = Path(path)
     try:
@@ -169,9 +173,9 @@ def atomic_path(path: str | Path, folder: bool = False) -> Iterator[Path]:
     try:
         yield tmp
         if folder:
+            write_manifest(tmp, written_by)
             os.chmod(tmp, 0o777 & ~_umask())
-            if path.is_dir() and not path.is_symlink():
-                shutil.rmtree(path)
+            _replace_folder(tmp, path)
         else:
             fd = os.open(tmp, os.O_RDONLY)
             try:
@@ -179,14 +183,110 @@ def atomic_path(path: str | Path, folder: bool = False) -> Iterator[Path]:
             finally:
                 os.close(fd)
             os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, path)
+            refuse_input(path)
+            os.replace(tmp, path)
     except BaseException as err:
         with contextlib.suppress(OSError):
             shutil.rmtree(tmp) if tmp.is_dir() else os.unlink(tmp)
         if isinstance(err, OSError):
             raise DataError(located(path, None, f"cannot write: {_reason(err)}")) from None
+        if isinstance(err, DataError) and str(tmp) in str(err):  # name the output, not its temporary copy
+            raise DataError(str(err).replace(str(tmp), str(path))) from None
         raise
     _sync_folder(path.parent)
+
+
+def _replace_folder(tmp: Path, path: Path) -> None:
+    """Rename the finished folder ``tmp`` to ``path``; an existing folder there is moved
+    aside first and removed after, and only when it holds nothing tofnet did not write."""
+    if not (path.is_dir() and not path.is_symlink()):
+        refuse_input(path)
+        os.replace(tmp, path)
+        return
+    _refuse_foreign(path, "output")
+    held = inputs_under(path)
+    if held is not None:
+        raise DataError(located(path, None, f"output would replace a folder holding the input {held}; "
+                                            "choose another name"))
+    old = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".old.part"))
+    os.replace(path, old / "previous")
+    os.replace(tmp, path)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def refuse_input(path: str | Path, what: str = "output") -> None:
+    """Refuse to replace ``path`` when the command read it (``tofnet.io.guard``)."""
+    source = input_among(path)
+    if source is not None:
+        raise DataError(located(path, None, f"{what} would overwrite the input {source}; choose another name"))
+
+
+def _refuse_foreign(folder: Path, what: str) -> None:
+    foreign = foreign_entries(folder)
+    if foreign:
+        more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
+        raise DataError(located(folder, None, f"{what} is a folder holding {quote(foreign[0])}{more}, which tofnet "
+                                              f"did not write (not in its {MANIFEST}); tofnet replaces only "
+                                              "an empty folder or one it wrote: choose another name"))
+
+
+class LenientFile:
+    """A file for a library that writes through Python (h5py's file-object driver) and
+    cannot survive a failed write: libhdf5 whose close fails on a full disk stays half
+    open and crashes the interpreter later (SIGSEGV). A failed write here is remembered
+    (``error``), and every write after it is dropped, so the library closes cleanly; the
+    caller stops early and raises ``error`` once the library is closed. Unbuffered, so
+    the error is seen at the write that fails.
+    """
+
+    def __init__(self, path: str | Path):
+        self.handle = open(path, "w+b", buffering=0)
+        self.error: OSError | None = None
+
+    def write(self, data) -> int:
+        if self.error is None:
+            try:
+                view = memoryview(data)
+                done = 0
+                while done < len(view.cast("B")):
+                    done += self.handle.write(view.cast("B")[done:])
+            except OSError as err:
+                self.error = err
+        return len(memoryview(data).cast("B"))
+
+    def readinto(self, buffer) -> int:
+        return self.handle.readinto(buffer)
+
+    def read(self, size: int = -1) -> bytes:
+        return self.handle.read(size)
+
+    def seek(self, offset: int, whence: int = 0) -> int:
+        return self.handle.seek(offset, whence)
+
+    def tell(self) -> int:
+        return self.handle.tell()
+
+    def truncate(self, size: int | None = None) -> int:
+        if self.error is None:
+            try:
+                return self.handle.truncate(size)
+            except OSError as err:
+                self.error = err
+        return size if size is not None else self.tell()
+
+    def flush(self) -> None:
+        pass  # unbuffered
+
+    def close(self) -> None:
+        self.handle.close()
+
+    def __enter__(self) -> "LenientFile":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+        if exc[0] is None and self.error is not None:
+            raise self.error
 
 
 def write_text_atomic(path: str | Path, text: str) -> None:
@@ -197,36 +297,29 @@ def write_text_atomic(path: str | Path, text: str) -> None:
 
 # ---------------------------------------------------------------- checking outputs before the work
 
-def same_file(a: str | Path, b: str | Path) -> bool:
-    """Whether two paths name the same file: same resolved path, or same inode (hard links)."""
-    a, b = Path(a), Path(b)
-    if a.resolve() == b.resolve():
-        return True
-    try:
-        return os.path.samefile(a, b)
-    except OSError:
-        return False
-
-
 def check_output(path: str | Path, *, force: bool = False, inputs: Iterable[str | Path] = (),
                  what: str = "output", option: str = "--force", folder: bool = False) -> Path:
     """Check that ``path`` can be written, before any work is done; returns it.
 
     Refused: a path that is a folder, one under a file, one whose nearest existing
-    folder is not writable, an input file (same path or inode; even with ``force``),
-    and an existing file unless ``force``. With ``folder`` the output is a whole folder
-    (an ECD recording): an existing folder is replaced only with ``force``, and never
-    one that holds an input.
+    folder is not writable or has no free space, an input file (listed in ``inputs`` or
+    read so far by the command, ``tofnet.io.guard``; same path or inode; even with
+    ``force``), and an existing file unless ``force``. With ``folder`` the output is a
+    whole folder (an ECD recording, depth maps): an existing folder that is not empty is
+    replaced only with ``force``, only when it holds nothing but what tofnet wrote there
+    (its manifest), and never when it holds an input.
     """
     path = Path(path)
     if path.name in ("", ".", "..") or "\x00" in str(path):
         raise DataError(located(path, None, f"{what}: expected a {'folder' if folder else 'file'} name"))
-    inputs = [source for source in inputs if "\x00" not in str(source)]  # such a name cannot exist
-    for source in inputs:
-        if (path.exists() or path.is_symlink()) and Path(source).exists() and same_file(path, source):
-            raise DataError(located(path, None, f"{what} would overwrite the input {source}; choose another name"))
-        if folder and Path(source).exists() and Path(source).resolve().is_relative_to(path.resolve()):
-            raise DataError(located(path, None, f"{what} would replace a folder holding the input {source}; "
+    inputs = list(inputs)
+    source = input_among(path, inputs) if path.exists() or path.is_symlink() else None
+    if source is not None:
+        raise DataError(located(path, None, f"{what} would overwrite the input {source}; choose another name"))
+    if folder:
+        held = inputs_under(path, inputs) if path.is_dir() and not path.is_symlink() else None
+        if held is not None:
+            raise DataError(located(path, None, f"{what} would replace a folder holding the input {held}; "
                                                 "choose another name"))
     if path.is_dir() and not folder:
         raise DataError(located(path, None, f"{what} is a folder, expected a file name"))
@@ -235,7 +328,9 @@ def check_output(path: str | Path, *, force: bool = False, inputs: Iterable[str 
         if wrong_kind:
             kind = "folder" if folder else "regular file"
             raise DataError(located(path, None, f"{what} exists and is not a {kind}"))
-        if not force:
+        if folder:
+            _refuse_foreign(path, what)
+        if not force and not (folder and not any(path.iterdir())):
             raise DataError(located(path, None, f"{what} exists; pass {option} to overwrite it"))
     check_folder_writable(path.parent, what)
     return path
@@ -253,14 +348,30 @@ def check_folder_writable(folder: str | Path, what: str = "output") -> None:
         raise DataError(located(folder, None, f"{what}: cannot create a folder under {probe}, which is a file"))
     if not os.access(probe, os.W_OK | os.X_OK):
         raise DataError(located(probe, None, f"{what}: the folder is not writable"))
-    if probe == folder:
-        # Permission bits do not show a read-only mount or a full disk: try a file.
-        try:
-            fd, tmp = tempfile.mkstemp(dir=folder, prefix=".tofnet-probe.", suffix=".part")
-            os.close(fd)
-            os.unlink(tmp)
-        except OSError as err:
-            raise DataError(located(folder, None, f"{what}: cannot write in this folder: {_reason(err)}")) from None
+    # Permission bits do not show a read-only mount (nor root's limits): try a file.
+    try:
+        fd, tmp = tempfile.mkstemp(dir=probe, prefix=".tofnet-probe.", suffix=".part")
+        os.close(fd)
+        os.unlink(tmp)
+    except OSError as err:
+        raise DataError(located(probe, None, f"{what}: cannot write in this folder: {_reason(err)}")) from None
+    check_free_space(probe, what)
+
+
+#: Bytes a file system must have free for an output to be started (a full one is refused
+#: before the work, not when the first block is written).
+MIN_FREE_BYTES = 1 << 20
+
+
+def check_free_space(folder: str | Path, what: str = "output", needed: int = MIN_FREE_BYTES) -> None:
+    """Refuse a folder on a file system with less than ``needed`` bytes free (when it says)."""
+    try:
+        usage = shutil.disk_usage(folder)
+    except OSError:
+        return
+    if usage.free < needed:
+        raise DataError(located(folder, None, f"{what}: the file system is full ({usage.free:,} bytes free, "
+                                              f"at least {needed:,} needed)"))
 
 
 def distinct_outputs(paths: dict[str, str | Path | None]) -> None:

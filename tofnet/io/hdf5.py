@@ -260,12 +260,18 @@ def write_hdf5(path: str | Path, chunks: Iterable[np.ndarray], meta) -> int:
     """
     h5py = require("h5py", path)
     written, next_ms, t_offset = 0, 0, None
-    with h5py.File(path, "w") as out:
+    from tofnet.io.files import LenientFile
+
+    # Through LenientFile: a failed write (a full disk) is raised once libhdf5 has closed
+    # the file; raised inside libhdf5 it crashes the interpreter later (SIGSEGV).
+    with LenientFile(path) as handle, h5py.File(handle, "w") as out:
         columns = {name: out.create_dataset(f"events/{name}", shape=(0,), maxshape=(None,), dtype=dtype,
                                             chunks=(1 << 16,))
                    for name, dtype in (("t", "<i8"), ("x", "<u2"), ("y", "<u2"), ("p", "u1"))}
         ms_to_idx = out.create_dataset("ms_to_idx", shape=(0,), maxshape=(None,), dtype="<u8", chunks=(1 << 12,))
         for chunk in chunks:
+            if handle.error is not None:
+                break  # nothing more can be written; raised once closed
             if len(chunk) == 0:
                 continue
             if t_offset is None:

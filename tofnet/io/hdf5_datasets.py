@@ -89,6 +89,9 @@ def _companion(path: Path, stem_suffix: str, suffixes: tuple[str, ...]) -> Path 
 class _GroundTruthMixin:
     def _open_gt(self, gt_path: Path):
         import h5py
+
+        from tofnet.io.guard import note_read
+        note_read(gt_path)  # h5py opens it: protected from the command's outputs all the same
         try:
             return h5py.File(gt_path, "r")
         except OSError as err:

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tofnet.errors import DataError, located
+from tofnet.errors import DataError
 
 #: Largest depth a 16-bit millimetre PNG holds, m.
 PNG_MAX_DEPTH = 65.535
@@ -99,29 +99,28 @@ def write_png16(path: str | Path, image: np.ndarray) -> None:
 def write_depth_maps(maps: Iterator[DepthMap], folder: str | Path, *, png: bool = True) -> dict:
     """Write ``depth_<k>.npy``, ``age_<k>.npy`` (and ``depth_<k>.png``) per window and ``index.csv``.
 
-    ``index.csv``: ``window,t_start_s,t_end_s,pixels_with_depth,estimates_in_window``.
+    The folder is written as a whole (``tofnet.io.files.atomic_path``): it replaces an
+    earlier export's folder, leaving exactly the new files, and never a folder holding
+    files tofnet did not write there. ``index.csv``:
+    ``window,t_start_s,t_end_s,pixels_with_depth,estimates_in_window``.
     Returns ``{"windows": n, "saturated_png_pixels": n}``.
     """
-    from tofnet.io.files import write_text_atomic
+    from tofnet.io.files import atomic_path, write_text_atomic
     from tofnet.io.npy import write_npy
 
-    folder = Path(folder)
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise DataError(located(folder, None, f"cannot create the folder: {err.strerror or err}")) from None
     rows = ["window,t_start_s,t_end_s,pixels_with_depth,estimates_in_window"]
     saturated = 0
-    for depth_map in maps:
-        stem = f"{depth_map.index:06d}"
-        write_npy(folder / f"depth_{stem}.npy", depth_map.depth)
-        write_npy(folder / f"age_{stem}.npy", depth_map.age_ms)
-        if png:
-            image, clipped = depth_to_png16(depth_map.depth)
-            saturated += clipped
-            write_png16(folder / f"depth_{stem}.png", image)
-        pixels = int(np.count_nonzero(np.isfinite(depth_map.depth)))
-        rows.append(f"{depth_map.index},{depth_map.t_start_us * 1e-6:.6f},{depth_map.t_end_us * 1e-6:.6f},"
-                    f"{pixels},{depth_map.estimates}")
-    write_text_atomic(folder / "index.csv", "\n".join(rows) + "\n")
+    with atomic_path(folder, folder=True, written_by="tofnet export --maps") as partial:
+        for depth_map in maps:
+            stem = f"{depth_map.index:06d}"
+            write_npy(partial / f"depth_{stem}.npy", depth_map.depth)
+            write_npy(partial / f"age_{stem}.npy", depth_map.age_ms)
+            if png:
+                image, clipped = depth_to_png16(depth_map.depth)
+                saturated += clipped
+                write_png16(partial / f"depth_{stem}.png", image)
+            pixels = int(np.count_nonzero(np.isfinite(depth_map.depth)))
+            rows.append(f"{depth_map.index},{depth_map.t_start_us * 1e-6:.6f},{depth_map.t_end_us * 1e-6:.6f},"
+                        f"{pixels},{depth_map.estimates}")
+        write_text_atomic(partial / "index.csv", "\n".join(rows) + "\n")
     return {"windows": len(rows) - 1, "saturated_png_pixels": saturated}

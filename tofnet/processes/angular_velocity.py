@@ -35,7 +35,7 @@ class AngularVelocityProcess(Process):
         Param("source", "str", "groundtruth", doc="where the angular velocity comes from", choices=SOURCES),
         Param("omega", "vector3", None, unit="rad/s", optional=True,
               doc="constant camera-frame angular velocity [wx, wy, wz] (source: constant)"),
-        Param("samples", "str", None, optional=True,
+        Param("samples", "str", None, optional=True, reads_file=True,
               doc="file of 't wx wy wz' lines, seconds and rad/s in the camera frame (source: samples)"),
         Param("imu", "str", None, optional=True,
               doc="an imu.txt file ('t ax ay az gx gy gz'); the recording's when omitted (source: gyro)"),

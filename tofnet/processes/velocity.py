@@ -34,7 +34,7 @@ class VelocityProcess(Process):
         Param("source", "str", "groundtruth", doc="where the velocity comes from", choices=SOURCES),
         Param("velocity", "vector3", None, unit="m/s", optional=True,
               doc="constant camera-frame velocity [tx, ty, tz] (source: constant)"),
-        Param("samples", "str", None, optional=True,
+        Param("samples", "str", None, optional=True, reads_file=True,
               doc="file of 't vx vy vz' lines, seconds and m/s in the camera frame (source: samples)"),
         Param("per", "str", "patch", doc="one A t per patch (paper) or per pixel (exact)", choices=("patch", "pixel")),
         Param("patch_size", "int", 30, unit="px", doc="side of the square patches sharing one A t",

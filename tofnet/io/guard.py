@@ -1,0 +1,133 @@
+"""The one rule every output obeys: never replace a file the command reads, never a folder
+tofnet did not write.
+
+A command collects the files it reads: ``reading()`` opens a scope (the CLI opens one per
+command, a batch worker one per task) in which every file opened through
+``tofnet.io.files.open_regular`` is noted, and readers whose libraries open files
+themselves (h5py, faery, rosbags) note them with ``note_read``. ``input_among`` tells
+whether an output names one of them or one of the inputs a command lists before it
+reads anything: same resolved path or same file (``st_dev`` and ``st_ino``, so hard
+links and symlinks count). The writers of ``tofnet.io.files`` ask it once more just
+before they rename a finished file into place, so a file read after the early checks
+is protected too.
+
+A folder output (an ECD recording, ``export --maps``, a batch's output) is marked with
+``MANIFEST``, which lists what tofnet wrote there. Such a folder is replaced only when
+it is empty or holds nothing but what its manifest lists (``foreign_entries``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import contextvars
+import json
+import os
+from pathlib import Path
+from typing import Iterable, Iterator
+
+#: The file that marks a folder as tofnet's and lists what tofnet wrote in it.
+MANIFEST = ".tofnet-manifest.json"
+
+_READS: contextvars.ContextVar[dict | None] = contextvars.ContextVar("tofnet_reads", default=None)
+
+
+@contextlib.contextmanager
+def reading() -> Iterator[None]:
+    """A scope in which the files read are collected (one command, one batch task)."""
+    token = _READS.set({})
+    try:
+        yield
+    finally:
+        _READS.reset(token)
+
+
+def note_read(path: str | Path, fd: int | None = None) -> None:
+    """Note that the current command reads ``path`` (``fd``: its open descriptor). Outside
+    a ``reading()`` scope this does nothing."""
+    reads = _READS.get()
+    if reads is None:
+        return
+    try:
+        st = os.fstat(fd) if fd is not None else os.stat(path)
+    except (OSError, ValueError):
+        return
+    reads[(st.st_dev, st.st_ino)] = Path(path)
+
+
+def files_read() -> list[Path]:
+    """The files noted so far in the current scope (empty outside one)."""
+    reads = _READS.get()
+    return list(reads.values()) if reads else []
+
+
+def _identity(path: Path) -> tuple[int, int] | None:
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError):
+        return None
+    return st.st_dev, st.st_ino
+
+
+def input_among(path: str | Path, inputs: Iterable[str | Path] = ()) -> Path | None:
+    """The input (of ``inputs`` or of the files read in this scope) that ``path`` would
+    overwrite: same resolved path, or the same file through a hard link or symlink."""
+    path = Path(path)
+    if "\x00" in str(path):
+        return None
+    target, resolved = _identity(path), path.resolve()
+    reads = _READS.get() or {}
+    if target is not None and target in reads:
+        return reads[target]
+    for source in inputs:
+        source = Path(source)
+        if "\x00" in str(source):
+            continue  # such a name cannot exist
+        if source.resolve() == resolved or (target is not None and _identity(source) == target):
+            return source
+    return None
+
+
+def inputs_under(folder: str | Path, inputs: Iterable[str | Path] = ()) -> Path | None:
+    """An input (listed or read) that lies inside ``folder``, which an output would replace."""
+    root = Path(folder).resolve()
+    for source in [*inputs, *files_read()]:
+        if "\x00" not in str(source) and Path(source).exists() and Path(source).resolve().is_relative_to(root):
+            return Path(source)
+    return None
+
+
+def read_manifest(folder: str | Path) -> dict | None:
+    """The manifest of ``folder`` (``{"written_by": ..., "files": [...]}``), or ``None``."""
+    try:
+        with open(Path(folder) / MANIFEST, encoding="utf-8") as handle:
+            data = json.load(handle)
+    except (OSError, ValueError):
+        return None
+    if not isinstance(data, dict) or not isinstance(data.get("files"), list):
+        return None
+    return data
+
+
+def foreign_entries(folder: str | Path) -> list[str]:
+    """Names in ``folder`` (top level) that tofnet did not write there: everything when it
+    has no manifest, else what the manifest does not list (tofnet's own interrupted
+    temporary files ``.NAME.*.part`` count as its own)."""
+    folder = Path(folder)
+    try:
+        names = sorted(entry.name for entry in os.scandir(folder))
+    except OSError:
+        return []
+    manifest = read_manifest(folder)
+    listed = {MANIFEST, *(str(name).split("/")[0] for name in manifest["files"])} if manifest else set()
+    return [name for name in names if name not in listed
+            and not (manifest and name.startswith(".") and name.endswith(".part"))]
+
+
+def write_manifest(folder: str | Path, written_by: str, files: Iterable[str] | None = None) -> None:
+    """Mark ``folder`` as tofnet's: ``files`` (relative names; default: everything in it now)."""
+    from tofnet.io.files import write_text_atomic
+
+    folder = Path(folder)
+    if files is None:
+        files = sorted(str(p.relative_to(folder)) for p in folder.rglob("*") if p.name != MANIFEST and p.is_file())
+    write_text_atomic(folder / MANIFEST, json.dumps({"written_by": written_by, "files": list(files)}, indent=1) + "\n")
