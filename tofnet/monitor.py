@@ -34,7 +34,16 @@ class Monitor:
         if isinstance(self.every, bool) or not isinstance(self.every, int) or self.every < 1:
             raise TofnetError(f"monitor {self.target}: every must be a positive whole number of steps, got {self.every!r}")
         if self.pixels is not None:
-            self.pixels = [(int(x), int(y)) for x, y in self.pixels]
+            self.pixels = [self._pixel(p) for p in self.pixels]
+
+    def _pixel(self, pixel) -> tuple[int, int]:
+        """``(x, y)``, two whole numbers >= 0 (the session checks them against the sensor)."""
+        pair = tuple(pixel) if isinstance(pixel, (tuple, list, np.ndarray)) else ()
+        if len(pair) != 2 or not all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 0
+                                     for v in pair):
+            raise TofnetError(f"monitor {self.target}: a pixel must be (x, y), two whole numbers >= 0, "
+                              f"got {str(pixel)[:40]!r}")
+        return int(pair[0]), int(pair[1])
 
     @classmethod
     def parse(cls, text: str, every: int = 1) -> "Monitor":

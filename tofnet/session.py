@@ -26,6 +26,7 @@ from tofnet.backends.runtime import clock_of, start_time_us
 from tofnet.backends.stream import Collected
 from tofnet.core.network import Network
 from tofnet.errors import BackendError, TofnetError
+from tofnet.events import MAX_TIME_US
 from tofnet.io.recording import Recording
 from tofnet.kernels.compilation import Stopwatch
 from tofnet.monitor import Monitor
@@ -56,8 +57,8 @@ class Session:
         self.network: Network = self.compiled.network
         self.recording = recording
         self.backend = get_backend(backend, **(backend_options or {})) if isinstance(backend, str) else backend
-        self.monitors = [m if isinstance(m, Monitor) else Monitor.parse(m) for m in monitors]
-        ports = self._bind_monitors()
+        self.monitors = _monitors(monitors)
+        ports = self._bind_monitors(self.monitors)
         clock = clock_of(self.network)
         if recording is not None and t0_us is None:
             t0_us = start_time_us(clock.t0_us, recording)
@@ -93,31 +94,40 @@ class Session:
         except TypeError:
             return opener(self.compiled, **options)
 
-    def _bind_monitors(self) -> list[str]:
-        """Check each monitor's target; the ports among them become probes."""
+    def _bind_monitors(self, monitors: list[Monitor]) -> list[str]:
+        """Check each monitor's target and pixels (inside the process's sensor); the ports among them
+        become probes."""
         ports = []
-        for monitor in self.monitors:
+        for monitor in monitors:
             process = self.network.process(monitor.process)
-            if any(v.name == monitor.name for v in type(process).vars):
+            variables = [v.name for v in type(process).vars]
+            if monitor.name in variables:
                 monitor.kind = "var"
-            else:
-                process.port(monitor.name)  # raises naming the ports
+            elif monitor.name in process.ports:
                 monitor.kind = "port"
                 ports.append(monitor.target)
+            else:
+                raise TofnetError(f"monitor {monitor.target}: {process.name} ({type(process).__name__}) has no "
+                                  f"variable or port {monitor.name!r}; variables: {', '.join(variables) or 'none'}; "
+                                  f"ports: {', '.join(process.ports)}")
+            width, height = process.sensor_size
+            for x, y in monitor.pixels or ():
+                if not (x < width and y < height):
+                    raise TofnetError(f"monitor {monitor.target}: pixel ({x}, {y}) is outside the "
+                                      f"{width}x{height} sensor (x 0..{width - 1}, y 0..{height - 1})")
         return ports
 
     def add_monitors(self, monitors: Iterable[Monitor | str]) -> None:
         """Start recording more monitors from ``step`` on (a port must be a sink or probed since the
-        session opened)."""
-        added = [m if isinstance(m, Monitor) else Monitor.parse(m) for m in monitors]
-        kept, self.monitors = self.monitors, added
-        ports = self._bind_monitors()
-        self.monitors = kept + added
+        session opened). Nothing is added when one of them is refused."""
+        added = _monitors(monitors)
+        ports = self._bind_monitors(added)
         wanted = set(self.stream.sinks) | set(self.stream.payloads)
         missing = [p for p in ports if p not in wanted]
         if missing:
             raise TofnetError(f"monitor {missing[0]}: that port was not probed when the session opened; "
                               "pass it in probes= (or as a monitor) to Session()")
+        self.monitors = self.monitors + added
         self._sample()
 
     def __enter__(self) -> "Session":
@@ -167,10 +177,11 @@ class Session:
         t0, dt = self.stream.t0_us, self.timestep_us
         if steps is not None:
             if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
-                raise TofnetError(f"run: steps must be a whole number >= 0, got {steps!r}")
+                raise TofnetError(f"run: steps must be a whole number >= 0, got {str(steps)[:40]!r}")
             target = self.step + int(steps)
+            self._check_step(target, f"run: steps={int(steps)}")
         elif until is not None:
-            target = max(self.step, int(np.ceil(float(until) * 1e6 / dt - 1e-9)))
+            target = max(self.step, self._until_step(until))
         else:
             t = self.recording.events["t"]
             target = max(self.step, (int(t[-1]) - t0) // dt + 1 if len(t) else 0)
@@ -188,16 +199,43 @@ class Session:
     def feed(self, events: np.ndarray, until_us: int | None = None) -> dict[str, np.ndarray]:
         """Live source: feed events (time order); the records of the steps they completed."""
         self._check_open()
+        self._check_packet(events, until_us)
         produced = self._guard(lambda: self.stream.feed_all(events, until_us))
         self._keep(produced)
         self._sample()
         return produced
+
+    def _check_packet(self, events, until_us) -> None:
+        """Refuse, leaving the session as it was, a packet the stream would refuse (a refusal is
+        not a failure: the session stays open)."""
+        check = getattr(self.stream, "check", None)
+        if check is not None:
+            check(events, until_us)
+        else:
+            self.stream._admit(events, until_us)
 
     def _keep(self, produced: dict[str, np.ndarray]) -> None:
         self._collected.add(produced)
         for m in self.monitors:
             if m.kind == "port" and m.target in produced and len(produced[m.target]):
                 m.record_port(produced[m.target])
+
+    def _until_step(self, until) -> int:
+        """The step ``until`` seconds after step 0's start ends in, checked."""
+        if isinstance(until, bool) or not isinstance(until, (int, float, np.integer, np.floating)) or \
+                not np.isfinite(until):
+            raise TofnetError(f"run: until must be a finite number of seconds, got {str(until)[:40]!r}")
+        if abs(until) >= MAX_TIME_US * 1e-6:
+            raise TofnetError(f"run: until={float(until):.6g} s is out of the time range (|t| < 2**61 µs)")
+        target = int(np.ceil(float(until) * 1e6 / self.timestep_us - 1e-9))
+        self._check_step(target, f"run: until={float(until):.6g} s")
+        return target
+
+    def _check_step(self, target: int, what: str) -> None:
+        """Refuse a run whose end lies beyond the time range (|t| < 2**61 µs)."""
+        end_us = self.stream.t0_us + target * self.timestep_us
+        if end_us >= MAX_TIME_US:
+            raise TofnetError(f"{what} ends at {end_us} µs, out of the time range (|t| < 2**61 µs)")
 
     def _boundaries(self, target: int) -> list[int]:
         """Where to stop on the way to ``target``: every sampling step of a variable monitor, and ``target``."""
@@ -271,3 +309,14 @@ class Session:
 
     def counts(self) -> dict[str, dict[str, int]]:
         return self.executor.counts()
+
+
+def _monitors(monitors: Iterable[Monitor | str]) -> list[Monitor]:
+    """``Monitor`` objects from monitors or their strings (``"proc.var@x,y"``)."""
+    out = []
+    for m in monitors:
+        if not isinstance(m, (Monitor, str)):
+            raise TofnetError(f"monitors: expected Monitor objects or strings 'PROCESS.VAR@X,Y', got "
+                              f"{type(m).__name__}")
+        out.append(m if isinstance(m, Monitor) else Monitor.parse(m))
+    return out

@@ -17,7 +17,7 @@ import numpy as np
 from tofnet.backends.base import DROP_REASONS, RunResult
 from tofnet.backends.graph import canonical
 from tofnet.backends.runtime import UpdateRows, velocity_table
-from tofnet.backends.stream import check_events
+from tofnet.backends.stream import check_packet
 from tofnet.core.network import Network
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, TOT_DTYPE
@@ -163,12 +163,12 @@ class FusedStream:
         self._clock = Stopwatch()
         self._closed = False
 
-    def _admit(self, events: np.ndarray) -> tuple[int, int] | None:
-        """Checks before anything changes (the kernel checks the time order itself); the packet's
-        first and last times (µs), None when it is empty."""
+    def _admit(self, events: np.ndarray, until_us: int | None = None) -> tuple[int, int] | None:
+        """Checks before anything changes (the kernel checks the time order itself), ``until_us`` as the
+        graph stream's; the packet's first and last times (µs), None when it is empty."""
         if self._closed:
             raise BackendError("stream is closed")
-        return check_events(events)
+        return check_packet(events, until_us)
 
     def _kernel_call(self, events: np.ndarray, span: tuple[int, int], until_us: int | None, into: np.ndarray,
                      offset: int, output: bool, canonical: bool = True):
@@ -205,7 +205,8 @@ class FusedStream:
         return self._feed(events, until_us, False)
 
     def _feed(self, events: np.ndarray, until_us: int | None, canonical: bool) -> np.ndarray:
-        span = self._admit(events)
+        span = self._admit(events, until_us)
+        until_us = None if until_us is None else int(until_us)
         into = np.empty(len(events), DEPTH_DTYPE)  # the kernel writes the caller's array: no copy
         if span is None:
             if until_us is not None:

@@ -237,12 +237,11 @@ class GraphExecutor:
         var = type(node.process).var(name)
         if not var.settable:
             raise BackendError(f"{process}.{name} is read-only ({var.doc})")
-        expected = var.shape_for(node.process.sensor_size)
         try:
-            full = np.broadcast_to(np.asarray(value), expected).astype(var.dtype)
-        except (ValueError, TypeError) as err:
-            raise BackendError(f"{process}.{name}: expected values of shape {expected} ({var.dtype}): {err}") from None
-        node.model.set_var(name, np.ascontiguousarray(full), self.clock)
+            full = var.check(value, node.process.sensor_size)
+        except ValueError as err:
+            raise BackendError(f"{process}.{name}: {err}; the session is unchanged") from None
+        node.model.set_var(name, full, self.clock)
 
     def set_param(self, process: str, name: str, value) -> None:
         """Change a parameter from step ``clock`` on, with the declaration's checks; the model must accept it."""

@@ -291,6 +291,7 @@ class _GuardedStream(GraphStream):
         super().__init__(*args)
 
     def feed_all(self, events, until_us=None):
+        self.check(events, until_us)  # a refused packet changes nothing: the workers go on
         return self.session._guarded(lambda: GraphStream.feed_all(self, events, until_us))
 
     def abort(self) -> None:

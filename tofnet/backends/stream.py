@@ -47,6 +47,23 @@ def check_events(events) -> tuple[int, int] | None:
     return first, last
 
 
+def check_packet(events, until_us) -> tuple[int, int] | None:
+    """``check_events``, and a promise ``until_us`` (µs, or None) that is a whole number in the time
+    range and later than the packet's last event; the packet's first and last times."""
+    span = check_events(events)
+    if until_us is None:
+        return span
+    if isinstance(until_us, bool) or not isinstance(until_us, (int, np.integer)):
+        raise BackendError(f"until_us must be a whole number of µs, got {type(until_us).__name__} "
+                           f"{str(until_us)[:40]!r}")
+    if not -MAX_TIME_US < int(until_us) < MAX_TIME_US:
+        raise BackendError(f"until_us={int(until_us)} µs is out of the time range (|t| < 2**61 µs, "
+                           "docs/reliability.md)")
+    if span is not None and span[1] >= until_us:
+        raise BackendError(f"until_us={int(until_us)} µs but the packet holds events up to {span[1]} µs")
+    return span
+
+
 class GraphStream:
     """A network running on a stream of events; memory is fixed by the network, not the stream's length.
 
@@ -74,14 +91,19 @@ class GraphStream:
         #: Backend facts added to the result (e.g. the fixed-point format).
         self.extra: dict = {}
 
-    def feed_all(self, events: np.ndarray, until_us: int | None = None) -> dict[str, np.ndarray]:
-        """The records each sink and probe sent in the steps this packet completed."""
+    def check(self, events: np.ndarray, until_us: int | None = None) -> None:
+        """Refuse (changing nothing) a packet ``feed_all`` would refuse: closed stream, not an event
+        array, times out of range or order, a bad ``until_us``."""
         if self._closed:
             raise BackendError("stream is closed")
-        check_events(events)
+        check_packet(events, until_us)
         check_time_order(events, self._latest_us, "stream")
-        if until_us is not None and len(events) and int(events["t"][-1]) >= until_us:
-            raise BackendError(f"until_us={until_us} µs but the packet holds events up to {int(events['t'][-1])} µs")
+
+    def feed_all(self, events: np.ndarray, until_us: int | None = None) -> dict[str, np.ndarray]:
+        """The records each sink and probe sent in the steps this packet completed."""
+        self.check(events, until_us)
+        if until_us is not None:
+            until_us = int(until_us)
         if self.executor is None and len(events):
             self.t0_us = int(events["t"][0])
             self.executor = self._build(self.t0_us)

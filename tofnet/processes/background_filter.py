@@ -34,7 +34,7 @@ class BackgroundActivityFilterProcess(Process):
               minimum=0.0, maximum=MAX_PERIOD_S),
     )
     vars = (Var("last_spike", "pixel", "int64", "steps", "the step the pixel last received a spike; -2**62 before "
-                "the first", settable=True),)
+                "the first", settable=True, low=-(1 << 62), high=(1 << 62) - 1),)
     resources_per_pixel = {"accumulators": 2, "neurons": 2}
 
     def receptive_offsets(self) -> list[tuple[int, int]]:

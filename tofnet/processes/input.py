@@ -47,5 +47,5 @@ class InputProcess(Process):
               doc="start of step 0; the first event's time when omitted"),
     )
     vars = (Var("last_accepted", "pixel", "int64", "µs", "time of the pixel's last accepted event (any polarity); "
-                "-2**62 before the first", settable=True),)
+                "-2**62 before the first", settable=True, low=-(1 << 62), high=(1 << 61) - 1),)
     placement = "host"

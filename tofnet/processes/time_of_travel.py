@@ -27,9 +27,10 @@ class TimeOfTravelProcess(Process):
         Param("counter_bits", "int", 8, unit="bits", doc="width of the unsigned counter", minimum=1, maximum=30),
     )
     vars = (Var("counter", "channels", "int64", "steps", "the counter each unit shows at the start of the step "
-                "(0: idle), channels +u, -u, +v, -v", channels=4, settable=True),
+                "(0: idle), channels +u, -u, +v, -v", channels=4, settable=True, low=0,
+                high=(1 << 30) - 1),
             Var("polarity", "channels", "uint8", "", "the polarity of the unit's last facilitation (0 when idle)",
-                channels=4, settable=True))
+                channels=4, settable=True, low=0, high=1))
     # 4 units x (trigger + facilitating) accumulators; 4 neurons (paper §4.1).
     resources_per_pixel = {"accumulators": 8, "neurons": 4}
 

@@ -97,9 +97,10 @@ class TimeSurfaceProcess(Process):
     )
     vars = (Var("last_first_event", "channels", "int64", "µs", "time of the pixel's last first event of an edge, "
                 "per polarity (channel 0 OFF, 1 ON): the time surface; -2**62 before the first",
-                channels=2, settable=True),
+                channels=2, settable=True, low=-(1 << 62), high=(1 << 61) - 1),
             Var("hold", "channels", "int64", "µs", "the burst hold the pixel's last fit measured, per polarity "
-                "(0: none yet, the refractory_depth hold applies)", channels=2, settable=True))
+                "(0: none yet, the refractory_depth hold applies)", channels=2, settable=True,
+                low=0, high=(1 << 31) - 1))
     placement = "host"
 
     def _check(self) -> None:
