@@ -154,11 +154,11 @@ def test_time_going_back_names_the_event(tmp_path, recording):
 
 
 def test_filter_without_plugin_names_the_extra(tmp_path, recording, monkeypatch):
-    from tofnet.io import hdf5
+    from tofnet.io import hdf5_checks
 
     _dsec(tmp_path / "events.h5", recording.events, compression="gzip")
     # Pretend gzip needs a plugin and hdf5plugin is not installed.
-    monkeypatch.setattr(hdf5, "_BUILTIN_FILTERS", set())
+    monkeypatch.setattr(hdf5_checks, "_BUILTIN_FILTERS", set())
     monkeypatch.setattr("h5py.h5z.filter_avail", lambda code: False)
     monkeypatch.setitem(sys.modules, "hdf5plugin", None)
     with pytest.raises(DataError) as caught:

@@ -9,7 +9,7 @@ from tofnet.errors import TofnetError
 
 
 def add_input_options(p: argparse.ArgumentParser) -> None:
-    """``--columns`` for plain numpy arrays and ``--topic ROLE=NAME`` for ROS bags."""
+    """``--columns`` for plain numpy arrays, ``--topic ROLE=NAME`` for ROS bags, ``--allow-external`` for HDF5."""
     g = p.add_argument_group("input")
     g.add_argument("--columns", metavar="ORDER",
                    help="column order of a plain (n, 4) numpy array, e.g. x,y,t,p (default t,x,y,p); "
@@ -17,6 +17,9 @@ def add_input_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--topic", action="append", default=[], metavar="ROLE=NAME",
                    help="ROS bag topic for a role (events, pose, imu, camera_info), "
                         "e.g. --topic events=/davis/left/events; repeatable (default: found by message type)")
+    g.add_argument("--allow-external", action="store_true",
+                   help="read HDF5 datasets whose data is in other files (external storage, virtual datasets, "
+                        "external links); refused by default")
     add_camera_options(p)
     add_window_options(p)
 
@@ -71,4 +74,4 @@ def input_options(args) -> dict:
             raise TofnetError(f"--topic: expected ROLE=NAME (e.g. events=/dvs/events), got {item!r}")
         topics[role.strip()] = name.strip()
     return {"columns": getattr(args, "columns", None), "topics": topics or None, "window": window_option(args),
-            **camera_options(args)}
+            "allow_external": bool(getattr(args, "allow_external", False)), **camera_options(args)}

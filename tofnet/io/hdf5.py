@@ -13,6 +13,9 @@ The layout is recognised from the datasets present:
   poses and depth from ``*_depth_gt.h5`` (or ``*_pose_gt.h5``) next to it.
 
 Compressed datasets with a filter h5py lacks (Blosc, Zstandard, ...) need ``hdf5plugin``.
+Every dataset is reached through ``tofnet.io.hdf5_checks.H5File``: external storage,
+virtual datasets and external links are refused unless ``allow_external``, and declared
+sizes are checked against the storage the file holds before anything is read.
 """
 
 from __future__ import annotations
@@ -25,30 +28,32 @@ import numpy as np
 from tofnet.errors import DataError, located, quote, reason
 from tofnet.events import MAX_TIME_US
 from tofnet.io.extras import require
+from tofnet.io.hdf5_checks import H5File
 from tofnet.io.recording import Intrinsics
 from tofnet.io.source import EventSource
 
-#: Filters every h5py build has: deflate, shuffle, fletcher32, szip, nbit, scaleoffset, lzf.
-_BUILTIN_FILTERS = {1, 2, 3, 4, 5, 6, 32000}
 
+def open_hdf5(path: Path, allow_external: bool = False) -> EventSource:
+    """The reader for the layout found in ``path``; ``DataError`` naming the groups otherwise.
 
-def open_hdf5(path: Path) -> EventSource:
-    """The reader for the layout found in ``path``; ``DataError`` naming the groups otherwise."""
+    ``allow_external``: read datasets whose data is in other files (external storage,
+    virtual datasets, external links), each checked (``tofnet.io.hdf5_checks``)."""
     h5py = require("h5py", path)
     try:
         handle = h5py.File(path, "r")
     except OSError as err:
         raise DataError(located(path, None, f"not a readable HDF5 file ({reason(err)})")) from None
+    h5 = H5File(handle, path, allow_external)
     try:
-        if _has(handle, "events", ("x", "y", "t", "p")):
-            return DsecSource(path, handle)
-        if "davis/left/events" in handle:
+        if _has(h5, "events", ("x", "y", "t", "p")):
+            return DsecSource(path, h5)
+        if "davis/left/events" in h5:
             from tofnet.io.hdf5_datasets import MvsecSource
-            return MvsecSource(path, handle)
-        if _has(handle, "prophesee/left", ("x", "y", "t", "p")):
+            return MvsecSource(path, h5)
+        if _has(h5, "prophesee/left", ("x", "y", "t", "p")):
             from tofnet.io.hdf5_datasets import M3edSource
-            return M3edSource(path, handle)
-        keys = sorted(handle.keys())
+            return M3edSource(path, h5)
+        keys = h5.keys()
         found = ", ".join(quote(key, 20) for key in keys[:10]) + (", ..." if len(keys) > 10 else "") or "nothing"
         raise DataError(located(path, None, f"no event datasets; expected events/{{x,y,t,p}} (DSEC, TUM-VIE), "
                                             f"davis/left/events (MVSEC) or prophesee/left/{{x,y,t,p}} (M3ED); "
@@ -58,33 +63,13 @@ def open_hdf5(path: Path) -> EventSource:
         raise
 
 
-def _has(handle, group: str, names: tuple[str, ...]) -> bool:
-    return group in handle and all(f"{group}/{name}" in handle for name in names)
+def _has(h5: H5File, group: str, names: tuple[str, ...]) -> bool:
+    return group in h5 and all(f"{group}/{name}" in h5 for name in names)
 
 
-def readable(dataset, path: object):
-    """``dataset``, after making sure its compression filter can be decoded (``hdf5plugin``)."""
-    from h5py import h5z
-
-    plist = dataset.id.get_create_plist()
-    for k in range(plist.get_nfilters()):
-        code, _, _, name = plist.get_filter(k)
-        if code in _BUILTIN_FILTERS or h5z.filter_avail(code):
-            continue
-        label = name.decode("latin-1", "replace") if isinstance(name, bytes) else str(name)
-        require("hdf5plugin", path, f"dataset '{dataset.name}' (compressed with {label or 'filter'} #{code})")
-        if not h5z.filter_avail(code):
-            raise DataError(located(path, None, f"dataset '{dataset.name}': compression filter #{code} "
-                                                f"({label}) is not available even with hdf5plugin"))
-    return dataset
-
-
-def scalar(handle, name: str, default=None):
+def scalar(h5: H5File, name: str, default=None):
     """A scalar or small dataset as a Python/numpy value, ``default`` when absent."""
-    if name not in handle:
-        return default
-    value = handle[name][()]
-    return value.decode() if isinstance(value, bytes) else value
+    return h5.value(name, default)
 
 
 class ColumnsSource(EventSource):
@@ -92,10 +77,10 @@ class ColumnsSource(EventSource):
 
     format = "hdf5"
 
-    def __init__(self, path: Path, handle, group: str, t_offset: int = 0):
+    def __init__(self, path: Path, h5: H5File, group: str, t_offset: int = 0):
         super().__init__(path)
-        self.handle = handle
-        self.columns = {name: readable(handle[f"{group}/{name}"], path) for name in ("t", "x", "y", "p")}
+        self.h5, self.handle = h5, h5.handle
+        self.columns = {name: h5.dataset(f"{group}/{name}") for name in ("t", "x", "y", "p")}
         lengths = {name: d.shape for name, d in self.columns.items()}
         if len({shape for shape in lengths.values()}) != 1 or len(lengths["t"]) != 1:
             raise DataError(located(path, None, f"{group}/{{t,x,y,p}} must be 1-D of one length, got {lengths}"))
@@ -171,22 +156,22 @@ class ColumnsSource(EventSource):
 class DsecSource(ColumnsSource):
     """DSEC / TUM-VIE ``events/{x,y,t,p}`` + ``t_offset``, and what tofnet adds (see the module docstring)."""
 
-    def __init__(self, path: Path, handle):
-        super().__init__(path, handle, "events", t_offset=scalar(handle, "t_offset", 0))
+    def __init__(self, path: Path, h5: H5File):
+        super().__init__(path, h5, "events", t_offset=_t_offset(h5))
         self.detail = "DSEC layout"
-        if "ms_to_idx" in handle and handle["ms_to_idx"].ndim == 1:
-            self.ms_index = handle["ms_to_idx"]
-            self.streams["ms_to_idx"] = f"{handle['ms_to_idx'].shape[0]} ms index entries (used for time windows)"
-        self.intrinsics, self.sensor_size = read_calib_group(handle, "calib", path)
-        if "poses" in handle:
+        if "ms_to_idx" in h5 and h5.dataset("ms_to_idx").ndim == 1:
+            self.ms_index = h5.dataset("ms_to_idx")
+            self.streams["ms_to_idx"] = f"{self.ms_index.shape[0]} ms index entries (used for time windows)"
+        self.intrinsics, self.sensor_size = read_calib_group(h5, "calib", path)
+        if "poses" in h5:
             from tofnet.io.groundtruth import Trajectory
-            self.trajectory = Trajectory(handle["poses/t"][()], handle["poses/position"][()],
-                                         handle["poses/quaternion"][()], source=f"{path}:poses")
-        if "imu" in handle:
-            self.imu = np.column_stack([handle["imu/t"][()], handle["imu/accel"][()], handle["imu/gyro"][()]])
+            self.trajectory = Trajectory(h5.value("poses/t"), h5.value("poses/position"),
+                                         h5.value("poses/quaternion"), source=f"{path}:poses")
+        if "imu" in h5:
+            self.imu = np.column_stack([h5.value("imu/t"), h5.value("imu/accel"), h5.value("imu/gyro")])
         if self.intrinsics is None:
             self._dsec_calibration()
-        for key in sorted(set(handle.keys()) - {"events", "ms_to_idx", "t_offset", "calib", "poses", "imu"}):
+        for key in sorted(set(h5.keys()) - {"events", "ms_to_idx", "t_offset", "calib", "poses", "imu"}):
             self.streams[key] = "not read"
 
     def _dsec_calibration(self) -> None:
@@ -235,18 +220,30 @@ def intrinsics_from(matrix, coefficients, model: str) -> Intrinsics:
                       distortion_model=model_name if coefficients else "radtan")
 
 
-def read_calib_group(handle, group: str, path: object) -> tuple[Intrinsics | None, tuple[int, int] | None]:
+def read_calib_group(h5: H5File, group: str, path: object) -> tuple[Intrinsics | None, tuple[int, int] | None]:
     """``{group}/{intrinsics,distortion_coeffs,distortion_model,resolution}`` (M3ED, tofnet)."""
-    if f"{group}/intrinsics" not in handle:
-        size = scalar(handle, f"{group}/resolution")
+    if f"{group}/intrinsics" not in h5:
+        size = scalar(h5, f"{group}/resolution")
         return None, (tuple(int(v) for v in size) if size is not None else None)
     try:
-        intrinsics = intrinsics_from(handle[f"{group}/intrinsics"][()], scalar(handle, f"{group}/distortion_coeffs", ()),
-                                     scalar(handle, f"{group}/distortion_model", "radtan"))
+        intrinsics = intrinsics_from(h5.value(f"{group}/intrinsics"), scalar(h5, f"{group}/distortion_coeffs", ()),
+                                     scalar(h5, f"{group}/distortion_model", "radtan"))
     except ValueError as err:
         raise DataError(located(path, None, f"{group}: {err}")) from None
-    size = scalar(handle, f"{group}/resolution")
+    size = scalar(h5, f"{group}/resolution")
     return intrinsics, (tuple(int(v) for v in size) if size is not None else None)
+
+
+def _t_offset(h5: H5File) -> int:
+    """DSEC's scalar ``t_offset`` (µs), 0 when absent; one whole number."""
+    value = np.asarray(h5.value("t_offset", 0))
+    if value.size != 1 or value.dtype.kind not in "iu":
+        raise DataError(located(h5.path, None, f"t_offset: expected one whole number of µs, got {value.dtype} "
+                                               f"of shape {value.shape}"))
+    if abs(int(value.reshape(-1)[0])) >= MAX_TIME_US:
+        raise DataError(located(h5.path, None, f"t_offset {int(value.reshape(-1)[0])} µs is out of range "
+                                               "(|t| < 2**61 µs)"))
+    return int(value.reshape(-1)[0])
 
 
 def write_hdf5(path: str | Path, chunks: Iterable[np.ndarray], meta) -> int:

@@ -8,13 +8,16 @@ images a chunk needs are read.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
 from tofnet.errors import DataError, located, reason
-from tofnet.io.hdf5 import ColumnsSource, read_calib_group, readable
+from tofnet.events import MAX_TIME_US
+from tofnet.io.hdf5 import ColumnsSource, read_calib_group
+from tofnet.io.hdf5_checks import H5File
 
 #: An event further than this from every depth image gets no true depth (s).
 MAX_DEPTH_GAP_S = 0.1
@@ -27,7 +30,7 @@ class DepthImages:
         if dataset.ndim != 3 or dataset.shape[0] != len(times_us):
             raise DataError(located(source, None, f"depth images {dataset.shape} do not match {len(times_us)} "
                                                   "timestamps"))
-        self.dataset, self.times_us = dataset, np.asarray(times_us, dtype=np.int64)
+        self.dataset, self.times_us = dataset, times_us
         self.height, self.width = dataset.shape[1:]
 
     def lookup(self, events: np.ndarray) -> np.ndarray:
@@ -86,22 +89,54 @@ def _companion(path: Path, stem_suffix: str, suffixes: tuple[str, ...]) -> Path 
     return None
 
 
+def image_times_us(h5: H5File, name: str, scale: float) -> np.ndarray:
+    """Ground-truth timestamps ``name`` (``scale`` µs per unit) as int64 µs: one line naming the
+    dataset unless they are finite, in the time range and strictly increasing (an image lookup
+    and a trajectory both need that)."""
+    values = np.asarray(h5.value(name), dtype=np.float64)
+    where = f"{name}: "
+    if values.ndim != 1:
+        raise DataError(located(h5.path, None, f"{where}expected one timestamp per row, got shape {values.shape}"))
+    bad = np.flatnonzero(~np.isfinite(values) | (np.abs(values * scale) >= MAX_TIME_US))
+    if bad.size:
+        i = int(bad[0])
+        raise DataError(located(h5.path, None, f"{where}timestamp {i} is {values[i]!r}, expected a finite time "
+                                               "(|t| < 2**61 µs)"))
+    times = np.round(values * scale).astype(np.int64)
+    back = np.flatnonzero(np.diff(times) <= 0)
+    if back.size:
+        i = int(back[0]) + 1
+        raise DataError(located(h5.path, None, f"{where}timestamps must be strictly increasing, got "
+                                               f"{values[i]!r} after {values[i - 1]!r} (row {i})"))
+    return times
+
+
 class _GroundTruthMixin:
-    def _open_gt(self, gt_path: Path):
+    @contextmanager
+    def _opened_gt(self, gt_path: Path) -> Iterator[H5File]:
+        """The ground-truth file, kept open for the depth images (closed with the source) unless
+        reading it fails."""
         import h5py
 
         from tofnet.io.guard import note_read
         note_read(gt_path)  # h5py opens it: protected from the command's outputs all the same
         try:
-            return h5py.File(gt_path, "r")
+            self.gt = H5File(h5py.File(gt_path, "r"), gt_path, self.h5.allow_external)
         except OSError as err:
             raise DataError(located(gt_path, None, f"not a readable HDF5 file ({reason(err)})")) from None
+        try:
+            yield self.gt
+        except BaseException:
+            self.gt.handle.close()
+            self.gt = None
+            raise
 
     def _depth(self, events: np.ndarray, first_index: int) -> np.ndarray | None:
         return self.depth_images.lookup(events)
 
     def close(self) -> None:
-        for handle in (self.handle, getattr(self, "gt_handle", None)):
+        gt = getattr(self, "gt", None)
+        for handle in (self.handle, gt.handle if gt is not None else None):
             if handle is not None:
                 handle.close()
 
@@ -109,36 +144,37 @@ class _GroundTruthMixin:
 class MvsecSource(_GroundTruthMixin, ColumnsSource):
     """MVSEC ``*_data.hdf5`` (left DAVIS) with ``*_gt.hdf5`` poses and raw depth images."""
 
-    def __init__(self, path: Path, handle):
+    def __init__(self, path: Path, h5: H5File):
         from tofnet.io.source import EventSource
         EventSource.__init__(self, path)
-        self.handle, self.gt_handle = handle, None
+        self.h5, self.handle, self.gt = h5, h5.handle, None
         self.detail = "MVSEC layout, davis/left"
-        self.rows = readable(handle["davis/left/events"], path)
+        self.rows = h5.dataset("davis/left/events")
         if self.rows.ndim != 2 or self.rows.shape[1] != 4:
             raise DataError(located(path, None, f"davis/left/events: expected (n, 4) rows x, y, t, p; "
                                                 f"got shape {self.rows.shape}"))
         self.n_events = self.n_rows = int(self.rows.shape[0])
-        if "davis/left/image_raw" in handle and handle["davis/left/image_raw"].ndim == 3:
-            height, width = handle["davis/left/image_raw"].shape[1:]
+        if "davis/left/image_raw" in h5 and h5.dataset("davis/left/image_raw").ndim == 3:
+            images = h5.dataset("davis/left/image_raw")
+            height, width = images.shape[1:]
             self.sensor_size = (int(width), int(height))
-            self.streams["davis/left/image_raw"] = f"{handle['davis/left/image_raw'].shape[0]} images"
-        if "davis/left/imu" in handle and "davis/left/imu_ts" in handle:
-            self.imu = np.column_stack([handle["davis/left/imu_ts"][()], handle["davis/left/imu"][()]])
-        for key in sorted(k for k in handle.get("davis", {}).keys() if k != "left"):
+            self.streams["davis/left/image_raw"] = f"{images.shape[0]} images"
+        if "davis/left/imu" in h5 and "davis/left/imu_ts" in h5:
+            self.imu = np.column_stack([h5.value("davis/left/imu_ts"), h5.value("davis/left/imu")])
+        for key in (k for k in h5.keys("davis") if k != "left"):
             self.streams[f"davis/{key}"] = "not read"
         gt_path = _companion(path, "_gt", (".hdf5", ".h5"))
         if gt_path is None:
             self.notes.append("no *_gt.hdf5 next to the file: no poses or depth")
             return
-        self.gt_handle = gt = self._open_gt(gt_path)
-        if "davis/left/pose" in gt:
-            self.trajectory = trajectory_from_matrices(gt["davis/left/pose_ts"][()], gt["davis/left/pose"][()],
-                                                       f"{gt_path}:davis/left/pose")
-        if "davis/left/depth_image_raw" in gt:
-            self.depth_images = DepthImages(gt["davis/left/depth_image_raw"],
-                                            np.round(gt["davis/left/depth_image_raw_ts"][()] * 1e6), gt_path)
-            self.has_depth = True
+        with self._opened_gt(gt_path) as gt:
+            if "davis/left/pose" in gt:
+                self.trajectory = trajectory_from_matrices(gt.value("davis/left/pose_ts"),
+                                                           gt.value("davis/left/pose"), f"{gt_path}:davis/left/pose")
+            if "davis/left/depth_image_raw" in gt:
+                self.depth_images = DepthImages(gt.dataset("davis/left/depth_image_raw"),
+                                                image_times_us(gt, "davis/left/depth_image_raw_ts", 1e6), gt_path)
+                self.has_depth = True
         self.notes.append(f"poses and depth from {gt_path.name}")
 
     def _times(self, lo: int, hi: int) -> np.ndarray:
@@ -158,28 +194,28 @@ class MvsecSource(_GroundTruthMixin, ColumnsSource):
 class M3edSource(_GroundTruthMixin, ColumnsSource):
     """M3ED ``*_data.h5`` (left Prophesee) with ``*_depth_gt.h5`` (or ``*_pose_gt.h5``) ground truth."""
 
-    def __init__(self, path: Path, handle):
-        super().__init__(path, handle, "prophesee/left", t_offset=0)
-        self.gt_handle = None
+    def __init__(self, path: Path, h5: H5File):
+        super().__init__(path, h5, "prophesee/left", t_offset=0)
+        self.gt = None
         self.detail = "M3ED layout, prophesee/left"
-        self.intrinsics, self.sensor_size = read_calib_group(handle, "prophesee/left/calib", path)
-        if "prophesee/left/ms_map_idx" in handle and handle["prophesee/left/ms_map_idx"].ndim == 1:
-            self.ms_index = handle["prophesee/left/ms_map_idx"]  # M3ED's ms_to_idx (µs from 0: t_offset 0)
-        for key in sorted(set(handle.keys()) - {"prophesee"}):
+        self.intrinsics, self.sensor_size = read_calib_group(h5, "prophesee/left/calib", path)
+        if "prophesee/left/ms_map_idx" in h5 and h5.dataset("prophesee/left/ms_map_idx").ndim == 1:
+            self.ms_index = h5.dataset("prophesee/left/ms_map_idx")  # M3ED's ms_to_idx (µs from 0: t_offset 0)
+        for key in sorted(set(h5.keys()) - {"prophesee"}):
             self.streams[key] = "not read"
         gt_path = _companion(path, "_depth_gt", (".h5", ".hdf5")) or _companion(path, "_pose_gt", (".h5", ".hdf5"))
         if gt_path is None:
             self.notes.append("no *_depth_gt.h5 or *_pose_gt.h5 next to the file: no poses or depth")
             return
-        self.gt_handle = gt = self._open_gt(gt_path)
-        times_us = gt["ts"][()].astype(np.int64) if "ts" in gt else None
-        if "Cn_T_C0" in gt and times_us is not None:
-            # Cn_T_C0 maps the first camera frame into camera n: the camera-to-world pose is its inverse.
-            self.trajectory = trajectory_from_matrices(times_us * 1e-6, np.linalg.inv(gt["Cn_T_C0"][()]),
-                                                       f"{gt_path}:Cn_T_C0")
-        if "depth/prophesee/left" in gt and times_us is not None:
-            self.depth_images = DepthImages(gt["depth/prophesee/left"], times_us, gt_path)
-            self.has_depth = True
+        with self._opened_gt(gt_path) as gt:
+            times_us = image_times_us(gt, "ts", 1.0) if "ts" in gt else None
+            if "Cn_T_C0" in gt and times_us is not None:
+                # Cn_T_C0 maps the first camera frame into camera n: the camera-to-world pose is its inverse.
+                self.trajectory = trajectory_from_matrices(times_us * 1e-6, np.linalg.inv(gt.value("Cn_T_C0")),
+                                                           f"{gt_path}:Cn_T_C0")
+            if "depth/prophesee/left" in gt and times_us is not None:
+                self.depth_images = DepthImages(gt.dataset("depth/prophesee/left"), times_us, gt_path)
+                self.has_depth = True
         self.notes.append(f"ground truth from {gt_path.name}")
 
 

@@ -407,7 +407,8 @@ def fill_from_side_files(source: EventSource) -> EventSource:
 def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = None,
                    columns: str | tuple[str, ...] | None = None,
                    topics: dict[str, str] | None = None, window=None, intrinsics: Intrinsics | None = None,
-                   calib: str | Path | None = None, camera: str | None = None) -> EventSource:
+                   calib: str | Path | None = None, camera: str | None = None,
+                   allow_external: bool = False) -> EventSource:
     """Open any recording ``detect_format`` knows; see the module docstring.
 
     ``sensor_size`` (width, height px) overrides the file's; ``columns`` gives the column
@@ -416,6 +417,8 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
     ``window`` (a ``tofnet.io.window.TimeWindow``) reads only the events of that time window;
     ``intrinsics``, or a calibration file ``calib`` (``read_camera_file``; ``camera`` picks one of
     several), replace the recording's camera (the image size of the file fills a missing sensor size).
+    ``allow_external`` lets an HDF5 file keep data in other files (external storage,
+    virtual datasets, external links; refused otherwise).
     """
     from tofnet.io.detect import detect_format
 
@@ -431,7 +434,7 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
             source = open_faery(path, kind)
         elif kind == "hdf5":
             from tofnet.io.hdf5 import open_hdf5
-            source = open_hdf5(path)
+            source = open_hdf5(path, allow_external)
         elif kind == "rosbag1":
             from tofnet.io.rosbag import RosbagSource
             source = RosbagSource(path, topics)
