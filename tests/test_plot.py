@@ -11,6 +11,7 @@ import pytest
 from tofnet.cli import main
 from tofnet.errors import DataError, TofnetError
 from tofnet.eval import evaluate
+from tofnet.eval.bins import band_window_s, depth_lattice, histogram_edges, ray_medians, window_quartiles
 from tofnet.eval.plots import (DPI, FIGURE_SIZES, cloud_figure, depth_map_figure, error_figure, histogram_figure,
                                plot_all, save_figure)
 from tofnet.eval.views import (Window, back_project, depth_image, resolve_window, to_world, world_points)
@@ -149,23 +150,120 @@ def test_error_figure_plots_the_windowed_median_beside_the_trajectory():
     assert error.get_xlabel() == "time since start [s]"
     median = next(line for line in error.get_lines() if line.get_label() == "median")
     expected = [w.errors.median_rel_pct for w in evaluate(rec, depth, META, window_s=0.1).windows]
-    assert median.get_ydata() == pytest.approx(expected)
-    assert median.get_xdata() == pytest.approx([0.05, 0.15, 0.25, 0.35])
+    assert median.get_ydata()[:4] == pytest.approx(expected)  # the fifth window (0.4-0.402 s) is too thin
+    assert np.isnan(median.get_ydata()[4:]).all()
+    assert median.get_xdata()[:4] == pytest.approx([0.05, 0.15, 0.25, 0.35])
     x_line = position.get_lines()[0]
     assert x_line.get_ydata()[-1] == pytest.approx(0.5 * 0.402, abs=1e-3)  # x = 0.5 m/s * t
 
 
-def test_cloud_figure_places_points_in_3d():
+def test_cloud_figure_draws_one_point_per_ray_cell_and_every_estimate_from_above():
     rec, depth = scene()
     fig = cloud_figure(rec, depth, META)
-    ax = fig.axes[0]
+    ax, top = fig.axes[0], fig.axes[2]
     assert ax.name == "3d"
     assert ax.get_xlabel() == "x, right [m]" and ax.get_ylabel() == "z, forward [m]" and "[m]" in ax.get_zlabel()
-    assert fig.axes[-1].get_ylabel() == "depth [m]"
-    scatter = ax.collections[0]
-    assert 0.9 * len(depth) <= len(scatter.get_offsets()) <= len(depth)
+    assert fig.axes[1].get_ylabel() == "depth [m]"
+    # The camera never turns and starts at the origin: the first pose's frame is the world's.
+    world = world_points(depth, rec.intrinsics, rec.trajectory, depth["step"] * 1000 - 2000 + 500)
+    cells, _ = ray_medians(world, 3 / rec.intrinsics.fx, 3)
+    drawn = np.ma.filled(ax.collections[0].get_array(), np.nan)  # the colour of a point is its median depth
+    assert 0.9 * len(cells) <= len(drawn) <= len(cells) and np.isin(drawn, cells[:, 2]).all()
+    assert top.get_xlabel() == "x, right [m]" and top.get_ylabel() == "z, forward [m]"
+    counts = np.nansum(np.ma.filled(top.collections[0].get_array(), np.nan))
+    outside = int(fig.get_suptitle().split(", ")[1].split(" outside")[0].replace(",", "")) \
+        if "outside" in fig.get_suptitle() else 0
+    assert counts + outside == len(depth)  # every estimate is counted once in the top view
     with pytest.raises(DataError, match="poses"):
         cloud_figure(scene(poses=False)[0], depth, META)
+
+
+def test_ray_medians_gather_the_estimates_of_a_ray_on_their_median():
+    ray = np.array([0.1, -0.05, 1.0])
+    pts = np.vstack([ray * z for z in (1.0, 2.0, 9.0)] + [ray * 4.0 + [5.0, 0, 0]])  # three on one ray, one apart
+    cells, counts = ray_medians(pts, angle=0.02, least=1)
+    assert counts.tolist() == [1, 3] or counts.tolist() == [3, 1]
+    on_ray = cells[counts == 3][0]
+    assert on_ray[2] == 2.0  # the median depth, not the mean (4)
+    assert on_ray[:2] / on_ray[2] == pytest.approx([0.11, -0.05], abs=0.01)  # the cell's central ray
+    assert len(ray_medians(pts, angle=0.02, least=2)[0]) == 1  # a lone estimate is no surface
+
+
+def test_depth_lattice_finds_the_counter_step_only_where_there_is_one():
+    rng = np.random.default_rng(1)
+    q = 0.1095123
+    steps = rng.integers(3, 60, 5000)
+    assert depth_lattice((steps * q).astype(np.float32)) == pytest.approx(q, rel=1e-5)
+    assert depth_lattice(rng.uniform(0.3, 6.0, 5000)) is None  # continuous depths
+    mixed = np.concatenate([steps * q, rng.uniform(0.3, 6.0, 200)])  # 4 % off the lattice
+    assert depth_lattice(mixed) is None
+    assert depth_lattice(np.array([0.5, 0.5])) is None  # one value: no step to see
+
+
+def test_histogram_bins_hold_whole_counter_steps_and_none_is_empty():
+    rng = np.random.default_rng(2)
+    q = 0.1095123
+    z = rng.integers(3, 40, 20_000) * q
+    edges, step, per_bin = histogram_edges(z, z, 100)
+    assert step == pytest.approx(q) and per_bin >= 1
+    assert (edges / q - 0.5) / per_bin == pytest.approx(np.arange(len(edges)))  # edges half a step off the lattice
+    counts, _ = np.histogram(z, edges)
+    used = counts[np.flatnonzero(counts)[0]:np.flatnonzero(counts)[-1] + 1]
+    assert (used > 0).all()
+    round_edges = np.arange(0.0, edges[-1], 0.1)  # what a round width did: empty bins between the steps
+    round_counts, _ = np.histogram(z, round_edges)
+    assert (round_counts[4:40] == 0).any()
+
+
+def test_histogram_figure_bins_the_networks_depths_on_its_counter_steps():
+    rec, depth = scene()
+    q = 0.05
+    depth["z"] = np.maximum(np.round(depth["z"] / q), 1) * q
+    ax = histogram_figure(rec, depth, META).axes[0]
+    bars = ax.containers[0]
+    lefts = np.array([bar.get_x() for bar in bars])
+    widths = np.array([bar.get_width() for bar in bars])
+    per_bin = int(round(widths[0] / q))
+    assert (lefts / q - 0.5) / per_bin == pytest.approx(np.arange(len(lefts)))
+    assert f"({per_bin} counter step" in ax.get_ylabel()
+    assert any("n a whole number" in text.get_text() for text in ax.texts)  # the figure says why
+    assert "multiples of 0.05 m" in ax.get_legend().get_texts()[0].get_text()
+
+
+def test_the_velocity_and_position_lines_of_each_axis_look_different():
+    rec, depth = scene()
+    position, velocity = error_figure(rec, depth, META).axes[:2]
+    for ax in (position, velocity):
+        lines = [line for line in ax.get_lines() if line.get_label() in ("x", "y", "z", "$t_x$", "$t_y$", "$t_z$")]
+        assert len(lines) == 3
+        looks = {(line.get_linestyle(), line.get_marker(), line.get_color()) for line in lines}
+        assert len({look[0] for look in looks}) == 3 and len({look[1] for look in looks}) >= 2
+        y_line, z_line = lines[1], lines[2]
+        assert y_line.get_markevery() != z_line.get_markevery()  # markers never sit on each other
+
+
+def test_the_error_band_window_comes_from_the_data():
+    assert band_window_s(108_000, 0.5, 0.001) == pytest.approx(0.005)  # 100 windows, ~1000 estimates each
+    assert band_window_s(19_000, 0.5, 0.001) == pytest.approx(0.01)  # 5.3 ms for 200 each, rounded up
+    assert band_window_s(2_000, 0.4, 0.001) == pytest.approx(0.05)  # ~250 per window
+    assert band_window_s(10**8, 0.5, 0.001) == pytest.approx(0.005)  # at most 100 windows
+    assert band_window_s(10**8, 0.05, 0.001) == pytest.approx(0.001)  # at least one step
+    assert band_window_s(500, 1.0, 0.004) == pytest.approx(0.4)  # whole steps of 4 ms
+    rec, depth = scene()
+    error = error_figure(rec, depth, META).axes[2]
+    median = next(line for line in error.get_lines() if line.get_label() == "median")
+    assert np.diff(median.get_xdata()) == pytest.approx(0.05)  # 9 points over 0.4 s, not 5
+    assert np.isfinite(median.get_ydata()).sum() >= 8
+    assert "per 50 ms window" in error.get_title()
+
+
+def test_window_quartiles_per_window_and_thin_windows_left_out():
+    t = np.array([0, 10, 20, 30, 100, 110, 250])
+    v = np.array([1.0, 2.0, 3.0, 4.0, 10.0, 20.0, 7.0])
+    q, counts = window_quartiles(t, v, 100, 3, least=2)
+    assert counts.tolist() == [4, 2, 1]
+    assert q[:, 0] == pytest.approx(np.percentile([1, 2, 3, 4], [25, 50, 75]))
+    assert q[1, 1] == 15.0 and np.isnan(q[:, 2]).all()
 
 
 @pytest.mark.parametrize("kind, make", [("depthmap", depth_map_figure), ("histogram", histogram_figure),
@@ -247,3 +345,12 @@ def test_figures_of_a_run_without_estimates_still_render(tmp_path):
     rec, depth = scene(n=500)
     paths = plot_all(rec, depth[:0], META, tmp_path)
     assert len(paths) == 4 and all(p.stat().st_size > 0 for p in paths)
+
+
+def test_cli_error_window_is_auto_or_a_positive_duration(tmp_path, capsys):
+    rec, dep = write_inputs(tmp_path)
+    assert main(["plot", "error", rec, dep, "--out", str(tmp_path / "e.png"), "--error-window", "20ms"]) == 0
+    assert png_size(tmp_path / "e.png") == expected_pixels("error")
+    capsys.readouterr()
+    assert main(["plot", "error", rec, dep, "--out", str(tmp_path / "f.png"), "--error-window", "0"]) == 2
+    assert "'auto'" in capsys.readouterr().err

@@ -31,7 +31,9 @@ def register(subparsers) -> None:
     p.add_argument("--window", metavar="START:END|LENGTH",
                    help="time span, seconds since the start: '1.2:1.27', '1200ms:1270ms', or a length "
                         "centred in the run, '70ms' (default: 70ms for depthmap, the whole run otherwise)")
-    p.add_argument("--error-window", default="100ms", help="window of the error-over-time figure (default 100ms)")
+    p.add_argument("--error-window", default="auto",
+                   help="window of the error-over-time figure's band, e.g. '20ms' (default auto: about 200 "
+                        "matched estimates per window, at most 100 windows, a round number of timesteps)")
     p.add_argument("--reduce", choices=("latest", "median"), default="latest",
                    help="depth map: each pixel's latest or median depth in the window (default latest)")
     p.add_argument("--no-gt", action="store_true", help="leave out the ground truth panels and overlays")
@@ -57,9 +59,9 @@ def handle(args) -> int:
     from tofnet.io.files import check_output
     from tofnet.units import seconds
 
-    window_s = seconds(args.error_window, "--error-window")
-    if window_s <= 0:
-        raise TofnetError(f"--error-window must be positive, got {args.error_window!r}")
+    window_s = None if args.error_window == "auto" else seconds(args.error_window, "--error-window")
+    if window_s is not None and window_s <= 0:
+        raise TofnetError(f"--error-window must be positive or 'auto', got {args.error_window!r}")
     recording, depth, meta = load_inputs(args.recording, args.depth, timestep=args.timestep,
                                          latency_steps=args.latency_steps)
     require_timing(meta)
