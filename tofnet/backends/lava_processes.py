@@ -50,13 +50,15 @@ def words_for(records: int, dtype: np.dtype) -> int:
     return 1 + -(-records * np.dtype(dtype).itemsize // 8)
 
 
-def pack(records: np.ndarray, words: int, what: str) -> np.ndarray:
-    """``records`` as one message of ``words`` int64 words; raises naming ``what`` when they do not fit."""
+def pack(records: np.ndarray, words: int, what: str, out: np.ndarray | None = None) -> np.ndarray:
+    """``records`` as one message of ``words`` int64 words (into ``out`` when given: a port's buffer,
+    reused because Lava copies what is sent; words past the records are left as they are);
+    raises naming ``what`` when they do not fit."""
     nbytes = len(records) * records.dtype.itemsize
     if 8 + nbytes > 8 * words:
         raise BackendError(f"{what}: {len(records)} records in one step, more than its Lava port holds "
                            f"({(8 * words - 8) // records.dtype.itemsize})")
-    out = np.zeros(words, np.int64)
+    out = np.zeros(words, np.int64) if out is None else out
     out[0] = len(records)
     out[1:].view(np.uint8)[:nbytes] = np.ascontiguousarray(records).view(np.uint8)
     return out
@@ -173,6 +175,7 @@ class PyTofnetModel(PyLoihiProcessModel):
         self.plan: Plan = proc_params["plan"]
         self.model = self.plan.model
         self.held: dict[str, np.ndarray] = {}  # what arrived in the previous step, per tofnet input
+        self.buffers = {port: np.zeros(words, np.int64) for port, (_, words) in self.plan.outputs.items()}
 
     def run_spk(self) -> None:
         plan, k = self.plan, self.time_step - 1
@@ -188,7 +191,7 @@ class PyTofnetModel(PyLoihiProcessModel):
         for port, (lava_name, words) in plan.outputs.items():
             records = sent.get(port)
             records = plan_empty(plan, port) if records is None else canonical(records)
-            getattr(self, lava_name).send(pack(records, words, f"{plan.name}.{port}"))
+            getattr(self, lava_name).send(pack(records, words, f"{plan.name}.{port}", self.buffers[port]))
 
     # Var.get and Var.set reach the tofnet model: its state is read when asked for, not every step.
     def _get_var(self) -> None:
