@@ -11,6 +11,7 @@ from __future__ import annotations
 import glob as globbing
 import itertools
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -99,7 +100,9 @@ def load_plan(path_or_text: str | Path, *, output: str | Path | None = None) -> 
     """Read and validate a plan from a YAML file (a ``Path`` or a one-line ``.yaml`` name) or YAML text.
 
     Relative paths in the plan are relative to the plan file's folder (the working
-    directory for text). ``output`` overrides the plan's ``output``.
+    directory for text). ``output`` overrides the plan's ``output`` (relative: to the
+    working directory). Every path of the plan comes out absolute, so tasks mean the same
+    files on workers that run in other folders or on other machines.
     """
     try:  # the spec reader's file checks and YAML errors, already located
         text, source, path = yaml_source(path_or_text, "plan")
@@ -107,6 +110,8 @@ def load_plan(path_or_text: str | Path, *, output: str | Path | None = None) -> 
     except SpecError as err:
         raise PlanError(str(err)) from None
     base = path.resolve().parent if path is not None else Path.cwd()
+    if output is not None:
+        output = os.path.abspath(Path(output).expanduser())  # --out is the client's, relative to its cwd
     return _PlanReader(tree, source, base).read(output)
 
 

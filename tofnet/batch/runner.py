@@ -150,8 +150,15 @@ def run_batch(plan: Plan, *, scheduler: str | None = None, workers: int | None =
             except TimeoutError:
                 raise TofnetError(f"no Dask worker joined the scheduler at {active.scheduler.address} within "
                                   f"{WAIT_FOR_WORKERS_S:g} s; start some with: dask worker ADDRESS") from None
+            from tofnet.batch.probe import check_cluster
+            check_cluster(active)  # one line naming a scheduler or worker without tofnet, before any task
             backends = tuple(sorted({t.backend or "fixed" for t in todo}))
-            active.register_plugin(WarmUp(backends, ignore_sigint=client is None and scheduler is None))
+            plugin = WarmUp(backends, ignore_sigint=client is None and scheduler is None)
+            active.register_plugin(plugin)
+            if client is not None or scheduler is not None:
+                # Left registered, it would be sent to every worker that joins the cluster later, and one
+                # without tofnet could not even start: an existing cluster is given back as it was.
+                stack.callback(_unregister, active, plugin.name)
             n_workers = len(active.scheduler_info()["workers"])
             execution = _Execution(active, todo, done, progress, len(tasks))
             execution.run()
@@ -161,6 +168,13 @@ def run_batch(plan: Plan, *, scheduler: str | None = None, workers: int | None =
     files = write_table(rows, parameters, plan.output)
     figure = plot(rows, parameters, plan.output / "plot.png")
     return BatchResult(plan, rows, files, figure, resumed, time.perf_counter() - started, tasks_time, n_workers)
+
+
+def _unregister(client: Client, name: str) -> None:
+    try:
+        client.unregister_worker_plugin(name)
+    except Exception:  # the cluster is gone or busy: nothing left to give back
+        pass
 
 
 class _Execution:
@@ -231,6 +245,9 @@ class _Execution:
             kind = type(exc).__name__
             if kind == "KilledWorker":
                 error = f"KilledWorker: the worker died every time it ran this task ({one_line(str(exc))})"
+            elif isinstance(exc.__cause__, ImportError):  # a process that joined later without tofnet
+                error = f"Dask could not load the task ({type(exc.__cause__).__name__}: {exc.__cause__}); " \
+                        "install tofnet on every worker and the scheduler"
             else:
                 error = one_line(f"{kind}: {exc}")
             simulation = self.simulations.get(task.number)
