@@ -9,7 +9,13 @@ overrides the choice.
 rosbags reads the container (chunks, compression, index); EventArray messages are
 decoded with numpy straight from their ROS1 serialisation (13 bytes per event), which
 is far faster than building one Python object per event. Event times ``sec.nsec``
-become µs rounded half up (as ``events.txt`` seconds are).
+become µs rounded half up (as ``events.txt`` seconds are); ``nsec`` must be below 10^9.
+
+A bag carries each connection's message definition (its text and md5sum). Every
+connection of a topic tofnet reads must have the standard definition of its type (the
+md5sum in the bag, and the md5sum of the definition text it carries): a look-alike (an
+``EventArray`` whose stamps are ``int64``, the same size) would otherwise be decoded as
+the standard one.
 """
 
 from __future__ import annotations
@@ -49,8 +55,9 @@ def typestore():
     return store
 
 
-def decode_event_array(raw: bytes | memoryview) -> tuple[np.ndarray, tuple[int, int]]:
-    """A serialised ``dvs_msgs/EventArray``: its events (``EVENT_DTYPE``) and (width, height)."""
+def decode_event_array(raw: bytes | memoryview, where: object = "EventArray") -> tuple[np.ndarray, tuple[int, int]]:
+    """A serialised ``dvs_msgs/EventArray``: its events (``EVENT_DTYPE``) and (width, height);
+    ``DataError`` naming ``where`` for a stamp whose nanoseconds are not below 10^9."""
     from tofnet.events import EVENT_DTYPE
 
     buffer = memoryview(raw)
@@ -58,10 +65,35 @@ def decode_event_array(raw: bytes | memoryview) -> tuple[np.ndarray, tuple[int, 
     offset = 16 + frame_id_length
     height, width, count = (int(v) for v in np.frombuffer(buffer, "<u4", 3, offset))
     wire = np.frombuffer(buffer, _EVENT_WIRE, count, offset + 12)
+    bad = np.flatnonzero(wire["nsec"] >= _NSEC_PER_S)
+    if bad.size:
+        i = int(bad[0])
+        raise DataError(located(where, None, f"event {i}: ts nanoseconds {int(wire['nsec'][i])} (expected below 10^9)"))
     events = np.empty(count, dtype=EVENT_DTYPE)
     events["t"] = wire["sec"].astype(np.int64) * 1_000_000 + (wire["nsec"].astype(np.int64) + 500) // 1000
     events["x"], events["y"], events["p"] = wire["x"], wire["y"], wire["p"] != 0
     return events, (width, height)
+
+
+#: A ``time``'s nanoseconds are below this.
+_NSEC_PER_S = 1_000_000_000
+
+
+def standard_digests(store) -> dict[str, str]:
+    """md5sum of the standard definition of each type tofnet reads (ROS1's rule)."""
+    return {msgtype: store.generate_msgdef(msgtype, ros_version=1)[1] for msgtype in ROLES.values()}
+
+
+def definition_digest(connection) -> str | None:
+    """md5sum of the definition text a connection carries (None when it cannot be parsed)."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    try:
+        store = get_typestore(Stores.EMPTY)
+        store.register(get_types_from_msg(connection.msgdef.data, connection.msgtype))
+        return store.generate_msgdef(connection.msgtype, ros_version=1)[1]
+    except Exception:  # rosbags' parser raises several kinds (and asserts) on a hostile text
+        return None
 
 
 class RosbagSource(EventSource):
@@ -81,6 +113,7 @@ class RosbagSource(EventSource):
             raise DataError(located(self.path, None, f"not a readable ROS1 bag ({reason(err)})")) from None
         try:
             self.topics = self._choose(dict(topics or {}))
+            self._check_definitions()
             self._read_side_topics()
         except BaseException:
             self.reader.close()
@@ -120,6 +153,22 @@ class RosbagSource(EventSource):
                 self.streams[name] = f"{info.msgtype}, {info.msgcount} messages"
         return chosen
 
+    def _check_definitions(self) -> None:
+        """Every connection of a chosen topic has its type's standard definition (md5sum and text)."""
+        digests = standard_digests(typestore())
+        for role, topic in self.topics.items():
+            for connection in (c for c in self.reader.connections if c.topic == topic):
+                expected = digests[ROLES[role]]
+                if connection.digest != expected:
+                    what = f"md5sum {quote(connection.digest, 40)}"
+                elif definition_digest(connection) != expected:  # the text may lie about its md5sum
+                    what = "the md5sum of its definition text"
+                else:
+                    continue
+                raise DataError(located(self.path, None, f"topic {quote(topic)}: {ROLES[role]} with a non-standard "
+                                                         f"message definition ({what} differs from the standard "
+                                                         f"{expected}); not decoded"))
+
     def _messages(self, role: str):
         connections = [c for c in self.reader.connections if c.topic == self.topics[role]]
         return self.reader.messages(connections=connections)
@@ -131,17 +180,19 @@ class RosbagSource(EventSource):
                 self._camera_info(store.deserialize_ros1(raw, ROLES["camera_info"]))
                 break
         if "pose" in self.topics:
-            rows = [_pose_row(store.deserialize_ros1(raw, ROLES["pose"])) for _, _, raw in self._messages("pose")]
+            rows = [_pose_row(store.deserialize_ros1(raw, ROLES["pose"]), self._where("pose"))
+                    for _, _, raw in self._messages("pose")]
             if len(rows) >= 2:
                 from tofnet.io.groundtruth import Trajectory
                 rows = np.asarray(rows)
                 self.trajectory = Trajectory(rows[:, 0], rows[:, 1:4], rows[:, 4:8],
                                              source=f"{self.path}:{self.topics['pose']}")
         if "imu" in self.topics:
-            rows = [_imu_row(store.deserialize_ros1(raw, ROLES["imu"])) for _, _, raw in self._messages("imu")]
+            rows = [_imu_row(store.deserialize_ros1(raw, ROLES["imu"]), self._where("imu"))
+                    for _, _, raw in self._messages("imu")]
             self.imu = np.asarray(rows).reshape(-1, 7)
         for _, _, raw in self._messages("events"):
-            _, size = decode_event_array(raw)
+            _, size = decode_event_array(raw, self._where("events"))
             self.sensor_size = self.sensor_size or (size if min(size) > 0 else None)
             break
 
@@ -157,9 +208,13 @@ class RosbagSource(EventSource):
         if info.width and info.height:
             self.sensor_size = (int(info.width), int(info.height))
 
+    def _where(self, role: str) -> str:
+        return f"{self.path}: topic {self.topics[role]}"
+
     def _packets(self, size_hint: int) -> Iterable[np.ndarray]:
+        where = self._where("events")
         for _, _, raw in self._messages("events"):
-            events, _ = decode_event_array(raw)
+            events, _ = decode_event_array(raw, where)
             if len(events):
                 yield events
 
@@ -167,15 +222,18 @@ class RosbagSource(EventSource):
         self.reader.close()
 
 
-def _stamp(header) -> float:
+def _stamp(header, where: str) -> float:
+    """A header's stamp in seconds; its nanoseconds must be below 10^9."""
+    if not 0 <= header.stamp.nanosec < _NSEC_PER_S:
+        raise DataError(located(where, None, f"header stamp nanoseconds {header.stamp.nanosec} (expected below 10^9)"))
     return header.stamp.sec + header.stamp.nanosec * 1e-9
 
 
-def _pose_row(message) -> list[float]:
+def _pose_row(message, where: str) -> list[float]:
     p, q = message.pose.position, message.pose.orientation
-    return [_stamp(message.header), p.x, p.y, p.z, q.x, q.y, q.z, q.w]
+    return [_stamp(message.header, where), p.x, p.y, p.z, q.x, q.y, q.z, q.w]
 
 
-def _imu_row(message) -> list[float]:
+def _imu_row(message, where: str) -> list[float]:
     a, g = message.linear_acceleration, message.angular_velocity
-    return [_stamp(message.header), a.x, a.y, a.z, g.x, g.y, g.z]
+    return [_stamp(message.header, where), a.x, a.y, a.z, g.x, g.y, g.z]
