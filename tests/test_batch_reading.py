@@ -68,6 +68,8 @@ def test_reading_keys_plan_wide_and_per_recording(folder):
     ("recordings:\n  - {path: plain.npy, duration: 1s, until: 2s}\n", 2, "duration and until: give one"),
     ("recordings: [plain.npy]\nintrinsics: 1,1,1,1\ncalib: cam.yaml\n", 3, "intrinsics and calib"),
     ("recordings:\n  - {scenario: slider, start: 1s}\n", 2, "recordings[0].start: unknown key for a scenario"),
+    ("recordings:\n  - {path: plain.npy, topics: {event: /dvs}}\n", 2, "topics: unknown role 'event'"),
+    ("recordings:\n  - {path: plain.npy, camera: cam3}\n", 2, "recordings[0].camera: picks a camera"),
 ])
 def test_errors_name_the_line_and_the_key(folder, text, line, expected):
     path = write(folder, text)

@@ -190,3 +190,25 @@ def test_eval_and_export_window_the_estimates(tmp_path, capsys):
     assert len(index) == 1 + 2  # two 50 ms maps in the 100 ms window
     depth, meta = read_depth(tmp_path / "d.npz")
     assert int(index[1].split(",")[4]) > 0
+
+
+def test_mvsec_rows_and_a_windowed_convert(tmp_path, recording):
+    h5py = pytest.importorskip("h5py")
+    events = recording.events
+    rows = np.column_stack([events["x"], events["y"], events["t"] * 1e-6, np.where(events["p"] == 1, 1.0, -1.0)])
+    with h5py.File(tmp_path / "seq_data.hdf5", "w") as f:
+        f.create_dataset("davis/left/events", data=rows)
+    whole = read_recording(tmp_path / "seq_data.hdf5")
+    first = int(whole.events["t"][0])
+    read = read_recording(tmp_path / "seq_data.hdf5", window=parse_window(start="120ms", until="180ms"))
+    assert np.array_equal(read.events, _expected(whole.events, first + 120_000, first + 180_000))
+    # tofnet convert writes the window, with the poses that cover it
+    src = tmp_path / "ecd"
+    write_ecd(src, events, intrinsics=recording.intrinsics, times=recording.trajectory.times,
+              positions=recording.trajectory.positions, quaternions=recording.trajectory.quaternions,
+              sensor_size=recording.sensor_size)
+    assert main(["convert", str(src), str(tmp_path / "cut.h5"), "--start", "100ms", "--duration", "50ms"]) == 0
+    cut = read_recording(tmp_path / "cut.h5")
+    first = int(events["t"][0])
+    assert np.array_equal(cut.events, _expected(events, first + 100_000, first + 150_000))
+    assert cut.trajectory.times[0] * 1e6 <= first + 100_000 and len(cut.trajectory) < len(recording.trajectory)

@@ -36,6 +36,10 @@ def read_options(entry: Mapping, defaults: dict[str, Any], where: str,
                 if not isinstance(value, Mapping) or not value or \
                         not all(isinstance(k, str) and isinstance(v, str) and v.strip() for k, v in value.items()):
                     raise TofnetError("expected a mapping ROLE: TOPIC (events, pose, imu, camera_info)")
+                from tofnet.io.rosbag import ROLES
+                unknown = sorted(set(value) - set(ROLES))
+                if unknown:
+                    raise TofnetError(f"unknown role {unknown[0]!r}; expected {', '.join(ROLES)}")
                 value = {str(k): str(v) for k, v in value.items()}
             elif key in ("start", "duration", "until"):
                 if isinstance(value, bool) or not isinstance(value, (str, int, float)):
@@ -65,6 +69,8 @@ def read_options(entry: Mapping, defaults: dict[str, Any], where: str,
         key = "calib" if "calib" in entry else "intrinsics"
         raise fail(entry, key, f"{where}{key}",
                    "intrinsics and calib: give one of them, not both")
+    if "camera" in entry and "calib" not in options:
+        raise fail(entry, "camera", f"{where}camera", "picks a camera of a calib file; give calib: FILE")
     if "duration" in options and "until" in options:
         key = "until" if "until" in entry else "duration"
         raise fail(entry, key, f"{where}{key}", "duration and until: give one of them, not both")

@@ -113,7 +113,7 @@ class ColumnsSource(EventSource):
         from tofnet.io.source import first_at_or_after
 
         bracket = None
-        k = (us - self.t_offset) // 1000
+        k = (us - self.t_offset) // 1000 if self.ms_index is not None else -1
         if self.ms_index is not None and 0 <= k < self.ms_index.shape[0]:
             pair = self.ms_index[k:k + 2]
             bracket = (int(pair[0]), int(pair[1]) if len(pair) > 1 else self.n_rows)

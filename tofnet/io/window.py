@@ -77,12 +77,6 @@ class TimeWindow:
             parts.append(f"until {self.until.text()}")
         return ", ".join(parts)
 
-    def to_dict(self) -> dict:
-        """Plain data (JSON summaries, batch task identities)."""
-        return {"start": None if self.start is None else [self.start.us, self.start.absolute],
-                "duration_us": self.duration_us,
-                "until": None if self.until is None else [self.until.us, self.until.absolute]}
-
 
 def parse_window(start: object = None, duration: object = None, until: object = None,
                  names: tuple[str, str, str] = ("--start", "--duration", "--until")) -> TimeWindow | None:
