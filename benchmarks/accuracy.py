@@ -20,7 +20,9 @@ network's rows, the time-surface estimator's (beyond the paper: ``improved_netwo
 defaults, docs/time_surface.md) on the same events, with the issue's bars: on slider and
 all_axes a median at most half the paper network's, coverage >= 10 % and a bias within
 ±3 %; elsewhere a median not above the paper network's row (on a turning camera both
-compensate the rotation: eq. 7 with ω from the poses). The table
+compensate the rotation: eq. 7 with ω from the poses). Every row also has its coverage by
+true-depth band and by motion phase (``tofnet.eval.breakdown``, as ``tofnet eval`` prints it;
+``benchmarks/motion_sweep.py`` has the random scenes under general motion). The table
 goes to stdout twice: as text and as markdown (for docs/accuracy.md and the README),
 followed by the command that reproduces it. Progress goes to stderr.
 
@@ -44,6 +46,7 @@ import numpy as np
 
 import tofnet
 from tofnet.api import run
+from tofnet.eval.breakdown import PHASES, breakdown_columns
 from tofnet.eval.metrics import Evaluation, evaluate
 from tofnet.eval.rotation import split_by_true_share
 from tofnet.io.recording import Recording
@@ -161,7 +164,8 @@ class Run:
                 "matched": e.matched, "coverage_pct": 100 * e.coverage, "mean_abs_m": e.errors.mean_abs_m,
                 "median_abs_m": e.errors.median_abs_m, "mean_rel_pct": e.errors.mean_rel_pct,
                 "median_rel_pct": e.errors.median_rel_pct, "bias_pct": e.errors.bias_rel_pct,
-                "wall_s": self.result.wall_time}
+                "wall_s": self.result.wall_time,
+                **breakdown_columns(self.result.depth, e.matches, self.recording)}
 
 
 def run_network(recording: Recording, *, backend: str | None = None, refractory: str | None = None,
@@ -216,7 +220,15 @@ def row_of(label: str, m: dict, a: dict, paper: str, verdict: str, why: str) -> 
     """One row of the accuracy table."""
     return [label, fmt(m["events"]), fmt(m["estimates"]), fmt(m["coverage_pct"]), fmt(m["mean_abs_m"], 3),
             fmt(m["median_abs_m"], 3), fmt(m["mean_rel_pct"]), fmt(m["median_rel_pct"]), f"{m['bias_pct']:+.1f}",
-            fmt(float(np.median(a["n"]))), paper, verdict, why]
+            fmt(float(np.median(a["n"]))), _groups(m, BAND_KEYS), _groups(m, PHASES), paper, verdict, why]
+
+
+BAND_KEYS = ("lt1m", "1to2m", "2to4m", "4to8m", "ge8m")
+
+
+def _groups(m: dict, keys) -> str:
+    """Coverage % per group as ``a / b / ...`` (``-`` for a group without events)."""
+    return " / ".join(fmt(m[f"coverage_{k}_pct"]) for k in keys)
 
 
 def as_written(recording: Recording, config: SimConfig, seed: int) -> Recording:
@@ -346,7 +358,8 @@ def main(argv: list[str] | None = None) -> int:
         f"backend {backend}, refractory {refractory}, 1 ms steps, 8-bit counters")
 
     header = ["scenario", "events", "estimates", "coverage %", "mean abs m", "median abs m", "mean rel %",
-              "median rel %", "bias %", "steps/px", "bar: median rel % (paper, or issue)", "verdict", "why"]
+              "median rel %", "bias %", "steps/px",
+              "coverage % by depth (<1 / 1-2 / 2-4 / 4-8 / >=8 m)", "coverage % steady / reversal", "bar: median rel % (paper, or issue)", "verdict", "why"]
     rows, splits, slider = [], [], None
     for name in names:
         log(f"{name}:")

@@ -18,6 +18,7 @@ from tofnet.batch import load_plan, run_batch  # noqa: E402
 from tofnet.batch.runner import local_cluster  # noqa: E402
 from tofnet.batch.table import TIMING_COLUMNS, read_csv  # noqa: E402
 from tofnet.cli import main  # noqa: E402
+from tofnet.eval.breakdown import BREAKDOWN_COLUMNS  # noqa: E402
 from tofnet.io import read_depth  # noqa: E402
 
 SCENARIOS = ["slider", "forward", "paper_all_axes"]  # desk x, desk z, room all axes
@@ -73,6 +74,13 @@ def test_a_sweep_equals_the_same_runs_done_one_by_one_with_tofnet_run(sweep, tmp
         alone_depth, _ = read_depth(out)
         assert batch_depth.tobytes() == alone_depth.tobytes()
         assert row["depth_out"] > 0 and row["matched"] > 0 and 0 < row["median_rel_pct"] < 100
+        scores_file = tmp_path / "scores.json"
+        assert main(["eval", recording, str(out), "--json", str(scores_file), "--force"]) == 0
+        scores = json.loads(scores_file.read_text())
+        groups = scores["depth_bands"] + scores["motion_phases"]
+        cover = [row[c] for c in BREAKDOWN_COLUMNS if c.startswith("coverage_")]
+        assert cover == [None if g["coverage"] is None else pytest.approx(100 * g["coverage"]) for g in groups]
+        assert any(c for c in cover)
     # the refractory period filters more the longer it is
     slider = [r["dropped_refractory"] for r in result.rows if r["scenario"] == "slider"]
     assert slider == sorted(slider) and slider[0] < slider[-1]

@@ -83,3 +83,9 @@ def test_eval_prints_and_writes_the_bands(tmp_path, capsys):
     assert (bands["2-4 m"]["events"], bands["2-4 m"]["estimates"]) == (1, 1)
     assert (bands["4-8 m"]["events"], bands["4-8 m"]["estimates"]) == (2, 1)
     assert data["motion_phases"] is None
+
+
+def test_a_steady_run_has_no_reversal_up_to_its_last_event():
+    trajectory = Trajectory((0.0, 0.0, 0.0), (Segment(0.3, (0.5, 0.0, 0.0)),))  # stands still after 0.3 s
+    t = np.array([0.0, 0.1, 0.2999, 0.29999])
+    assert motion_phase(trajectory, t).tolist() == [0, 0, 0, 0]

@@ -134,6 +134,8 @@ def _run(task: Task, recording_path: str, folder: Path) -> dict[str, Any]:
         out.update(matched=e.n, coverage_pct=_pct(evaluation.coverage), mean_abs_m=_num(e.mean_abs_m),
                    median_abs_m=_num(e.median_abs_m), mean_rel_pct=_num(e.mean_rel_pct),
                    median_rel_pct=_num(e.median_rel_pct), bias_rel_pct=_num(e.bias_rel_pct))
+        from tofnet.eval.breakdown import breakdown_columns
+        out.update(breakdown_columns(result.depth, evaluation.matches, recording))
         summary["evaluation"] = evaluation.to_dict()
     if "depth" in task.keep:
         from tofnet.io.depth import write_depth

@@ -90,17 +90,20 @@ def motion_phase(trajectory, t_s: np.ndarray) -> np.ndarray:
     if t_s.size == 0:
         return np.zeros(0, dtype=np.int8)
     lo, hi = float(t_s.min()) - REVERSAL_WINDOW_S, float(t_s.max())
-    grid = np.arange(lo, hi + PHASE_STEP_S, PHASE_STEP_S)
+    # The grid ends at the last event: a trajectory stands still after its end, which is no reversal.
+    grid = np.linspace(lo, hi, int(math.ceil((hi - lo) / PHASE_STEP_S)) + 1)
+    spacing = (hi - lo) / max(len(grid) - 1, 1)
     velocity = np.asarray(trajectory.velocity_at(grid), dtype=np.float64)
     speed = np.linalg.norm(velocity, axis=1)
     slow = speed < SLOW_SHARE * float(np.median(speed))
     direction = velocity / np.maximum(speed, 1e-12)[:, None]
-    look_back = int(round(REVERSAL_WINDOW_S / PHASE_STEP_S))
+    look_back = int(round(REVERSAL_WINDOW_S / spacing)) if spacing > 0 else 0
     turned = np.zeros(len(grid), dtype=bool)
     for lag in range(1, look_back + 1):  # one pass per lag, vectorised over the grid
         turned[lag:] |= np.einsum("ij,ij->i", direction[lag:], direction[:-lag]) < 0
     phase = (slow | turned).astype(np.int8)
-    index = np.clip(np.round((t_s - lo) / PHASE_STEP_S).astype(np.int64), 0, len(grid) - 1)
+    index = np.clip(np.floor((t_s - lo) / spacing).astype(np.int64), 0, len(grid) - 1) if spacing > 0 else \
+        np.full(t_s.shape, len(grid) - 1)
     return phase[index]
 
 
@@ -122,3 +125,25 @@ def format_groups(title: str, groups: list[GroupStats]) -> str:
         bias = f"{g.errors.bias_rel_pct:+9.2f}" if g.errors.n else f"{'-':>9}"
         lines.append(f"{g.label:>12} {g.events:9d} {g.estimates:9d} {cover} {med} {bias}")
     return "\n".join(lines)
+
+
+def _key(label: str) -> str:
+    return label.replace("< ", "lt").replace(">= ", "ge").replace("-", "to").replace(" ", "")
+
+
+#: Flat column names of ``breakdown_columns`` (batch tables): coverage and median error per group.
+BREAKDOWN_COLUMNS = tuple(f"{what}_{_key(label)}_pct" for label in
+                          [band_label(lo, hi) for lo, hi in zip(DEPTH_BANDS[:-1], DEPTH_BANDS[1:])] + list(PHASES)
+                          for what in ("coverage", "median_rel"))
+
+
+def breakdown_columns(depth: np.ndarray, matches: Matches, recording) -> dict:
+    """``BREAKDOWN_COLUMNS`` of one run on a recording with per-event ground truth (None where undefined)."""
+    groups = by_depth_band(depth, matches, recording.gt_depth)
+    if recording.trajectory is not None:
+        groups += by_motion_phase(depth, matches, recording.events, recording.trajectory)
+    out = dict.fromkeys(BREAKDOWN_COLUMNS)
+    for g in groups:
+        out[f"coverage_{_key(g.label)}_pct"] = _number(100.0 * g.coverage)
+        out[f"median_rel_{_key(g.label)}_pct"] = _number(g.errors.median_rel_pct) if g.errors.n else None
+    return out
