@@ -25,14 +25,28 @@ ROOT = str(Path(__file__).resolve().parents[1])
 START_S = 60  # at most, for the scheduler's file and the workers to appear
 
 
-def _start(args, cwd, log, pythonpath):
+#: A `dask worker` on which tofnet cannot be imported, even where it is installed (CI pip-installs it):
+#: a finder in front of the others answers as Python does for a package that is not there.
+WORKER_WITHOUT_TOFNET = """
+import sys
+class NoTofnet:
+    def find_spec(self, name, path=None, target=None):
+        if name == "tofnet" or name.startswith("tofnet."):
+            raise ModuleNotFoundError(f"No module named {name!r}", name=name)
+sys.meta_path.insert(0, NoTofnet())
+from distributed.cli.dask_worker import main
+main()
+"""
+
+
+def _start(args, cwd, log, pythonpath, command=("dask",)):
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     if pythonpath:
         env["PYTHONPATH"] = pythonpath
     env["PYTHONUNBUFFERED"] = "1"
     with open(log, "wb") as out:
         # A session of its own: the whole process group is ended at the end of the test.
-        return subprocess.Popen(["dask", *args], cwd=cwd, env=env, stdout=out, stderr=subprocess.STDOUT,
+        return subprocess.Popen([*command, *args], cwd=cwd, env=env, stdout=out, stderr=subprocess.STDOUT,
                                 start_new_session=True)
 
 
@@ -108,10 +122,10 @@ def test_a_standalone_cluster_with_relative_paths_gives_the_local_table(tmp_path
             assert not list((tmp_path / name).rglob("*.npz"))  # nothing written in a worker's own folder
 
         # A worker that cannot import tofnet: one line naming it and the package, before any task.
-        processes.append(_start(["worker", address, "--nthreads", "1", "--no-nanny", "--no-dashboard",
-                                 "--name", "bare"], tmp_path / "bare-worker", tmp_path / "bare.log", None))
-        bare = [w for w in _workers(address, 3)]
-        assert len(bare) == 3
+        processes.append(_start([address, "--nthreads", "1", "--no-nanny", "--no-dashboard", "--name", "bare"],
+                                tmp_path / "bare-worker", tmp_path / "bare.log", None,
+                                command=(sys.executable, "-c", WORKER_WITHOUT_TOFNET)))
+        assert len(_workers(address, 3)) == 3
         failed = _batch(client_dir, "data/plan.yaml", "--scheduler", address, "--out", "again", "--quiet")
         assert failed.returncode == 2
         lines = failed.stderr.strip().splitlines()

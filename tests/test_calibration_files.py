@@ -110,7 +110,8 @@ def test_each_layout(tmp_path):
     (tmp_path / "calib.txt").write_text("199.0 198.5 132.2 110.1 -0.37 0.15 0 0 0\n")
 
     dsec, size, what = read_camera_file(tmp_path / "cam_to_cam.yaml")
-    assert what == "intrinsics.cam0" and size == (640, 480)  # the first with distortion: camRect0 is rectified
+    assert what == "intrinsics.cam0" and size == (640, 480)  # camRect0 (rectified) only when asked for
+    assert read_camera_file(tmp_path / "cam_to_cam.yaml", "camRect0")[0].distortion == ()
     assert (dsec.fx, dsec.cy, dsec.distortion, dsec.distortion_model) == \
         (553.47, 216.52, (-0.0948, 0.1976, 7.6e-05, 0.000436, 0.0), "radtan")
     assert read_camera_file(tmp_path / "cam_to_cam.yaml", "cam3")[0].fx == 552.18
@@ -139,7 +140,7 @@ def test_errors_name_the_file_and_the_key(tmp_path):
     bad.write_text(KALIBR.replace("camera_model: pinhole", "camera_model: omni", 1))
     with pytest.raises(DataError, match=r"cam.yaml: cam0.camera_model 'omni': only pinhole is supported"):
         read_camera_file(bad)
-    with pytest.raises(DataError, match=r"cam_to_cam.yaml: no camera 'cam9'; the file has cam0, cam1, cam3"):
+    with pytest.raises(DataError, match=r"cam_to_cam.yaml: no camera 'cam9'; the file has cam0, cam1, cam3, camRect0"):
         (tmp_path / "cam_to_cam.yaml").write_text(DSEC)
         read_camera_file(tmp_path / "cam_to_cam.yaml", "cam9")
     (tmp_path / "info.yaml").write_text(ROS.replace("data: [226.38, 0, 173.65, 0, 226.15, 133.73, 0, 0, 1]",

@@ -159,10 +159,13 @@ def _camera_from(data, camera, sensor_size):
         return (intrinsics_from([k[0], k[4], k[2], k[5]], coefficients, model),
                 _size([data["image_width"], data["image_height"]]), f"camera_info {data.get('camera_name', '')}".strip())
     if isinstance(data.get("intrinsics"), dict):  # DSEC cam_to_cam.yaml
-        cameras = {name: (entry, entry.get("resolution")) for name, entry in data["intrinsics"].items()
-                   if isinstance(entry, dict) and "distortion_coeffs" in entry}
+        # The raw cameras first: the rectified camRectN (no distortion) only when asked for by name.
+        entries = sorted(((name, entry) for name, entry in data["intrinsics"].items()
+                          if isinstance(entry, dict) and "camera_matrix" in entry),
+                         key=lambda item: str(item[0]).startswith("camRect"))
+        cameras = {name: (entry, entry.get("resolution")) for name, entry in entries}
         name, (entry, size) = _pick(cameras, camera, sensor_size)
-        return (intrinsics_from(entry["camera_matrix"], entry["distortion_coeffs"],
+        return (intrinsics_from(entry["camera_matrix"], entry.get("distortion_coeffs", ()),
                                 entry.get("distortion_model", "radtan")), _size(size), f"intrinsics.{name}")
     cameras = {name: (entry, entry.get("resolution")) for name, entry in data.items()
                if str(name).startswith("cam") and isinstance(entry, dict) and "intrinsics" in entry}

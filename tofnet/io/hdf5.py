@@ -180,16 +180,9 @@ class DsecSource(ColumnsSource):
         yaml_path = self.path.parent.parent.parent / "calibration" / "cam_to_cam.yaml"
         if side not in ("left", "right") or not (yaml_path.exists() or yaml_path.is_symlink()):
             return
-        from tofnet.io.safe_yaml import read_yaml_file
-        data = read_yaml_file(yaml_path, "calibration")  # bounded (size, nesting, aliases)
-        try:
-            camera = data["intrinsics"]["cam0" if side == "left" else "cam3"]
-            self.intrinsics = intrinsics_from(camera["camera_matrix"], camera.get("distortion_coeffs", ()),
-                                              camera.get("distortion_model", "radtan"))
-            self.sensor_size = self.sensor_size or tuple(int(v) for v in camera["resolution"])
-        except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as err:
-            raise DataError(located(yaml_path, None, f"expected intrinsics/cam0 (or cam3) with camera_matrix "
-                                                     f"[fx, fy, cx, cy] ({reason(err, 40)})")) from None
+        from tofnet.io.calibration import read_camera_file  # the one reader of cam_to_cam.yaml (--calib too)
+        self.intrinsics, size, _ = read_camera_file(yaml_path, "cam0" if side == "left" else "cam3")
+        self.sensor_size = self.sensor_size or size
         self.notes.append(f"intrinsics from {yaml_path}")
 
 
