@@ -159,7 +159,7 @@ def histogram_figure(recording, depth: np.ndarray, meta: dict, *, window=None, w
                 f"(the time-of-travel counter):\none step is {step:.3g} m here; each bin holds {steps}, "
                 "centred on them", transform=ax.transAxes, ha="right", va="top", fontsize="small", color="0.25")
     ax.legend(loc="upper right")
-    note = f"; {beyond:,} estimates beyond {edges[-1]:.2f} m not shown" if beyond else ""
+    note = f"\n({beyond:,} estimates beyond {edges[-1]:.2f} m not shown)" if beyond else ""
     ax.set_title(f"Depth histogram over {win.label()}{note}")
     return fig
 

@@ -53,7 +53,7 @@ def cloud_figure(recording, depth: np.ndarray, meta: dict, *, window=None,
     grid = fig.add_gridspec(1, 2, width_ratios=[3, 2])
     ax = fig.add_subplot(grid[0], projection="3d")
     shown = ax.scatter(pts[inside, 0], pts[inside, 1], pts[inside, 2], c=cells[inside, 2], cmap=DEPTH_CMAP,
-                       norm=norm, s=4, linewidths=0, depthshade=False)
+                       norm=norm, s=5, linewidths=0, depthshade=False)
     ax.plot(cam_path[:, 0], cam_path[:, 1], cam_path[:, 2], color="black", linewidth=2.5, label="camera path")
     ax.scatter(*cam_path[0], color="black", marker="o", s=30, label="start")
     # Optical axes at a few poses show where the camera looked.
