@@ -154,9 +154,23 @@ def test_branchless_depth_rules_equal_the_depth_neuron():
     assert N_REASONS == len(REJECT_REASONS) and REJECT_REASONS[ROTATION_DOMINATED] == "rotation_dominated"
 
 
-def test_process_events_needs_the_whole_sensor():
+def test_a_region_filters_its_halo_and_counts_and_emits_only_its_own_pixels():
+    """A band's kernel (tofnet.backends.bands) given every event: its pixels' estimates are the
+    whole sensor's, its halo's events are filtered but not counted, events beyond it skipped."""
     from tofnet.kernels.region import Region
 
-    kernel = TimeOfTravelKernel(config(), Region(0, 5, 0, 5))
-    with pytest.raises(BackendError, match="whole sensor"):
-        kernel.process_events(random_events(0, n=10), table_rows(VELOCITY))
+    events = random_events(0)
+    whole = TimeOfTravelKernel(config())
+    full = whole.process_events(events, table_rows(VELOCITY))
+    region = Region(0, SENSOR[0], 3, 9)
+    band = TimeOfTravelKernel(config(), region)
+    part = band.process_events(events, table_rows(VELOCITY))
+    inside = (full.depth["y"] >= 3) & (full.depth["y"] < 9)
+    assert inside.sum() > 20 and part.depth.tobytes() == full.depth[inside].tobytes()
+    own = (events["y"] >= 3) & (events["y"] < 9) & (events["x"] < SENSOR[0])
+    outside = (events["x"] >= SENSOR[0]) | (events["y"] >= SENSOR[1])
+    alone = TimeOfTravelKernel(config())
+    alone.process_events(events[own | outside], table_rows(VELOCITY))  # the filter is per pixel
+    assert band.accepted == alone.accepted and np.array_equal(band.drops, alone.drops)
+
+

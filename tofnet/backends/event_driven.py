@@ -34,8 +34,8 @@ class FixedBackend(LocalBackend):
     fuses = True
 
     def __init__(self, frac_bits: int = DEFAULT_FRAC_BITS, payload_bits: int = DEFAULT_PAYLOAD_BITS,
-                 packet_events: int = DEFAULT_PACKET_EVENTS, fuse: bool = True):
-        super().__init__(packet_events, fuse)
+                 packet_events: int = DEFAULT_PACKET_EVENTS, fuse: bool = True, workers: int | str = 1):
+        super().__init__(packet_events, fuse, workers)
         self.format = FixedPointFormat(frac_bits, payload_bits)
 
     def _format(self) -> FixedPointFormat:

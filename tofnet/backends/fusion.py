@@ -137,10 +137,11 @@ class FusedStream:
 
     def __init__(self, backend: str, config: KernelConfig, pipeline: PipelineParams,
                  velocity_source: VelocitySource, t0_us: int | None, record_tot: bool = False,
-                 order: list[str] | None = None):
+                 order: list[str] | None = None, kernel=None):
         self.backend = backend
         self.pipeline = pipeline
-        self.kernel = TimeOfTravelKernel(config, t0_us=t0_us or 0)
+        # ``kernel``: another implementation of the kernel's streaming API (bands: ``BandedKernel``)
+        self.kernel = kernel if kernel is not None else TimeOfTravelKernel(config, t0_us=t0_us or 0)
         self.velocity_source = velocity_source
         self.t0_us = t0_us
         self.timestep_us = pipeline.timestep_us
@@ -260,12 +261,19 @@ class FusedStream:
     def abort(self) -> None:
         """Give up the stream (after its caller failed)."""
         self._closed = True
+        self._release()
+
+    def _release(self) -> None:
+        close = getattr(self.kernel, "close", None)  # a banded kernel's threads
+        if close is not None:
+            close()
 
     def close(self) -> RunResult:
         """The counts so far; ``outputs`` hold what ``feed_all`` kept of the open step (``feed`` returned every estimate)."""
         if self._closed:
             raise BackendError("stream is closed")
         self._closed = True
+        self._release()
         kernel, names = self.kernel, self.pipeline.names
         fmt = kernel.config.fixed
         counts = {
@@ -284,4 +292,5 @@ class FusedStream:
             self.backend, outputs, counts, last_step + 1 + self.pipeline.latency_steps,
             t0, self.timestep_us,
             {name: self._latency(name) for name in outputs}, dict(self.payloads),
-            extra={"frac_bits": fmt.frac_bits, "payload_bits": fmt.payload_bits} if fmt else {}).timed_by(self._clock)
+            extra={**({"frac_bits": fmt.frac_bits, "payload_bits": fmt.payload_bits} if fmt else {}),
+                   **getattr(kernel, "facts", {})}).timed_by(self._clock)

@@ -12,16 +12,19 @@ from typing import Iterable
 
 import numpy as np
 
+from tofnet.backends.bands import BandedKernel, band_placer, resolve_workers, threads_for
 from tofnet.backends.base import Backend, ProgressCallback, RunResult
 from tofnet.backends.fusion import FusedStream, PipelineParams, paper_chain
 from tofnet.backends.graph import GraphExecutor, canonical, resolve_probes, sinks_of
 from tofnet.backends.runtime import camera_of, clock_of, start_time_us, velocity_source_of
 from tofnet.backends.stream import DEFAULT_PACKET_EVENTS, GraphStream, run_in_packets
+from tofnet.compiler.bands import input_reach, plan_bands
 from tofnet.compiler.compiled import network_of
 from tofnet.core.network import Network
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, EVENT_DTYPE, TOT_DTYPE
 from tofnet.io.recording import Intrinsics, Recording, VelocitySource
+from tofnet.kernels.bands import row_load
 from tofnet.kernels.compilation import Stopwatch
 from tofnet.kernels.region import KernelConfig
 
@@ -52,11 +55,13 @@ class LocalBackend(Backend):
     #: Whether this backend may run a recognised chain through a fused kernel.
     fuses = False
 
-    def __init__(self, packet_events: int = DEFAULT_PACKET_EVENTS, fuse: bool = True):
+    def __init__(self, packet_events: int = DEFAULT_PACKET_EVENTS, fuse: bool = True, workers: int | str = 1):
         if isinstance(packet_events, bool) or not isinstance(packet_events, int) or packet_events < 1:
             raise BackendError(f"packet_events must be a positive whole number, got {packet_events!r}")
         self.packet_events = packet_events
         self.fuse = bool(fuse)
+        #: Bands the sensor is cut into (``tofnet.backends.bands``), run on at most one thread per CPU.
+        self.workers = resolve_workers(workers, f"{self.name or 'backend'}: workers")
 
     def _format(self):
         return None
@@ -82,13 +87,20 @@ class LocalBackend(Backend):
             pipeline = paper_chain(network, self.family, probes)
             if pipeline is not None:
                 return self._fused_stream(network, pipeline, known, t0, f"{pipeline.names[1]}.counts" in probes)
+        bands = self._bands(network, known)
+        place, pool, facts = band_placer(bands, threads_for(len(bands))) if len(bands) > 1 else (None, None, {})
 
         def build(start_us: int) -> GraphExecutor:
-            return self._executor(network, start_us, clock.timestep_us, known, probes)
+            if place is None:  # a subclass's own executor need not take bands (lava)
+                return self._executor(network, start_us, clock.timestep_us, known, probes)
+            return self._executor(network, start_us, clock.timestep_us, known, probes, place)
 
         sinks = sinks_of(network)
         stream = GraphStream(self.name, build, t0, clock.timestep_us, sinks,
                              payloads_of(network, list(dict.fromkeys(sinks + probes))))
+        if pool is not None:
+            stream.extra.update(facts)
+            stream.releases.append(pool.close)
         if stream.executor is None:
             build(0)  # check models and bindings now, not at the first event
         fmt = self._format()
@@ -97,12 +109,13 @@ class LocalBackend(Backend):
         return stream
 
     def _executor(self, network: Network, t0_us: int, timestep_us: int, recording: Recording,
-                  probes: list[str]) -> GraphExecutor:
-        """What runs the models of a stream: a ``GraphExecutor`` here (the lava backend gives its own)."""
+                  probes: list[str], place=None) -> GraphExecutor:
+        """What runs the models of a stream: a ``GraphExecutor`` here (the lava backend gives its own);
+        ``place``: builds the models of bands (``band_placer``)."""
         from tofnet.backends.registry import backends_by_family
         return GraphExecutor(network, family=self.family, backend=self.name, t0_us=t0_us, timestep_us=timestep_us,
                              recording=recording, fixed_format=self._format(), probes=probes,
-                             backends_by_family=backends_by_family)
+                             backends_by_family=backends_by_family, place=place)
 
     def _fused_stream(self, network: Network, pipeline: PipelineParams, known: Recording, t0_us: int | None,
                       record_tot: bool) -> FusedStream:
@@ -111,8 +124,23 @@ class LocalBackend(Backend):
         source = velocity_source_of(pipeline.velocity_source, pipeline.velocity_constant, pipeline.velocity_samples,
                                     known, pipeline.names[3])
         config = KernelConfig.from_pipeline(pipeline, intr, self._format())
+        bands = self._bands(network, known)
+        kernel = None
+        if len(bands) > 1:
+            kernel = BandedKernel(config, bands, input_reach(network), threads_for(len(bands)), t0_us or 0)
         return FusedStream(self.name, config, pipeline, source, t0_us, record_tot, order=[p.name for p in
-                                                                                       network.processes])
+                                                                                       network.processes],
+                           kernel=kernel)
+
+    def _bands(self, network: Network, known: Recording) -> list[tuple[int, int]]:
+        """The rows of each band: balanced by the recording's events per row when it has events."""
+        if self.workers < 2:
+            return [(0, network.sensor_size[1])]
+        height = network.sensor_size[1]
+        load = None
+        if len(known.events):  # a sample of a million events shows where the load is
+            load = row_load(known.events, height, max(1, len(known.events) >> 20))
+        return plan_bands(height, self.workers, load)
 
     def run(self, compiled, recording: Recording, *, probes: Iterable[str] = (), record_tot: bool = False,
             progress: ProgressCallback | None = None) -> RunResult:

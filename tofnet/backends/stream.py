@@ -90,6 +90,9 @@ class GraphStream:
         self._closed = False
         #: Backend facts added to the result (e.g. the fixed-point format).
         self.extra: dict = {}
+        #: Called once when the stream closes or is given up (e.g. to stop a backend's threads).
+        self.releases: list[Callable[[], None]] = []
+
 
     def check(self, events: np.ndarray, until_us: int | None = None) -> None:
         """Refuse (changing nothing) a packet ``feed_all`` would refuse: closed stream, not an event
@@ -139,10 +142,16 @@ class GraphStream:
         self._release()
 
     def _release(self) -> None:
-        """Let the executor free what it holds outside this process (the lava backend's runtime)."""
+        """Let the executor free what it holds outside this process (the lava backend's runtime), and
+        run the backend's ``releases`` (e.g. stop its threads)."""
         release = getattr(self.executor, "release", None)
-        if release is not None:
-            release()
+        hooks, self.releases = self.releases, []
+        try:
+            if release is not None:
+                release()
+        finally:
+            for hook in hooks:
+                hook()
 
     def close(self) -> RunResult:
         """Run the steps still in flight; their outputs (``outputs``) and every count so far."""

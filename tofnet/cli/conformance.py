@@ -18,6 +18,9 @@ def register(subparsers) -> None:
     p.add_argument("--against", default=None, metavar="NAME", help="baseline backend (default: reference)")
     p.add_argument("--case", action="append", metavar="NAME",
                    help="run only this case, or every case starting with it (repeatable)")
+    p.add_argument("--workers", metavar="N,N,...",
+                   help="instead of a baseline: check that each backend run with N workers (bands of rows) gives "
+                        "the bytes it gives with one, fused and model by model, e.g. 1,2,3,7")
     p.add_argument("--list", action="store_true", help="list the cases and the registered backends, run nothing")
     p.add_argument("--json", metavar="FILE", help="also write every case's outcome as JSON")
     p.add_argument("--force", action="store_true", help="overwrite an existing --json file")
@@ -44,12 +47,19 @@ def handle(args) -> int:
         check_output(args.json, force=args.force, what="--json")
     against = args.against or DEFAULT_BASELINE
     backends = args.backend or available_backends()
+    workers = workers_list(args.workers) if args.workers else None
+    if workers is not None and not args.backend:
+        backends = ["fixed", "float"]
     outcomes, failed, cache = [], 0, {}
     for name in backends:
-        print(f"== {name} vs {against}")
+        print(f"== {name} with {args.workers} workers vs one" if workers else f"== {name} vs {against}")
         print(header())
-        results = run_suite(name, against, [c.name for c in cases], cache=cache,
-                            report=lambda r: print(format_row(r), flush=True))
+        report = lambda r: print(format_row(r), flush=True)  # noqa: E731
+        if workers is not None:
+            from tofnet.conformance.workers import check_workers
+            results = check_workers(name, workers, [c.name for c in cases], report=report)
+        else:
+            results = run_suite(name, against, [c.name for c in cases], cache=cache, report=report)
         print(summary_line(results))
         print()
         failed += sum(not r.ok for r in results)
@@ -60,3 +70,15 @@ def handle(args) -> int:
     if failed:
         print(f"tofnet conformance: {failed} case(s) failed", file=sys.stderr)
     return 1 if failed else 0
+
+
+def workers_list(text: str) -> list[int]:
+    """``--workers 1,2,3,7``: positive whole numbers."""
+    from tofnet.errors import BackendError
+    try:
+        values = [int(part) for part in text.split(",") if part.strip()]
+    except ValueError:
+        values = []
+    if not values or any(v < 1 for v in values):
+        raise BackendError(f"--workers: expected positive whole numbers separated by commas (1,2,3,7), got {text!r}")
+    return values

@@ -7,7 +7,7 @@ import json
 import time
 from pathlib import Path
 
-from tofnet.errors import TofnetError, quote
+from tofnet.errors import BackendError, TofnetError, quote
 
 
 def register(subparsers) -> None:
@@ -22,6 +22,9 @@ def register(subparsers) -> None:
     p.add_argument("--out", default="depth.npz", help="depth output, .npz or .csv (default: depth.npz)")
     p.add_argument("--backend", default=None, help="backend name (default: the spec's, else 'fixed'); "
                                                     "see 'tofnet conformance --list'")
+    p.add_argument("--workers", default=None, metavar="N|auto",
+                   help="CPU cores to run on: the sensor is cut into N bands of rows (fixed, float; multiproc: "
+                        "worker processes); 0 or auto: one per CPU (default: the spec's, else 1)")
     p.add_argument("--record-tot", action="store_true",
                    help="also save the time-of-travel spikes (next to --out, *_tot.npz)")
     p.add_argument("--probe", action="append", default=[], metavar="PROCESS.PORT",
@@ -34,6 +37,16 @@ def register(subparsers) -> None:
     p.add_argument("--force", action="store_true", help="overwrite existing output files (never an input)")
     p.add_argument("--quiet", action="store_true", help="no progress, summary only")
     p.set_defaults(handler=handle)
+
+
+def workers_option(text: str) -> int | str:
+    """``--workers``: a whole number, or ``auto``."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        return int(text)
+    except ValueError:
+        raise BackendError(f"--workers: expected a whole number of workers or auto, got {text!r}") from None
 
 
 def add_network_options(p: argparse.ArgumentParser) -> None:
@@ -104,6 +117,8 @@ def handle(args) -> int:
         backend = args.backend or spec_backend or DEFAULT_BACKEND
         if args.backend and args.backend != spec_backend:
             backend_options = {}  # the spec's options belong to the spec's backend
+        if args.workers is not None:
+            backend_options = {**backend_options, "workers": workers_option(args.workers)}
         progress = None if args.quiet else Progress(f"tofnet run [{backend}]")
         options = dict(backend=backend, backend_options=backend_options, compile_options=compile_options,
                        record_tot=args.record_tot, probes=args.probe, progress=progress)

@@ -83,7 +83,6 @@ class TimeOfTravelKernel:
         # Scalars and empty arrays the per-packet path needs, looked up once.
         self._t0, self._dt, self._u = int(t0_us), config.timestep_us, config.update_every
         self._span_us = (MAX_VELOCITY_ROWS - 2) * config.update_every * config.timestep_us
-        self._full = self.region == Region.full(config.sensor_size)
         self._no_raw, self._no_velocity = np.empty(0, np.int64), np.zeros((0, 3))
         self._held_velocity = np.zeros(4)
         self._held_omega = np.zeros(3)  # rad/s: no rotation before the first angular velocity update
@@ -194,8 +193,11 @@ class TimeOfTravelKernel:
                        copy: bool = True, into: np.ndarray | None = None, offset: int = 0) -> KernelOutput:
         """Run raw events (``EVENT_DTYPE``) through the input filter and the region, in one pass.
 
-        The region must be the whole sensor; the filter's state (refractory period, one
-        event per pixel and step, drop counts: ``drops``, ``accepted``) lives in the kernel.
+        The filter's state (refractory period, one event per pixel and step, drop counts:
+        ``drops``, ``accepted``) lives in the kernel. A region smaller than the sensor (a band,
+        ``tofnet.backends.bands``) filters the events of its halo too but counts only its own
+        pixels' (and every event outside the sensor it is given); events beyond its halo are
+        skipped.
         Events the filter may accept must be in time order, also across calls; a packet
         that is not is refused before any state changes. ``velocity`` supplies velocity
         rows (``VelocityRows``). Estimates go to ``into[offset:]`` when given (capacity
@@ -218,9 +220,8 @@ class TimeOfTravelKernel:
         ``canonical=False`` leaves the estimates in the order of their trigger events (a live
         stream's caller who does not need each step in pixel order spares the sort).
         """
-        if self._broken or not self._full:
-            raise BackendError("kernel state is invalid after an earlier error; start a new one" if self._broken else
-                               "process_events runs the input filter: the region must be the whole sensor")
+        if self._broken:
+            raise BackendError("kernel state is invalid after an earlier error; start a new one")
         n = len(events)
         if into is None:
             if n > len(self._out) or (record_tot and 4 * n > len(self._tot)):

@@ -72,10 +72,12 @@ N_CURSOR = 6
 # Count slots: input_filter's drop reasons and ACCEPTED (0-4), depth outcomes (5-10:
 # the N_REASONS of REJECT_REASONS, emitted, no unit fired), time-of-travel spikes. The
 # fused kernel computes eq. 8 only, so it never counts ``rotation_dominated`` (slot 8).
+# ``HALO``: where the filter's outcomes for a halo pixel go (a band's halo pixel belongs to
+# another band, which counts it), so a banded run counts every event once.
 N_REASONS = 4
 REJECTED = 5
 EMITTED = REJECTED + N_REASONS
-INACTIVE, TOT_SPIKES, N_COUNTS = EMITTED + 1, EMITTED + 2, EMITTED + 3
+INACTIVE, TOT_SPIKES, HALO, N_COUNTS = EMITTED + 1, EMITTED + 2, EMITTED + 3, EMITTED + 4
 # The state travels in two arrays (each array argument costs ~0.1 µs per call): ``ints``
 # holds the integer parameters ``ip`` (these slots), then at the offsets they give the
 # cursor, the counts, the sample tables, the caches, the facilitation buffer and the
@@ -269,7 +271,7 @@ def views(ints, floats):
             floats[N_FP + SAMPLE_COLUMNS * n_samples:N_FP + (SAMPLE_COLUMNS + 2) * n_samples])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # bands run in threads (tofnet.backends.bands)
 def process_events(events, ints, floats, velocity, first_update, out, out_raw, n_out, record_tot, tot, n_tot,
                    scratch, row_start, canonical):
     """Raw events (``EVENT_DTYPE``) through the input filter and the region (``process``); with
@@ -283,13 +285,13 @@ def process_events(events, ints, floats, velocity, first_update, out, out_raw, n
     return n_out2, n_tot2, status
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out, out_raw, n_out, record_tot, tot,
             n_tot):
     """Run a packet through the region; returns ``(n_out, n_tot, status)``.
 
-    ``filtering``: ``ts`` are event times (µs) and the input filter runs first (full-sensor
-    region only); else ``ts`` are input steps of accepted spikes. Depth estimates are
+    ``filtering``: ``ts`` are event times (µs) and the input filter runs first (on the
+    region's halo; only the region's own pixels' outcomes count, the halo's go to ``HALO``); else ``ts`` are input steps of accepted spikes. Depth estimates are
     written to ``out[n_out:]`` (``DEPTH_DTYPE``, capacity ``n_out + len(ts)``) and their
     fixed-point values to ``out_raw`` unless it is empty; time-of-travel spikes to ``tot``
     (from ``n_tot`` on) when ``record_tot``. The sample of pixel (x, y) is
@@ -328,13 +330,16 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
         x, y = np.int64(xs[i]), np.int64(ys[i])
         polarity = 1 if ps[i] != 0 else 0
         r = ((y + pad_y) * row + x + pad_x) * stride  # the pixel's record (valid inside the halo)
+        own = x0 <= x < x1 and y0 <= y < y1  # the region's own pixel: it triggers, and its events count
         if filtering:
             t = ts[i]
             if x >= width or y >= height:
                 counts[OUT_OF_BOUNDS] += 1
                 continue
+            if not (hx0 <= x < hx1 and hy0 <= y < hy1):
+                continue  # a band's kernel is given its halo's events only; others have no record here
             if t < t0:
-                counts[BEFORE_T0] += 1
+                counts[BEFORE_T0 if own else HALO] += 1
                 continue
             if t >= step_end:  # events are in time order (checked): a division per step, not per event
                 step = (t - t0) // dt
@@ -342,7 +347,7 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
                 step_end = step_start + dt
             reason = admit(rec, r + FILTER_WORD + (polarity if per_polarity else 0), r + latest,
                            t, step_start, step_end, refractory)
-            counts[reason] += 1
+            counts[reason if own else HALO] += 1
             if reason != ACCEPTED:
                 continue
             k = step
@@ -368,7 +373,7 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
         if not (hx0 <= x < hx1 and hy0 <= y < hy1):
             continue  # neither triggers nor facilitates here
         u = np.uint64(2 * r)  # stamp of unit 0
-        if x0 <= x < x1 and y0 <= y < y1:
+        if own:
             # 1. Triggers, in step k+1.
             key = key_now | polarity
             m0, f0 = _unit(stamp, u, key, max_diff)

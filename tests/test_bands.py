@@ -1,0 +1,196 @@
+"""Workers for fixed and float: the sensor in bands of rows, byte-identical to one worker."""
+
+import os
+
+import numpy as np
+import pytest
+
+from tofnet import Session
+from tofnet.backends.bands import BandedKernel, resolve_workers
+from tofnet.backends.event_driven import FixedBackend, FloatBackend
+from tofnet.backends.registry import get_backend
+from tofnet.cli import main
+from tofnet.compiler import compile_network
+from tofnet.compiler.bands import input_reach, plan_bands
+from tofnet.conformance.workers import check_workers, first_difference
+from tofnet.errors import BackendError
+from tofnet.events import EVENT_DTYPE, make_events
+from tofnet.io.recording import Recording
+from tofnet.networks import denoised_network, depth_network, improved_network
+from tofnet.testing import TEST_INTRINSICS, merge_events, moving_pattern, noise_events
+
+SENSOR = (24, 16)
+VELOCITY = {"source": "constant", "velocity": [-0.5, 0.2, 0.1], "per": "pixel"}
+
+
+def scene(sensor=SENSOR, seed=1):
+    events = merge_events(moving_pattern(sensor, (300, -150), 100_000, seed=seed),
+                          noise_events(sensor, 20, 100_000, seed=seed + 1))
+    return Recording(events, intrinsics=TEST_INTRINSICS)
+
+
+def with_bands(cls, bands, **options):
+    """A backend whose bands are ``bands`` (rows), whatever the recording's load."""
+    class Forced(cls):
+        def _bands(self, network, known):
+            return list(bands)
+    return Forced(workers=len(bands), **options)
+
+
+def edge_events(sensor, rows):
+    """Events on exactly ``rows`` (band edges), both polarities, 3 events per pixel a step apart,
+    plus events outside the sensor and before t0."""
+    width, _ = sensor
+    t, x, y, p = [], [], [], []
+    for k in range(60):
+        for row in rows:
+            col = (3 * k + row) % width
+            t += [1000 * k + row, 1000 * k + 400 + row]
+            x += [col, (col + 1) % width]
+            y += [row, row]
+            p += [k % 2, 1 - k % 2]
+    t += [0, 5000, 7000]
+    x += [width + 3, 2, 1]
+    y += [1, sensor[1] + 5, 2]
+    p += [1, 0, 1]
+    order = np.argsort(t, kind="stable")
+    ev = make_events(np.array(t)[order], np.array(x)[order], np.array(y)[order], np.array(p)[order])
+    return merge_events(ev, moving_pattern(sensor, (250, 200), 60_000, seed=4))
+
+
+@pytest.mark.parametrize("cls", [FixedBackend, FloatBackend])
+@pytest.mark.parametrize("bands", [
+    [(0, 1), (1, 2), (2, 3), (3, 9), (9, 10), (10, 16)],  # bands of one row: narrower than the distance-2 halo
+    [(0, 5), (5, 6), (6, 16)],
+    [(0, 15), (15, 16)],
+])
+@pytest.mark.parametrize("fuse", [True, False])
+def test_bands_narrower_than_the_halo_and_events_on_band_edges_change_nothing(cls, bands, fuse):
+    network = depth_network(SENSOR, input={"refractory": "2ms"}, time_of_travel={"distance": 2}, velocity=VELOCITY)
+    edges = sorted({b for band in bands for b in band if 0 < b < SENSOR[1]} | {b - 1 for band in bands for b in band
+                                                                               if 0 < b < SENSOR[1]})
+    recording = Recording(edge_events(SENSOR, edges), intrinsics=TEST_INTRINSICS)
+    one = cls(fuse=fuse).run(network, recording, record_tot=True)
+    banded = with_bands(cls, bands, fuse=fuse).run(network, recording, record_tot=True)
+    assert len(one.depth) > 50 and one.dropped["out_of_bounds"] == 2 and one.dropped["before_t0"] == 0
+    assert first_difference(banded, one) == ""
+    assert banded.extra["bands"] == [list(b) for b in bands]
+
+
+def test_a_band_without_events_and_packets_of_any_size():
+    network = depth_network(SENSOR, velocity=VELOCITY)
+    events = scene().events
+    events = events[events["y"] < 8]  # the bottom half has no events
+    recording = Recording(events, intrinsics=TEST_INTRINSICS)
+    one = FixedBackend().run(network, recording, record_tot=True)
+    for packet in (1, 7, 1000):
+        banded = with_bands(FixedBackend, [(0, 4), (4, 8), (8, 12), (12, 16)], packet_events=packet)
+        assert first_difference(banded.run(network, recording, record_tot=True), one) == ""
+
+
+def test_a_stream_with_workers_returns_the_run_in_any_packets():
+    network = depth_network(SENSOR, velocity=VELOCITY)
+    recording = scene()
+    one = FixedBackend().run(network, recording)
+    stream = get_backend("fixed", workers=3).open_stream(network, recording=recording)
+    assert isinstance(stream.kernel, BandedKernel)
+    events, parts = recording.events, []
+    for lo in range(0, len(events), 97):
+        parts.append(stream.feed_all(events[lo:lo + 97])["depth.depth"])
+    result = stream.close()
+    parts.append(result.outputs["depth.depth"])
+    assert np.concatenate(parts).tobytes() == one.depth.tobytes()
+    assert result.counts == one.counts
+    assert not any(t.name.startswith("tofnet-band") and t.is_alive() for t in __import__("threading").enumerate())
+
+
+def test_a_stream_refuses_a_packet_out_of_order_and_stays_as_it_was():
+    network = depth_network(SENSOR, velocity=VELOCITY)
+    recording = scene()
+    events = recording.events
+    stream = get_backend("fixed", workers=2).open_stream(network, recording=recording)
+    first = stream.feed_all(events[:500])
+    bad = events[500:600].copy()
+    bad["t"][50] = bad["t"][0] - 1
+    with pytest.raises(BackendError, match="not sorted by time"):
+        stream.feed_all(bad)
+    rest = stream.feed_all(events[500:])
+    result = stream.close()
+    one = FixedBackend().run(network, recording)
+    got = np.concatenate([first["depth.depth"], rest["depth.depth"], result.outputs["depth.depth"]])
+    assert got.tobytes() == one.depth.tobytes() and result.counts == one.counts
+
+
+def test_sessions_gather_and_scatter_variables_across_bands():
+    compiled = compile_network(denoised_network(SENSOR, input={"refractory": "1ms"}, denoise={"window": "4ms"},
+                                                velocity=VELOCITY), patch=(8, 8))
+    recording = scene()
+    names = ["input.last_accepted", "denoise.last_spike", "time_of_travel.counter", "depth.a_t"]
+    with Session(compiled, recording, backend="fixed") as one, \
+            Session(compiled, recording, backend="fixed", backend_options={"workers": 3}) as three:
+        for steps in (13, 40):
+            one.run(steps=steps)
+            three.run(steps=steps)
+            for name in names:
+                assert np.array_equal(one.get(name), three.get(name)), name
+        counter = one.get("time_of_travel.counter")
+        counter[0, 3:9, 4] = 2
+        one.set("time_of_travel.counter", counter)
+        three.set("time_of_travel.counter", counter)
+        assert np.array_equal(three.get("time_of_travel.counter"), counter)
+        a, b = one.finish(), three.finish()
+    assert first_difference(b, a) == ""
+
+
+def test_processes_that_cannot_hold_a_region_run_whole_and_the_result_says_so():
+    network = improved_network(SENSOR, velocity=VELOCITY)
+    recording = scene()
+    one = FixedBackend().run(network, recording)
+    two = FixedBackend(workers=2).run(network, recording)
+    assert first_difference(two, one) == ""
+    assert "time_surface" in two.extra["whole"] and two.extra["banded"] == []
+
+
+def test_workers_option_and_its_errors(capsys, tmp_path):
+    cpus = os.cpu_count() or 1
+    assert resolve_workers(0) == resolve_workers("auto") == cpus and resolve_workers(None) == 1
+    assert FixedBackend(workers=7).workers == 7 and get_backend("float", workers="auto").workers == cpus
+    for bad in (-1, 1.5, "many", True):
+        with pytest.raises(BackendError, match="workers"):
+            FixedBackend(workers=bad)
+    np.save(tmp_path / "ev.npy", scene().events)
+    assert main(["run", str(tmp_path / "ev.npy"), "--workers", "lots", "--out", str(tmp_path / "d.npz"),
+                 "--velocity", "0.5,0,0", "--quiet"]) != 0
+    assert "--workers" in capsys.readouterr().err
+
+
+def test_bands_are_balanced_by_load_and_the_reach_composes():
+    load = np.zeros(100)
+    load[:10] = 50  # the busy top rows get narrow bands
+    load[10:] = 1
+    bands = plan_bands(100, 4, load)
+    assert bands[0][0] == 0 and bands[-1][1] == 100 and all(a[1] == b[0] for a, b in zip(bands, bands[1:]))
+    assert bands[0][1] - bands[0][0] < 10 < bands[-1][1] - bands[-1][0]
+    assert plan_bands(3, 7) == [(0, 1), (1, 2), (2, 3)]  # never more bands than rows
+    assert plan_bands(10, 3) == [(0, 3), (3, 7), (7, 10)]
+    assert input_reach(depth_network(SENSOR, time_of_travel={"distance": 2})) == 2
+    denoised = denoised_network(SENSOR, denoise={"radius": 1}, time_of_travel={"distance": 2})
+    assert input_reach(denoised) == 3  # halos compose along the chain
+
+
+@pytest.mark.parametrize("backend", ["fixed", "float"])
+def test_every_conformance_case_is_byte_identical_on_1_2_3_and_7_workers(backend):
+    results = check_workers(backend, (1, 2, 3, 7))
+    failed = [f"{r.case} {r.mode}: {r.first}" for r in results if not r.ok]
+    assert results and not failed, failed
+
+
+def test_events_outside_the_sensor_count_once():
+    network = depth_network(SENSOR, velocity=VELOCITY)
+    events = np.zeros(5, EVENT_DTYPE)
+    events["t"] = [0, 1, 2, 3, 4]
+    events["x"] = [1, 30, 2, 500, 3]
+    events["y"] = [1, 2, 40, 3, 15]
+    recording = Recording(events, intrinsics=TEST_INTRINSICS)
+    result = with_bands(FixedBackend, [(0, 2), (2, 9), (9, 16)]).run(network, recording)
+    assert result.dropped["out_of_bounds"] == 3 and result.accepted == 2 and result.events_in == 5

@@ -1,0 +1,272 @@
+"""Workers for ``fixed`` and ``float``: the sensor cut into bands of rows that run in threads.
+
+A band holds rows ``[y0, y1)`` of the network (``tofnet.compiler.bands``). The paper's chain
+runs per band through the fused kernel (``BandedKernel``): each band's kernel is given the
+packet's events of its rows widened by the network's input reach (its halo), filters them
+all, and triggers, counts and emits for its own pixels only, so every count and estimate is
+the one-kernel run's. Any other graph runs model by model, each core-placed process as one
+instance per band fed the spikes of its halo (``local_placements``: the ``multiproc`` stand-in,
+run in threads); host processes run whole. Threads, not processes: the kernels release the
+GIL (numba ``nogil``) and share the packet without copies (docs/performance.md, "Workers").
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from dataclasses import replace
+import weakref
+from concurrent.futures import ThreadPoolExecutor
+from typing import Callable, Sequence
+
+import numpy as np
+
+from tofnet.backends._workers import _Worker
+from tofnet.backends.remote import Placement, RemoteModel
+from tofnet.compiler.bands import Band, halo_rows
+from tofnet.compiler.partition import halo_of, receptive_offsets
+from tofnet.errors import BackendError
+from tofnet.events import DEPTH_DTYPE, EVENT_DTYPE, TOT_DTYPE
+from tofnet.kernels.bands import merge_by_step, select_rows
+from tofnet.kernels.input_filter import NEVER, first_out_of_order
+from tofnet.kernels.kernel_config import KernelConfig, KernelOutput, Region
+from tofnet.kernels.region import TimeOfTravelKernel
+
+#: Packets with fewer events run their bands one after the other in the caller's thread: handing
+#: work to another thread costs more than it saves there (docs/performance.md, "Workers").
+SERIAL_BELOW = 8192
+
+
+def resolve_workers(value, who: str = "workers") -> int:
+    """Workers asked for: a positive whole number, or ``0`` / ``"auto"`` for the machine's CPUs."""
+    if value is None:
+        return 1
+    if value == "auto" or (isinstance(value, int) and not isinstance(value, bool) and value == 0):
+        return os.cpu_count() or 1
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise BackendError(f"{who} must be a whole number of workers (0 or 'auto': one per CPU), got {value!r}")
+    return value
+
+
+def threads_for(bands: int) -> int:
+    """Threads that run ``bands`` bands: one per band, at most one per CPU."""
+    return max(1, min(bands, os.cpu_count() or 1))
+
+
+class BandPool:
+    """Threads started once (per stream) that run one job per band; the caller's thread runs the first
+    share itself. ``threads`` 1: no thread at all."""
+
+    def __init__(self, threads: int):
+        self.threads = threads
+        self._pool = ThreadPoolExecutor(threads - 1, thread_name_prefix="tofnet-band") if threads > 1 else None
+        if self._pool is not None:
+            weakref.finalize(self, self._pool.shutdown, wait=False)
+
+    def run(self, job: Callable[[int], object], jobs: int, serial: bool = False) -> list:
+        """``job(b)`` for every ``b < jobs``, the results in order; shares of consecutive jobs per thread."""
+        if self._pool is None or serial or jobs < 2:
+            return [job(b) for b in range(jobs)]
+        shares = np.array_split(np.arange(jobs), min(self.threads, jobs))
+        futures = [self._pool.submit(lambda share=share: [job(int(b)) for b in share]) for share in shares[1:]]
+        first = [job(int(b)) for b in shares[0]]
+        rest = [f.result() for f in futures]  # every thread finishes before an error propagates
+        return first + [r for part in rest for r in part]
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
+
+
+class BandedKernel:
+    """The fused kernel over ``bands`` (``TimeOfTravelKernel``'s streaming API, as ``FusedStream`` uses it).
+
+    Estimates and time-of-travel spikes of a call are those of one whole-sensor kernel, merged
+    in the canonical order (``run_events`` sorts always: the trigger-event order of a one-kernel
+    ``feed`` is not kept across bands); counts are the bands' sums.
+    """
+
+    def __init__(self, config: KernelConfig, bands: Sequence[Band], reach: int, threads: int, t0_us: int = 0):
+        width, height = config.sensor_size
+        self.config = config
+        self.bands = list(bands)
+        self._rows = [halo_rows(band, reach, height) for band in self.bands]  # the events each band reads
+        self._pool = BandPool(min(threads, len(self.bands)))
+        # each band's state is built (and its pages touched) by the thread that runs it
+        self.kernels = self._pool.run(lambda b: TimeOfTravelKernel(config, Region(0, width, *self.bands[b]), t0_us),
+                                      len(self.bands))
+        self._lock = threading.Lock()
+        self._t_hi = NEVER  # the latest event time fed or promised (every band checks its part too)
+        self._events = [np.empty(0, EVENT_DTYPE) for _ in self.bands]  # each band's events of a packet
+        self._out = np.empty(0, DEPTH_DTYPE)
+        self._scratch = np.empty(0, DEPTH_DTYPE)
+        self._tot = np.empty(0, TOT_DTYPE)
+        self._broken = False
+        #: What a run reports about how it ran (``RunResult.extra``).
+        self.facts = {"workers": self._pool.threads, "bands": [list(b) for b in self.bands]}
+
+    # -- what FusedStream reads ----------------------------------------------------------------
+    @property
+    def t0_us(self) -> int:
+        return self.kernels[0].t0_us
+
+    @t0_us.setter
+    def t0_us(self, value: int) -> None:
+        for kernel in self.kernels:
+            kernel.t0_us = value
+
+    @property
+    def accepted(self) -> int:
+        return sum(k.accepted for k in self.kernels)
+
+    @property
+    def drops(self) -> np.ndarray:
+        return np.sum([k.drops for k in self.kernels], axis=0)
+
+    @property
+    def tot_spikes(self) -> int:
+        return sum(k.tot_spikes for k in self.kernels)
+
+    @property
+    def outcomes(self) -> np.ndarray:
+        return np.sum([k.outcomes for k in self.kernels], axis=0)
+
+    def buffers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self._out, np.empty(0, np.int64), self._tot
+
+    def promise(self, until_us: int) -> None:
+        self._t_hi = max(self._t_hi, int(until_us))
+        for kernel in self.kernels:
+            kernel.promise(until_us)
+
+    def join_packets(self, depth: np.ndarray, seams: list[int]) -> np.ndarray:
+        return self.kernels[0].join_packets(depth, seams)
+
+    def close(self) -> None:
+        self._pool.close()
+
+    # -- running -------------------------------------------------------------------------------
+    def process_events(self, events: np.ndarray, velocity, *, record_tot: bool = False, copy: bool = True,
+                       into: np.ndarray | None = None, offset: int = 0) -> KernelOutput:
+        spikes_before = self.tot_spikes
+        end, n_tot = self.run_events(events, velocity, into, offset, record_tot)
+        depth = (self._out[:end] if into is None else into[offset:end])
+        tot = self._tot[:n_tot] if record_tot else None
+        if copy:
+            depth = depth.copy()
+            tot = tot.copy() if tot is not None else None
+        return KernelOutput(depth, np.empty(0, np.int64), tot, self.tot_spikes - spikes_before)
+
+    def run_events(self, events: np.ndarray, velocity, into: np.ndarray | None = None, offset: int = 0,
+                   record_tot: bool = False, span: tuple[int, int] | None = None,
+                   canonical: bool = True) -> tuple[int, int]:
+        """As ``TimeOfTravelKernel.run_events``; the estimates are always in the canonical order."""
+        if self._broken:
+            raise BackendError("kernel state is invalid after an earlier error; start a new one")
+        n = len(events)
+        if into is None:
+            if len(self._out) < n:
+                self._out = np.empty(max(n, 2 * len(self._out)), DEPTH_DTYPE)
+            into, offset = self._out, 0
+        elif len(into) < offset + n:
+            raise BackendError(f"output buffer holds {len(into)} estimates, {offset + n} may be written")
+        if n == 0:
+            return offset, 0
+        if first_out_of_order(events["t"], self._t_hi) >= 0:  # refused before any band changes
+            raise BackendError("events are not sorted by time (input spikes: by step): each packet must be in "
+                               "time order and follow the previous one; it was refused and the state is unchanged")
+        width, height = self.config.sensor_size
+        if len(self._scratch) < n * len(self.kernels):  # band b writes from b * n: at most one estimate per event
+            self._scratch = np.empty(max(n * len(self.kernels), 2 * len(self._scratch)), DEPTH_DTYPE)
+        scratch = self._scratch
+
+        def velocity_locked(first, count):
+            with self._lock:
+                return velocity(first, count)
+
+        def job(b: int):
+            if len(self._events[b]) <= n:
+                self._events[b] = np.empty(max(n + 1, 2 * len(self._events[b])), EVENT_DTYPE)
+            lo, hi = self._rows[b]
+            m = select_rows(events, lo, hi, width, height, b == 0, self._events[b])
+            if m == 0:
+                return b * n, 0
+            return self.kernels[b].run_events(self._events[b][:m], velocity_locked, scratch, b * n, record_tot)
+
+        try:
+            ends = self._pool.run(job, len(self.kernels), serial=n < SERIAL_BELOW)
+        except BaseException:
+            self._broken = True  # some bands ran the packet, others did not
+            raise
+        self._t_hi = max(self._t_hi, int(events["t"][-1]))
+        parts = np.array([(b * n, end) for b, (end, _) in enumerate(ends)], np.int64).reshape(-1, 2)
+        end = merge_by_step(words(scratch)[0], scratch["step"], parts, words(into)[0], offset, 7)
+        n_tot = 0
+        if record_tot:
+            n_tot = sum(t for _, t in ends)
+            if len(self._tot) < n_tot:
+                self._tot = np.empty(max(n_tot, 2 * len(self._tot)), TOT_DTYPE)
+            tots = [k.buffers()[2][:t] for k, (_, t) in zip(self.kernels, ends)]
+            joined = np.concatenate(tots) if tots else np.empty(0, TOT_DTYPE)
+            bounds = np.cumsum([0] + [len(t) for t in tots])
+            flat, width = words(joined)
+            merge_by_step(flat, joined["step"], np.stack([bounds[:-1], bounds[1:]], 1).astype(np.int64),
+                          words(self._tot)[0], 0, width)
+        return end, n_tot
+
+
+def words(records: np.ndarray) -> tuple[np.ndarray, int]:
+    """A contiguous record array as flat words and the words per record (a view): 32-bit words when
+    the records are whole words (depth records: 7), else bytes."""
+    size = records.dtype.itemsize
+    word = np.uint32 if size % 4 == 0 else np.uint8
+    return records.view(word).reshape(-1), size // np.dtype(word).itemsize
+
+
+def band_placer(bands: Sequence[Band], threads: int):
+    """``(place, pool, facts)`` for a ``GraphExecutor`` running ``bands``: each core-placed process whose
+    model can hold a region becomes one instance per band behind a ``RemoteModel`` whose exchange
+    runs the bands in ``pool``'s threads; any other process runs whole. ``facts`` (updated as the
+    executor places processes) names both kinds, for ``RunResult.extra``."""
+    pool = BandPool(min(threads, len(bands)))
+    workers = [_Worker(b) for b in range(len(bands))]
+    exchange = band_exchange(pool, workers)
+    facts = {"workers": pool.threads, "bands": [list(b) for b in bands], "banded": [], "whole": []}
+
+    def place(process, model_class, ctx):
+        if process.placement != "core" or not getattr(model_class, "supports_regions", False):
+            if process.name not in facts["whole"]:
+                facts["whole"].append(process.name)
+            return model_class(process, ctx)
+        placements = []
+        for placement, model in band_placements(process, model_class, bands, ctx):
+            workers[placement.worker].models[placement.key] = model
+            placements.append(placement)
+        if process.name not in facts["banded"]:
+            facts["banded"].append(process.name)
+        return RemoteModel(process, model_class, placements, exchange)
+
+    return place, pool, facts
+
+
+def band_exchange(pool: BandPool, workers: list) -> Callable[[dict[int, tuple]], dict[int, tuple]]:
+    """``RemoteModel``'s exchange, answered by the bands' message handlers (``_Worker``) in ``pool``'s threads."""
+    def exchange(messages: dict[int, tuple]) -> dict[int, tuple]:
+        keys = sorted(messages)
+        replies = pool.run(lambda i: workers[keys[i]].handle(messages[keys[i]]), len(keys))
+        return dict(zip(keys, replies))
+    return exchange
+
+
+def band_placements(process, model_class, bands: Sequence[Band], ctx) -> list[tuple[Placement, object]]:
+    """One instance of ``process`` per band (its rows), fed the spikes of its halo (from the process's
+    receptive offsets, as the compiler's cores are)."""
+    width, height = process.sensor_size
+    offsets = receptive_offsets(process)
+    out = []
+    for b, (y0, y1) in enumerate(bands):
+        rect = (0, y0, width, y1)
+        model = model_class(process, replace(ctx, region=Region(0, width, y0, y1)))
+        out.append((Placement((process.name, b), b, tuple(halo_of(rect, offsets, (width, height))), rect), model))
+    return out

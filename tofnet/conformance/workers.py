@@ -1,0 +1,69 @@
+"""Workers change nothing: every case run with N bands equals the same backend with one, byte for byte.
+
+``check_workers("fixed", (1, 2, 3, 7))`` runs each selected case on the backend with one worker
+and with each N of ``workers`` (the sensor cut into N bands, ``tofnet.backends.bands``), both
+fused and model by model, and compares every output's bytes, every count, the steps and
+``t0`` (``tofnet conformance --backend fixed --workers 1,2,3,7``). Small scenes cut into 7
+bands have bands narrower than the halo, bands without events and events on band edges.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Callable, Iterable
+
+from tofnet.backends.registry import get_backend
+from tofnet.conformance.runner import CaseResult, select_cases
+from tofnet.errors import TofnetError
+
+#: The band counts the suite checks by default.
+DEFAULT_WORKERS = (1, 2, 3, 7)
+
+
+def first_difference(got, expected) -> str:
+    """The first way two results differ (outputs by bytes, counts, steps, t0), or '' when identical."""
+    for what in ("steps", "t0_us", "counts"):
+        if getattr(got, what) != getattr(expected, what):
+            return f"{what}: {getattr(got, what)!r} vs {getattr(expected, what)!r}"
+    if set(got.outputs) != set(expected.outputs):
+        return f"outputs {sorted(got.outputs)} vs {sorted(expected.outputs)}"
+    for name in sorted(got.outputs):
+        a, b = got.outputs[name], expected.outputs[name]
+        if a.dtype != b.dtype or a.tobytes() != b.tobytes():
+            at = next((i for i in range(min(len(a), len(b))) if a[i].tobytes() != b[i].tobytes()), min(len(a), len(b)))
+            return f"{name}: {len(a)} vs {len(b)} records, first differing at {at}"
+    return ""
+
+
+def check_workers(backend: str = "fixed", workers: Iterable[int] = DEFAULT_WORKERS,
+                  cases: Iterable[str] | None = None, *, fuse: Iterable[bool] = (True, False),
+                  report: Callable[[CaseResult], None] | None = None) -> list[CaseResult]:
+    """Each case on ``backend`` with each N of ``workers`` against one worker (mode ``bands-N``,
+    ``bands-N-unfused`` for the models); one ``CaseResult`` per case, N and fusion."""
+    from tofnet.compiler import compile_network
+
+    results = []
+    for case in select_cases(cases):
+        scene = case.build()
+        compiled = compile_network(scene.network, patch=scene.patch)
+        for fused in fuse:
+            baseline = None
+            for n in workers:
+                started = time.perf_counter()
+                mode = f"bands-{n}" + ("" if fused else "-unfused")
+                try:
+                    if baseline is None:
+                        baseline = get_backend(backend, fuse=fused).run(compiled, scene.recording, record_tot=True)
+                    got = get_backend(backend, fuse=fused, workers=n).run(compiled, scene.recording,
+                                                                          record_tot=True)
+                    first = first_difference(got, baseline)
+                    estimates = tuple(sum(len(r.outputs[name]) for name in r.depth_outputs) for r in (got, baseline))
+                except Exception as err:  # a backend's bug is a failed case, not the end of the suite
+                    first = "error: " + (str(err) if isinstance(err, TofnetError) else f"{type(err).__name__}: {err}")
+                    estimates = (0, 0)
+                outcome = CaseResult(case.name, f"{backend} x{n}", f"{backend} x1", mode, not first, estimates,
+                                     first, time.perf_counter() - started)
+                results.append(outcome)
+                if report is not None:
+                    report(outcome)
+    return results
