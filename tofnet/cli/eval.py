@@ -24,6 +24,10 @@ def register(subparsers) -> None:
     p.add_argument("depth", help="depth estimates written by `tofnet run` (.npz; .csv with --timestep)")
     p.add_argument("--window", default="100ms",
                    help="length of the per-window metrics, e.g. 100ms or 0.5 (seconds); 0 for none (default 100ms)")
+    p.add_argument("--quality", metavar="FILE",
+                   help="the fits behind the estimates (the *.quality.npz `tofnet run` writes beside the depth of "
+                        "the time-surface estimator; found there by default): error and coverage against a "
+                        "threshold on the fit's rms residual and on its points")
     p.add_argument("--json", metavar="OUT", help="also write the metrics as JSON to OUT ('-' for stdout only)")
     p.add_argument("--force", action="store_true", help="overwrite an existing --json file")
     add_timing_options(p)
@@ -104,6 +108,18 @@ def _t0_from_stamps(depth: np.ndarray, timestep_us: int, recording, depth_path: 
     return int(t0[0])
 
 
+def quality_curves(args, depth, result) -> dict | None:
+    """Error and coverage against fit-quality thresholds, when the estimates' fits are at hand."""
+    from tofnet.eval.quality import CRITERIA, check_aligned, quality_beside, quality_curve, read_quality
+
+    path = Path(args.quality) if args.quality else quality_beside(args.depth)
+    if path is None:
+        return None
+    quality = read_quality(path)
+    check_aligned(depth, quality, str(path))
+    return {c: quality_curve(depth, quality, result.matches, result.events_in, c) for c in CRITERIA}
+
+
 def handle(args) -> int:
     from tofnet.eval import evaluate
     from tofnet.units import seconds
@@ -135,6 +151,8 @@ def handle(args) -> int:
     phases = None if recording.trajectory is None else by_motion_phase(depth, result.matches, recording.events,
                                                                        recording.trajectory)
     data["depth_bands"] = [g.to_dict() for g in bands]
+    curves = quality_curves(args, depth, result)
+    data["quality_curves"] = None if curves is None else {k: [p.to_dict() for p in c] for k, c in curves.items()}
     data["motion_phases"] = None if phases is None else [g.to_dict() for g in phases]
     text = json.dumps(data, indent=2, allow_nan=False)
     if args.json == "-":
@@ -148,6 +166,10 @@ def handle(args) -> int:
     print()
     print(format_groups("by motion phase (reversal: turned > 90 deg in 100 ms, or slow)", phases) if phases is not None
           else "by motion phase: not available (the recording has no poses)")
+    for criterion, curve in (curves or {}).items():
+        from tofnet.eval.quality import format_curve
+        print()
+        print(format_curve(criterion, curve))
     if args.json:
         from tofnet.io.files import write_text_atomic
         write_text_atomic(args.json, text + "\n")
