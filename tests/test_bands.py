@@ -94,14 +94,27 @@ def test_a_stream_with_workers_returns_the_run_in_any_packets():
     one = FixedBackend().run(network, recording)
     stream = get_backend("fixed", workers=3).open_stream(network, recording=recording)
     assert isinstance(stream.kernel, BandedKernel)
+    stream.kernel.one_band_below = 0  # bands even for these small packets
     events, parts = recording.events, []
     for lo in range(0, len(events), 97):
         parts.append(stream.feed_all(events[lo:lo + 97])["depth.depth"])
     result = stream.close()
     parts.append(result.outputs["depth.depth"])
     assert np.concatenate(parts).tobytes() == one.depth.tobytes()
-    assert result.counts == one.counts
+    assert result.counts == one.counts and len(result.extra["bands"]) == 3
     assert not any(t.name.startswith("tofnet-band") and t.is_alive() for t in __import__("threading").enumerate())
+
+
+def test_a_stream_fed_small_packets_keeps_one_band_and_returns_what_one_worker_returns():
+    network = depth_network(SENSOR, velocity=VELOCITY)
+    recording = scene()
+    events = recording.events
+    streams = [get_backend("fixed", workers=n).open_stream(network, recording=recording) for n in (1, 2)]
+    for lo in range(0, len(events), 50):  # feed (not feed_all): the trigger events' order, as one worker's
+        a, b = (s.feed(events[lo:lo + 50]) for s in streams)
+        assert a.tobytes() == b.tobytes()
+    one, two = (s.close() for s in streams)
+    assert two.counts == one.counts and two.extra["bands"] == [[0, SENSOR[1]]]
 
 
 def test_a_stream_refuses_a_packet_out_of_order_and_stays_as_it_was():
@@ -109,6 +122,7 @@ def test_a_stream_refuses_a_packet_out_of_order_and_stays_as_it_was():
     recording = scene()
     events = recording.events
     stream = get_backend("fixed", workers=2).open_stream(network, recording=recording)
+    stream.kernel.one_band_below = 0
     first = stream.feed_all(events[:500])
     bad = events[500:600].copy()
     bad["t"][50] = bad["t"][0] - 1

@@ -14,21 +14,22 @@ from __future__ import annotations
 
 import os
 import threading
-from dataclasses import replace
 import weakref
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import replace
 from typing import Callable, Sequence
 
 import numpy as np
 
 from tofnet.backends._workers import _Worker
+from tofnet.backends.base import REJECT_REASONS
 from tofnet.backends.remote import Placement, RemoteModel
 from tofnet.compiler.bands import Band, halo_rows
 from tofnet.compiler.partition import halo_of, receptive_offsets
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, EVENT_DTYPE, TOT_DTYPE
 from tofnet.kernels.bands import merge_by_step, select_rows
-from tofnet.kernels.input_filter import NEVER, first_out_of_order
+from tofnet.kernels.input_filter import ACCEPTED, NEVER, first_out_of_order
 from tofnet.kernels.kernel_config import KernelConfig, KernelOutput, Region
 from tofnet.kernels.region import TimeOfTravelKernel
 
@@ -88,31 +89,47 @@ class BandedKernel:
     """
 
     def __init__(self, config: KernelConfig, bands: Sequence[Band], reach: int, threads: int, t0_us: int = 0):
-        width, height = config.sensor_size
         self.config = config
-        self.bands = list(bands)
-        self._rows = [halo_rows(band, reach, height) for band in self.bands]  # the events each band reads
-        self._pool = BandPool(min(threads, len(self.bands)))
-        # each band's state is built (and its pages touched) by the thread that runs it
-        self.kernels = self._pool.run(lambda b: TimeOfTravelKernel(config, Region(0, width, *self.bands[b]), t0_us),
-                                      len(self.bands))
+        self._planned, self._reach, self._threads = list(bands), reach, threads
+        self._t0 = int(t0_us)
+        self.kernels: list[TimeOfTravelKernel] = []  # built for the first packet (``_build``)
+        self._pool: BandPool | None = None
         self._lock = threading.Lock()
         self._t_hi = NEVER  # the latest event time fed or promised (every band checks its part too)
-        self._events = [np.empty(0, EVENT_DTYPE) for _ in self.bands]  # each band's events of a packet
         self._out = np.empty(0, DEPTH_DTYPE)
         self._scratch = np.empty(0, DEPTH_DTYPE)
         self._tot = np.empty(0, TOT_DTYPE)
         self._broken = False
         #: What a run reports about how it ran (``RunResult.extra``).
+        self.facts: dict = {"workers": 1, "bands": []}
+        #: A first packet of fewer events keeps one band (``_build``); ``run`` sets 0: its packets are large.
+        self.one_band_below = SERIAL_BELOW
+
+    def _build(self, packet: int) -> None:
+        """The bands' kernels, for a first packet of ``packet`` events: a stream fed small packets (under
+        ``one_band_below``, e.g. 1 ms at 1 M ev/s) keeps one whole-sensor kernel, as one worker would:
+        for them bands cost more than they save (docs/performance.md, "Workers")."""
+        width, height = self.config.sensor_size
+        self.bands = self._planned if packet >= self.one_band_below else [(0, height)]
+        self._rows = [halo_rows(band, self._reach, height) for band in self.bands]  # the events each band reads
+        self._events = [np.empty(0, EVENT_DTYPE) for _ in self.bands]  # each band's events of a packet
+        self._pool = BandPool(min(self._threads, len(self.bands)))
+        # each band's state is built (and its pages touched) by the thread that runs it
+        self.kernels = self._pool.run(lambda b: TimeOfTravelKernel(self.config, Region(0, width, *self.bands[b]),
+                                                                   self._t0), len(self.bands))
+        if self._t_hi != NEVER:
+            for kernel in self.kernels:
+                kernel.promise(self._t_hi)
         self.facts = {"workers": self._pool.threads, "bands": [list(b) for b in self.bands]}
 
     # -- what FusedStream reads ----------------------------------------------------------------
     @property
     def t0_us(self) -> int:
-        return self.kernels[0].t0_us
+        return self._t0
 
     @t0_us.setter
     def t0_us(self, value: int) -> None:
+        self._t0 = int(value)
         for kernel in self.kernels:
             kernel.t0_us = value
 
@@ -122,7 +139,7 @@ class BandedKernel:
 
     @property
     def drops(self) -> np.ndarray:
-        return np.sum([k.drops for k in self.kernels], axis=0)
+        return np.sum([k.drops for k in self.kernels], axis=0) if self.kernels else np.zeros(ACCEPTED, np.int64)
 
     @property
     def tot_spikes(self) -> int:
@@ -130,9 +147,12 @@ class BandedKernel:
 
     @property
     def outcomes(self) -> np.ndarray:
-        return np.sum([k.outcomes for k in self.kernels], axis=0)
+        return np.sum([k.outcomes for k in self.kernels], axis=0) if self.kernels else \
+            np.zeros(len(REJECT_REASONS) + 1, np.int64)
 
     def buffers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if len(self.kernels) == 1:
+            return self.kernels[0].buffers()
         return self._out, np.empty(0, np.int64), self._tot
 
     def promise(self, until_us: int) -> None:
@@ -141,10 +161,11 @@ class BandedKernel:
             kernel.promise(until_us)
 
     def join_packets(self, depth: np.ndarray, seams: list[int]) -> np.ndarray:
-        return self.kernels[0].join_packets(depth, seams)
+        return self.kernels[0].join_packets(depth, seams) if self.kernels else depth
 
     def close(self) -> None:
-        self._pool.close()
+        if self._pool is not None:
+            self._pool.close()
 
     # -- running -------------------------------------------------------------------------------
     def process_events(self, events: np.ndarray, velocity, *, record_tot: bool = False, copy: bool = True,
@@ -173,6 +194,10 @@ class BandedKernel:
             raise BackendError(f"output buffer holds {len(into)} estimates, {offset + n} may be written")
         if n == 0:
             return offset, 0
+        if not self.kernels:
+            self._build(n)
+        if len(self.kernels) == 1:  # one band: the one-worker path, nothing to select or merge
+            return self.kernels[0].run_events(events, velocity, into, offset, record_tot, span, canonical)
         if first_out_of_order(events["t"], self._t_hi) >= 0:  # refused before any band changes
             raise BackendError("events are not sorted by time (input spikes: by step): each packet must be in "
                                "time order and follow the previous one; it was refused and the state is unchanged")
@@ -195,7 +220,7 @@ class BandedKernel:
             return self.kernels[b].run_events(self._events[b][:m], velocity_locked, scratch, b * n, record_tot)
 
         try:
-            ends = self._pool.run(job, len(self.kernels), serial=n < SERIAL_BELOW)
+            ends = self._pool.run(job, len(self.kernels), serial=n < SERIAL_BELOW)  # a small packet: no hand-over
         except BaseException:
             self._broken = True  # some bands ran the packet, others did not
             raise
