@@ -212,3 +212,23 @@ def test_mvsec_rows_and_a_windowed_convert(tmp_path, recording):
     first = int(events["t"][0])
     assert np.array_equal(cut.events, _expected(events, first + 100_000, first + 150_000))
     assert cut.trajectory.times[0] * 1e6 <= first + 100_000 and len(cut.trajectory) < len(recording.trajectory)
+
+
+def test_npy_windows_read_only_their_rows(tmp_path, recording):
+    events = recording.events
+    first = int(events["t"][0])
+    rows = np.column_stack([events["x"], events["y"], (events["t"] - first) * 1e-6, events["p"]]).astype(np.float64)
+    rows[5, 0] = -1  # a bad row outside the window: the whole file is refused, the window is not
+    np.save(tmp_path / "plain.npy", rows)
+    np.save(tmp_path / "plain_depth.npy", np.arange(len(rows), dtype=np.float64) + 1.0)
+    with pytest.raises(DataError, match="pixel coordinates must be >= 0"):
+        read_recording(tmp_path / "plain.npy", columns="x,y,t,p")
+    read = read_recording(tmp_path / "plain.npy", columns="x,y,t,p", window=parse_window(start="100ms", duration="50ms"))
+    keep = (events["t"] - first >= 100_000) & (events["t"] - first < 150_000)
+    assert np.array_equal(read.events[["x", "y", "p"]], events[keep][["x", "y", "p"]])
+    assert np.array_equal(read.events["t"], events["t"][keep] - first)
+    assert np.array_equal(read.gt_depth, np.flatnonzero(keep) + 1.0)
+    assert any("time window 0.1 s .. 0.15 s" in note for note in read.notes)
+    with pytest.raises(DataError, match=r"no events in the time window 1 s \.\. the end from the first event; "
+                                        r"the recording ends 0\.29987 s"):
+        read_recording(tmp_path / "plain.npy", columns="x,y,t,p", window=parse_window(start="1s"))

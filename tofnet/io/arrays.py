@@ -201,6 +201,49 @@ def read_events_npy(path: str | Path, columns: str | tuple[str, ...] | None = No
         raise
 
 
+def seconds_to_us(t: np.ndarray) -> np.ndarray:
+    """Float seconds to float64 µs rounded to the nearest whole µs, halves away from zero (via float64)."""
+    scaled = np.asarray(t).astype(np.float64) * 1e6
+    return np.sign(scaled) * np.floor(np.abs(scaled) + 0.5)
+
+
+def times_us_for_search(t: np.ndarray) -> np.ndarray:
+    """A slice of a ``t`` column as the µs ``events_from_columns`` makes of it, for binary searches
+    (float seconds rounded; integers as they are, unsigned ones beyond int64 clipped: refused later)."""
+    if t.dtype.kind == "f":
+        return seconds_to_us(t)
+    if t.dtype.kind == "u":
+        return np.minimum(t, np.iinfo(np.int64).max).astype(np.int64)
+    return np.asarray(t).astype(np.int64)
+
+
+def read_npy_window(path: str | Path, columns, window) -> tuple[np.ndarray, int, int, int, int]:
+    """The events of a ``.npy`` file in ``window`` (``tofnet.io.window.TimeWindow``), reading only
+    their rows (a memory map and a binary search on the sorted ``t``): ``(events, first event µs,
+    first row, end row, last event µs)``. Events outside the window are not checked."""
+    from tofnet.io.npy import map_npy
+    from tofnet.io.source import first_at_or_after
+
+    path = Path(path)
+    cols = columns_of(path, map_npy(path, "events file"), "the array", columns)
+    n = len(cols["t"])
+    if n == 0:
+        raise DataError(located(path, None, "no events"))
+
+    def times(lo: int, hi: int) -> np.ndarray:
+        return times_us_for_search(np.asarray(cols["t"][lo:hi]))
+
+    first, last = int(times(0, 1)[0]), int(times(n - 1, n)[0])
+    start, stop = window.resolve(first)
+    lo = first_at_or_after(times, n, start)
+    hi = n if stop is None else max(first_at_or_after(times, n, stop), lo)
+    if hi == lo:  # the source says which window and where the recording ends
+        return np.empty(0, dtype=EVENT_DTYPE), first, lo, hi, last
+    events = events_from_columns({name: np.asarray(col[lo:hi]) for name, col in cols.items()},
+                                 f"{path} (rows {lo}..{hi - 1})")
+    return events, first, lo, hi, last
+
+
 def events_from_columns(columns: dict[str, np.ndarray], source: object = "<memory>") -> np.ndarray:
     """Validate columns ``t x y p`` and build an ``EVENT_DTYPE`` array.
 
@@ -228,8 +271,7 @@ def events_from_columns(columns: dict[str, np.ndarray], source: object = "<memor
     t = arrays["t"]
     limit = MAX_TIME_US
     if t.dtype.kind == "f":
-        scaled = t.astype(np.float64) * 1e6
-        t_us = np.sign(scaled) * np.floor(np.abs(scaled) + 0.5)
+        t_us = seconds_to_us(t)
         bad = np.flatnonzero(np.abs(t_us) >= limit)
         if bad.size:
             raise fail("t", int(bad[0]), f"{t[bad[0]]:g} s is out of range (|t| < 2**61 µs; float t is seconds)")

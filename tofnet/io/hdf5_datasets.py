@@ -178,9 +178,8 @@ class MvsecSource(_GroundTruthMixin, ColumnsSource):
         self.notes.append(f"poses and depth from {gt_path.name}")
 
     def _times(self, lo: int, hi: int) -> np.ndarray:
-        # As events_from_columns converts them: seconds to µs, halves away from zero.
-        scaled = self.rows[lo:hi, 2].astype(np.float64) * 1e6
-        return np.sign(scaled) * np.floor(np.abs(scaled) + 0.5)
+        from tofnet.io.arrays import seconds_to_us  # as events_from_columns converts them
+        return seconds_to_us(self.rows[lo:hi, 2])
 
     def _rows(self, first: int, last: int, size_hint: int) -> Iterable[np.ndarray]:
         from tofnet.io.events import events_from_columns

@@ -128,6 +128,27 @@ def load_npy(path: str | Path, what: str = ".npy file") -> np.ndarray:
             raise DataError(located(path, None, f"cannot read the array: {reason(err)}")) from None
 
 
+def map_npy(path: str | Path, what: str = ".npy file") -> np.ndarray:
+    """The array of a ``.npy`` file as a read-only memory map, after the same header and size checks
+    as ``load_npy``: nothing is read until it is indexed (time windows read only their rows)."""
+    path = Path(path)
+    with open_regular(path, what) as handle:
+        size = os.fstat(handle.fileno()).st_size
+        try:
+            shape, fortran, dtype, header_bytes = _read_header(handle, path)
+        except _ERRORS as err:
+            raise DataError(located(path, None, f"cannot read the array: {reason(err)}")) from None
+    count = 1
+    for n in shape:
+        count *= n
+    if count * dtype.itemsize != size - header_bytes:
+        with open_regular(path, what) as handle:  # the same message as load_npy
+            _read_array(handle, size, path)
+    if count == 0:
+        return np.empty(shape, dtype=dtype)
+    return np.memmap(path, dtype=dtype, mode="r", offset=header_bytes, shape=shape, order="F" if fortran else "C")
+
+
 def load_npz(path: str | Path, wanted: Iterable[str] | None = None,
              what: str = ".npz file") -> tuple[list[str], dict[str, np.ndarray]]:
     """The keys of a ``.npz`` file and the arrays of those in ``wanted`` (all when None)."""

@@ -323,8 +323,9 @@ def _copy_checked(out_t, out_x, out_y, out_p, at, t, x, y, p, start, count, last
 class RecordingSource(EventSource):
     """A recording already in memory (ECD folders, text and numpy files), served in chunks."""
 
-    def __init__(self, recording: Recording, format: str, path: str | Path):
+    def __init__(self, recording: Recording, format: str, path: str | Path, span: tuple[int, int] | None = None):
         super().__init__(path)
+        self._span = span  # (first, last) event µs of the file when only a window of it was read
         self.format = format
         self.recording = recording
         self.sensor_size = recording.sensor_size
@@ -345,10 +346,10 @@ class RecordingSource(EventSource):
 
     def first_time(self) -> int | None:
         events = self.recording.events
-        return int(events["t"][0]) if len(events) else None
+        return self._span[0] if self._span else int(events["t"][0]) if len(events) else None
 
     def _window_end_us(self) -> int | None:
-        return int(self.recording.events["t"][-1])
+        return self._span[1] if self._span else int(self.recording.events["t"][-1])
 
     def set_window(self, window) -> None:
         # Loaded whole already (text and numpy have no index): the window is a slice, found by
@@ -360,8 +361,8 @@ class RecordingSource(EventSource):
         hi = len(t) if stop is None else max(int(np.searchsorted(t, stop, side="left")), lo)
         if hi == lo:
             raise DataError(located(self.path, None, f"no events in the time window {self.window_text()}; the "
-                                                     f"recording ends {(int(t[-1]) - self._origin_us) * 1e-6:g} s "
-                                                     "after its first event"))
+                                                     f"recording ends {(self._window_end_us() - self._origin_us) * 1e-6:g}"
+                                                     " s after its first event"))
         recording = self.recording
         self.recording = Recording(events=recording.events[lo:hi], intrinsics=recording.intrinsics,
                                    trajectory=recording.trajectory, sensor_size=recording.sensor_size,
@@ -439,7 +440,8 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
             from tofnet.io.rosbag import RosbagSource
             source = RosbagSource(path, topics)
         else:
-            source = RecordingSource(_read_in_memory(path, kind, columns), kind, path)
+            recording, span = _read_in_memory(path, kind, columns, window)
+            source = RecordingSource(recording, kind, path, span)
     except BaseException as err:
         if not is_decode_error(err, kind):
             raise
@@ -492,23 +494,36 @@ FORMAT_NAMES = {"aedat4": "AEDAT4", "evt": "Prophesee RAW", "dat": "Prophesee DA
                 "hdf5": "HDF5", "rosbag1": "ROS1 bag"}
 
 
-def _read_in_memory(path: Path, kind: str, columns) -> Recording:
+def _read_in_memory(path: Path, kind: str, columns, window=None) -> tuple[Recording, tuple[int, int] | None]:
+    """The recording, and for a ``.npy`` read through a time window, the file's (first, last) event µs."""
     from tofnet.io.ecd import attach_sidecars, read_ecd
     from tofnet.io.events import read_events_npy, read_events_txt
 
+    span = None
     if kind == "ecd":
         recording = read_ecd(path)
     else:
         notes: list[str] = []
+        depth_name = f"{path.stem}_depth.npy"
         if kind == "text":
             events = read_events_txt(path, notes)  # notes: how many times were rounded to the µs
+        elif kind == "npy" and window is not None:
+            # A memory map: only the window's rows are read (the other formats here are parsed whole).
+            from tofnet.io.arrays import read_npy_window
+            events, first, lo, hi, last = read_npy_window(path, columns, window)
+            span, depth_name = (first, last), None
         else:
             events = read_events_npy(path, columns=columns)
         recording = attach_sidecars(Recording(events=events, source=str(path), notes=notes), path.parent,
-                                    gt_depth_name=f"{path.stem}_depth.npy")
+                                    gt_depth_name=depth_name)
+        if span is not None and (path.parent / f"{path.stem}_depth.npy").exists():
+            from tofnet.io.ecd import read_gt_depth
+            from tofnet.io.npy import map_npy
+            total = len(map_npy(path, "events file"))
+            recording.gt_depth = read_gt_depth(path.parent / f"{path.stem}_depth.npy", total)[lo:hi]
         if kind == "npz":
             from tofnet.io.arrays import apply_npz_metadata
             apply_npz_metadata(recording, path)
-    if len(recording.events) == 0:
+    if len(recording.events) == 0 and span is None:
         raise DataError(located(path, None, "no events"))
-    return recording
+    return recording, span
