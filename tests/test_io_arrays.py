@@ -57,7 +57,7 @@ def test_n_imagenet_event_data_key(tmp_path):
 
 def test_missing_polarity_names_the_accepted_names(tmp_path):
     np.save(tmp_path / "bad.npy", np.zeros(3, dtype=[("t", "<i8"), ("x", "<u2"), ("y", "<u2"), ("pol", "u1")]))
-    with pytest.raises(DataError, match=r"expected t, x, y and p \(or on, polarity\); missing p"):
+    with pytest.raises(DataError, match=r"expected t \(or timestamp\), x, y and p \(or on, polarity\); missing p"):
         read_events_npy(tmp_path / "bad.npy")
 
 

@@ -9,7 +9,7 @@ from tofnet.backends.base import ProgressCallback, RunResult
 from tofnet.core.network import Network
 from tofnet.errors import NetworkError
 from tofnet.io.recording import Recording
-from tofnet.networks import depth_network, improved_network
+from tofnet.networks import DEFAULT_SENSOR_SIZE, depth_network, improved_network
 from tofnet.processes import (AngularVelocityProcess, InputProcess, TimeOfTravelProcess, TimeSurfaceProcess,
                               UndistortProcess, VelocityProcess)
 
@@ -51,7 +51,7 @@ def default_network(recording: Recording | None = None, *, sensor_size: tuple[in
     """
     if estimator not in ESTIMATORS:
         raise NetworkError(f"estimator: expected one of {', '.join(ESTIMATORS)}, got {estimator!r}")
-    size = sensor_size or (recording.sensor_size if recording is not None else None) or (240, 180)
+    size = sensor_size or (recording.sensor_size if recording is not None else None) or DEFAULT_SENSOR_SIZE
     source = rotation_source_of(recording) if rotation else None
     network = ESTIMATORS[estimator](size, rotation=None if source is None else {"source": source})
     if not undistort:

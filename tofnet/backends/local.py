@@ -23,7 +23,7 @@ from tofnet.compiler.compiled import network_of
 from tofnet.core.network import Network
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, EVENT_DTYPE, TOT_DTYPE
-from tofnet.io.recording import Intrinsics, Recording, VelocitySource
+from tofnet.io.recording import Intrinsics, Recording, VelocitySource, as_velocity_source
 from tofnet.kernels.bands import row_load
 from tofnet.kernels.compilation import Stopwatch
 from tofnet.kernels.region import KernelConfig
@@ -34,11 +34,32 @@ RESULT_CAPACITY = 1 << 22
 
 
 def binding(recording: Recording | None, intrinsics: Intrinsics | None,
-            velocity_source: VelocitySource | None) -> Recording:
-    """What a stream knows about the camera: a recording's metadata, or the pieces given."""
+            velocity_source: VelocitySource | None, network: Network | None = None) -> Recording:
+    """What a stream knows about the camera: a recording's metadata, or the pieces given
+    (``velocity_source``: a ``VelocitySource`` or ``(tx, ty, tz)`` m/s). With ``network``, a
+    recording that declares its sensor size must hold every process's (``check_sensor_fits``)."""
     if recording is not None:
+        if network is not None:
+            check_sensor_fits(network, recording)
         return recording
+    if velocity_source is not None:
+        velocity_source = as_velocity_source(velocity_source)
     return Recording(np.empty(0, EVENT_DTYPE), intrinsics=intrinsics, trajectory=velocity_source, source="the stream")
+
+
+def check_sensor_fits(network: Network, recording: Recording) -> None:
+    """Refuse a process sized larger than the sensor the recording declares (a mix-up of spec and
+    recording: its edge pixels would never see an event, silently). A smaller process is a crop:
+    the events outside it are dropped and counted (``out_of_bounds``)."""
+    if recording.sensor_size is None:
+        return
+    width, height = recording.sensor_size
+    for process in network.processes:
+        size = process.sensor_size
+        if size is not None and (size[0] > width or size[1] > height):
+            raise BackendError(f"sensor size mismatch: process '{process.name}' is {size[0]}x{size[1]} px and "
+                               f"{recording.source} declares {width}x{height} px; size the network to the "
+                               f"recording (e.g. --sensor-size {width}x{height})")
 
 
 def payloads_of(network: Network, names: Iterable[str]) -> dict[str, str]:
@@ -67,7 +88,8 @@ class LocalBackend(Backend):
         return None
 
     def open_stream(self, compiled, *, recording: Recording | None = None, intrinsics: Intrinsics | None = None,
-                    velocity_source: VelocitySource | None = None, t0_us: int | None = None,
+                    velocity_source: VelocitySource | tuple[float, float, float] | None = None,
+                    t0_us: int | None = None,
                     probes: Iterable[str] = (), record_tot: bool = False,
                     fuse: bool | None = None) -> GraphStream | FusedStream:
         """A stream running ``compiled`` (a ``CompiledNetwork`` or ``Network``).
@@ -79,7 +101,7 @@ class LocalBackend(Backend):
         overrides the backend's choice (False: model by model, as sessions need).
         """
         network = network_of(compiled)
-        known = binding(recording, intrinsics, velocity_source)
+        known = binding(recording, intrinsics, velocity_source, network)
         clock = clock_of(network)
         t0 = clock.t0_us if t0_us is None else int(t0_us)
         probes = resolve_probes(network, probes, record_tot)

@@ -220,7 +220,7 @@ class MultiprocSession:
         """A ``GraphStream`` on this session's workers (see ``LocalBackend.open_stream``)."""
         compiled = self._check_open(compiled)
         network = compiled.network
-        known = binding(recording, intrinsics, velocity_source)
+        known = binding(recording, intrinsics, velocity_source, network)
         clock = clock_of(network)
         probes = resolve_probes(network, probes, record_tot)
         sinks = sinks_of(network)

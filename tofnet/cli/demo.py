@@ -85,7 +85,8 @@ def handle(args) -> int:
         print(f"      {path}")
     compiled = (f" ({clock.compile_seconds:.0f} s of it compiling kernels: first run only)" if clock.compiled > 0
                 else "")
-    print(f"done in {time.perf_counter() - clock.started:.1f} s{compiled}. Open the PNGs in {out / 'figures'} to see the depth maps "
+    print(f"done in {time.perf_counter() - clock.started:.1f} s{compiled}. Open the PNGs in {out / 'figures'} "
+          "to see the depth maps "
           "(compare.png: both estimators side by side).")
     return 0
 

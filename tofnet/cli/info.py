@@ -31,6 +31,7 @@ def describe(path, *, sensor_size=None, progress=None, **options) -> dict:
         count = on = 0
         t_first = t_last = None
         x_max = y_max = -1
+        x_min = y_min = 1 << 16  # above any uint16 coordinate
         pixel_counts = None
         if source.sensor_size is not None:
             pixel_counts = np.zeros(source.sensor_size[0] * source.sensor_size[1], dtype=np.int64)
@@ -41,6 +42,7 @@ def describe(path, *, sensor_size=None, progress=None, **options) -> dict:
             t_first = int(chunk["t"][0]) if t_first is None else t_first
             t_last = int(chunk["t"][-1])
             x_max, y_max = max(x_max, int(chunk["x"].max())), max(y_max, int(chunk["y"].max()))
+            x_min, y_min = min(x_min, int(chunk["x"].min())), min(y_min, int(chunk["y"].min()))
             if pixel_counts is not None:
                 width, height = source.sensor_size
                 inside = (chunk["x"] < width) & (chunk["y"] < height)
@@ -56,6 +58,7 @@ def describe(path, *, sensor_size=None, progress=None, **options) -> dict:
             "rate_events_per_s": count / duration if duration > 0 else None,
             "on_fraction": on / count if count else None,
             "extent": [x_max + 1, y_max + 1] if count else None,
+            "pixels_used": {"x": [x_min, x_max], "y": [y_min, y_max]} if count else None,
             "beyond_sensor": beyond if pixel_counts is not None else None,
             "intrinsics": _intrinsics(source.intrinsics),
             "poses": _poses(source.trajectory),
@@ -99,9 +102,9 @@ def format_facts(facts: dict) -> str:
         lines.append(f"rate           {rate / 1e6:.4g} M events/s (mean)" if rate else "rate           -")
         on = facts["on_fraction"]
         lines.append(f"polarity       ON {on:.1%} / OFF {1 - on:.1%}")
-        extent = facts["extent"]
+        used = facts["pixels_used"]
         beyond = facts["beyond_sensor"]
-        lines.append(f"pixels used    x 0..{extent[0] - 1}, y 0..{extent[1] - 1}"
+        lines.append(f"pixels used    x {used['x'][0]}..{used['x'][1]}, y {used['y'][0]}..{used['y'][1]}"
                      + (f"; {beyond:,} events beyond the sensor" if beyond else ""))
         if "busiest_pixel" in facts:
             b = facts["busiest_pixel"]

@@ -3,7 +3,8 @@ back): column orders, polarity names, dataset keys, metadata.
 
 - A plain ``(n, 4)`` array has columns ``t x y p`` unless ``columns`` says otherwise
   (``"x,y,t,p"`` for MVSEC-style arrays, whose ``t`` is seconds).
-- The polarity field or key may be called ``p``, ``on`` (faery, aedat) or ``polarity``.
+- The polarity field or key may be called ``p`` (tonic, Metavision), ``on`` (faery, aedat) or
+  ``polarity`` (dv-processing); the time field or key ``t`` or ``timestamp`` (dv-processing), in µs.
 - ``.npz`` keys tried in order: ``events``, ``event_data`` (N-ImageNet), then four arrays.
 - A ``.npz`` written by ``tofnet convert`` also holds the camera: ``intrinsics``
   (fx fy cx cy), ``distortion``, ``distortion_model``, ``sensor_size``, ``poses``
@@ -24,6 +25,8 @@ COLUMNS = ("t", "x", "y", "p")
 MAX_COORD = 65535  # uint16
 #: Accepted names of the polarity field, in the order they are looked for.
 POLARITY_NAMES = ("p", "on", "polarity")
+#: Accepted names of the time field (µs), in the order they are looked for.
+TIME_NAMES = ("t", "timestamp")
 #: ``.npz`` keys that hold a whole structured event array.
 ARRAY_KEYS = ("events", "event_data")
 
@@ -47,17 +50,22 @@ def _polarity_name(names) -> str | None:
     return next((name for name in POLARITY_NAMES if name in names), None)
 
 
+def _time_name(names) -> str | None:
+    return next((name for name in TIME_NAMES if name in names), None)
+
+
 def columns_of(path: object, array: np.ndarray, what: str,
                columns: str | tuple[str, ...] | None = None) -> dict[str, np.ndarray]:
     """The ``t x y p`` columns of a structured array (any polarity name) or a plain ``(n, 4)`` array."""
     if array.dtype.names:
         names = array.dtype.names
-        polarity = _polarity_name(names)
-        missing = [name for name in ("t", "x", "y") if name not in names] + ([] if polarity else ["p"])
+        polarity, time = _polarity_name(names), _time_name(names)
+        missing = (([] if time else ["t"]) + [name for name in ("x", "y") if name not in names]
+                   + ([] if polarity else ["p"]))
         if missing:
-            raise DataError(located(path, None, f"{what} has fields {_names(names)}; expected t, x, y and "
-                                                f"p (or on, polarity); missing {', '.join(missing)}"))
-        return {"t": array["t"], "x": array["x"], "y": array["y"], "p": array[polarity]}
+            raise DataError(located(path, None, f"{what} has fields {_names(names)}; expected t (or timestamp), "
+                                                f"x, y and p (or on, polarity); missing {', '.join(missing)}"))
+        return {"t": array[time], "x": array["x"], "y": array["y"], "p": array[polarity]}
     if array.ndim == 2 and array.shape[1] == 4:
         order = parse_columns(columns)
         return PlainColumns((name, array[:, k]) for k, name in enumerate(order))
@@ -88,10 +96,10 @@ def npz_columns(path: object, columns: str | tuple[str, ...] | None = None) -> d
         if key in keys:
             _, arrays = load_npz(path, (key,), "events file")
             return columns_of(path, arrays[key], f"'{key}'", columns)
-    polarity = _polarity_name(keys)
-    if polarity and {"t", "x", "y"} <= set(keys):
-        _, arrays = load_npz(path, ("t", "x", "y", polarity), "events file")
-        return {"t": arrays["t"], "x": arrays["x"], "y": arrays["y"], "p": arrays[polarity]}
+    polarity, time = _polarity_name(keys), _time_name(keys)
+    if polarity and time and {"x", "y"} <= set(keys):
+        _, arrays = load_npz(path, (time, "x", "y", polarity), "events file")
+        return {"t": arrays[time], "x": arrays["x"], "y": arrays["y"], "p": arrays[polarity]}
     raise DataError(located(path, None, f"expected a structured array 'events' or arrays 't', 'x', 'y', 'p' "
                                         f"(or N-ImageNet's 'event_data'); found {_names(keys) or 'nothing'}"))
 

@@ -7,6 +7,7 @@ from typing import Protocol
 
 import numpy as np
 
+from tofnet.errors import DataError
 from tofnet.events import EVENT_DTYPE
 
 
@@ -44,6 +45,21 @@ class ConstantVelocity:
     def velocity_at(self, t: np.ndarray) -> np.ndarray:
         t = np.asarray(t, dtype=np.float64)
         return np.broadcast_to(np.asarray(self.velocity, dtype=np.float64), (t.shape[0], 3)).copy()
+
+
+def as_velocity_source(value, what: str = "velocity_source") -> VelocitySource:
+    """``value`` as a ``VelocitySource``: one already (anything with ``velocity_at``), or three numbers
+    ``(tx, ty, tz)`` m/s in the camera frame (a ``ConstantVelocity``); else a one-line ``DataError``."""
+    if callable(getattr(value, "velocity_at", None)):
+        return value
+    try:
+        numbers = tuple(float(v) for v in value)
+    except (TypeError, ValueError):
+        numbers = ()
+    if len(numbers) == 3 and all(np.isfinite(numbers)):
+        return ConstantVelocity(numbers)
+    raise DataError(f"{what}: expected a VelocitySource (with velocity_at) or (tx, ty, tz) in m/s, "
+                    f"got {type(value).__name__} {value!r:.60}")
 
 
 @dataclass
