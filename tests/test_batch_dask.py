@@ -56,7 +56,7 @@ def sweep(client, cache, tmp_path_factory):
 
 def test_a_sweep_equals_the_same_runs_done_one_by_one_with_tofnet_run(sweep, tmp_path):
     _, result = sweep
-    assert [r["status"] for r in result.rows] == ["ok"] * len(SCENARIOS) * len(REFRACTORY)
+    assert [r["status"] for r in result.rows] == ["ok"] * len(SCENARIOS) * len(REFRACTORY), result.rows[0]["error"]
     assert [(r["scenario"], r["refractory"]) for r in result.rows] == \
         [(s, v) for s in SCENARIOS for v in REFRACTORY]
     for row in result.rows:
@@ -89,7 +89,7 @@ def test_a_sweep_equals_the_same_runs_done_one_by_one_with_tofnet_run(sweep, tmp
 def test_the_same_plan_gives_the_same_table_apart_from_timing(sweep, client):
     path, first = sweep
     first_table = read_csv(first.files[0])
-    second = run_batch(load_plan(path), client=client)  # not resumed: every task runs again
+    second = run_batch(load_plan(path), client=client, force=True)  # not resumed: every task runs again
     assert second.resumed == 0
     second_table = read_csv(second.files[0])
     strip = [{k: v for k, v in row.items() if k not in TIMING_COLUMNS} for row in first_table]
@@ -210,3 +210,19 @@ def test_a_task_whose_worker_kept_dying_becomes_a_failed_row(tmp_path):
     row = _Execution(None, [task], {}, None, 1).collect(Future(), task)
     assert row["status"] == "failed" and row["error"].startswith("KilledWorker: the worker died")
     assert json.loads((tmp_path / "tasks" / task.task_id / "row.json").read_text())["status"] == "failed"
+
+
+def test_resume_runs_again_a_task_whose_recording_changed(client, cache, tmp_path):
+    import numpy as np
+
+    from tofnet.events import make_events
+
+    np.save(tmp_path / "a.npy", make_events([0, 1000, 2000], [1, 2, 3], [1, 1, 1], [1, 1, 1]))
+    path = plan_file(tmp_path, cache, '  - {path: a.npy, intrinsics: "200,200,120,90", velocity: [0.5, 0, 0]}',
+                     "  refractory: [20ms]", keep="[summary]")
+    first = run_batch(load_plan(path), client=client)
+    assert first.rows[0]["status"] == "ok" and first.rows[0]["events_in"] == 3, first.rows[0]["error"]
+    assert run_batch(load_plan(path), client=client, resume=True).resumed == 1
+    np.save(tmp_path / "a.npy", make_events([0, 1000], [1, 2], [1, 1], [1, 1]))  # same path, other content
+    again = run_batch(load_plan(path), client=client, resume=True)
+    assert again.resumed == 0 and again.rows[0]["events_in"] == 2

@@ -17,13 +17,14 @@ import sys
 import threading
 import time
 import uuid
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable
 
 from distributed import Client, LocalCluster
 from distributed.diagnostics.plugin import WorkerPlugin
 
+from tofnet.batch.outputs import check_batch_output, fingerprint, mark_output
 from tofnet.batch.plan import Plan
 from tofnet.batch.table import plot, sort_rows, write_table
 from tofnet.batch.tasks import Task, expand
@@ -124,9 +125,15 @@ def _connect(scheduler: str | None, workers: int | None, memory_limit):
 
 
 def run_batch(plan: Plan, *, scheduler: str | None = None, workers: int | None = None,
-              memory_limit: str | float | None = "auto", resume: bool = False, client: Client | None = None,
+              memory_limit: str | float | None = "auto", resume: bool = False, force: bool = False,
+              fingerprints: str = "sample", client: Client | None = None,
               progress: Callable[[dict], None] | None = None) -> BatchResult:
     """Run every task of ``plan`` and write the table and the plot to ``plan.output``.
+
+    The output folder is checked before anything runs (``tofnet.batch.outputs``): an
+    earlier batch's folder needs ``resume`` (run only what is missing, or whose input
+    files' content changed: ``fingerprints`` ``"sample"`` or ``"full"``) or ``force``
+    (run every task again); a folder holding anything else is refused.
 
     ``client`` (an open ``distributed.Client``) or ``scheduler`` (an address) use an
     existing cluster; otherwise a ``local_cluster(workers, memory_limit)`` is started
@@ -136,6 +143,10 @@ def run_batch(plan: Plan, *, scheduler: str | None = None, workers: int | None =
     """
     started = time.perf_counter()
     tasks = expand(plan)
+    check_batch_output(plan, force=force, resume=resume)
+    memo: dict[str, str] = {}
+    tasks = [replace(t, fingerprint=fingerprint(t, fingerprints, memo)) for t in tasks]
+    mark_output(plan)
     done: dict[int, dict] = {}
     if resume:
         done = {t.number: row for t in tasks if (row := is_complete(t)) is not None}
@@ -256,7 +267,7 @@ class _Execution:
         row = {**base_row(task), "status": "failed", "error": error, "keep": list(task.keep)}
         try:
             write_json(Path(task.folder) / ROW_FILE, row)
-        except OSError:
+        except (OSError, TofnetError):
             pass  # the table still gets the row
         return row
 

@@ -8,13 +8,12 @@ from __future__ import annotations
 
 import csv
 import math
-import os
-import uuid
 from pathlib import Path
 from typing import Any, Iterable
 
 from tofnet.backends.base import DROP_REASONS, REJECT_REASONS
 from tofnet.eval.breakdown import BREAKDOWN_COLUMNS
+from tofnet.io.files import atomic_path
 
 INPUT_COLUMNS = ("task", "task_id", "recording", "recording_name", "scenario", "seed", "duration_s", "network",
                  "backend")
@@ -45,7 +44,6 @@ def write_table(rows: list[dict], parameters: Iterable[str], out_dir: Path, stem
     """Write ``results.csv`` (and ``results.parquet`` when pyarrow imports); the paths written."""
     names = columns(parameters)
     rows = sort_rows(rows)
-    out_dir.mkdir(parents=True, exist_ok=True)
     written = [out_dir / f"{stem}.csv"]
     with atomic_path(written[0]) as tmp, open(tmp, "w", newline="", encoding="utf-8") as f:
         writer = csv.writer(f)
@@ -68,26 +66,6 @@ def read_csv(path: str | Path) -> list[dict[str, str]]:
     """The rows of a ``results.csv`` as strings (empty cells are ``""``)."""
     with open(path, newline="", encoding="utf-8") as f:
         return list(csv.DictReader(f))
-
-
-class atomic_path:
-    """``with atomic_path(final) as tmp:`` write ``tmp``; on success it is renamed to ``final``, else removed."""
-
-    def __init__(self, final: str | Path):
-        self.final = Path(final)
-        # A hidden name with this process's id: never mistaken for a finished file.
-        self.tmp = self.final.with_name(f".{self.final.stem}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
-                                        f"{self.final.suffix}")
-
-    def __enter__(self) -> Path:
-        self.final.parent.mkdir(parents=True, exist_ok=True)
-        return self.tmp
-
-    def __exit__(self, kind, value, traceback) -> None:
-        if kind is None:
-            os.replace(self.tmp, self.final)
-        else:
-            self.tmp.unlink(missing_ok=True)
 
 
 def _csv_cell(value: Any) -> Any:
@@ -168,7 +146,6 @@ def plot(rows: list[dict], parameters: list[str], path: Path) -> Path | None:
             ax.grid(alpha=0.3)
             if i == 0 and len(groups) <= 12:
                 ax.legend(fontsize=6)
-    path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format=path.suffix.lstrip(".") or "png")
     plt.close(fig)

@@ -29,7 +29,7 @@ class Task:
 
     ``number`` is the task's position in plan order (the table's sort key) and
     ``folder`` where its outputs go; ``scenario_folder`` is the cache folder of a
-    simulated recording (``None`` for files).
+    simulated recording (``None`` for files); ``fingerprint`` what its input files held.
     """
 
     number: int
@@ -41,6 +41,8 @@ class Task:
     keep: tuple[str, ...]
     folder: str
     scenario_folder: str | None = None
+    #: Content fingerprint of the input files (``tofnet.batch.outputs.fingerprint``), set before running.
+    fingerprint: str | None = None
 
     @property
     def parameters(self) -> dict[str, Any]:

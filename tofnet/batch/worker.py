@@ -19,9 +19,10 @@ from pathlib import Path
 from typing import Any
 
 from tofnet.backends.base import DROP_REASONS, REJECT_REASONS
-from tofnet.batch.table import atomic_path
 from tofnet.batch.tasks import Task
 from tofnet.errors import TofnetError
+from tofnet.io.files import write_text_atomic
+from tofnet.io.guard import reading
 
 ROW_FILE = "row.json"
 DEPTH_FILE = "depth.npz"
@@ -76,10 +77,12 @@ def run_task(task: Task, recording_path: str | None = None) -> dict[str, Any]:
     memory: the row then has ``status`` ``failed`` and the one-line ``error``.
     """
     started, cpu_started = time.perf_counter(), time.thread_time()
-    row = {**base_row(task), "status": "failed", "error": None, "worker": worker_name()}
+    row = {**base_row(task), "status": "failed", "error": None, "worker": worker_name(),
+           "fingerprint": task.fingerprint}
     folder = Path(task.folder)
     try:
-        row.update(_run(task, recording_path or task.recording_path, folder))
+        with reading():  # what the task reads, which none of its outputs may replace
+            row.update(_run(task, recording_path or task.recording_path, folder))
         row["status"] = "ok"
     except MemoryError:
         row["error"] = "out of memory while running the task"
@@ -139,8 +142,7 @@ def _run(task: Task, recording_path: str, folder: Path) -> dict[str, Any]:
         summary["evaluation"] = evaluation.to_dict()
     if "depth" in task.keep:
         from tofnet.io.depth import write_depth
-        with atomic_path(folder / DEPTH_FILE) as tmp:
-            write_depth(tmp, result.depth, summary=summary, **meta)
+        write_depth(folder / DEPTH_FILE, result.depth, summary=summary, **meta)  # atomic itself
         out["depth_file"] = str(folder / DEPTH_FILE)
     if "summary" in task.keep:
         summary["parameters"] = task.parameters
@@ -157,6 +159,8 @@ def is_complete(task: Task) -> dict | None:
     except (OSError, ValueError):
         return None
     if row.get("status") != "ok" or row.get("task_id") != task.task_id:
+        return None
+    if row.get("fingerprint") != task.fingerprint:  # the recording's (or spec's) content changed since
         return None
     if not set(task.keep) <= set(row.get("keep", ())):  # the plan now keeps more than that run did
         return None
@@ -196,8 +200,7 @@ def warm_up(backends: tuple[str, ...] = ("fixed",)) -> float:
 
 
 def write_json(path: Path, data: dict) -> None:
-    with atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(data, indent=2, default=str, allow_nan=False) + "\n", encoding="utf-8")
+    write_text_atomic(path, json.dumps(data, indent=2, default=str, allow_nan=False) + "\n")
 
 
 def worker_name() -> str:

@@ -19,7 +19,13 @@ def register(subparsers) -> None:
     p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: one per core)")
     p.add_argument("--memory-limit", default="auto", metavar="SIZE",
                    help="memory per local worker, e.g. 2GB (default: auto, the machine's memory shared equally)")
-    p.add_argument("--resume", action="store_true", help="skip the tasks whose outputs are already complete")
+    p.add_argument("--resume", action="store_true", help="skip the tasks whose outputs are already complete "
+                                                         "(and whose input files are unchanged)")
+    p.add_argument("--force", action="store_true", help="run every task again into an earlier batch's output "
+                                                        "folder (never a folder of other files, never an input)")
+    p.add_argument("--fingerprint", choices=("sample", "full"), default="sample",
+                   help="how --resume tells an input changed: size, mtime and a hash of three 64 KiB samples "
+                        "(default), or a hash of whole files")
     p.add_argument("--check", action="store_true", help="validate the plan and list its tasks; run nothing")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(handler=handle)
@@ -46,7 +52,8 @@ def handle(args) -> int:
     from tofnet.batch.runner import Progress, run_batch
     try:
         result = run_batch(plan, scheduler=args.scheduler, workers=args.workers,
-                           memory_limit=_memory(args.memory_limit), resume=args.resume,
+                           memory_limit=_memory(args.memory_limit), resume=args.resume, force=args.force,
+                           fingerprints=args.fingerprint,
                            progress=None if args.quiet else Progress())
     except KeyboardInterrupt:
         print(f"tofnet batch: interrupted; finished tasks are kept in {plan.output}; "
