@@ -166,14 +166,20 @@ def test_cloud_figure_draws_one_point_per_ray_cell_and_every_estimate_from_above
     assert fig.axes[1].get_ylabel() == "depth [m]"
     # The camera never turns and starts at the origin: the first pose's frame is the world's.
     world = world_points(depth, rec.intrinsics, rec.trajectory, depth["step"] * 1000 - 2000 + 500)
-    cells, _ = ray_medians(world, 3 / rec.intrinsics.fx, 3)
+    cells, _, spread = ray_medians(world, 3 / rec.intrinsics.fx, 3)
+    agree = cells[spread <= 0.3]
     drawn = np.ma.filled(ax.collections[0].get_array(), np.nan)  # the colour of a point is its median depth
-    assert 0.9 * len(cells) <= len(drawn) <= len(cells) and np.isin(drawn, cells[:, 2]).all()
+    assert 0 < len(agree) < len(cells) and 0.9 * len(agree) <= len(drawn) <= len(agree)
+    assert np.isin(drawn, agree[:, 2]).all()
+    assert f"{len(cells) - len(agree):,} others disagree" in ax.get_title()
     assert top.get_xlabel() == "x, right [m]" and top.get_ylabel() == "z, forward [m]"
     counts = np.nansum(np.ma.filled(top.collections[0].get_array(), np.nan))
     outside = int(fig.get_suptitle().split(", ")[1].split(" outside")[0].replace(",", "")) \
         if "outside" in fig.get_suptitle() else 0
     assert counts + outside == len(depth)  # every estimate is counted once in the top view
+    assert (ax.elev, ax.azim) == (15.0, -75.0)  # behind the camera's left shoulder
+    turned = cloud_figure(rec, depth, META, view=(40.0, -30.0)).axes[0]
+    assert (turned.elev, turned.azim) == (40.0, -30.0)
     with pytest.raises(DataError, match="poses"):
         cloud_figure(scene(poses=False)[0], depth, META)
 
@@ -181,12 +187,16 @@ def test_cloud_figure_draws_one_point_per_ray_cell_and_every_estimate_from_above
 def test_ray_medians_gather_the_estimates_of_a_ray_on_their_median():
     ray = np.array([0.1, -0.05, 1.0])
     pts = np.vstack([ray * z for z in (1.0, 2.0, 9.0)] + [ray * 4.0 + [5.0, 0, 0]])  # three on one ray, one apart
-    cells, counts = ray_medians(pts, angle=0.02, least=1)
-    assert counts.tolist() == [1, 3] or counts.tolist() == [3, 1]
+    cells, counts, spread = ray_medians(pts, angle=0.02, least=1)
+    assert sorted(counts.tolist()) == [1, 3]
     on_ray = cells[counts == 3][0]
     assert on_ray[2] == 2.0  # the median depth, not the mean (4)
     assert on_ray[:2] / on_ray[2] == pytest.approx([0.11, -0.05], abs=0.01)  # the cell's central ray
+    q25, q75 = np.percentile([1.0, 2.0, 9.0], [25, 75])
+    assert spread[counts == 3][0] == pytest.approx((q75 - q25) / 2.0) and spread[counts == 1][0] == 0.0
     assert len(ray_medians(pts, angle=0.02, least=2)[0]) == 1  # a lone estimate is no surface
+    near_zero = np.array([[0.1, 0.0, 1e-9], [0.0, 0.0, 1.0]])  # a ray far outside the view: no huge image
+    assert len(ray_medians(near_zero, angle=0.01, least=1)[0]) == 2
 
 
 def test_depth_lattice_finds_the_counter_step_only_where_there_is_one():

@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from tofnet.eval.views import depth_image
-
 
 def nice_step(span: float, target_bins: int, multipliers: tuple[float, ...] = (1, 2, 2.5, 5, 10)) -> float:
     """A round bin width (``multipliers`` times a power of ten) giving at most ``target_bins`` bins."""
@@ -92,27 +90,33 @@ def window_quartiles(t_rel_us: np.ndarray, values: np.ndarray, window_us: int, n
     return q, counts
 
 
-def ray_medians(points_cam: np.ndarray, angle: float, least: int = 3) -> tuple[np.ndarray, np.ndarray]:
+def ray_medians(points_cam: np.ndarray, angle: float, least: int = 3
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The cloud binned along rays: camera-frame points (m) grouped by direction into
     cells ``angle`` (rad) wide in ``x/z`` and ``y/z``; per cell holding at least ``least``
     points, one point on the cell's central ray at the median depth of its points.
 
-    Returns ``(points (m, 3), count per point)``. Estimates scattered along a ray by a timing
-    error collapse onto the surface they measure; points behind the camera are left out.
+    Returns ``(points (m, 3), count, spread)`` per cell, ``spread`` the interquartile range
+    of the cell's depths over their median (0: they agree). Estimates scattered along a ray
+    by a timing error collapse onto the surface they measure; points behind the camera are
+    left out.
     """
     p = np.asarray(points_cam, dtype=np.float64)
     p = p[p[:, 2] > 0]
-    if len(p) == 0:
-        return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
     cell = np.floor(p[:, :2] / p[:, 2:3] / angle).astype(np.int64)
-    first = cell.min(axis=0)
-    cell -= first
-    width, height = (int(v) + 1 for v in cell.max(axis=0))
-    median = depth_image(cell[:, 0], cell[:, 1], p[:, 2], np.zeros(len(p)), (width, height), "median")
-    counts = np.bincount(cell[:, 1] * width + cell[:, 0], minlength=width * height).reshape(height, width)
-    rows, cols = np.nonzero(np.isfinite(median) & (counts >= least))
-    z = median[rows, cols]
-    x = (cols + first[0] + 0.5) * angle * z
-    y = (rows + first[1] + 0.5) * angle * z
-    return np.column_stack([x, y, z]), counts[rows, cols]
+    cells, group, counts = np.unique(cell.reshape(-1, 2), axis=0, return_inverse=True, return_counts=True)
+    z = p[np.lexsort((p[:, 2], group.ravel())), 2]  # grouped by cell, by depth within one
+    starts = np.cumsum(counts) - counts
+    keep = counts >= least
+    cells, counts, starts = cells[keep], counts[keep], starts[keep]
 
+    def quantile(share: float) -> np.ndarray:  # per cell, interpolated between ranks (as np.percentile)
+        pos = share * (counts - 1)
+        low = np.floor(pos).astype(np.int64)
+        high = np.minimum(low + 1, counts - 1)
+        return z[starts + low] + (pos - low) * (z[starts + high] - z[starts + low])
+
+    median = quantile(0.5)
+    spread = (quantile(0.75) - quantile(0.25)) / median
+    rays = (cells + 0.5) * angle  # x/z, y/z of each cell's central ray
+    return np.column_stack([rays * median[:, None], median]), counts, spread

@@ -19,8 +19,9 @@ from tofnet.eval.views import depth_range, event_times_us, poses_at, sensor_size
 #: behind the camera's left shoulder, looking into the scene as the camera did.
 CLOUD_VIEW = (15.0, -75.0)
 #: The 3D view's ray cells are this many pixels (of the first pose) wide, and a cell is drawn
-#: when at least ``CELL_LEAST`` estimates fall in it.
-CELL_PX, CELL_LEAST = 3, 3
+#: when at least ``CELL_LEAST`` estimates fall in it and they agree: the middle half of
+#: their depths spans at most ``CELL_AGREE`` of their median.
+CELL_PX, CELL_LEAST, CELL_AGREE = 3, 3, 0.3
 #: Cells along the longest side of the top view.
 TOP_CELLS = 160
 
@@ -33,8 +34,9 @@ def cloud_figure(recording, depth: np.ndarray, meta: dict, *, window=None,
     moved to the world with the camera pose at the middle of its triggering input step.
     Left, seen from ``view`` (elevation, azimuth in degrees): the estimates grouped by
     direction from the first pose into cells ``CELL_PX`` pixels wide, one point per cell
-    at their median depth (``ray_medians``), so estimates that a timing error scattered
-    along a ray gather on the surface; right, every estimate seen from above, counted per cell.
+    at their median depth (``ray_medians``) where they agree (``CELL_AGREE``), so estimates
+    that a timing error scattered along a ray gather on the surface; right, every estimate
+    seen from above, counted per cell.
     """
     win = figure_window(window, recording, depth, meta, None)
     sel = depth[win.contains(depth["t"])]
@@ -42,7 +44,8 @@ def cloud_figure(recording, depth: np.ndarray, meta: dict, *, window=None,
     path, rotations = poses_at(recording.trajectory, np.linspace(win.start_us, win.end_us, 200) * 1e-6)
     r0, c0 = rotations[0], path[0]
     cam = (world - c0) @ r0  # in the first pose's camera frame: R_wc^T (p - c)
-    cells, counts = ray_medians(cam, CELL_PX / recording.intrinsics.fx, CELL_LEAST)
+    cells, _, spread = ray_medians(cam, CELL_PX / recording.intrinsics.fx, CELL_LEAST)
+    cells, disagree = cells[spread <= CELL_AGREE], int(np.count_nonzero(spread > CELL_AGREE))
     pts, cam_path = _to_view(cells), _to_view((path - c0) @ r0)
     lo, hi = _limits(pts, cam_path)
     # 3D axes do not clip: points beyond the limits would be drawn outside the box.
@@ -69,8 +72,9 @@ def cloud_figure(recording, depth: np.ndarray, meta: dict, *, window=None,
     ax.set_zlabel("\u2212y, up [m]", labelpad=8)
     ax.view_init(elev=view[0], azim=view[1])
     ax.legend(loc="upper left", fontsize="small")
-    ax.set_title(f"median depth per {CELL_PX}\u00d7{CELL_PX} px ray of the first pose "
-                 f"({np.count_nonzero(inside):,} rays with \u2265 {CELL_LEAST} estimates)", fontsize="medium")
+    ax.set_title(f"median depth per {CELL_PX}\u00d7{CELL_PX} px ray of the first pose where \u2265 {CELL_LEAST} "
+                 f"estimates agree\n(interquartile range \u2264 {CELL_AGREE:.0%} of the median): "
+                 f"{np.count_nonzero(inside):,} rays; {disagree:,} others disagree, not drawn", fontsize="medium")
     fig.colorbar(shown, ax=ax, label="depth [m]", shrink=0.6, extend="both", pad=0.08)
     beyond = _top_view(fig.add_subplot(grid[1]), _to_view(cam), cam_path, lo, hi, recording, sel)
     outside = f", {beyond:,} outside the box" if beyond else ""
