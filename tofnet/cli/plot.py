@@ -10,9 +10,11 @@ from tofnet.errors import DataError, TofnetError
 
 KIND_HELP = {
     "depthmap": "depth per pixel accumulated over a window, beside the ground truth (paper Fig. 5, 6)",
-    "histogram": "histogram of the estimated depths over that of the ground truth (Fig. 4)",
+    "histogram": "histogram of the estimated depths over that of the ground truth, binned on the "
+                 "counter's steps when the depths are whole steps (Fig. 4)",
     "error": "camera trajectory and windowed relative error over time (Fig. 3)",
-    "cloud": "estimates back-projected to 3D with the camera path (Fig. 1)",
+    "cloud": "estimates back-projected to 3D (median per ray where they agree) and seen from above, "
+             "with the camera path (Fig. 1)",
     "all": "every figure the recording supports",
     "units": "the four time-of-travel units of chosen pixels at work: counters, spikes, depth (Fig. 2); "
              "runs the network, so DEPTH is not needed",
