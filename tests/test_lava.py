@@ -89,3 +89,14 @@ def test_a_step_busier_than_the_source_holds_is_refused_naming_the_option():
     case = get_case("texture-blobs").build()
     with pytest.raises(BackendError, match="raise the backend's source_capacity"):
         get_backend("lava", source_capacity=2).run(case.network, case.recording)
+
+
+@needs_lava
+def test_a_model_failing_inside_lava_is_one_error_naming_the_process_not_a_hang(monkeypatch):
+    import tofnet.backends.lava_backend as lava_backend
+
+    monkeypatch.setattr(lava_backend, "FIELD_RECORDS", 0)  # the velocity's first update no longer fits its port
+    case = get_case("edge+u").build()
+    with pytest.raises(BackendError) as err:
+        get_backend("lava").run(case.network, case.recording)
+    assert str(err.value).startswith("lava backend: process 'velocity' failed in step 0: velocity.a_t: 1 records")

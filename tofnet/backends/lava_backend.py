@@ -137,6 +137,7 @@ class LavaExecutor:
         self._latest_us: int | None = None
         self._started = False
         self._feed = lp.new_queue()
+        self.failures = lp.Failures()
         source_words = lp.words_for(source_capacity, EVENT_DTYPE)
         self.source = lp.EventSource(words=source_words, feed=self._feed, t0_us=self.t0_us,
                                      timestep_us=self.timestep_us, name="event_source")
@@ -148,7 +149,7 @@ class LavaExecutor:
             process = node.process
             plan = lp.Plan(process.name, node.model, {s.name: s.payload.dtype for s in process.inports + process.outports},
                            reads_events=process.name in self.readers, source_words=source_words,
-                           tally=list(node.model.counts()))
+                           tally=list(node.model.counts()), failures=self.failures)
             for port, edges in node.inputs.items():
                 plan.inputs[port] = [f"in_{port}" if len(edges) == 1 else f"in_{port}_{i + 1}" for i in range(len(edges))]
                 for lava_name, edge in zip(plan.inputs[port], edges):
@@ -202,6 +203,8 @@ class LavaExecutor:
         first = self.clock
         if end <= first:
             return {}
+        if not self._finalizer.alive:
+            raise BackendError("lava backend: Lava's runtime was stopped (after an error or close); open a new stream")
         cut = int(np.searchsorted(self._pending["t"], self.t0_us + end * self.timestep_us))
         now, self._pending = self._pending[:cut], self._pending[cut:]
         if len(now):
@@ -219,6 +222,10 @@ class LavaExecutor:
             raise BackendError(f"lava backend: the Lava run of steps {first}..{end - 1} failed: "
                                f"{type(err).__name__}: {str(err).strip().splitlines()[-1] if str(err).strip() else ''}"
                                ) from err
+        failure = self.failures.first()
+        if failure is not None:
+            self.release()
+            raise BackendError(f"lava backend: {failure}")
         self.clock = end
         return {name: self._collect(name, q, end - 1) for name, q in self.sink_queues.items()}
 

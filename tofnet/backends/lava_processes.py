@@ -35,7 +35,7 @@ from lava.magma.core.resources import CPU
 from lava.magma.core.sync.protocols.loihi_protocol import LoihiProtocol
 
 from tofnet.backends.graph import canonical
-from tofnet.errors import BackendError
+from tofnet.errors import BackendError, TofnetError
 from tofnet.events import EVENT_DTYPE
 from tofnet.models.base import concat
 
@@ -148,6 +148,7 @@ class Plan:
     tally: list[str] = field(default_factory=list)
     reads_events: bool = False
     source_words: int = 0
+    failures: Any = None
 
 
 class TofnetLavaProcess(AbstractProcess):
@@ -176,22 +177,46 @@ class PyTofnetModel(PyLoihiProcessModel):
         self.model = self.plan.model
         self.held: dict[str, np.ndarray] = {}  # what arrived in the previous step, per tofnet input
         self.buffers = {port: np.zeros(words, np.int64) for port, (_, words) in self.plan.outputs.items()}
+        self.failed = False
 
     def run_spk(self) -> None:
         plan, k = self.plan, self.time_step - 1
-        if plan.reads_events:
-            self.model.feed(unpack(getattr(self, CAMERA_PORT).recv(), EVENT_DTYPE))
+        # every message of the step is taken and every port sends, whatever happens: a process that
+        # stopped sending would leave Lava's runtime waiting for ever (it does not stop on an error)
+        camera = getattr(self, CAMERA_PORT).recv() if plan.reads_events else None
+        messages = {port: [getattr(self, n).recv() for n in names] for port, names in plan.inputs.items()}
+        sent: dict[str, np.ndarray] = {}
+        if not self.failed:
+            try:
+                sent = self._step(k, camera, messages)
+            except Exception as err:  # reported to the host, which raises it after the run
+                self.failed = True
+                what = str(err) if isinstance(err, TofnetError) else f"{type(err).__name__}: {err}"
+                plan.failures.report(f"process {plan.name!r} failed in step {k}: {what}")
+        for port, (lava_name, words) in plan.outputs.items():
+            message = sent.get(port)
+            if message is None:
+                message = self.buffers[port]
+                message[0] = 0
+            getattr(self, lava_name).send(message)
+
+    def _step(self, k: int, camera, messages: dict[str, list[np.ndarray]]) -> dict[str, np.ndarray]:
+        plan = self.plan
+        if camera is not None:
+            self.model.feed(unpack(camera, EVENT_DTYPE))
         received = {}
-        for port, lava_names in plan.inputs.items():
-            parts = [unpack(getattr(self, n).recv(), plan.dtypes[port]) for n in lava_names]
+        for port, parts in messages.items():
+            parts = [unpack(m, plan.dtypes[port]) for m in parts]
             received[port] = parts[0] if len(parts) == 1 else canonical(concat(parts, plan.dtypes[port]))
         inputs = {port: self.held.get(port, received[port][:0]) for port in plan.inputs}
         self.held = received  # runs next step: the connection's one-step delay
         sent = self.model.run(k, k + 1, inputs)
-        for port, (lava_name, words) in plan.outputs.items():
+        out = {}
+        for port, (_, words) in plan.outputs.items():
             records = sent.get(port)
             records = plan_empty(plan, port) if records is None else canonical(records)
-            getattr(self, lava_name).send(pack(records, words, f"{plan.name}.{port}", self.buffers[port]))
+            out[port] = pack(records, words, f"{plan.name}.{port}", self.buffers[port])
+        return out
 
     # Var.get and Var.set reach the tofnet model: its state is read when asked for, not every step.
     def _get_var(self) -> None:
@@ -239,3 +264,26 @@ def process_for(plan: Plan, family: str) -> tuple[AbstractProcess, type]:
 def new_queue():
     """A queue the Lava runtime's forked processes inherit (host <-> source and sinks)."""
     return multiprocessing.get_context("fork").Queue()
+
+
+class Failures:
+    """Errors of the Lava processes, for the host: a shared flag (seen at once) and their messages."""
+
+    def __init__(self):
+        context = multiprocessing.get_context("fork")
+        self.flag = context.Value("i", 0)
+        self.messages = context.Queue()
+
+    def report(self, message: str) -> None:
+        self.messages.put(message)
+        with self.flag.get_lock():
+            self.flag.value += 1
+
+    def first(self, timeout_s: float = 10.0) -> str | None:
+        """The first error reported (None when none was)."""
+        if not self.flag.value:
+            return None
+        try:
+            return self.messages.get(timeout=timeout_s)
+        except Exception:
+            return "a Lava process failed (its message was lost)"
