@@ -1,6 +1,7 @@
 """How much of a large HDF5 file a time window reads (``--start/--duration``, docs/formats.md).
 
-Usage: ``python benchmarks/window_read.py [--seconds 200] [--rate 1e6] [--folder /tmp/x]``.
+Usage: ``python benchmarks/window_read.py [--seconds 200] [--rate 1e6] [--folder /tmp/x]
+[--text-seconds 10]``.
 Writes a DSEC-layout file (``events/{t,x,y,p}``, ``t_offset``, ``ms_to_idx``; int64 t:
 13 bytes per event, 2.6 GB at the defaults) in a temporary folder, then opens a 10 s
 window at the start, the middle and the end, several rounds each, and reports the
@@ -66,12 +67,47 @@ def read_window(path: Path, start: str, duration: str) -> tuple[int, float, int]
     return count, time.perf_counter() - started, rchar() - before
 
 
+def text_windows(path: Path, seconds: int, rate: float, rounds: int) -> None:
+    """The same for an ``events.txt`` (parsed only in the bytes a binary search finds)."""
+    from tofnet.io.events import write_events_txt
+    from tofnet.io.source import open_recording
+
+    rng = np.random.default_rng(1)
+    n = int(seconds * rate)
+    events = np.empty(n, dtype=[("t", "<i8"), ("x", "<u2"), ("y", "<u2"), ("p", "u1")])
+    events["t"] = np.sort(rng.integers(0, seconds * 1_000_000, n))
+    events["x"], events["y"], events["p"] = rng.integers(0, 240, n), rng.integers(0, 180, n), rng.integers(0, 2, n)
+    write_events_txt(path, events)
+    size = path.stat().st_size
+    print(f"events.txt: {n:,} lines, {seconds} s, {size / 1e6:.0f} MB")
+    for where in ("0s", f"{seconds // 2}s", f"{seconds - 1}s"):
+        times = []
+        for _ in range(rounds):
+            started = time.perf_counter()
+            with open_recording(path, window=parse_window_text(where, "1s")) as source:
+                count = len(source.read().events)
+            times.append(time.perf_counter() - started)
+        print(f"1 s window at {where:>4}: {count:,} events, median {statistics.median(times):.3f} s "
+              f"(min {min(times):.3f}, max {max(times):.3f})")
+    started = time.perf_counter()
+    with open_recording(path) as source:
+        count = len(source.read().events)
+    print(f"whole file: {count:,} events in {time.perf_counter() - started:.2f} s")
+
+
+def parse_window_text(start: str, duration: str):
+    from tofnet.io.window import parse_window
+    return parse_window(start=start, duration=duration)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=int, default=200)
     parser.add_argument("--rate", type=float, default=1e6, help="events per second")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--folder", help="where to write the file (default: a temporary folder)")
+    parser.add_argument("--text-seconds", type=int, default=0,
+                        help="also time 1 s windows of an events.txt this long (at --rate; 0: skip)")
     args = parser.parse_args()
     folder = Path(tempfile.mkdtemp(prefix="datasets-window-", dir=args.folder))
     try:
@@ -89,6 +125,9 @@ def main() -> None:
                   f"median {statistics.median(times):.2f} s (min {min(times):.2f}, max {max(times):.2f})")
         count, seconds, read = read_window(path, "0s", f"{args.seconds + 1}s")
         print(f"whole file:          {count:,} events, read {read / 1e6:.1f} MB in {seconds:.2f} s")
+        path.unlink()
+        if args.text_seconds:
+            text_windows(folder / "events.txt", args.text_seconds, args.rate, args.rounds)
     finally:
         shutil.rmtree(folder, ignore_errors=True)
 

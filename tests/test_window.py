@@ -232,3 +232,45 @@ def test_npy_windows_read_only_their_rows(tmp_path, recording):
     with pytest.raises(DataError, match=r"no events in the time window 1 s \.\. the end from the first event; "
                                         r"the recording ends 0\.29987 s"):
         read_recording(tmp_path / "plain.npy", columns="x,y,t,p", window=parse_window(start="1s"))
+
+
+def test_text_windows_parse_only_their_bytes(tmp_path, recording, monkeypatch):
+    import tofnet.io.text_window as text_window
+    from tofnet.io.events import write_events_txt
+
+    events = recording.events
+    write_events_txt(tmp_path / "events.txt", events)
+    lines = (tmp_path / "events.txt").read_text().splitlines()
+    # comments, blank lines and CRLF line ends, as the reader accepts them
+    body = "# t x y p\r\n" + "\r\n".join(line if k % 97 else f"{line}\r\n\r\n# note" for k, line in enumerate(lines))
+    (tmp_path / "events.txt").write_bytes(body.encode() + b"\r\n")
+    whole = read_recording(tmp_path / "events.txt")
+    assert np.array_equal(whole.events, events)
+    monkeypatch.setattr(text_window, "REGION", 256)  # many probes on a small file
+    first = int(events["t"][0])
+    rng = np.random.default_rng(5)
+    for start_ms, length_ms in [(0, 1), (0.0, 300), (299.8, 5)] + [tuple(rng.uniform(0, 300, 2)) for _ in range(12)]:
+        start, stop = first + round(start_ms * 1000), first + round(start_ms * 1000) + round(length_ms * 1000)
+        want = _expected(events, start, stop)
+        window = TimeWindow(TimePoint(round(start_ms * 1000)), round(length_ms * 1000))
+        if len(want) == 0:
+            with pytest.raises(DataError, match="no events in the time window"):
+                read_recording(tmp_path / "events.txt", window=window)
+            continue
+        assert np.array_equal(read_recording(tmp_path / "events.txt", window=window).events, want)
+    # A bad line far from the window is not parsed; one inside it is reported with its line, as always.
+    t3, _, y3, p3 = lines[3].split()
+    bad = body.encode().replace(lines[3].encode(), f"{t3} x {y3} {p3}".encode(), 1)
+    (tmp_path / "events.txt").write_bytes(bad)
+    with pytest.raises(DataError, match=r"events.txt:7: column 'x': expected a number"):
+        read_recording(tmp_path / "events.txt")
+    late = parse_window(start="200ms", duration="50ms")
+    assert np.array_equal(read_recording(tmp_path / "events.txt", window=late).events,
+                          _expected(events, first + 200_000, first + 250_000))
+    with pytest.raises(DataError, match=r"events.txt:7: column 'x': expected a number"):
+        read_recording(tmp_path / "events.txt", window=parse_window(duration="1ms"))
+    # An ECD folder without per-event true depth takes the same path.
+    (tmp_path / "ecd").mkdir()
+    (tmp_path / "ecd" / "events.txt").write_bytes(body.encode())
+    read = read_recording(tmp_path / "ecd", window=late)
+    assert np.array_equal(read.events, _expected(events, first + 200_000, first + 250_000))

@@ -269,24 +269,32 @@ def read_events_txt(path: str | Path, notes: list[str] | None = None) -> np.ndar
     """
     path = Path(path)
     data = read_bytes(path, "events file")
-    buf = np.frombuffer(data, dtype=np.uint8)
-    capacity = data.count(b"\n") + 1
+    events, info = parse_lines(np.frombuffer(data, dtype=np.uint8), data.count(b"\n") + 1)
+    if info[_STATUS] != _OK:
+        raise DataError(_describe(path, data, info))
+    if len(events) == 0:
+        what = "the file is empty" if not data.strip() else "only blank lines and # comments"
+        raise DataError(located(path, None, f"no events ({what}); expected lines of {_EXPECTED}"))
+    if info[_ROUNDED] and notes is not None:
+        notes.append(ROUNDED_NOTE.format(name=path.name, count=int(info[_ROUNDED])))
+    return events
+
+
+def parse_lines(buf: np.ndarray, capacity: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The events of the ``t x y p`` lines in ``buf`` (uint8) and the parser's ``info`` (``info[0]``
+    is 0 when every line was good; else the events before the first bad line). ``capacity``:
+    at least the number of lines (counted when not given)."""
+    if capacity is None:  # counted in pieces: no temporary the size of the buffer
+        capacity = 1 + sum(int(np.count_nonzero(buf[k:k + (1 << 24)] == 10)) for k in range(0, len(buf), 1 << 24))
     t = np.empty(capacity, dtype=np.int64)
     x = np.empty(capacity, dtype=np.uint16)
     y = np.empty(capacity, dtype=np.uint16)
     p = np.empty(capacity, dtype=np.uint8)
     info = np.zeros(9, dtype=np.int64)
     n = _parse_events(buf, t, x, y, p, info, _POW10, _I64_MAX, _MAX_COORD, _MAX_TIME_US)
-    if info[_STATUS] != _OK:
-        raise DataError(_describe(path, data, info))
-    if n == 0:
-        what = "the file is empty" if not data.strip() else "only blank lines and # comments"
-        raise DataError(located(path, None, f"no events ({what}); expected lines of {_EXPECTED}"))
-    if info[_ROUNDED] and notes is not None:
-        notes.append(ROUNDED_NOTE.format(name=path.name, count=int(info[_ROUNDED])))
     events = np.empty(n, dtype=EVENT_DTYPE)
     events["t"], events["x"], events["y"], events["p"] = t[:n], x[:n], y[:n], p[:n]
-    return events
+    return events, info
 
 
 def _describe(path: Path, data: bytes, info: np.ndarray) -> str:

@@ -499,13 +499,23 @@ def _read_in_memory(path: Path, kind: str, columns, window=None) -> tuple[Record
     from tofnet.io.ecd import attach_sidecars, read_ecd
     from tofnet.io.events import read_events_npy, read_events_txt
 
+    from tofnet.io.ecd import EVENTS, GT_DEPTH
+
     span = None
-    if kind == "ecd":
+    notes: list[str] = []
+    if kind == "ecd" and window is not None and (path / EVENTS).is_file() and not _exists(path / GT_DEPTH):
+        # Only the window's bytes of events.txt are parsed (true depth per event needs the whole file).
+        from tofnet.io.text_window import read_text_window
+        events, *span = read_text_window(path / EVENTS, window, notes)
+        recording = attach_sidecars(Recording(events=events, source=str(path), notes=notes), path)
+    elif kind == "ecd":
         recording = read_ecd(path)
     else:
-        notes: list[str] = []
         depth_name = f"{path.stem}_depth.npy"
-        if kind == "text":
+        if kind == "text" and window is not None and not _exists(path.parent / depth_name):
+            from tofnet.io.text_window import read_text_window
+            events, *span = read_text_window(path, window, notes)
+        elif kind == "text":
             events = read_events_txt(path, notes)  # notes: how many times were rounded to the µs
         elif kind == "npy" and window is not None:
             # A memory map: only the window's rows are read (the other formats here are parsed whole).
@@ -516,7 +526,7 @@ def _read_in_memory(path: Path, kind: str, columns, window=None) -> tuple[Record
             events = read_events_npy(path, columns=columns)
         recording = attach_sidecars(Recording(events=events, source=str(path), notes=notes), path.parent,
                                     gt_depth_name=depth_name)
-        if span is not None and (path.parent / f"{path.stem}_depth.npy").exists():
+        if kind == "npy" and span is not None and _exists(path.parent / f"{path.stem}_depth.npy"):
             from tofnet.io.ecd import read_gt_depth
             from tofnet.io.npy import map_npy
             total = len(map_npy(path, "events file"))
@@ -526,4 +536,8 @@ def _read_in_memory(path: Path, kind: str, columns, window=None) -> tuple[Record
             apply_npz_metadata(recording, path)
     if len(recording.events) == 0 and span is None:
         raise DataError(located(path, None, "no events"))
-    return recording, span
+    return recording, (tuple(span) if span is not None else None)
+
+
+def _exists(path: Path) -> bool:
+    return path.exists() or path.is_symlink()
