@@ -6,7 +6,8 @@ import pytest
 from tofnet.cli import main
 from tofnet.errors import DataError, TofnetError
 from tofnet.io import read_recording, write_ecd
-from tofnet.io.source import first_at_or_after, open_recording
+from tofnet.io.source import open_recording
+from tofnet.io.window import first_at_or_after
 from tofnet.io.window import TimePoint, TimeWindow, parse_time, parse_window
 
 from formats_helpers import pattern_recording
@@ -274,3 +275,16 @@ def test_text_windows_parse_only_their_bytes(tmp_path, recording, monkeypatch):
     (tmp_path / "ecd" / "events.txt").write_bytes(body.encode())
     read = read_recording(tmp_path / "ecd", window=late)
     assert np.array_equal(read.events, _expected(events, first + 200_000, first + 250_000))
+
+
+def test_ros_bag_windows_stop_at_the_end(tmp_path, recording):
+    pytest.importorskip("rosbags")
+    from test_io_rosbag import write_bag
+
+    write_bag(tmp_path / "r.bag", recording)
+    first = int(recording.events["t"][0])
+    read = read_recording(tmp_path / "r.bag", window=parse_window(start="120ms", duration="30ms"))
+    assert np.array_equal(read.events, _expected(recording.events, first + 120_000, first + 150_000))
+    inside = np.linspace(first + 120_000, first + 149_999, 5) * 1e-6
+    whole = read_recording(tmp_path / "r.bag")
+    assert np.allclose(read.trajectory.velocity_at(inside), whole.trajectory.velocity_at(inside), rtol=0, atol=0)

@@ -230,7 +230,7 @@ def read_npy_window(path: str | Path, columns, window) -> tuple[np.ndarray, int,
     their rows (a memory map and a binary search on the sorted ``t``): ``(events, first event µs,
     first row, end row, last event µs)``. Events outside the window are not checked."""
     from tofnet.io.npy import map_npy
-    from tofnet.io.source import first_at_or_after
+    from tofnet.io.window import first_at_or_after
 
     path = Path(path)
     cols = columns_of(path, map_npy(path, "events file"), "the array", columns)

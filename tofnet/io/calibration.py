@@ -201,3 +201,21 @@ def _size(size) -> tuple[int, int] | None:
         return None
     width, height = (int(v) for v in list(size)[:2])
     return width, height
+
+
+def set_camera(source, intrinsics: Intrinsics | None, calib: str | Path | None,
+               camera: str | None) -> None:
+    """Give ``source`` the camera of ``--intrinsics`` or ``--calib FILE`` (which win over the file's)."""
+    if intrinsics is not None and calib is not None:
+        raise DataError("--intrinsics and --calib: give one of them, not both")
+    had = source.intrinsics is not None
+    if calib is not None:
+        intrinsics, size, what = read_camera_file(calib, camera, source.sensor_size)
+        if source.sensor_size is None and size is not None:
+            source.sensor_size = size
+            source.notes.append(f"sensor size {size[0]}x{size[1]} from {calib}")
+        used = f"{calib} ({what})"
+    else:
+        used = "--intrinsics"
+    source.intrinsics = intrinsics
+    source.notes.append(f"intrinsics from {used}" + (", instead of the recording's" if had else ""))

@@ -110,7 +110,7 @@ class ColumnsSource(EventSource):
 
     def _index_at(self, us: int) -> int:
         """The first event at or after ``us``: the ms index narrows it, a binary search finds it."""
-        from tofnet.io.source import first_at_or_after
+        from tofnet.io.window import first_at_or_after
 
         bracket = None
         k = (us - self.t_offset) // 1000 if self.ms_index is not None else -1

@@ -14,6 +14,10 @@ finite intrinsics with ``fx``, ``fy`` > 0, IMU rows) when it is opened and once 
 after ``read()``; every event a reader returns (``check_packet``: ``|t| < MAX_TIME_US``,
 coordinates 0..65535) before it is copied into a chunk; and errors of the decoding
 libraries (h5py, faery, rosbags) become one-line ``DataError``s.
+
+A time window (``open_recording(..., window=)``, ``set_window``; ``tofnet.io.window``)
+makes ``chunks`` and ``read`` give only its events, found through the file's own index
+where it has one; recordings parsed whole live in ``tofnet.io.in_memory``.
 """
 
 from __future__ import annotations
@@ -86,6 +90,7 @@ class EventSource:
         """The events of ``[start, stop)``. The default decodes from the beginning, skips whole packets
         before ``start`` uncopied and stops at the first packet past ``stop``; readers with an index
         (HDF5) override it to read only the window's rows."""
+        from tofnet.io.window import window_filter
         yield from window_filter(self, self._packets(size_hint), start, stop)
 
     def _window_end_us(self) -> int | None:
@@ -217,55 +222,6 @@ class EventSource:
 
 
 
-def window_filter(source: EventSource, packets: Iterable[np.ndarray], start: int,
-                  stop: int | None) -> Iterator[np.ndarray]:
-    """``packets`` cut to ``[start, stop)`` µs (sorted files): packets wholly before ``start`` are skipped
-    (``source._first_index`` counts them), iteration stops at the first packet reaching ``stop``. Once
-    inside the window nothing is dropped for being early, so ``chunks`` still sees a time going back."""
-    skipped, started = 0, False
-    for packet in packets:
-        if not len(packet):
-            continue
-        t = packet[packet.dtype.names[0]]
-        first, last = int(t[0]), int(t[-1])
-        source._last_seen_us = last
-        lo = 0
-        if not started:
-            if last < start:
-                skipped += len(packet)
-                source._first_index = skipped
-                continue
-            lo = int(np.searchsorted(t, start, side="left")) if first < start else 0
-            skipped += lo
-            source._first_index = skipped
-        hi = len(packet)
-        if stop is not None and last >= stop:
-            hi = lo if stop <= first else max(int(np.searchsorted(t, stop, side="left")), lo)
-        if hi > lo:
-            started = True
-            yield packet[lo:hi]
-        if stop is not None and last >= stop:
-            return
-
-
-def first_at_or_after(times, n: int, value: int, bracket: tuple[int, int] | None = None) -> int:
-    """Index of the first of ``n`` sorted times at or after ``value`` (µs). ``times(lo, hi)`` reads
-    times ``lo..hi-1`` as µs; ``bracket`` is a guess from the file's index (``ms_to_idx``), used only
-    when the times at its ends confirm it, so a wrong index cannot give wrong events."""
-    lo, hi = 0, n
-    if bracket is not None:
-        a, b = bracket
-        if 0 <= a <= b <= n and (a == 0 or times(a - 1, a)[0] < value) and (b == n or times(b, b + 1)[0] >= value):
-            lo, hi = a, b
-    while hi - lo > 1 << 16:  # bisect on single reads until the rest is one small read
-        mid = (lo + hi) // 2
-        if times(mid, mid + 1)[0] < value:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo + int(np.searchsorted(times(lo, hi), value, side="left")) if hi > lo else lo
-
-
 def _rechunk(packets: Iterable[np.ndarray], n: int) -> Iterator[tuple[np.ndarray, int]]:
     """Re-cut arrays of any sizes into new ``EVENT_DTYPE`` arrays of ``n`` (the last shorter).
 
@@ -318,70 +274,6 @@ def _copy_checked(out_t, out_x, out_y, out_p, at, t, x, y, p, start, count, last
         last_t[0] = out_t[at + count - 1]
         started[0] = True
     return first_back
-
-
-class RecordingSource(EventSource):
-    """A recording already in memory (ECD folders, text and numpy files), served in chunks."""
-
-    def __init__(self, recording: Recording, format: str, path: str | Path, span: tuple[int, int] | None = None):
-        super().__init__(path)
-        self._span = span  # (first, last) event µs of the file when only a window of it was read
-        self.format = format
-        self.recording = recording
-        self.sensor_size = recording.sensor_size
-        self.intrinsics = recording.intrinsics
-        self.trajectory = recording.trajectory
-        self.imu = recording.imu
-        self.n_events = len(recording.events)
-        self.has_depth = recording.gt_depth is not None
-        self.notes = list(recording.notes)
-
-    def _packets(self, size_hint: int) -> Iterable[np.ndarray]:
-        events = self.recording.events
-        for start in range(0, len(events), size_hint):
-            yield events[start:start + size_hint]
-
-    def _depth(self, events: np.ndarray, first_index: int) -> np.ndarray | None:
-        return self.recording.gt_depth[first_index:first_index + len(events)]
-
-    def first_time(self) -> int | None:
-        events = self.recording.events
-        return self._span[0] if self._span else int(events["t"][0]) if len(events) else None
-
-    def _window_end_us(self) -> int | None:
-        return self._span[1] if self._span else int(self.recording.events["t"][-1])
-
-    def set_window(self, window) -> None:
-        # Loaded whole already (text and numpy have no index): the window is a slice, found by
-        # binary search on the sorted times (a time going back is caught by the reader first).
-        super().set_window(window)
-        start, stop = self.window
-        t = self.recording.events["t"]
-        lo = int(np.searchsorted(t, start, side="left"))
-        hi = len(t) if stop is None else max(int(np.searchsorted(t, stop, side="left")), lo)
-        if hi == lo:
-            raise DataError(located(self.path, None, f"no events in the time window {self.window_text()}; the "
-                                                     f"recording ends {(self._window_end_us() - self._origin_us) * 1e-6:g}"
-                                                     " s after its first event"))
-        recording = self.recording
-        self.recording = Recording(events=recording.events[lo:hi], intrinsics=recording.intrinsics,
-                                   trajectory=recording.trajectory, sensor_size=recording.sensor_size,
-                                   gt_depth=None if recording.gt_depth is None else recording.gt_depth[lo:hi],
-                                   imu=recording.imu, source=recording.source, notes=recording.notes)
-        self.n_events = hi - lo
-
-    def _window_packets(self, size_hint: int, start: int, stop: int | None) -> Iterable[np.ndarray]:
-        return self._packets(size_hint)  # already the window's slice (set_window)
-
-    def read(self, progress: ProgressHook | None = None) -> Recording:
-        recording = self.recording
-        # Attributes set after opening (a sensor size override) win over what was read.
-        recording.sensor_size, recording.intrinsics = self.sensor_size, self.intrinsics
-        recording.trajectory, recording.imu = self.trajectory, self.imu
-        recording.notes = list(self.notes)  # the file's (rounded times) and any added since
-        if progress is not None:
-            progress(len(recording.events), len(recording.events))
-        return recording
 
 
 def fill_from_side_files(source: EventSource) -> EventSource:
@@ -440,7 +332,8 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
             from tofnet.io.rosbag import RosbagSource
             source = RosbagSource(path, topics)
         else:
-            recording, span = _read_in_memory(path, kind, columns, window)
+            from tofnet.io.in_memory import RecordingSource, read_in_memory
+            recording, span = read_in_memory(path, kind, columns, window)
             source = RecordingSource(recording, kind, path, span)
     except BaseException as err:
         if not is_decode_error(err, kind):
@@ -457,6 +350,7 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
                 raise DataError(f"sensor size: {problem}")
             source.sensor_size = (width, height)
         if intrinsics is not None or calib is not None:
+            from tofnet.io.calibration import set_camera
             set_camera(source, intrinsics, calib, camera)
         check_metadata(source, path)
         if window is not None:
@@ -470,74 +364,6 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
     return source
 
 
-def set_camera(source: EventSource, intrinsics: Intrinsics | None, calib: str | Path | None,
-               camera: str | None) -> None:
-    """Give ``source`` the camera of ``--intrinsics`` or ``--calib FILE`` (which win over the file's)."""
-    if intrinsics is not None and calib is not None:
-        raise DataError("--intrinsics and --calib: give one of them, not both")
-    had = source.intrinsics is not None
-    if calib is not None:
-        from tofnet.io.calibration import read_camera_file
-        intrinsics, size, what = read_camera_file(calib, camera, source.sensor_size)
-        if source.sensor_size is None and size is not None:
-            source.sensor_size = size
-            source.notes.append(f"sensor size {size[0]}x{size[1]} from {calib}")
-        used = f"{calib} ({what})"
-    else:
-        used = "--intrinsics"
-    source.intrinsics = intrinsics
-    source.notes.append(f"intrinsics from {used}" + (", instead of the recording's" if had else ""))
-
-
 #: Format names for messages.
 FORMAT_NAMES = {"aedat4": "AEDAT4", "evt": "Prophesee RAW", "dat": "Prophesee DAT", "es": "Event Stream",
                 "hdf5": "HDF5", "rosbag1": "ROS1 bag"}
-
-
-def _read_in_memory(path: Path, kind: str, columns, window=None) -> tuple[Recording, tuple[int, int] | None]:
-    """The recording, and for a ``.npy`` read through a time window, the file's (first, last) event µs."""
-    from tofnet.io.ecd import attach_sidecars, read_ecd
-    from tofnet.io.events import read_events_npy, read_events_txt
-
-    from tofnet.io.ecd import EVENTS, GT_DEPTH
-
-    span = None
-    notes: list[str] = []
-    if kind == "ecd" and window is not None and (path / EVENTS).is_file() and not _exists(path / GT_DEPTH):
-        # Only the window's bytes of events.txt are parsed (true depth per event needs the whole file).
-        from tofnet.io.text_window import read_text_window
-        events, *span = read_text_window(path / EVENTS, window, notes)
-        recording = attach_sidecars(Recording(events=events, source=str(path), notes=notes), path)
-    elif kind == "ecd":
-        recording = read_ecd(path)
-    else:
-        depth_name = f"{path.stem}_depth.npy"
-        if kind == "text" and window is not None and not _exists(path.parent / depth_name):
-            from tofnet.io.text_window import read_text_window
-            events, *span = read_text_window(path, window, notes)
-        elif kind == "text":
-            events = read_events_txt(path, notes)  # notes: how many times were rounded to the µs
-        elif kind == "npy" and window is not None:
-            # A memory map: only the window's rows are read (the other formats here are parsed whole).
-            from tofnet.io.arrays import read_npy_window
-            events, first, lo, hi, last = read_npy_window(path, columns, window)
-            span, depth_name = (first, last), None
-        else:
-            events = read_events_npy(path, columns=columns)
-        recording = attach_sidecars(Recording(events=events, source=str(path), notes=notes), path.parent,
-                                    gt_depth_name=depth_name)
-        if kind == "npy" and span is not None and _exists(path.parent / f"{path.stem}_depth.npy"):
-            from tofnet.io.ecd import read_gt_depth
-            from tofnet.io.npy import map_npy
-            total = len(map_npy(path, "events file"))
-            recording.gt_depth = read_gt_depth(path.parent / f"{path.stem}_depth.npy", total)[lo:hi]
-        if kind == "npz":
-            from tofnet.io.arrays import apply_npz_metadata
-            apply_npz_metadata(recording, path)
-    if len(recording.events) == 0 and span is None:
-        raise DataError(located(path, None, "no events"))
-    return recording, (tuple(span) if span is not None else None)
-
-
-def _exists(path: Path) -> bool:
-    return path.exists() or path.is_symlink()

@@ -11,6 +11,7 @@ so every command and batch task windows the same way.
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from decimal import ROUND_HALF_UP, Decimal, InvalidOperation
 
@@ -129,3 +130,52 @@ def window_rows(rows: np.ndarray | None, start_us: int, stop_us: int | None) -> 
     if rows is None or len(rows) == 0:
         return rows
     return rows[rows_in(rows[:, 0], start_us, stop_us)]
+
+
+def window_filter(source, packets: Iterable[np.ndarray], start: int,
+                  stop: int | None) -> Iterator[np.ndarray]:
+    """``packets`` cut to ``[start, stop)`` µs (sorted files): packets wholly before ``start`` are skipped
+    (``source._first_index`` counts them), iteration stops at the first packet reaching ``stop``. Once
+    inside the window nothing is dropped for being early, so ``chunks`` still sees a time going back."""
+    skipped, started = 0, False
+    for packet in packets:
+        if not len(packet):
+            continue
+        t = packet[packet.dtype.names[0]]
+        first, last = int(t[0]), int(t[-1])
+        source._last_seen_us = last
+        lo = 0
+        if not started:
+            if last < start:
+                skipped += len(packet)
+                source._first_index = skipped
+                continue
+            lo = int(np.searchsorted(t, start, side="left")) if first < start else 0
+            skipped += lo
+            source._first_index = skipped
+        hi = len(packet)
+        if stop is not None and last >= stop:
+            hi = lo if stop <= first else max(int(np.searchsorted(t, stop, side="left")), lo)
+        if hi > lo:
+            started = True
+            yield packet[lo:hi]
+        if stop is not None and last >= stop:
+            return
+
+
+def first_at_or_after(times, n: int, value: int, bracket: tuple[int, int] | None = None) -> int:
+    """Index of the first of ``n`` sorted times at or after ``value`` (µs). ``times(lo, hi)`` reads
+    times ``lo..hi-1`` as µs; ``bracket`` is a guess from the file's index (``ms_to_idx``), used only
+    when the times at its ends confirm it, so a wrong index cannot give wrong events."""
+    lo, hi = 0, n
+    if bracket is not None:
+        a, b = bracket
+        if 0 <= a <= b <= n and (a == 0 or times(a - 1, a)[0] < value) and (b == n or times(b, b + 1)[0] >= value):
+            lo, hi = a, b
+    while hi - lo > 1 << 16:  # bisect on single reads until the rest is one small read
+        mid = (lo + hi) // 2
+        if times(mid, mid + 1)[0] < value:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo + int(np.searchsorted(times(lo, hi), value, side="left")) if hi > lo else lo
