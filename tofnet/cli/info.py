@@ -23,11 +23,14 @@ def register(subparsers) -> None:
     p.set_defaults(handler=handle)
 
 
-def describe(path, *, sensor_size=None, progress=None, **options) -> dict:
-    """The facts ``tofnet info`` prints, as plain data (one pass over the events)."""
+def describe(path, *, sensor_size=None, progress=None, opened=None, **options) -> dict:
+    """The facts ``tofnet info`` prints, as plain data (one pass over the events);
+    ``opened()``, when given, runs once the recording is open, before that pass."""
     from tofnet.io.source import open_recording
 
     with open_recording(path, sensor_size=sensor_size, **options) as source:
+        if opened is not None:
+            opened()
         count = on = 0
         t_first = t_last = None
         x_max = y_max = -1
@@ -133,12 +136,16 @@ def handle(args) -> int:
     from tofnet.core.params import parse_size
 
     sensor = parse_size(args.sensor_size, "--sensor-size") if args.sensor_size else None
+    check = None
     if args.json:
         from tofnet.io.ecd import recording_files
         from tofnet.io.files import check_output
-        check_output(args.json, force=args.force, inputs=recording_files(args.recording), what="--json")
+
+        def check() -> None:  # before reading, and again once the side files (DSEC's calibration) are read
+            check_output(args.json, force=args.force, inputs=recording_files(args.recording), what="--json")
+        check()
     progress = None if args.quiet else Progress("tofnet info")
-    facts = describe(args.recording, sensor_size=sensor, progress=progress, **input_options(args))
+    facts = describe(args.recording, sensor_size=sensor, progress=progress, opened=check, **input_options(args))
     if progress:
         progress.done()
     print(format_facts(facts))
