@@ -11,6 +11,9 @@ camera motion of one class:
 - ``shake``: ``reversing`` held by a hand that turns the camera as well, its rotational
   image motion up to the translational one at the scene's median depth (IMU included).
 
+An event at an occluding contour gets the nearer surface's depth (``occlusion_depth``): its
+timing is that surface's motion, so that is the depth an estimator should find.
+
 Velocities are piecewise constant over ``STEP_S`` (2 ms), fine enough that the motion is
 smooth to the network (1 ms steps, poses at 1 kHz). Variants are reproducible: the same
 name and variant give the same ``SimConfig`` everywhere. docs/simulator.md lists them;
@@ -136,7 +139,9 @@ def random_motion(motion: str, variant: int = 0, duration: float = 1.0) -> SimCo
                                         roll=_hand_sway(rng, 0.5 * peak))
         imu = ImuModel()
     noise = float(math.exp(rng.uniform(math.log(NOISE_RANGE[0]), math.log(NOISE_RANGE[1]))))
+    # An event at an occluding contour is made by the nearer surface's motion: that is the depth to find.
     return SimConfig(f"random_{motion}:{variant}", scene, trajectory, duration, noise_rate=noise, imu=imu,
+                     occlusion_depth="nearer_surface",
                      description=f"random scene, {motion} motion (variant {variant}), noise {noise:.1f} Hz/px")
 
 
