@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from tofnet.backends.registry import available_backends, get_backend
+from tofnet.cli import main
 from tofnet.conformance import format_table, run_suite
 from tofnet.conformance.cases import get_case
 from tofnet.errors import BackendError, UnsupportedError
@@ -27,20 +28,25 @@ CASES = ["edge+u", "speed-4bit-16", "patch-d2-ragged", "graph-two-distances", "g
 
 
 @pytest.mark.skipif(LAVA, reason="checks the refusal where Lava cannot run; Lava runs here")
-def test_without_lava_the_backend_says_in_one_line_what_it_needs():
-    case = get_case("edge+u").build()
+def test_without_lava_the_backend_says_in_one_line_what_it_needs(capsys):
     with pytest.raises(BackendError) as err:
-        get_backend("lava").run(case.network, case.recording)
+        get_backend("lava")
     text = str(err.value)
     assert "\n" not in text and "Python 3.10" in text and "pip install 'tofnet[lava]'" in text
+    assert main(["conformance", "--backend", "lava", "--case", "edge+u"]) != 0  # one line, not a table of failures
+    assert capsys.readouterr().err.strip().splitlines() == [f"tofnet conformance: error: {text}"]
 
 
 def test_lava_is_asked_for_by_name_and_not_listed_with_the_backends_every_install_runs():
     assert "lava" not in available_backends()
     assert "lava" in available_backends(optional=True)
-    assert get_backend("lava").arithmetic == "fixed" and get_backend("lava", arithmetic="float").family == "float"
     with pytest.raises(BackendError, match="arithmetic must be 'fixed' or 'float'"):
         get_backend("lava", arithmetic="double")
+
+
+@needs_lava
+def test_lava_runs_the_fixed_models_or_the_float_ones():
+    assert get_backend("lava").family == "fixed" and get_backend("lava", arithmetic="float").family == "float"
 
 
 @needs_lava

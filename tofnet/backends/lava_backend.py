@@ -71,12 +71,12 @@ class LavaBackend(LocalBackend):
         self.arithmetic = self.family = arithmetic
         self.format = FixedPointFormat(frac_bits, payload_bits) if arithmetic == "fixed" else None
         self.source_capacity = source_capacity
+        require_lava()  # here, so that a run, a session or the suite stops at once with the one line
 
     def _format(self) -> FixedPointFormat | None:
         return self.format
 
     def open_stream(self, compiled, **options):
-        require_lava()
         options.pop("fuse", None)  # nothing to fuse: every process is its own Lava process
         return super().open_stream(compiled, **options)
 
