@@ -20,7 +20,8 @@ from tofnet.eval.units import unit_traces, units_figure
 from tofnet.io import read_recording
 from tofnet.sim.run import simulate
 
-folder = Path(tempfile.mkdtemp()) / "slider"
+workspace = tempfile.TemporaryDirectory(prefix="tofnet-stepping-")  # removed at the end (or at exit)
+folder = Path(workspace.name) / "slider"
 simulate("slider", folder, duration=0.3, seed=0)  # events, poses, calibration, true depth
 recording = read_recording(folder)
 network = depth_network(recording.sensor_size)  # input -> time_of_travel -> depth <- velocity
@@ -72,10 +73,12 @@ print(f"the monitor sampled pixel (120, 90) {len(monitor.steps)} times: values {
 # ## The units at work (paper Fig. 2)
 # Counters ramp after a facilitating spike (triangles), a trigger (dotted line) makes them
 # send their count (circles) and the depth neuron turns the counts into a depth (diamond).
+# The figure goes to the current folder; the simulated recording is removed.
 
 # %%
 traces = unit_traces(recording, depth_network(recording.sensor_size), [(120, 90)], 0.08, 0.14)
 figure = units_figure(traces)
-path = folder.parent / "units.png"
+path = Path("stepping_units.png")
 figure.savefig(path, dpi=120)
-print(f"figure: {path}")
+print(f"figure: {path.resolve()}")
+workspace.cleanup()

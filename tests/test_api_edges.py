@@ -84,3 +84,24 @@ def test_an_ecd_folder_without_a_size_builds_the_cli_default_network(tmp_path):
     assert network.sensor_size == DEFAULT_SENSOR_SIZE == (240, 180)
     from tofnet.api import default_network
     assert default_network(recording).sensor_size == network.sensor_size  # what `tofnet run` builds
+
+
+@pytest.mark.parametrize("name", ["rec.npz", "rec.h5", "rec.aedat4"])
+def test_simulate_writes_the_formats_convert_writes(tmp_path, capsys, name):
+    from optional import optional
+    optional({"rec.npz": "numpy", "rec.h5": "h5py", "rec.aedat4": "faery"}[name])
+
+    folder = tmp_path / "ecd"
+    assert main(["simulate", "slider", str(folder), "--duration", "0.05", "--sensor-size", "48x36", "--quiet"]) == 0
+    assert main(["simulate", "slider", str(tmp_path / name), "--duration", "0.05", "--sensor-size", "48x36",
+                 "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert f"to {tmp_path / name}" in out
+    expected, got = read_recording(folder), read_recording(tmp_path / name)
+    assert np.array_equal(got.events, expected.events) and got.sensor_size == (48, 36)
+    assert got.intrinsics == expected.intrinsics  # in the file, or calib.txt beside it
+    if name == "rec.npz":
+        assert np.array_equal(got.gt_depth, expected.gt_depth)
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".tofnet-simulate-")]  # no temporary folder left
+    assert main(["simulate", "slider", str(tmp_path / name), "--duration", "0.05", "--quiet"]) == 2  # no --force
+    assert "exists" in capsys.readouterr().err

@@ -1,4 +1,4 @@
-"""The layout's promise: the *what* never imports the *how* (DESIGN.md §3)."""
+"""The layout's promise: the *what* never imports the *how* (docs/architecture.md)."""
 
 import subprocess
 import sys

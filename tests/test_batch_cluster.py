@@ -11,8 +11,9 @@ import time
 from pathlib import Path
 
 import pytest
+from optional import optional
 
-pytest.importorskip("distributed")
+optional("distributed")
 if shutil.which("dask") is None:
     pytest.skip("the dask command is not installed", allow_module_level=True)
 

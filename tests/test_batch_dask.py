@@ -11,8 +11,9 @@ import sys
 import time
 
 import pytest
+from optional import optional
 
-pytest.importorskip("distributed")
+optional("distributed")
 
 from tofnet.batch import load_plan, run_batch  # noqa: E402
 from tofnet.batch.runner import local_cluster  # noqa: E402

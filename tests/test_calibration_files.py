@@ -11,6 +11,7 @@ from tofnet.io.calibration import parse_intrinsics, read_camera_file
 from tofnet.io.recording import Intrinsics
 
 from formats_helpers import pattern_recording
+from optional import optional
 
 DSEC = """\
 intrinsics:
@@ -156,7 +157,7 @@ def test_errors_name_the_file_and_the_key(tmp_path):
 
 
 def test_aedat4_without_calib_runs_with_intrinsics_and_velocity(tmp_path, capsys):
-    pytest.importorskip("faery")
+    optional("faery")
     from tofnet.io.aedat import write_aedat4
 
     recording = pattern_recording()

@@ -190,3 +190,16 @@ def test_quantised_comparison_uses_the_eq7_bound():
 def depth_tolerance_of(sx, sy):
     from tofnet.kernels.fixed_point import depth_tolerance
     return depth_tolerance(sx, sy)
+
+
+def test_a_pass_with_unequal_estimates_is_marked_and_explained():
+    from tofnet.conformance.runner import CaseResult
+
+    equal = CaseResult("edge+u", "fixed", "float", "quantised", True, (10, 10), "", 0.1)
+    unequal = CaseResult("graph-denoised", "fixed", "float", "quantised", True, (3051, 3038), "", 0.1)
+    table = format_table([equal, unequal]).splitlines()
+    assert " pass  " in table[1] and " pass* " in table[2]
+    assert table[-1].startswith("pass* (quantised): fixed vs float: an estimate may be on one side only when its "
+                                "depth lies within the quantisation tolerance")
+    assert "docs/fixed_point.md" in table[-1]
+    assert not format_table([equal]).splitlines()[-1].startswith("pass*")  # no such row, no footnote

@@ -11,6 +11,7 @@ from tofnet.io.convert import convert
 from tofnet.io.source import open_recording
 
 from formats_helpers import pattern_recording
+from optional import optional
 
 TARGETS = [("ecd", "rec", None), ("npz", "rec.npz", None), ("hdf5", "rec.h5", "h5py"),
            ("aedat4", "rec.aedat4", "faery")]
@@ -40,7 +41,7 @@ def original_depth(original):
 @pytest.mark.parametrize("kind, name, needs", TARGETS)
 def test_each_target_gives_the_same_depth_bit_for_bit(tmp_path, original, original_depth, kind, name, needs):
     if needs:
-        pytest.importorskip(needs)
+        optional(needs)
     recording, path = original
     with open_recording(path) as source:
         messages = convert(source, tmp_path / name)
@@ -53,8 +54,8 @@ def test_each_target_gives_the_same_depth_bit_for_bit(tmp_path, original, origin
 
 
 def test_chain_through_every_format_is_lossless(tmp_path, original, original_depth):
-    pytest.importorskip("h5py")
-    pytest.importorskip("faery")
+    optional("h5py")
+    optional("faery")
     current = original[1]
     for k, name in enumerate(["a.h5", "b.aedat4", "c", "d.npz", "e.h5"]):
         folder = tmp_path / str(k)
@@ -87,7 +88,7 @@ def test_equidistant_distortion_is_reported_when_the_target_cannot_hold_it(tmp_p
 
 
 def test_cli_convert_and_info(tmp_path, original, capsys):
-    pytest.importorskip("h5py")
+    optional("h5py")
     assert main(["convert", str(original[1]), str(tmp_path / "rec.h5"), "--quiet"]) == 0
     assert "wrote" in capsys.readouterr().out
     assert main(["convert", str(original[1]), str(tmp_path / "rec.h5"), "--quiet"]) == 2

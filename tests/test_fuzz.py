@@ -15,8 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from optional import optional
 
-hypothesis = pytest.importorskip("hypothesis")
+hypothesis = optional("hypothesis")
 from hypothesis import HealthCheck, given, settings, strategies as st  # noqa: E402
 from hypothesis.extra import numpy as hnp  # noqa: E402
 

@@ -16,8 +16,9 @@ import pytest
 from tofnet.cli import main
 from tofnet.errors import DataError
 from tofnet.io import read_recording
+from optional import optional
 
-h5py = pytest.importorskip("h5py")
+h5py = optional("h5py")
 
 from formats_helpers import SENSOR, pattern_recording  # noqa: E402
 

@@ -7,6 +7,7 @@ from tofnet.errors import DataError
 from tofnet.events import make_events
 from tofnet.io import read_recording
 from tofnet.io.events import read_events_npy, read_events_txt
+from optional import optional
 
 EVENTS = make_events([1000, 2000, 2000, 5000], [3, 4, 5, 6], [7, 8, 9, 10], [1, 0, 1, 1])
 
@@ -39,7 +40,7 @@ def test_polarity_field_names(tmp_path, polarity):
 
 
 def test_faery_dtype_with_titled_polarity(tmp_path):
-    faery = pytest.importorskip("faery")
+    faery = optional("faery")
     array = np.zeros(len(EVENTS), dtype=faery.EVENTS_DTYPE)
     array["t"], array["x"], array["y"], array["on"] = EVENTS["t"], EVENTS["x"], EVENTS["y"], EVENTS["p"] == 1
     np.save(tmp_path / "faery.npy", array)

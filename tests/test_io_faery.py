@@ -8,8 +8,9 @@ import pytest
 from tofnet.errors import DataError
 from tofnet.io import read_recording
 from tofnet.io.source import open_recording
+from optional import optional
 
-faery = pytest.importorskip("faery")
+faery = optional("faery")
 
 from formats_helpers import SENSOR, faery_events, pattern_recording  # noqa: E402
 

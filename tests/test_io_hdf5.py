@@ -9,8 +9,9 @@ import pytest
 from tofnet.errors import DataError
 from tofnet.io import read_recording
 from tofnet.io.source import open_recording
+from optional import optional
 
-h5py = pytest.importorskip("h5py")
+h5py = optional("h5py")
 
 from formats_helpers import SENSOR, pattern_recording  # noqa: E402
 
@@ -168,7 +169,7 @@ def test_filter_without_plugin_names_the_extra(tmp_path, recording, monkeypatch)
 
 
 def test_blosc_compressed_file(tmp_path, recording):
-    hdf5plugin = pytest.importorskip("hdf5plugin")
+    hdf5plugin = optional("hdf5plugin")
     path = tmp_path / "events.h5"
     _dsec(path, recording.events, **hdf5plugin.Blosc(cname="zstd"))
     # A fresh interpreter has not registered the filter yet: tofnet loads hdf5plugin itself.

@@ -10,6 +10,7 @@ from tofnet.io.groundtruth import Trajectory
 from tofnet.io.maps import depth_maps, depth_to_png16, write_depth_maps
 from tofnet.io.ply import depth_points, write_ply
 from tofnet.io.recording import Intrinsics
+from optional import optional
 
 INTRINSICS = Intrinsics(100.0, 110.0, 4.0, 3.0)
 
@@ -81,7 +82,7 @@ def test_ply_camera_frame(tmp_path, binary):
     assert names == ["x", "y", "z", "red", "green", "blue"]
     assert np.allclose(np.column_stack([vertices["x"], vertices["y"], vertices["z"]]), points)
     assert vertices["blue"].tolist() == [0, 0, 255]
-    plyfile = pytest.importorskip("plyfile")
+    plyfile = optional("plyfile")
     read = plyfile.PlyData.read(str(tmp_path / "c.ply"))
     assert np.allclose(read["vertex"]["z"], points[:, 2])
 

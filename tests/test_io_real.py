@@ -11,10 +11,12 @@ import pytest
 from tofnet.io import read_recording
 from tofnet.io.recording import ConstantVelocity, Intrinsics
 from tofnet.io.source import open_recording
+from optional import optional
 
 REAL = Path(__file__).resolve().parents[1].parent / "shared" / "real"  # ../shared/real beside the checkout
-pytestmark = pytest.mark.skipif(not REAL.is_dir(), reason="no ../shared/real/ folder of real recordings")
-pytest.importorskip("faery")
+pytestmark = pytest.mark.skipif(not REAL.is_dir(), reason="needs the real recordings, not distributed with tofnet "
+                                                             "(a shared/real/ folder beside the checkout)")
+optional("faery")
 
 #: The README's facts (decoded with faery 0.7.1).
 EVT3_DAT_EVENTS = 1_218_618

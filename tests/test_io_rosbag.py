@@ -6,8 +6,9 @@ import pytest
 from tofnet.errors import DataError
 from tofnet.io import read_recording
 from tofnet.io.source import open_recording
+from optional import optional
 
-pytest.importorskip("rosbags")
+optional("rosbags")
 
 from formats_helpers import INTRINSICS, SENSOR, pattern_recording  # noqa: E402
 

@@ -17,6 +17,7 @@ from tofnet.errors import DataError, TofnetError
 from tofnet.events import EVENT_DTYPE
 from tofnet.io import read_recording
 from tofnet.io.source import EventSource, open_recording
+from optional import optional
 
 
 def _events(n: int = 5) -> np.ndarray:
@@ -111,7 +112,7 @@ def test_devices_sockets_and_folders_as_side_files_are_refused(tmp_path):
             read_recording(tmp_path / "rec.bag")
     finally:
         server.close()
-    h5py = pytest.importorskip("h5py")
+    h5py = optional("h5py")
     with h5py.File(tmp_path / "rec.h5", "w") as out:
         for key in "txyp":
             out[f"events/{key}"] = _events()[key]
@@ -123,7 +124,7 @@ def test_devices_sockets_and_folders_as_side_files_are_refused(tmp_path):
 # ---------------------------------------------------------------- one check for every format
 
 def _dsec(path, events, **extra):
-    h5py = pytest.importorskip("h5py")
+    h5py = optional("h5py")
     with h5py.File(path, "w") as out:
         for key in "txyp":
             out[f"events/{key}"] = events[key]
@@ -208,7 +209,7 @@ def test_coordinates_that_do_not_fit_uint16_are_refused_not_wrapped(tmp_path):
 
 
 def test_a_corrupt_ros_message_is_one_line(tmp_path):
-    pytest.importorskip("rosbags")
+    optional("rosbags")
     from rosbags.rosbag1 import Writer
 
     from tofnet.io.rosbag import typestore
@@ -222,7 +223,7 @@ def test_a_corrupt_ros_message_is_one_line(tmp_path):
 
 def test_a_corrupt_side_topic_message_is_one_line(tmp_path):
     # found by benchmarks/fuzz.py (seed 2): rosbags raised SerdeError from a camera_info message
-    pytest.importorskip("rosbags")
+    optional("rosbags")
     from rosbags.rosbag1 import Writer
 
     from tofnet.io.rosbag import typestore
@@ -238,7 +239,7 @@ def test_a_corrupt_side_topic_message_is_one_line(tmp_path):
 
 def test_aedat4_with_a_non_utf8_description_is_refused_before_faery_sees_it(tmp_path):
     # faery 0.7 aborts the process (a panic that cannot unwind) on such a header.
-    pytest.importorskip("faery")
+    optional("faery")
     from tofnet.fuzzing import seeds
     data = bytearray(seeds("aedat4")[0])
     at = data.index(b"<dv version")
@@ -269,7 +270,7 @@ def test_convert_checks_its_output_first_and_never_replaces_an_input(tmp_path, c
 
 
 def test_a_failed_conversion_leaves_nothing_under_the_final_name(tmp_path):
-    pytest.importorskip("h5py")
+    optional("h5py")
     from tofnet.io.convert import convert
     events = _events()
     late = events.copy()
@@ -346,7 +347,7 @@ def test_nul_bytes_in_names_are_one_line(tmp_path, capsys):
 def test_a_faery_panic_is_one_line(tmp_path):
     # A zeroed byte inside an AEDAT4 packet makes faery's flatbuffers code panic; pyo3
     # raises that as PanicException, a BaseException that `except Exception` misses.
-    pytest.importorskip("faery")
+    optional("faery")
     from tofnet.fuzzing import seeds
     data = bytearray(seeds("aedat4")[0])
     data[1138] = 0

@@ -19,6 +19,7 @@ import pytest
 from tofnet.cli import main
 from tofnet.events import make_events
 from tofnet.io.events import write_events_npy
+from optional import optional
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -57,9 +58,9 @@ def _tofnet(*args: str) -> subprocess.CompletedProcess:
 
 @pytest.mark.parametrize("name", ["out.h5", "out.aedat4", "out_ecd", "out.npz"])
 def test_convert_on_a_full_file_system_is_one_line(tmp_path, name):
-    pytest.importorskip("h5py" if name.endswith(".h5") else "numpy")
+    optional("h5py" if name.endswith(".h5") else "numpy")
     if name.endswith(".aedat4"):
-        pytest.importorskip("faery")
+        optional("faery")
     source = tmp_path / "big.npy"
     write_events_npy(source, _events(400_000))  # ~6 MB of events; every output format needs > 2 MB
     with tmpfs("2m") as full:
@@ -113,7 +114,7 @@ class _FillsUp:
 
 
 def test_hdf5_full_disk_while_writing_is_one_line_and_no_file(tmp_path, monkeypatch, capsys):
-    pytest.importorskip("h5py")
+    optional("h5py")
     from tofnet.io import files
 
     source = tmp_path / "big.npy"
@@ -127,7 +128,7 @@ def test_hdf5_full_disk_while_writing_is_one_line_and_no_file(tmp_path, monkeypa
 
 
 def test_aedat4_encoder_errors_are_one_line(tmp_path, monkeypatch, capsys):
-    pytest.importorskip("faery")
+    optional("faery")
     from faery.extension import aedat
 
     class Encoder:

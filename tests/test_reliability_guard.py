@@ -17,6 +17,7 @@ from tofnet.io.depth import write_depth
 from tofnet.io.guard import MANIFEST
 
 from test_reliability_outputs import folder, one_line_error  # noqa: F401  (a fixture and a helper)
+from optional import optional
 
 
 def _tree(path) -> dict:
@@ -128,7 +129,7 @@ def test_run_never_overwrites_the_velocity_samples_its_spec_reads(folder, tmp_pa
 
 
 def test_convert_never_overwrites_mvsec_ground_truth(tmp_path, capsys):
-    h5py = pytest.importorskip("h5py")
+    h5py = optional("h5py")
     n = 50
     rows = np.column_stack([np.arange(n) % 8, np.arange(n) % 6, np.arange(n) * 1e-3, np.ones(n)])
     with h5py.File(tmp_path / "indoor_flying1_data.hdf5", "w") as f:
@@ -148,7 +149,7 @@ def test_convert_never_overwrites_mvsec_ground_truth(tmp_path, capsys):
 
 
 def test_info_never_overwrites_dsec_calibration(tmp_path, capsys):
-    h5py = pytest.importorskip("h5py")
+    h5py = optional("h5py")
     events = tmp_path / "seq" / "events" / "left"
     events.mkdir(parents=True)
     with h5py.File(events / "events.h5", "w") as f:

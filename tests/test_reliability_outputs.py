@@ -74,7 +74,8 @@ def test_a_folder_that_cannot_be_written_is_refused_before_the_run(folder, tmp_p
     assert "cannot write in this folder: Read-only file system" in err
 
 
-@pytest.mark.skipif(os.geteuid() == 0, reason="root writes to read-only folders")
+@pytest.mark.skipif(os.geteuid() == 0, reason="run as root: read-only folders are writable to root, "
+                                                               "so the refusal cannot be seen")
 def test_a_read_only_folder_is_refused(folder, tmp_path, capsys, no_run):
     locked = tmp_path / "locked"
     locked.mkdir()

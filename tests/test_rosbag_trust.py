@@ -11,8 +11,9 @@ import pytest
 from tofnet.cli import main
 from tofnet.errors import DataError
 from tofnet.io import read_recording
+from optional import optional
 
-pytest.importorskip("rosbags")
+optional("rosbags")
 
 from formats_helpers import SENSOR, pattern_recording  # noqa: E402
 from test_io_rosbag import write_bag  # noqa: E402

@@ -13,8 +13,9 @@ from tofnet.io.recording import Intrinsics, Recording
 from tofnet.io.source import open_recording
 from tofnet.networks import depth_network
 from tofnet.testing import merge_events, moving_pattern, noise_events
+from optional import optional
 
-pytest.importorskip("h5py")
+optional("h5py")
 from tofnet.io.hdf5 import write_hdf5  # noqa: E402
 
 SENSOR = (64, 48)

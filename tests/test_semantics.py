@@ -1,4 +1,4 @@
-"""DESIGN.md §1 and docs/semantics.md, one case at a time, on every registered backend."""
+"""docs/semantics.md, one case at a time, on every registered backend."""
 
 import numpy as np
 import pytest

@@ -10,6 +10,7 @@ from tofnet.errors import DataError
 from tofnet.events import EVENT_DTYPE, make_events
 from tofnet.io import detect_format, read_recording
 from tofnet.io.source import EventSource
+from optional import optional
 
 
 def test_content_decides_over_the_name(tmp_path):
@@ -82,7 +83,7 @@ def test_cli_run_with_columns_and_missing_extra(tmp_path, capsys, monkeypatch):
     assert f"events in      {len(events):>12,}" in capsys.readouterr().out
     assert main(args + ["--force"]) == 2  # the first run wrote d.npz
     assert "--columns" in capsys.readouterr().err
-    pytest.importorskip("h5py")
+    optional("h5py")
     from tofnet.io.hdf5 import write_hdf5
     from tofnet.io.recording import Recording
     write_hdf5(tmp_path / "e.h5", [events], Recording(events=events))

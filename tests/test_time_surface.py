@@ -83,7 +83,7 @@ def test_the_plane_model_is_bent_by_a_curved_edge():
 
 
 def test_the_gradient_is_the_time_of_travel_with_the_design_sign():
-    """DESIGN eq. 8: td = +count*dt/distance for motion towards +u, so ∇T_u > 0 for an edge moving to +u."""
+    """docs/semantics.md (depth neuron): td = +count*dt/distance for motion towards +u, so ∇T_u > 0 for an edge moving to +u."""
     events, velocity = edge_events((1, 0), speed=50.0, depth=2.0)
     _, quality, _ = run(events, velocity, model="plane")
     np.testing.assert_allclose(quality["gx"], 1 / 50.0, rtol=1e-4)  # s/px

@@ -6,6 +6,7 @@ import pytest
 from tofnet.events import make_events
 from tofnet.io.recording import Intrinsics
 from tofnet.kernels.undistort import distort, remap_events, undistort, undistortion_map
+from optional import optional
 
 #: ECD slider_depth's DAVIS240C (strong barrel: k1 = -0.37) and a DSEC-like fisheye lens.
 DAVIS = Intrinsics(199.092366542, 198.82882047, 132.192071378, 110.712660011,
@@ -67,7 +68,7 @@ def test_inverse_agrees_with_a_generic_numerical_inverse(intrinsics, size):
 
 @pytest.mark.parametrize("intrinsics, size", CASES)
 def test_against_opencv_when_installed(intrinsics, size):
-    cv2 = pytest.importorskip("cv2")
+    cv2 = optional("cv2")
     k = np.array([[intrinsics.fx, 0, intrinsics.cx], [0, intrinsics.fy, intrinsics.cy], [0, 0, 1]])
     u, v = _grid(size)
     points = np.stack([u, v], axis=-1).reshape(-1, 1, 2)

@@ -11,6 +11,7 @@ from tofnet.io.window import first_at_or_after
 from tofnet.io.window import TimePoint, TimeWindow, parse_time, parse_window
 
 from formats_helpers import pattern_recording
+from optional import optional
 
 
 @pytest.fixture(scope="module")
@@ -63,7 +64,7 @@ def _formats(tmp_path, recording):
     paths = [ecd]
     for name, module in (("rec.npz", None), ("rec.h5", "h5py"), ("rec.aedat4", "faery")):
         if module is not None:
-            pytest.importorskip(module)
+            optional(module)
         convert_recording(ecd, tmp_path / name)
         paths.append(tmp_path / name)
     return paths
@@ -104,7 +105,7 @@ def test_windowed_ground_truth_depth_follows_the_events(tmp_path, recording):
 
 
 def test_hdf5_reads_only_the_window_rows(tmp_path, recording, monkeypatch):
-    h5py = pytest.importorskip("h5py")
+    h5py = optional("h5py")
     from tofnet.io.hdf5 import ColumnsSource
 
     write_ecd(tmp_path / "r", recording.events, intrinsics=None, sensor_size=recording.sensor_size)
@@ -145,7 +146,7 @@ def test_empty_and_past_the_end_windows_are_one_line(tmp_path, recording, capsys
         assert main(args) != 0
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and ("no events in the time window" in err or "--start" in err), err
-    pytest.importorskip("h5py")
+    optional("h5py")
     convert_recording(tmp_path / "r", tmp_path / "r.h5")
     with pytest.raises(DataError, match="no events in the time window 0.3 s .. the end"):
         read_recording(tmp_path / "r.h5", window=TimeWindow(start=TimePoint(300_000)))
@@ -194,7 +195,7 @@ def test_eval_and_export_window_the_estimates(tmp_path, capsys):
 
 
 def test_mvsec_rows_and_a_windowed_convert(tmp_path, recording):
-    h5py = pytest.importorskip("h5py")
+    h5py = optional("h5py")
     events = recording.events
     rows = np.column_stack([events["x"], events["y"], events["t"] * 1e-6, np.where(events["p"] == 1, 1.0, -1.0)])
     with h5py.File(tmp_path / "seq_data.hdf5", "w") as f:

@@ -30,7 +30,7 @@ def register(subparsers) -> None:
 def handle(args) -> int:
     from tofnet.backends.registry import available_backends, get_backend
     from tofnet.conformance import DEFAULT_BASELINE, run_suite, select_cases
-    from tofnet.conformance.runner import format_row, header, summary_line
+    from tofnet.conformance.runner import footnote, format_row, header, summary_line
 
     cases = select_cases(args.case)
     if args.list:
@@ -61,6 +61,8 @@ def handle(args) -> int:
         else:
             results = run_suite(name, against, [c.name for c in cases], cache=cache, report=report)
         print(summary_line(results))
+        for line in footnote(results):
+            print(line)
         print()
         failed += sum(not r.ok for r in results)
         outcomes.extend(r.to_dict() for r in results)

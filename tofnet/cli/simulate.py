@@ -13,9 +13,12 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("simulate", help="simulate an event camera moving through a scene",
                               description="Simulate a built-in scenario (ESIM-style event camera with "
                                           "ground-truth depth) and write an ECD folder: events.txt, calib.txt, "
-                                          "groundtruth.txt, sensor_size.txt, events_depth.npy.")
+                                          "groundtruth.txt, sensor_size.txt, events_depth.npy; or, for an OUT "
+                                          "named .npz, .h5/.hdf5 or .aedat4, that file, as 'tofnet convert' "
+                                          "writes it.")
     p.add_argument("scenario", nargs="?", help="scenario name (see --list)")
-    p.add_argument("out_dir", nargs="?", help="output folder (created if needed)")
+    p.add_argument("out_dir", nargs="?", metavar="OUT",
+                   help="output folder (created if needed), or a .npz, .h5/.hdf5 or .aedat4 file")
     p.add_argument("--duration", type=float, metavar="S", help="seconds to simulate (default: 1)")
     p.add_argument("--seed", type=int, default=0, help="seed of textures, thresholds and noise (default: 0)")
     p.add_argument("--sensor-size", metavar="WxH",
@@ -41,20 +44,30 @@ def handle(args) -> int:
     if args.sensor_size:
         from tofnet.core.params import parse_size
         sensor = parse_size(args.sensor_size, "--sensor-size")
-    check_out_dir(Path(args.out_dir), args.force)
+    out = Path(args.out_dir)
+    as_file = out.suffix.lower() in FILE_OUTPUTS
+    if as_file:
+        from tofnet.io.convert import check_convert_output
+        check_convert_output(out, out.parent / f".{out.name}.simulated", force=args.force, gt_depth=True)
+    else:
+        check_out_dir(out, args.force)
     if args.json:
         from tofnet.io.files import check_output
         from tofnet.io.ecd import SIDE_FILES
-        check_output(args.json, force=args.force, inputs=[Path(args.out_dir) / name for name in SIDE_FILES],
-                     what="--json")
+        written = [out] if as_file else [out / name for name in SIDE_FILES]
+        check_output(args.json, force=args.force, inputs=written, what="--json")
     progress = None
     if not args.quiet:
         from tofnet.cli.progress import Progress
         progress = Progress(f"simulate {args.scenario}", unit="renders")
     from tofnet.kernels.compilation import Stopwatch
     clock = Stopwatch()
-    summary = simulate(args.scenario, args.out_dir, duration=args.duration, seed=args.seed, sensor_size=sensor,
-                       progress=progress)
+    if as_file:
+        summary = simulate_to_file(args.scenario, out, duration=args.duration, seed=args.seed, sensor_size=sensor,
+                                   progress=progress, force=args.force)
+    else:
+        summary = simulate(args.scenario, out, duration=args.duration, seed=args.seed, sensor_size=sensor,
+                           progress=progress)
     summary["compile_time_s"], summary["kernels_compiled"] = clock.compile_seconds, clock.compiled
     if progress is not None:
         progress.done()
@@ -63,6 +76,29 @@ def handle(args) -> int:
         from tofnet.io.files import write_text_atomic
         write_text_atomic(args.json, json.dumps(summary, indent=2) + "\n")
     return 0
+
+
+#: OUT suffixes written as one file (``tofnet.io.convert``); any other name is an ECD folder.
+FILE_OUTPUTS = (".npz", ".h5", ".hdf5", ".aedat4")
+
+
+def simulate_to_file(scenario: str, out: Path, *, force: bool, **options) -> dict:
+    """Simulate into a temporary ECD folder beside ``out`` and convert it to ``out`` (its format by
+    suffix, ``tofnet.io.convert``); the folder is removed. The summary's ``files`` say what went where."""
+    import tempfile
+
+    from tofnet.io.convert import convert
+    from tofnet.io.source import open_recording
+    from tofnet.sim import simulate
+
+    parent = out.parent if str(out.parent) else Path(".")
+    parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix=".tofnet-simulate-", dir=parent) as folder:
+        summary = simulate(scenario, folder, **options)
+        with open_recording(folder) as source:
+            messages = convert(source, out, force=force)
+    summary["out_dir"], summary["files"] = str(out), messages
+    return summary
 
 
 def check_out_dir(folder: Path, force: bool) -> None:
@@ -103,7 +139,9 @@ def format_summary(s: dict) -> str:
              f"{s['sim_time_s']:.1f} s simulating, {s['write_time_s']:.1f} s writing"
              + (f" ({s['compile_time_s']:.1f} s of it compiling {s['kernels_compiled']} kernels: first run only)"
                 if s.get("kernels_compiled") else "")]
-    if s["out_dir"]:
+    if s["out_dir"] and Path(s["out_dir"]).suffix.lower() in FILE_OUTPUTS:
+        lines += [f"  {message}" for message in s["files"]]
+    elif s["out_dir"]:
         lines.append(f"  wrote {s['out_dir']}: {' '.join(s['files'])}")
     return "\n".join(lines)
 

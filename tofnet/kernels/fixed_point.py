@@ -1,4 +1,4 @@
-"""Integer arithmetic of the depth path (DESIGN §2); every rule is written out in docs/fixed_point.md.
+"""Integer arithmetic of the depth path (the `fixed` backend); every rule is written out in docs/fixed_point.md.
 
 A quantity ``q`` in a format with ``F`` fractional bits and a ``P``-bit signed payload
 is stored as the integer ``raw = saturate(round_half_away(q * 2**F), P)``, i.e. in

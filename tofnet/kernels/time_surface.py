@@ -1,4 +1,4 @@
-"""Depth from the local slope of the time surface (beyond the paper; DESIGN "Beyond the paper").
+"""Depth from the local slope of the time surface (beyond the paper; docs/time_surface.md).
 
 The numba core of the time-surface estimator; the streaming API and the parameters are in
 ``tofnet.kernels.time_surface_estimator``, the method and the measurements behind the
@@ -18,7 +18,7 @@ the last *first event* of an edge: the surface ``T(u, v)``. Per event:
 3. fit the time along the motion, per line of pixels parallel to it (``fit_rows``) or as a
    plane (``fit_plane``), dropping the farthest point while it is more than ``outlier_px``
    pixels off, at most ``iterations`` times; check points, spread and rms;
-4. ``∇T`` (s/px) is the time of travel (DESIGN eq. 8: ``td = dT/du``, positive for motion
+4. ``∇T`` (s/px) is the time of travel (docs/semantics.md, depth neuron: ``td = dT/du``, positive for motion
    towards +u): ``Z = (A t)·∇T``, or ``(A t)·∇T / (1 − (B ω)·∇T)`` with a rotation.
 
 Every event ends in exactly one count slot (``COUNT_NAMES``).
