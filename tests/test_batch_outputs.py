@@ -142,3 +142,16 @@ def test_resume_reruns_a_task_whose_recording_changed(folder):
     assert is_complete(task) is not None
     np.save(folder / "a.npy", make_events([0, 1000], [1, 3], [1, 1], [1, 0]))  # same path, other events
     assert is_complete(replace(task, fingerprint=fingerprint(task))) is None
+
+
+def test_a_full_disk_while_writing_the_table_is_one_line_and_no_file(tmp_path, monkeypatch):
+    from tofnet.batch.table import write_table
+    from tofnet.io import files
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, "No space left on device")
+    monkeypatch.setattr(files.os, "fsync", full)
+    with pytest.raises(TofnetError) as caught:
+        write_table([{"task": 0, "task_id": "a", "status": "ok"}], [], tmp_path)
+    assert str(caught.value) == f"{tmp_path / 'results.csv'}: cannot write: No space left on device"
+    assert os.listdir(tmp_path) == []

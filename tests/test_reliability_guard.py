@@ -183,3 +183,16 @@ def test_a_writer_refuses_a_file_read_in_the_same_scope(tmp_path):
     assert path.read_text() == "kept"
     write_text_atomic(path, "replaced")  # outside the command's scope it is an ordinary file
     assert path.read_text() == "replaced"
+
+
+def test_a_folder_that_cannot_be_listed_is_never_tofnets(tmp_path, monkeypatch):
+    from tofnet.io import guard
+
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / MANIFEST).write_text('{"written_by": "tofnet", "files": []}')
+    assert guard.foreign_entries(tmp_path / "out") == []
+
+    def unreadable(path):
+        raise PermissionError(13, "Permission denied")
+    monkeypatch.setattr(guard.os, "scandir", unreadable)
+    assert guard.foreign_entries(tmp_path / "out") == ["(a folder that cannot be listed: Permission denied)"]

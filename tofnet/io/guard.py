@@ -115,8 +115,8 @@ def foreign_entries(folder: str | Path) -> list[str]:
     folder = Path(folder)
     try:
         names = sorted(entry.name for entry in os.scandir(folder))
-    except OSError:
-        return []
+    except OSError as err:  # a folder that cannot be listed may hold anything: never tofnet's
+        return [f"(a folder that cannot be listed: {err.strerror or type(err).__name__})"]
     manifest = read_manifest(folder)
     listed = {MANIFEST, *(str(name).split("/")[0] for name in manifest["files"])} if manifest else set()
     return [name for name in names if name not in listed
