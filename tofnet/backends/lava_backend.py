@@ -25,6 +25,7 @@ from tofnet.errors import BackendError, UnsupportedError
 from tofnet.events import EVENT_DTYPE
 from tofnet.io.recording import Recording
 from tofnet.kernels.fixed_point import DEFAULT_FRAC_BITS, DEFAULT_PAYLOAD_BITS, FixedPointFormat
+from tofnet.models.base import concat
 
 #: What to do when Lava cannot be imported here (one line, as every user error).
 NEEDS_LAVA = ("the lava backend needs lava-nc 0.10, which runs on Python 3.10 only ({why}); make a venv: "
@@ -67,7 +68,8 @@ class LavaBackend(LocalBackend):
             raise BackendError(f"lava backend: arithmetic must be 'fixed' or 'float', got {arithmetic!r}")
         if source_capacity is not None and (isinstance(source_capacity, bool) or not isinstance(source_capacity, int)
                                             or source_capacity < 1):
-            raise BackendError(f"lava backend: source_capacity must be a positive whole number, got {source_capacity!r}")
+            raise BackendError("lava backend: source_capacity must be a positive whole number, "
+                               f"got {source_capacity!r}")
         self.arithmetic = self.family = arithmetic
         self.format = FixedPointFormat(frac_bits, payload_bits) if arithmetic == "fixed" else None
         self.source_capacity = source_capacity
@@ -103,8 +105,8 @@ def refuse_host_only(host: GraphExecutor) -> None:
     for node in host.nodes:
         why = type(node.model).host_only
         if why:
-            raise UnsupportedError(f"process {node.process.name!r} ({type(node.process).__name__}) cannot run in Lava: "
-                               f"its {type(node.model).__name__} {why}")
+            raise UnsupportedError(f"process {node.process.name!r} ({type(node.process).__name__}) cannot run "
+                                   f"in Lava: its {type(node.model).__name__} {why}")
 
 
 def capacity_of(process, port: str, sensor_size: tuple[int, int]) -> int:
@@ -146,29 +148,17 @@ class LavaExecutor:
         self.procs: dict[str, Any] = {}
         out_ports: dict[tuple[str, str], Any] = {}
         for node in host.nodes:
-            process = node.process
-            plan = lp.Plan(process.name, node.model, {s.name: s.payload.dtype for s in process.inports + process.outports},
-                           reads_events=process.name in self.readers, source_words=source_words,
-                           tally=list(node.model.counts()), failures=self.failures)
-            for port, edges in node.inputs.items():
-                plan.inputs[port] = [f"in_{port}" if len(edges) == 1 else f"in_{port}_{i + 1}" for i in range(len(edges))]
-                for lava_name, edge in zip(plan.inputs[port], edges):
-                    plan.in_words[lava_name] = self.plans[edge.source].outputs[edge.source_port][1]
-            for spec in process.outports:
-                plan.outputs[spec.name] = (f"out_{spec.name}", lp.words_for(capacity_of(process, spec.name, process.sensor_size),
-                                                                   spec.payload.dtype))
-            for var in type(process).vars:
-                plan.vars[var.name] = (var.shape_for(process.sensor_size), np.dtype(var.dtype))
+            plan = self._plan(node, source_words)
             proc, model_cls = lp.process_for(plan, node.model.ctx.family)
             models[proc] = model_cls
-            self.plans[process.name], self.procs[process.name] = plan, proc
+            self.plans[plan.name], self.procs[plan.name] = plan, proc
             if plan.reads_events:
                 self.source.events.connect(getattr(proc, lp.CAMERA_PORT))
             for port, edges in node.inputs.items():
                 for lava_name, edge in zip(plan.inputs[port], edges):
                     out_ports[(edge.source, edge.source_port)].connect(getattr(proc, lava_name))
-            for spec in process.outports:
-                out_ports[(process.name, spec.name)] = getattr(proc, plan.outputs[spec.name][0])
+            for port, (lava_name, _) in plan.outputs.items():
+                out_ports[(plan.name, port)] = getattr(proc, lava_name)
         self.sink_queues: dict[str, Any] = {}
         for name in self.sinks + self.probes:
             proc_name, _, port = name.partition(".")
@@ -183,10 +173,29 @@ class LavaExecutor:
         self.run_cfg = Loihi2SimCfg(select_tag=lp.TAGS[family], exception_proc_model_map=models)
         self._finalizer = weakref.finalize(self, _stop, self.source)  # the runtime stops with the executor
 
+    def _plan(self, node, source_words: int):
+        """The ports, Vars and model of one process's Lava process (``lava_processes.Plan``)."""
+        from tofnet.backends.lava_processes import Plan, words_for
+
+        process = node.process
+        plan = Plan(process.name, node.model, {s.name: s.payload.dtype for s in process.inports + process.outports},
+                    reads_events=process.name in self.readers, source_words=source_words,
+                    tally=list(node.model.counts()), failures=self.failures)
+        for port, edges in node.inputs.items():
+            plan.inputs[port] = [f"in_{port}" if len(edges) == 1 else f"in_{port}_{i + 1}" for i in range(len(edges))]
+            for lava_name, edge in zip(plan.inputs[port], edges):
+                plan.in_words[lava_name] = self.plans[edge.source].outputs[edge.source_port][1]
+        for spec in process.outports:
+            records = capacity_of(process, spec.name, process.sensor_size)
+            plan.outputs[spec.name] = (f"out_{spec.name}", words_for(records, spec.payload.dtype))
+        for var in type(process).vars:
+            plan.vars[var.name] = (var.shape_for(process.sensor_size), np.dtype(var.dtype))
+        return plan
+
     # -- events ---------------------------------------------------------------------------------
     def feed(self, events: np.ndarray) -> None:
         if len(events):
-            self._pending = np.concatenate([self._pending, events])
+            self._pending = concat([self._pending, events], EVENT_DTYPE)
             self._latest_us = int(events["t"][-1])
 
     def complete_until(self) -> int | None:

@@ -134,8 +134,9 @@ class Plan:
     """What a generated Lava process needs: the tofnet model it runs and how its ports map.
 
     ``inputs[port]``: the Lava in-ports (one per connection) of tofnet input ``port``, in the
-    executor's order; ``outputs[port]``: ``(lava out-port, words)``; ``in_words``: each in-port's message length; ``vars``: the declared
-    variables ``{name: (shape, dtype)}``; ``tally``: the count keys in order.
+    executor's order; ``outputs[port]``: ``(lava out-port, words)``; ``in_words``: each
+    in-port's message length; ``vars``: the declared variables ``{name: (shape, dtype)}``;
+    ``tally``: the count keys in order; ``failures``: where a failing step is reported.
     """
 
     name: str
