@@ -65,7 +65,8 @@ def intrinsics_of(given, recording: Recording | None, who: str) -> Intrinsics:
     if recording is None or recording.intrinsics is None:
         source = recording.source if recording is not None else "the stream"
         raise DataError(f"{source}: no camera calibration (calib.txt); the process '{who}' needs fx, fy, cx, cy: "
-                        "add calib.txt or set intrinsics: [fx, fy, cx, cy]")
+                        "pass --intrinsics FX,FY,CX,CY or --calib FILE (plan keys intrinsics:, calib:), add "
+                        "calib.txt beside the recording, or set intrinsics: [fx, fy, cx, cy] in the spec")
     return recording.intrinsics
 
 
