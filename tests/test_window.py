@@ -279,7 +279,7 @@ def test_text_windows_parse_only_their_bytes(tmp_path, recording, monkeypatch):
 
 
 def test_ros_bag_windows_stop_at_the_end(tmp_path, recording):
-    pytest.importorskip("rosbags")
+    optional("rosbags")
     from test_io_rosbag import write_bag
 
     write_bag(tmp_path / "r.bag", recording)
