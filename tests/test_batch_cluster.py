@@ -15,7 +15,7 @@ from optional import optional
 
 optional("distributed")
 if shutil.which("dask") is None:
-    pytest.skip("the dask command is not installed", allow_module_level=True)
+    pytest.skip("needs the dask command: pip install \"tofnet[batch]\"", allow_module_level=True)
 
 from tofnet.batch.table import TIMING_COLUMNS, read_csv  # noqa: E402
 from tofnet.io import write_ecd  # noqa: E402
