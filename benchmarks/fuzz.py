@@ -5,7 +5,8 @@
 
 Each case is a valid file (``tofnet.fuzzing.seeds``) with 1-4 random edits
 (``tofnet.fuzzing.mutate``: hostile tokens, byte flips, cuts, duplications) or, for
-numpy formats, a random array of random dtype, shape and extreme values. A case ends
+numpy formats, a random array of random dtype, shape and extreme values (for the HDF5 storage
+and ROS definition recipes, every option drawn at random). A case ends
 in one of: a clean error (one-line ``TofnetError``), accepted (the result satisfies
 the documented rules, ``Target.check``), a traceback (any other exception, or a
 multi-line or overlong message), accepted-but-invalid, or a hang (longer than
@@ -31,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from tofnet.fuzzing import OPS, TARGETS, TOKENS, _npy, _npz, mutate, mutate_words, outcome, seeds
+from tofnet.fuzzing_storage import STORAGE_TARGETS, random_recipe
 
 NUMPY_TARGETS = {"events.npy", "events.npz", "events_depth.npy", "depth.npz", "hdf5"}
 DTYPES = ("<i1", "<u1", "<i2", "<u2", "<i4", "<u4", "<i8", "<u8", ">i8", "<f2", "<f4", "<f8", ">f8", "?", "<c16",
@@ -98,6 +100,9 @@ def make_case(rng: random.Random, name: str):
            for _ in range(rng.randint(1, 4))]
     if target.kind == "words":
         return mutate_words(rng.choice(seeds(name)), ops)
+    if name in STORAGE_TARGETS and rng.random() < 0.5:  # every option at random, then maybe edited
+        case = random_recipe(rng, name)
+        return mutate(case, ops) if rng.random() < 0.3 else case
     if name in NUMPY_TARGETS and rng.random() < 0.4:
         case = numpy_case(rng, name)
         return mutate(case, ops) if rng.random() < 0.3 else case

@@ -221,6 +221,16 @@ def _format_targets() -> None:
 _format_targets()
 
 
+def _storage_targets() -> None:
+    """Where a file's data is: HDF5 external/virtual storage, ROS definitions (``tofnet.fuzzing_storage``)."""
+    from tofnet.fuzzing_storage import STORAGE_TARGETS, check_outcome
+    for name, (run, _, _) in STORAGE_TARGETS.items():
+        TARGETS[name] = Target(name, run, check_outcome)
+
+
+_storage_targets()
+
+
 def outcome(target: Target, case: Any, folder: Path) -> tuple[str, str]:
     """``("error" | "accepted" | "traceback" | "invalid", detail)`` for one case."""
     try:
@@ -293,6 +303,9 @@ def seeds(name: str) -> list:
     from tofnet.fuzzing_formats import FORMAT_FILES, format_seeds
     if name in FORMAT_FILES:
         return format_seeds(name)
+    from tofnet.fuzzing_storage import STORAGE_TARGETS, storage_seeds
+    if name in STORAGE_TARGETS:
+        return storage_seeds(name)
     raise KeyError(name)
 
 

@@ -97,8 +97,8 @@ class H5File:
         """The dataset ``name``, its storage checked (see the module docstring)."""
         found = self._open(name)
         if (found.is_virtual or found.external) and not self.allow_external:
-            kind = "virtual dataset" if found.is_virtual else "external raw storage"
-            raise self._fail(f"'{name}' is a {kind} (its data is in other files); refused unless {ALLOW}")
+            kind = "is a virtual dataset" if found.is_virtual else "has external raw storage"
+            raise self._fail(f"'{name}' {kind} (its data is in other files); refused unless {ALLOW}")
         return self.storage_checked(found, name)
 
     def _open(self, name: str):
