@@ -1,7 +1,9 @@
 """Prophesee RAW (EVT2, EVT2.1, EVT3) and DAT files, and Event Stream (.es), through faery.
 
 faery (the ``formats`` extra) decodes them in compiled code; tofnet converts its
-packets (``t`` µs, ``x``, ``y``, ``on``) to ``EVENT_DTYPE`` chunks. Timestamps are kept
+packets (``t`` µs, ``x``, ``y``, ``on``) to ``EVENT_DTYPE`` chunks; EVT3 events are
+decoded by ``tofnet.io.evt3`` instead, which keeps the time base of Prophesee's
+specification where faery's clock refuses to go back. Timestamps are kept
 as the file has them: an EVT file's clock usually starts where the camera's did (the
 real sample starts at 11.2 s), a DAT file's at 0. ``open_faery`` also dispatches
 AEDAT4 to ``tofnet.io.aedat``.
@@ -90,7 +92,9 @@ class FaerySource(EventSource):
         # EVT and DAT straight from the decoders (fields t, x, y, then polarity: 'on' or
         # DAT's 0/1 'payload'); Event Stream through faery's Decoder, which flips its y axis.
         try:
-            if self.format == "evt":
+            if self.format == "evt" and self.detail == "EVT3":
+                yield from self._evt3_packets()
+            elif self.format == "evt":
                 with evt.Decoder(self.path, self._fallback, None) as decoder:
                     for packet in decoder:
                         if "events" in packet:
@@ -102,3 +106,19 @@ class FaerySource(EventSource):
                 yield from faery.file_decoder.Decoder(self.path, file_type="es", time_range_cache=None)
         except RuntimeError as err:
             raise DataError(located(self.path, None, f"cannot decode ({reason(err)})")) from None
+
+    def _evt3_packets(self) -> Iterable[np.ndarray]:
+        """EVT3 with the specification's time base (``tofnet.io.evt3``); a note counts the events
+        stamped with their predecessor's time because the stream went back."""
+        from tofnet.io.evt3 import clamped_of, decode_file, new_state
+
+        width, height = self._fallback or self.sensor_size
+        state = new_state()
+        try:
+            yield from decode_file(self.path, width, height, state=state)
+        except ValueError as err:
+            raise DataError(located(self.path, None, f"cannot decode ({err})")) from None
+        clamped = clamped_of(state)
+        if clamped:
+            self.notes.append(f"{clamped:,} EVT3 events were stamped earlier than the event before them "
+                              "(the time base went back); given that event's time to keep time order")
