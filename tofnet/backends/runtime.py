@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
@@ -111,8 +111,11 @@ def update_times(t0_us: int, timestep_us: int, update_every: int, n_updates: int
     return (t0_us + j * update_every * timestep_us) * 1e-6
 
 
-def _checked_table(values, t: np.ndarray, what: str, where: str) -> np.ndarray:
-    table = np.ascontiguousarray(values, dtype=np.float64)
+def _checked_table(source: Callable[[np.ndarray], Any], t: np.ndarray, what: str, where: str) -> np.ndarray:
+    # Huge finite inputs (a gyro sample of 1.797e308 minus a bias) overflow on the way; the
+    # result is checked below, so numpy's RuntimeWarning would only come before the one line.
+    with np.errstate(over="ignore", invalid="ignore"):
+        table = np.ascontiguousarray(source(t), dtype=np.float64)
     if table.shape != (len(t), 3):
         raise BackendError(f"{what} source returned shape {table.shape}, expected ({len(t)}, 3)")
     if not np.all(np.isfinite(table)):
@@ -125,14 +128,14 @@ def velocity_table(source: VelocitySource, t0_us: int, timestep_us: int, update_
                    n_updates: int, first_update: int = 0) -> np.ndarray:
     """Camera velocity (m/s, shape ``(n_updates, 3)``) of updates ``first_update ...`` (``update_times``)."""
     t = update_times(t0_us, timestep_us, update_every, n_updates, first_update)
-    return _checked_table(source.velocity_at(t), t, "camera velocity", "poses or samples")
+    return _checked_table(source.velocity_at, t, "camera velocity", "poses or samples")
 
 
 def angular_velocity_table(source, t0_us: int, timestep_us: int, update_every: int,
                            n_updates: int, first_update: int = 0) -> np.ndarray:
     """Angular velocity (rad/s, camera frame, ``(n_updates, 3)``) of updates ``first_update ...`` (``update_times``)."""
     t = update_times(t0_us, timestep_us, update_every, n_updates, first_update)
-    return _checked_table(source.angular_velocity_at(t), t, "angular velocity", "poses, samples or IMU")
+    return _checked_table(source.angular_velocity_at, t, "angular velocity", "poses, samples or IMU")
 
 
 class UpdateRows:

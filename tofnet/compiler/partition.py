@@ -321,13 +321,13 @@ def traffic_of(network, plans: Mapping[str, tuple[LayerPlan, int]], chip_cores: 
             label[y0:y1, x0:x1] = k
         links = [set() for _ in src_plan.rects]
         crossing = delivered = 0
+        source_chip = np.asarray(src_first) // chip_cores  # once: per core it made the loop quadratic
         for k, halo in enumerate(plan.halos):
             (x0, y0, x1, y1), mask = local_mask(halo)
             sources = label[y0:y1, x0:x1][mask]
             for s in np.unique(sources):
                 links[s].add(k)
-            chips_of_sources = np.asarray(src_first)[sources] // chip_cores
-            crossing += int(np.count_nonzero(chips_of_sources != first[k] // chip_cores))
+            crossing += int(np.count_nonzero(source_chip[sources] != first[k] // chip_cores))
             delivered += sources.size
         fan = [len(s) for s in links]
         out.append(Traffic(*names, "event", channels, mean, peak, mean, links_mean=float(np.mean(fan)),
