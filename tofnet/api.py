@@ -112,7 +112,7 @@ def _rotation_source_text(process: AngularVelocityProcess) -> str:
 
 def load_network(spec: str | Path | None = None, *, sensor_size: tuple[int, int] | None = None,
                  recording: Recording | None = None, rotation: bool = True, estimator: str | None = None,
-                 undistort: bool = True):
+                 undistort: bool = True, allow_import: Any = None):
     """The network of a YAML spec (or the default network) and the spec's compile/backend settings.
 
     Returns ``(network, compile_options, backend_name_or_None, backend_options)``.
@@ -122,6 +122,8 @@ def load_network(spec: str | Path | None = None, *, sensor_size: tuple[int, int]
     it moves spikes to undistorted pixels (``undistort=False`` refuses one that does, and makes its
     velocity processes ignore the lens). ``estimator`` picks the built-in network (``ESTIMATORS``;
     None: the paper's); a spec names its own processes, so the two do not go together.
+    ``allow_import``: the modules the spec's ``module:Class`` types may import (docs/spec.md); the
+    spec's worker counts are capped to the CPU count (``tofnet.io.trust.cap_workers``).
     """
     if spec is None:
         network = default_network(recording, sensor_size=sensor_size, rotation=rotation,
@@ -131,7 +133,7 @@ def load_network(spec: str | Path | None = None, *, sensor_size: tuple[int, int]
         raise NetworkError(f"{spec}: --estimator picks a built-in network, and a spec names its own processes; "
                            "give one or the other")
     from tofnet.io.spec import load_spec
-    loaded = load_spec(spec)
+    loaded = load_spec(spec, allow_import=allow_import)
     network = loaded.network
     if not rotation and rotation_summary(network) is not None:
         raise NetworkError(f"{spec}: the spec connects an angular velocity process to its depth neurons (eq. 7); "
@@ -144,7 +146,9 @@ def load_network(spec: str | Path | None = None, *, sensor_size: tuple[int, int]
     check_lens_once(network, recording, str(spec))
     if sensor_size is not None and network.sensor_size != tuple(sensor_size):
         resize(network, sensor_size)
-    return network, dict(loaded.compile or {}), loaded.backend, dict(loaded.backend_options or {})
+    from tofnet.io.trust import cap_workers  # a spec may not ask for more workers than the machine has
+    return network, dict(loaded.compile or {}), loaded.backend, cap_workers(loaded.backend_options or {},
+                                                                            f"{spec}: backend")
 
 
 def resize(network: Network, sensor_size: tuple[int, int]) -> None:

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
+from tofnet.batch.bounds import bounded_glob, check_task_count
 from tofnet.batch.reading import READ_KEYS
 from tofnet.errors import SpecError, TofnetError, located
 from tofnet.io.safe_yaml import _line, _parse_yaml, yaml_source
@@ -63,11 +64,15 @@ class RecordingSource:
 
 @dataclass(frozen=True)
 class NetworkChoice:
-    """One network of a plan: a YAML spec (``spec``; ``None``: the paper's network) and a backend."""
+    """One network of a plan: a YAML spec (``spec``; ``None``: the paper's network) and a backend.
+
+    ``allow_import``: the modules its spec may import (``tofnet.io.trust``), given to the workers.
+    """
 
     name: str
     spec: str | None = None
     backend: str | None = None
+    allow_import: tuple[str, ...] = ()
 
 
 @dataclass
@@ -96,14 +101,16 @@ class Plan:
         return len(self.recordings) * len(self.networks) * len(self.combinations())
 
 
-def load_plan(path_or_text: str | Path, *, output: str | Path | None = None) -> Plan:
+def load_plan(path_or_text: str | Path, *, output: str | Path | None = None, allow_import: Any = None) -> Plan:
     """Read and validate a plan from a YAML file (a ``Path`` or a one-line ``.yaml`` name) or YAML text.
 
     Relative paths in the plan are relative to the plan file's folder (the working
     directory for text). ``output`` overrides the plan's ``output`` (relative: to the
     working directory). Every path of the plan comes out absolute, so tasks mean the same
-    files on workers that run in other folders or on other machines.
+    files on workers that run in other folders or on other machines. ``allow_import``: the
+    modules its specs' ``module:Class`` types may import (``tofnet.io.trust``).
     """
+    from tofnet.io.trust import allowed_imports
     try:  # the spec reader's file checks and YAML errors, already located
         text, source, path = yaml_source(path_or_text, "plan")
         tree = _parse_yaml(text, source, empty="empty plan; expected a mapping with recordings (and networks, grid)")
@@ -112,7 +119,11 @@ def load_plan(path_or_text: str | Path, *, output: str | Path | None = None) -> 
     base = path.resolve().parent if path is not None else Path.cwd()
     if output is not None:
         output = os.path.abspath(Path(output).expanduser())  # --out is the client's, relative to its cwd
-    return _PlanReader(tree, source, base).read(output)
+    try:
+        allow = allowed_imports(allow_import)
+    except SpecError as err:
+        raise PlanError(str(err)) from None
+    return _PlanReader(tree, source, base, allow).read(output)
 
 
 def _grid_options() -> dict[str, str]:
@@ -124,8 +135,8 @@ def _grid_options() -> dict[str, str]:
 class _PlanReader:
     """Turns a line-annotated YAML tree into a ``Plan``; every error names line and key."""
 
-    def __init__(self, tree: Any, source: str, base: Path):
-        self.tree, self.source, self.base = tree, source, base
+    def __init__(self, tree: Any, source: str, base: Path, allow: tuple[str, ...] = ()):
+        self.tree, self.source, self.base, self.allow = tree, source, base, allow
         self.names: dict[str, int | None] = {}
         self.defaults: dict[str, Any] = {}  # plan-wide reading keys
 
@@ -161,6 +172,10 @@ class _PlanReader:
         recordings = self.recordings(tree)
         networks = self.networks(tree)
         grid = self.grid(tree)
+        try:  # from the sizes, before any grid point is made
+            check_task_count(len(recordings), len(networks), [len(v) for v in grid.values()])
+        except TofnetError as err:
+            raise self.fail(tree, "grid" if "grid" in tree else "recordings", "grid", str(err)) from None
         plan = Plan(recordings, networks, grid, out, cache, keep, backend, name, description, self.source, self.base)
         self.check_grid(plan)
         return plan
@@ -252,7 +267,10 @@ class _PlanReader:
     def glob(self, container: Any, key: Any, path: str, pattern: str,
              options: dict[str, Any]) -> list[RecordingSource]:
         full = self.resolve(pattern)
-        matches = sorted(Path(m) for m in globbing.glob(str(full), recursive=True))
+        try:
+            matches = bounded_glob(pattern, self.base)
+        except TofnetError as err:
+            raise self.fail(container, key, path, str(err)) from None
         if not matches:
             raise self.fail(container, key, path, f"{pattern!r} matches nothing (looked for {full})")
         return [RecordingSource(name=_recording_name(m), path=str(m), reading=tuple(options.items()))
@@ -336,14 +354,15 @@ class _PlanReader:
                                 "give this one a name:")
             names[name] = _line(container, key)
             backend = self.backend(entry, "backend", f"{path}.backend") if container is entry else None
-            out.append(NetworkChoice(name=name, spec=None if resolved is None else str(resolved), backend=backend))
+            out.append(NetworkChoice(name=name, spec=None if resolved is None else str(resolved), backend=backend,
+                                     allow_import=self.allow))
         return out
 
     def load_spec(self, spec: Path, container: Any, key: Any, path: str) -> None:
         from tofnet.io.spec import load_spec
         if not spec.is_file():
             raise self.fail(container, key, path, f"{spec}: no such spec file")
-        load_spec(spec)  # a SpecError names the spec's own file, line and key
+        load_spec(spec, allow_import=self.allow)  # a SpecError names the spec's own file, line and key
 
     def grid(self, tree: Mapping) -> dict[str, list[Any]]:
         section = tree.get("grid", {})
@@ -375,7 +394,8 @@ class _PlanReader:
         keys = {_grid_options()[k]: k for k in section}
         for network in plan.networks:
             def fresh():
-                return load_network(network.spec, sensor_size=None if network.spec else (240, 180))[0]
+                return load_network(network.spec, sensor_size=None if network.spec else (240, 180),
+                                    allow_import=network.allow_import)[0]
             for option, values in plan.grid.items():
                 for j, value in enumerate(values):
                     try:

@@ -107,7 +107,8 @@ def _run(task: Task, recording_path: str, folder: Path) -> dict[str, Any]:
     recording = read_recording(recording_path, **open_options(options))
     # The same network `tofnet run RECORDING [--spec S] [--refractory R ...] [--velocity V]` builds.
     network, compile_options, spec_backend, backend_options = load_network(
-        task.network.spec, sensor_size=None if task.network.spec else recording.sensor_size)
+        task.network.spec, sensor_size=None if task.network.spec else recording.sensor_size,
+        allow_import=task.network.allow_import)
     apply_overrides(network, **task.parameters)
     if options.get("velocity"):
         from tofnet.api import constant_velocity

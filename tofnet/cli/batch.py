@@ -28,6 +28,8 @@ def register(subparsers) -> None:
                         "(default), or a hash of whole files")
     p.add_argument("--check", action="store_true", help="validate the plan and list its tasks; run nothing")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
+    from tofnet.cli.trust import add_allow_import
+    add_allow_import(p)
     p.set_defaults(handler=handle)
 
 
@@ -41,7 +43,7 @@ def handle(args) -> int:
         raise TofnetError("--workers applies to the local cluster; with --scheduler the cluster has its own workers")
     if not args.check:
         require_dask()
-    plan = load_plan(Path(args.plan), output=args.out)
+    plan = load_plan(Path(args.plan), output=args.out, allow_import=args.allow_import)
     tasks = expand(plan)
     if args.check:
         print(f"plan {plan.name}: {len(plan.recordings)} recordings x {len(plan.networks)} networks x "

@@ -28,6 +28,8 @@ def register(subparsers) -> None:
     p.add_argument("--sensor-size", metavar="WxH", help="override the spec's sensor size, e.g. 1280x720")
     p.add_argument("--json", metavar="OUT", help="write the compiled network (mapping, cores, halos) as JSON; - for stdout")
     p.add_argument("--force", action="store_true", help="overwrite an existing --json file")
+    from tofnet.cli.trust import add_allow_import
+    add_allow_import(p)
     p.set_defaults(handler=handle)
 
 
@@ -70,7 +72,7 @@ def handle(args) -> int:
         from tofnet.api import default_network
         spec = Spec(default_network(estimator="improved"), source="--estimator improved")
     else:
-        spec = load_spec(Path(args.spec) if args.spec else default_spec_path())
+        spec = load_spec(Path(args.spec) if args.spec else default_spec_path(), allow_import=args.allow_import)
     network = spec.network
     if args.sensor_size:
         size = parse_size(args.sensor_size, "--sensor-size")

@@ -43,6 +43,8 @@ def register(subparsers) -> None:
     g.add_argument("--pixel", action="append", default=[], metavar="X,Y",
                    help="a pixel whose units to draw; repeatable (default: the busiest pixel of the window)")
     g.add_argument("--spec", help="YAML network spec (default: the paper's network)")
+    from tofnet.cli.trust import add_allow_import
+    add_allow_import(g)
     g.add_argument("--backend", default="fixed", help="backend that runs it (default fixed)")
     g.add_argument("--velocity", metavar="TX,TY,TZ", help="constant camera velocity in m/s instead of the poses")
     p.add_argument("--force", action="store_true", help="overwrite existing PNG files")
@@ -105,7 +107,8 @@ def handle_units(args) -> int:
     from tofnet.units import seconds
 
     recording = read_recording(args.recording)
-    network, _, _, _ = load_network(args.spec, sensor_size=None if args.spec else recording.sensor_size)
+    network, _, _, _ = load_network(args.spec, sensor_size=None if args.spec else recording.sensor_size,
+                                    allow_import=args.allow_import)
     if args.velocity:
         constant_velocity(network, args.velocity)
     start, end = 0.1, 0.15

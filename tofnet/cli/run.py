@@ -53,6 +53,8 @@ def add_network_options(p: argparse.ArgumentParser) -> None:
     """Options that choose and adjust the network (shared with ``tofnet demo``)."""
     g = p.add_argument_group("network")
     g.add_argument("--spec", help="YAML network spec (default: the --estimator's network)")
+    from tofnet.cli.trust import add_allow_import
+    add_allow_import(g)
     g.add_argument("--estimator", choices=("paper", "improved"), default=None,
                    help="built-in network: paper (the default: the paper's network) or improved (the time-surface "
                         "estimator, beyond the paper: docs/time_surface.md)")
@@ -83,7 +85,8 @@ def build_network(args, recording_sensor_size, recording=None):
     network, compile_options, spec_backend, backend_options = load_network(
         Path(args.spec) if args.spec else None, sensor_size=sensor or (None if args.spec else recording_sensor_size),
         recording=recording, rotation=not getattr(args, "no_rotation", False),
-        undistort=not getattr(args, "no_undistort", False), estimator=getattr(args, "estimator", None))
+        undistort=not getattr(args, "no_undistort", False), estimator=getattr(args, "estimator", None),
+        allow_import=args.allow_import)
     apply_overrides(network, timestep=args.timestep, refractory=args.refractory, distance=args.distance,
                     counter_bits=args.counter_bits, velocity_per=args.velocity_per,
                     update_every=args.update_every)

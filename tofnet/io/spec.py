@@ -24,6 +24,7 @@ from tofnet.core.process import Process
 from tofnet.errors import SpecError, TofnetError, located, quote, reason
 from tofnet.io.safe_yaml import (MAX_SPEC_BYTES, _Map, _Seq, _line, _parse_yaml, _read_spec_file,  # noqa: F401
                                  read_yaml_file, yaml_source)
+from tofnet.io.trust import ENTRY_POINTS, allowed_imports, check_import
 from tofnet.io.spec_writer import (dump_spec, network_signature, network_to_dict, networks_equal,  # noqa: F401
                                    patch_to_data, spec_to_dict, type_name_of)
 TOP_KEYS = ("name", "description", "processes", "connections", "compile", "backend")
@@ -59,8 +60,9 @@ class Spec:
 class _Reader:
     """Turns a (line-annotated) tree into a ``Spec``; every error names line and key."""
 
-    def __init__(self, tree: Any, source: str):
+    def __init__(self, tree: Any, source: str, allow_import: Any = None, folder: Path | None = None):
         self.tree, self.source = tree, source
+        self.allow, self.folder = allowed_imports(allow_import), folder
 
     def fail(self, container: Any, key: Any, path: str, message: str) -> SpecError:
         return SpecError(located(self.source, _line(container, key), f"{path}: {message}"))
@@ -147,7 +149,7 @@ class _Reader:
         type_name = body["type"]
         if isinstance(type_name, str):
             try:
-                found = process_class(type_name)
+                found = process_class(type_name, allow_import=self.allow, spec_dir=self.folder)
             except TofnetError as err:
                 raise self.fail(body, "type", f"{path}.type", str(err)) from None
             if found is not None:
@@ -241,23 +243,23 @@ def _known_types() -> list[str]:
     return sorted(set(Process._registry) | {ep.name for ep in entry_points(group=ENTRY_POINTS)})
 
 
-#: Entry-point group through which installed packages offer process types to specs.
-ENTRY_POINTS = "tofnet.processes"
 
-
-def process_class(type_name: str) -> type[Process] | None:
+def process_class(type_name: str, *, allow_import: Any = None, spec_dir: Path | None = None) -> type[Process] | None:
     """The process class a spec's ``type`` names, None when unknown.
 
-    In order: ``package.module:ClassName`` (imported; running its module is what registers
-    its models), a class already imported (``DepthProcess`` or ``Depth``), a
-    ``tofnet.processes`` entry point of that name. Raises when an import fails or names
-    something that is not a process type.
+    In order: ``package.module:ClassName`` (imported, only when ``tofnet.io.trust.check_import``
+    allows it: ``allow_import`` names the module, or it is already imported; running its
+    module is what registers its models), a class already imported (``DepthProcess`` or
+    ``Depth``), a ``tofnet.processes`` entry point of that name. Raises when an import is
+    refused or fails, or names something that is not a process type.
     """
     if ":" in type_name:
-        module_name, _, attr = type_name.partition(":")
+        allow = allow_import if isinstance(allow_import, tuple) else allowed_imports(allow_import)
+        module_name = check_import(type_name, allow, spec_dir)  # before anything is imported
+        attr = type_name.partition(":")[2]
         try:
             module = importlib.import_module(module_name)
-        except Exception as err:  # the user's module: whatever it raises, one line
+        except (Exception, SystemExit) as err:  # the user's module: whatever it raises (exits too), one line
             raise SpecError(f"cannot import {quote(module_name)} for process type {quote(type_name)}: "
                             f"{type(err).__name__}: {reason(err)}") from None
         found = getattr(module, attr, None)
@@ -286,25 +288,27 @@ def _ports(process: Process, kind: type = object) -> str:
 
 # ---------------------------------------------------------------- public API
 
-def load_spec(path_or_text: str | Path) -> Spec:
+def load_spec(path_or_text: str | Path, *, allow_import: Any = None) -> Spec:
     """Read a spec from a file path or from YAML text.
 
     A ``Path``, or a one-line string naming a file, is read as a file; any other string
-    is YAML text. Raises ``SpecError`` naming the file, line and key.
+    is YAML text. Raises ``SpecError`` naming the file, line and key. ``allow_import``:
+    the modules its ``module:Class`` types may import (``tofnet.io.trust``).
     """
-    text, source, _ = yaml_source(path_or_text, "spec")
-    return _Reader(_parse_yaml(text, source), source).read()
+    text, source, path = yaml_source(path_or_text, "spec")
+    folder = path.resolve().parent if path is not None else None
+    return _Reader(_parse_yaml(text, source), source, allow_import, folder).read()
 
 
-def spec_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> Spec:
+def spec_from_dict(data: Mapping[str, Any], source: str = "<dict>", *, allow_import: Any = None) -> Spec:
     """A spec from plain data (as ``spec_to_dict`` returns); errors name keys, not lines."""
-    return _Reader(data, source).read()
+    return _Reader(data, source, allow_import).read()
 
 
-def network_from_dict(data: Mapping[str, Any], source: str = "<dict>") -> Network:
+def network_from_dict(data: Mapping[str, Any], source: str = "<dict>", *, allow_import: Any = None) -> Network:
     """The network of plain spec data (``name``, ``processes``, ``connections``)."""
     return spec_from_dict({k: v for k, v in data.items() if k in ("name", "processes", "connections")},
-                          source).network
+                          source, allow_import=allow_import).network
 
 
 def patch_from_data(data: Any, where: str = "compile.patch") -> Any:
