@@ -33,6 +33,7 @@ import numpy as np
 
 from tofnet.fuzzing import OPS, TARGETS, TOKENS, _npy, _npz, mutate, mutate_words, outcome, seeds
 from tofnet.fuzzing_storage import STORAGE_TARGETS, random_recipe
+from tofnet.fuzzing_trust import TRUST_FILES, trust_case
 
 NUMPY_TARGETS = {"events.npy", "events.npz", "events_depth.npy", "depth.npz", "hdf5"}
 DTYPES = ("<i1", "<u1", "<i2", "<u2", "<i4", "<u4", "<i8", "<u8", ">i8", "<f2", "<f4", "<f8", ">f8", "?", "<c16",
@@ -102,6 +103,9 @@ def make_case(rng: random.Random, name: str):
         return mutate_words(rng.choice(seeds(name)), ops)
     if name in STORAGE_TARGETS and rng.random() < 0.5:  # every option at random, then maybe edited
         case = random_recipe(rng, name)
+        return mutate(case, ops) if rng.random() < 0.3 else case
+    if name in TRUST_FILES and rng.random() < 0.5:
+        case = trust_case(rng, name)
         return mutate(case, ops) if rng.random() < 0.3 else case
     if name in NUMPY_TARGETS and rng.random() < 0.4:
         case = numpy_case(rng, name)

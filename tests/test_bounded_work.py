@@ -125,3 +125,22 @@ def test_the_bounded_glob_matches_what_glob_matches(folder, monkeypatch):
     (folder / "plan.yaml").write_text("recordings: ['**/*.npy']\n")
     with pytest.raises(PlanError, match="looks at more than 5 files and folders"):
         load_plan(folder / "plan.yaml")
+
+
+def test_a_repeated_grid_value_is_named_alone_not_the_whole_list(folder):
+    # Found by the "plan imports" fuzz target: the message quoted the whole list (1,400 characters).
+    (folder / "plan.yaml").write_text(f"recordings: [a.npy]\ngrid:\n  update-every: {list(range(1, 300)) + [7]}\n")
+    with pytest.raises(PlanError) as err:
+        load_plan(folder / "plan.yaml")
+    assert str(err.value) == f"{folder / 'plan.yaml'}:3: grid.update-every: the value 7 is repeated"
+
+
+@pytest.mark.parametrize("entry", ["{spec: '%s'}", "{glob: '%s*'}", "'%s'", "{glob: '../%s*'}"])
+def test_a_very_long_name_in_a_plan_is_one_short_line(folder, entry):
+    # Found by the "plan imports" fuzz target: OSError (file name too long) and 5,000-character messages.
+    key = "networks" if "spec" in entry else "recordings"
+    other = "recordings: [a.npy]\n" if key == "networks" else ""
+    (folder / "plan.yaml").write_text(f"{other}{key}: [{entry % ('9' * 5000)}]\n")
+    with pytest.raises(PlanError) as err:
+        load_plan(folder / "plan.yaml")
+    assert "\n" not in str(err.value) and len(str(err.value)) < 600

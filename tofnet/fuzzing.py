@@ -212,10 +212,14 @@ TARGETS: dict[str, Target] = {t.name: t for t in (
 
 
 def _format_targets() -> None:
-    """Issue 10's formats, read through ``read_recording`` (``tofnet.fuzzing_formats``)."""
+    """Issue 10's formats, read through ``read_recording`` (``tofnet.fuzzing_formats``), and
+    specs and plans naming modules (``tofnet.fuzzing_trust``)."""
     from tofnet.fuzzing_formats import FORMAT_FILES, read_format
+    from tofnet.fuzzing_trust import trust_targets
     for name in FORMAT_FILES:
         TARGETS[name] = Target(name, read_format(name), check_recording)
+    for name, (run, check) in trust_targets().items():
+        TARGETS[name] = Target(name, run, check)
 
 
 _format_targets()
@@ -301,11 +305,14 @@ def seeds(name: str) -> list:
         return [["--timestep", "1ms"], ["--refractory", "5ms", "--distance", "2", "--sensor-size", "64x48"],
                 ["--velocity", "0.5,0,0", "--patch", "30x30", "--counter-bits", "6", "--update-every", "3"]]
     from tofnet.fuzzing_formats import FORMAT_FILES, format_seeds
+    from tofnet.fuzzing_trust import TRUST_FILES, trust_seeds
     if name in FORMAT_FILES:
         return format_seeds(name)
     from tofnet.fuzzing_storage import STORAGE_TARGETS, storage_seeds
     if name in STORAGE_TARGETS:
         return storage_seeds(name)
+    if name in TRUST_FILES:
+        return trust_seeds(name)
     raise KeyError(name)
 
 
@@ -320,6 +327,7 @@ TOKENS = (
     b"\x00", b"\xff\xfe", b"\xe0\xa5\xa9", b"\n", b"\r\n", b"#", b",", b" ", b"\t", b"'''", b"{", b"}", b"[", b"]",
     b"*a", b"&a", b"!!python/object/apply:os.system", b"!tag", b"<<", b"~", b"null", b"true", b"--", b"100000",
     b"100000x100000", b"0x0", b"65536x65536", b"1ms", b"1e300ms", b"-5ms", b"3601", b"255", b"256", b"30",
+    b"this", b"venv.__main__", b"beside_canary", b"os", b"tofnet", b"/**/*.npy", b"../*.npy",  # modules, globs
 )
 
 _WORD = re.compile(rb"[A-Za-z0-9_.+\-]+")

@@ -14,7 +14,7 @@ import os
 from pathlib import Path
 from typing import Iterable
 
-from tofnet.errors import TofnetError
+from tofnet.errors import TofnetError, quote
 
 #: Most tasks (recordings x networks x grid points) a plan may expand to.
 MAX_TASKS = 10_000
@@ -45,10 +45,18 @@ def bounded_glob(pattern: str, base: Path, limit: int | None = None) -> list[Pat
     part that starts with ``.``. Raises (one line) after looking at ``limit`` entries
     (default ``MAX_GLOB_ENTRIES``).
     """
-    limit = MAX_GLOB_ENTRIES if limit is None else limit
+    try:
+        return _glob(pattern, base, MAX_GLOB_ENTRIES if limit is None else limit)
+    except (OSError, ValueError) as err:  # a name too long, a NUL byte: nothing can match
+        raise TofnetError(f"{quote(pattern)}: cannot be looked up ({getattr(err, 'strerror', None) or err})") \
+            from None
+
+
+def _glob(pattern: str, base: Path, limit: int) -> list[Path]:
     path = Path(pattern).expanduser()
     if not path.is_absolute() and ".." in path.parts:
-        raise TofnetError(f"{pattern!r} leaves the plan's folder (..); give an absolute pattern to look elsewhere")
+        raise TofnetError(f"{quote(pattern)} leaves the plan's folder (..); give an absolute pattern to look "
+                          "elsewhere")
     parts = path.parts[1:] if path.is_absolute() else path.parts
     root = Path(path.anchor) if path.is_absolute() else base
     fixed = 0
@@ -91,6 +99,14 @@ def bounded_glob(pattern: str, base: Path, limit: int | None = None) -> list[Pat
     return sorted(found)
 
 
+def exists(path: Path, test=Path.exists) -> bool:
+    """``test(path)``, False when the path cannot even be looked up (a name too long, a NUL)."""
+    try:
+        return test(path)
+    except (OSError, ValueError):
+        return False
+
+
 def _magic(part: str) -> bool:
     return any(c in part for c in "*?[")
 
@@ -101,7 +117,7 @@ def _entries(folder: Path, seen: list[int], limit: int, pattern: str):
             for entry in entries:
                 seen[0] += 1
                 if seen[0] > limit:
-                    raise TofnetError(f"{pattern!r} looks at more than {limit:,} files and folders; "
+                    raise TofnetError(f"{quote(pattern)} looks at more than {limit:,} files and folders; "
                                       "give a narrower pattern")
                 yield entry
     except (PermissionError, NotADirectoryError, FileNotFoundError):

@@ -16,9 +16,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from tofnet.batch.bounds import bounded_glob, check_task_count
+from tofnet.batch.bounds import bounded_glob, check_task_count, exists
 from tofnet.batch.reading import READ_KEYS
-from tofnet.errors import SpecError, TofnetError, located
+from tofnet.errors import SpecError, TofnetError, located, quote
 from tofnet.io.safe_yaml import _line, _parse_yaml, yaml_source
 
 TOP_KEYS = ("name", "description", "output", "cache", "recordings", "networks", "grid", "backend", "keep",
@@ -259,8 +259,8 @@ class _PlanReader:
         if not isinstance(value, str) or not value.strip():
             raise self.fail(container, key, path, f"expected a path, got {value!r}")
         resolved = self.resolve(value)
-        if not resolved.exists():
-            raise self.fail(container, key, path, f"{resolved}: no such file or folder")
+        if not exists(resolved, Path.exists):
+            raise self.fail(container, key, path, located(resolved, None, "no such file or folder"))
         return RecordingSource(name=name or _recording_name(resolved), path=str(resolved),
                                reading=tuple(options.items()))
 
@@ -272,7 +272,8 @@ class _PlanReader:
         except TofnetError as err:
             raise self.fail(container, key, path, str(err)) from None
         if not matches:
-            raise self.fail(container, key, path, f"{pattern!r} matches nothing (looked for {full})")
+            raise self.fail(container, key, path, f"{quote(pattern)} matches nothing (looked for "
+                            f"{located(full, None, '')[:-2]})")
         return [RecordingSource(name=_recording_name(m), path=str(m), reading=tuple(options.items()))
                 for m in matches]
 
@@ -360,8 +361,8 @@ class _PlanReader:
 
     def load_spec(self, spec: Path, container: Any, key: Any, path: str) -> None:
         from tofnet.io.spec import load_spec
-        if not spec.is_file():
-            raise self.fail(container, key, path, f"{spec}: no such spec file")
+        if not exists(spec, Path.is_file):
+            raise self.fail(container, key, path, located(spec, None, "no such spec file"))
         load_spec(spec, allow_import=self.allow)  # a SpecError names the spec's own file, line and key
 
     def grid(self, tree: Mapping) -> dict[str, list[Any]]:
@@ -382,8 +383,11 @@ class _PlanReader:
             values = values if isinstance(values, list) else [values]
             if not values:
                 raise self.fail(section, key, path, "expected at least one value")
-            if len(set(map(repr, values))) != len(values):
-                raise self.fail(section, key, path, f"a value is repeated in {values!r}")
+            seen: set[str] = set()
+            for value in values:
+                if repr(value) in seen:  # quoted alone: the list may be long
+                    raise self.fail(section, key, path, f"the value {quote(value)} is repeated")
+                seen.add(repr(value))
             out[options[key]] = list(values)
         return out
 
