@@ -3,15 +3,15 @@
 import os
 import subprocess
 import sys
+import logging
 import uuid
-import warnings
 from pathlib import Path
 
 import pytest
 
 from tofnet.batch import load_plan
 from tofnet.cli import build_parser, main
-from tofnet.errors import SpecError, TofnetWarning
+from tofnet.errors import SpecError
 from tofnet.io import trust
 from tofnet.io.spec import load_spec, spec_from_dict
 
@@ -168,7 +168,7 @@ def test_a_plan_naming_such_a_spec_needs_the_opt_in_too(tmp_path, monkeypatch, c
 
 # ---------------------------------------------------------------- resources
 
-def test_a_spec_cannot_make_a_run_use_more_workers_than_the_machine_has(tmp_path, capsys):
+def test_a_spec_cannot_make_a_run_use_more_workers_than_the_machine_has(tmp_path, capsys, caplog):
     import numpy as np
 
     from tofnet.api import load_network
@@ -177,14 +177,16 @@ def test_a_spec_cannot_make_a_run_use_more_workers_than_the_machine_has(tmp_path
     spec.write_text("processes:\n  input: {type: InputProcess, sensor_size: [10, 8]}\n"
                     "backend: {name: multiproc, workers: 24000, timeout: 5}\n")
     assert load_spec(spec).backend_options["workers"] == 24000  # the spec says what it says (round trip)
-    with pytest.warns(TofnetWarning, match=rf"many.yaml: backend.workers: 24000 workers capped to this machine's "
-                                           rf"{trust.cpu_count()} CPUs"):
+    with caplog.at_level(logging.WARNING, logger="tofnet"):
         options = load_network(spec)[3]
     assert options == {"workers": trust.cpu_count(), "timeout": 5}  # what the backend is built with
+    assert [r.getMessage() for r in caplog.records] == [f"warning: {spec}: backend.workers: 24000 workers capped "
+                                                        f"to this machine's {trust.cpu_count()} CPUs"]
+    caplog.clear()
     spec.write_text(spec.read_text().replace("24000", "1"))
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
+    with caplog.at_level(logging.WARNING, logger="tofnet"):
         assert load_network(spec)[3]["workers"] == 1
+    assert not caplog.records
     spec.write_text(spec.read_text().replace("workers: 1", "workers: 24000"))
     np.save(tmp_path / "a.npy", make_events([0, 1000], [1, 2], [1, 1], [1, 0]))
     (tmp_path / "plan.yaml").write_text("recordings: [a.npy]\nnetworks: [many.yaml]\ngrid: {refractory: [20ms]}\n")

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from tofnet.batch.bounds import bounded_glob, check_task_count, exists
+from tofnet.batch.grid import check_grid, read_grid
 from tofnet.batch.reading import READ_KEYS
 from tofnet.errors import SpecError, TofnetError, located, quote
 from tofnet.io.safe_yaml import _line, _parse_yaml, yaml_source
@@ -126,12 +127,6 @@ def load_plan(path_or_text: str | Path, *, output: str | Path | None = None, all
     return _PlanReader(tree, source, base, allow).read(output)
 
 
-def _grid_options() -> dict[str, str]:
-    """Grid keys: the ``tofnet run`` options ``tofnet.api.apply_overrides`` knows, with - or _."""
-    from tofnet.api import OVERRIDES
-    return {**{k.replace("_", "-"): k for k in OVERRIDES}, **{k: k for k in OVERRIDES}}
-
-
 class _PlanReader:
     """Turns a line-annotated YAML tree into a ``Plan``; every error names line and key."""
 
@@ -171,13 +166,13 @@ class _PlanReader:
         self.defaults = self.read_options(tree, {}, "")
         recordings = self.recordings(tree)
         networks = self.networks(tree)
-        grid = self.grid(tree)
+        grid = read_grid(self, tree)
         try:  # from the sizes, before any grid point is made
             check_task_count(len(recordings), len(networks), [len(v) for v in grid.values()])
         except TofnetError as err:
             raise self.fail(tree, "grid" if "grid" in tree else "recordings", "grid", str(err)) from None
         plan = Plan(recordings, networks, grid, out, cache, keep, backend, name, description, self.source, self.base)
-        self.check_grid(plan)
+        check_grid(self, plan)
         return plan
 
     # ------------------------------------------------------------ sections
@@ -364,56 +359,6 @@ class _PlanReader:
         if not exists(spec, Path.is_file):
             raise self.fail(container, key, path, located(spec, None, "no such spec file"))
         load_spec(spec, allow_import=self.allow)  # a SpecError names the spec's own file, line and key
-
-    def grid(self, tree: Mapping) -> dict[str, list[Any]]:
-        section = tree.get("grid", {})
-        if section is None:
-            section = {}
-        if not isinstance(section, Mapping):
-            raise self.fail(tree, "grid", "grid", "expected a mapping option: [values]")
-        options = _grid_options()
-        out: dict[str, list[Any]] = {}
-        for key, values in section.items():
-            path = f"grid.{key}"
-            if key not in options:
-                known = ", ".join(sorted(set(options.values())))
-                raise self.fail(section, key, path, f"unknown option; expected one of {known}")
-            if options[key] in out:
-                raise self.fail(section, key, path, f"{options[key]} is given twice")
-            values = values if isinstance(values, list) else [values]
-            if not values:
-                raise self.fail(section, key, path, "expected at least one value")
-            seen: set[str] = set()
-            for value in values:
-                if repr(value) in seen:  # quoted alone: the list may be long
-                    raise self.fail(section, key, path, f"the value {quote(value)} is repeated")
-                seen.add(repr(value))
-            out[options[key]] = list(values)
-        return out
-
-    def check_grid(self, plan: Plan) -> None:
-        """Apply every grid value, then every grid point, to every network (sized 240x180)."""
-        from tofnet.api import apply_overrides, load_network
-        section = self.tree.get("grid") or {}
-        keys = {_grid_options()[k]: k for k in section}
-        for network in plan.networks:
-            def fresh():
-                return load_network(network.spec, sensor_size=None if network.spec else (240, 180),
-                                    allow_import=network.allow_import)[0]
-            for option, values in plan.grid.items():
-                for j, value in enumerate(values):
-                    try:
-                        apply_overrides(fresh(), **{option: value})
-                    except TofnetError as err:
-                        raise self.fail(section[keys[option]], j, f"grid.{keys[option]}[{j}]",
-                                        f"{value!r} for network {network.name!r}: {err}") from None
-            if len(plan.grid) > 1:
-                for point in plan.combinations():
-                    try:
-                        apply_overrides(fresh(), **point)
-                    except TofnetError as err:
-                        raise self.fail(self.tree, "grid", "grid", f"the point {point} for network "
-                                        f"{network.name!r}: {err}") from None
 
 
 def _recording_name(path: Path) -> str:

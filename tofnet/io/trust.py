@@ -12,16 +12,16 @@ The threat model is in docs/reliability.md ("Files from strangers").
 
 from __future__ import annotations
 
+import logging
 import os
 import re
 import sys
-import warnings
 from importlib.machinery import PathFinder
 from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
-from tofnet.errors import SpecError, TofnetWarning, quote
+from tofnet.errors import SpecError, quote
 
 #: Environment variable: modules a spec may import, separated by commas or spaces.
 ENV_ALLOW_IMPORT = "TOFNET_ALLOW_IMPORT"
@@ -96,14 +96,14 @@ def cpu_count() -> int:
 
 def cap_workers(options: Mapping[str, Any], where: str) -> dict[str, Any]:
     """``options`` with every worker count (``workers``, ``*_workers``) above the CPU count
-    lowered to it, with a ``TofnetWarning`` naming ``where``; other values are left to the
-    backend to check."""
+    lowered to it, saying so in one warning line of tofnet's log (the CLI prints it as
+    ``tofnet COMMAND: warning: ...``) naming ``where``; other values are left to the backend."""
     out = dict(options)
     cpus = cpu_count()
     for key, value in options.items():
         if (key == "workers" or key.endswith("_workers")) and isinstance(value, int) \
                 and not isinstance(value, bool) and value > cpus:
-            warnings.warn(f"{where}.{key}: {value} workers capped to this machine's {cpus} CPUs",
-                          TofnetWarning, stacklevel=2)
+            logging.getLogger(__name__).warning(f"warning: {where}.{key}: {value} workers capped to this "
+                                                f"machine's {cpus} CPUs")
             out[key] = cpus
     return out

@@ -1,0 +1,71 @@
+"""A plan's parameter grid: the options of ``tofnet run`` it sweeps, each value checked on every network.
+
+The size of the grid is bounded before it is expanded (``tofnet.batch.bounds``).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Mapping
+
+from tofnet.errors import TofnetError, quote
+
+
+def grid_options() -> dict[str, str]:
+    """Grid keys: the ``tofnet run`` options ``tofnet.api.apply_overrides`` knows, with - or _."""
+    from tofnet.api import OVERRIDES
+    return {**{k.replace("_", "-"): k for k in OVERRIDES}, **{k: k for k in OVERRIDES}}
+
+
+def read_grid(self, tree: Mapping) -> dict[str, list[Any]]:
+    """The plan's ``grid``: option -> its values, in plan order (``self``: the plan reader)."""
+    section = tree.get("grid", {})
+    if section is None:
+        section = {}
+    if not isinstance(section, Mapping):
+        raise self.fail(tree, "grid", "grid", "expected a mapping option: [values]")
+    options = grid_options()
+    out: dict[str, list[Any]] = {}
+    for key, values in section.items():
+        path = f"grid.{key}"
+        if key not in options:
+            known = ", ".join(sorted(set(options.values())))
+            raise self.fail(section, key, path, f"unknown option; expected one of {known}")
+        if options[key] in out:
+            raise self.fail(section, key, path, f"{options[key]} is given twice")
+        values = values if isinstance(values, list) else [values]
+        if not values:
+            raise self.fail(section, key, path, "expected at least one value")
+        seen: set[str] = set()
+        for value in values:
+            if repr(value) in seen:  # quoted alone: the list may be long
+                raise self.fail(section, key, path, f"the value {quote(value)} is repeated")
+            seen.add(repr(value))
+        out[options[key]] = list(values)
+    return out
+
+def check_grid(self, plan) -> None:
+    """Apply every grid value, then every grid point, to every network (sized 240x180).
+
+    ``self`` is the plan reader (its ``fail`` and ``tree``); errors quote a value, not a list.
+    """
+    from tofnet.api import apply_overrides, load_network
+    section = self.tree.get("grid") or {}
+    keys = {grid_options()[k]: k for k in section}
+    for network in plan.networks:
+        def fresh():
+            return load_network(network.spec, sensor_size=None if network.spec else (240, 180),
+                                allow_import=network.allow_import)[0]
+        for option, values in plan.grid.items():
+            for j, value in enumerate(values):
+                try:
+                    apply_overrides(fresh(), **{option: value})
+                except TofnetError as err:
+                    raise self.fail(section[keys[option]], j, f"grid.{keys[option]}[{j}]",
+                                    f"{quote(value)} for network {network.name!r}: {err}") from None
+        if len(plan.grid) > 1:
+            for point in plan.combinations():
+                try:
+                    apply_overrides(fresh(), **point)
+                except TofnetError as err:
+                    raise self.fail(self.tree, "grid", "grid", f"the point {quote(point, 120)} for network "
+                                    f"{network.name!r}: {err}") from None
