@@ -144,3 +144,11 @@ def test_a_very_long_name_in_a_plan_is_one_short_line(folder, entry):
     with pytest.raises(PlanError) as err:
         load_plan(folder / "plan.yaml")
     assert "\n" not in str(err.value) and len(str(err.value)) < 600
+
+
+def test_a_plans_scenario_duration_is_bounded_when_the_plan_is_read(folder):
+    # The simulator's limit (3600 s), checked with the plan's file, line and key instead of at expansion.
+    (folder / "plan.yaml").write_text("recordings:\n  - {scenario: slider, duration: 1e9}\n")
+    with pytest.raises(PlanError, match=r"plan.yaml:2: recordings\[0\].duration: expected a positive number of "
+                                        r"seconds, at most 3600, got 1000000000.0"):
+        load_plan(folder / "plan.yaml")

@@ -275,6 +275,7 @@ class _PlanReader:
     def scenarios(self, entry: Mapping, path: str) -> list[RecordingSource]:
         from tofnet.core.params import parse_size
         from tofnet.sim import built_in_scenarios
+        from tofnet.sim.config import MAX_DURATION_S
         self.only(entry, SCENARIO_KEYS, path, "a scenario")
         known = list(built_in_scenarios())
         names = entry["scenario"]
@@ -295,9 +296,9 @@ class _PlanReader:
             except TofnetError as err:
                 raise self.fail(entry, "duration", f"{path}.duration", str(err).split(": ", 1)[-1]) from None
         if isinstance(duration, bool) or not isinstance(duration, (int, float)) or not math.isfinite(duration) \
-                or duration <= 0:
-            raise self.fail(entry, "duration", f"{path}.duration", f"expected a positive number of seconds, "
-                            f"got {entry.get('duration')!r}")
+                or not 0 < duration <= MAX_DURATION_S:
+            raise self.fail(entry, "duration", f"{path}.duration", f"expected a positive number of seconds, at "
+                            f"most {MAX_DURATION_S:g}, got {quote(entry.get('duration'))}")
         seeds = entry.get("seed", 0)
         seeds = seeds if isinstance(seeds, list) else [seeds]
         if not seeds or any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in seeds):

@@ -178,11 +178,12 @@ class CompiledNetwork:
                 "traffic": [t.to_dict() for t in self.traffic]}
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> "CompiledNetwork":
-        """Rebuild from ``to_dict()`` output (the network from its embedded spec)."""
+    def from_dict(cls, data: Mapping[str, Any], *, allow_import: Any = None) -> "CompiledNetwork":
+        """Rebuild from ``to_dict()`` output (the network from its embedded spec; ``allow_import``:
+        the modules its ``module:Class`` types may import, as for ``load_spec``)."""
         from tofnet.io.spec import network_from_dict, patch_from_data
         patch = patch_from_data(data.get("patch"))
-        return cls(network=network_from_dict(data["network"]), budget=Budget.from_dict(data["budget"]),
+        return cls(network=network_from_dict(data["network"], allow_import=allow_import), budget=Budget.from_dict(data["budget"]),
                    layers=tuple(LayerMapping.from_dict(l) for l in data["layers"]),
                    cores=tuple(CoreAssignment.from_dict(c) for c in data["cores"]),
                    traffic=tuple(Traffic.from_dict(t) for t in data["traffic"]),
