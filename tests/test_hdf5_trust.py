@@ -220,3 +220,18 @@ def test_allow_external_on_the_command_line(tmp_path, capsys):
     assert main(["info", str(path), "--allow-external"]) == 0
     assert main(["convert", str(path), str(tmp_path / "out.npz"), "--allow-external", "--quiet"]) == 0
     assert np.array_equal(read_recording(tmp_path / "out.npz").events, EVENTS)
+
+
+def test_every_command_reading_the_recording_takes_allow_external(tmp_path, capsys):
+    path, depth = tmp_path / "events.h5", tmp_path / "depth.npz"
+    dsec(path, external={"t": tmp_path / "t.raw"})
+    with h5py.File(path, "a") as f:
+        f["calib/resolution"] = np.array(SENSOR)
+    run = ["run", str(path), "--velocity", "0.5,0,0", "--intrinsics", "20,20,8,6", "--out", str(depth), "--quiet"]
+    assert main(run) == 2 and "--allow-external" in capsys.readouterr().err
+    assert main(run + ["--allow-external"]) == 0 and depth.exists()
+    for command in (["export", str(depth), "--maps", str(tmp_path / "maps")],
+                    ["eval", str(path), str(depth)], ["plot", "depthmap", str(path), str(depth)]):
+        assert main(command) == 2, command
+        assert "refused unless --allow-external" in capsys.readouterr().err, command
+    assert main(["export", str(depth), "--maps", str(tmp_path / "maps"), "--allow-external"]) == 0

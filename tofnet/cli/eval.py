@@ -31,8 +31,9 @@ def register(subparsers) -> None:
     p.add_argument("--json", metavar="OUT", help="also write the metrics as JSON to OUT ('-' for stdout only)")
     p.add_argument("--force", action="store_true", help="overwrite an existing --json file")
     add_timing_options(p)
-    from tofnet.cli.inputs import add_window_options
+    from tofnet.cli.inputs import add_allow_external, add_window_options
     add_window_options(p)
+    add_allow_external(p)
     p.set_defaults(handler=handle)
 
 
@@ -48,7 +49,7 @@ def add_timing_options(p: argparse.ArgumentParser) -> None:
 
 
 def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = None,
-                latency_steps: int | None = None, window=None):
+                latency_steps: int | None = None, window=None, allow_external: bool = False):
     """Read a recording and a depth file; complete the depth timing from the options.
 
     Returns ``(recording, depth, meta)``. The options fill what the file lacks and must
@@ -60,7 +61,7 @@ def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = 
     from tofnet.io.source import open_recording
     from tofnet.units import seconds
 
-    with open_recording(recording_path, window=window) as source:
+    with open_recording(recording_path, window=window, allow_external=allow_external) as source:
         recording = source.read()
         bounds = source.window
     depth, meta = read_depth(depth_path)
@@ -134,7 +135,8 @@ def handle(args) -> int:
                      what="--json")
     from tofnet.cli.inputs import window_option
     recording, depth, meta = load_inputs(args.recording, args.depth, timestep=args.timestep,
-                                         latency_steps=args.latency_steps, window=window_option(args))
+                                         latency_steps=args.latency_steps, window=window_option(args),
+                                         allow_external=args.allow_external)
     undistortion = (meta.get("summary") or {}).get("undistortion")
     if undistortion:  # the estimates are at undistorted pixels: match them to events moved there too
         from tofnet.eval.undistorted import lens_from_summary, undistorted_recording

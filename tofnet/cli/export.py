@@ -31,9 +31,10 @@ def register(subparsers) -> None:
     p.add_argument("--no-color", action="store_true", help="no depth colours in the .ply")
     p.add_argument("--sensor-size", metavar="WxH", help="map size in pixels (default: the recording's)")
     p.add_argument("--force", action="store_true", help="replace existing maps and .ply (never an input)")
-    from tofnet.cli.inputs import add_camera_options, add_window_options
+    from tofnet.cli.inputs import add_allow_external, add_camera_options, add_window_options
     add_camera_options(p)
     add_window_options(p)
+    add_allow_external(p)
     p.set_defaults(handler=handle)
 
 
@@ -52,7 +53,8 @@ def handle(args) -> int:
     window = window_option(args)
     if recording_path:
         from tofnet.io.source import open_recording
-        with open_recording(recording_path, window=window, **camera_options(args)) as source:
+        with open_recording(recording_path, window=window, allow_external=args.allow_external,
+                            **camera_options(args)) as source:
             # The camera only; the events only when the sensor size must come from their extent.
             recording = source.metadata() if source.sensor_size is not None else source.read()
             bounds = source.window

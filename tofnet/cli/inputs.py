@@ -17,11 +17,16 @@ def add_input_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--topic", action="append", default=[], metavar="ROLE=NAME",
                    help="ROS bag topic for a role (events, pose, imu, camera_info), "
                         "e.g. --topic events=/davis/left/events; repeatable (default: found by message type)")
-    g.add_argument("--allow-external", action="store_true",
-                   help="read HDF5 datasets whose data is in other files (external storage, virtual datasets, "
-                        "external links); refused by default")
+    add_allow_external(g)
     add_camera_options(p)
     add_window_options(p)
+
+
+def add_allow_external(p) -> None:
+    """``--allow-external``: the opt-in for HDF5 data kept in other files (``open_recording``'s ``allow_external``)."""
+    p.add_argument("--allow-external", action="store_true",
+                   help="read HDF5 datasets whose data is in other files (external storage, virtual datasets, "
+                        "external links); refused by default")
 
 
 def add_camera_options(p: argparse.ArgumentParser) -> None:
