@@ -36,6 +36,14 @@ def test_integer_backends_equal_the_fixed_backend_exactly(name):
     _assert_all_pass(results)
 
 
+def test_multiproc_per_core_still_equals_the_fixed_backend_exactly():
+    """The chip-core-by-chip-core mode (spikes routed by the compiled mapping) stays checked."""
+    from tofnet.backends.multiproc import MultiprocBackend
+    results = run_suite(MultiprocBackend(workers=2, per_core=True), "fixed", cache=CACHE)
+    assert {r.mode for r in results} == {"exact"}
+    _assert_all_pass(results)
+
+
 class ShiftedBackend(Backend):
     """A wrapper around the reference whose depths are off by ``shift`` metres (a broken backend)."""
 

@@ -14,6 +14,8 @@ host -> worker                     worker -> host
 ("get", keys, var, step)           ("get", [the variable's values of each key])
 ("set", keys, var, value, step)    ("set", [None, ...])
 ("param", keys, name, value)       ("param", [None, ...])
+("band", spec)                     ("band",)   (shared-memory bands: ``_band_worker``)
+("band_run" | "band_promise" | "band_counts" | "band_map", ...)   (the same kind, answered)
 ("finish",)                        ("finished",)
 ("fault", kind)                    (nothing; test hook, see ``_FAULTS``)
 ("stop",) or end of file           (exits)
@@ -104,6 +106,7 @@ class _Worker:
     def __init__(self, index: int):
         self.index = index
         self.models: dict = {}
+        self.band = None  # the fused kernel of this worker's band (shared-memory mode)
         self.fault: str | None = None
 
     def handle(self, message: tuple):
@@ -127,8 +130,17 @@ class _Worker:
         if kind == "param":
             _, keys, name, value = message
             return ("param", [self.models[key].set_param(name, value) for key in keys])
+        if kind == "band":
+            from tofnet.backends._band_worker import BandWorker
+            self.band = BandWorker(message[1])
+            return ("band",)
+        if kind.startswith("band_"):
+            if self.fault is not None and kind == "band_run":
+                self._fire_fault()
+            return self.band.handle(message)
         if kind == "finish":
             self.models = {}
+            self.band = None
             return ("finished",)
         if kind == "fault":
             if message[1] not in _FAULTS:

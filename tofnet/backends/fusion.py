@@ -163,6 +163,8 @@ class FusedStream:
             self.velocity_source, self.kernel.t0_us, p.timestep_us, p.update_every, count, first), VELOCITY_LOOKAHEAD)
         self._clock = Stopwatch()
         self._closed = False
+        #: Called once when the stream closes or is given up (e.g. to stop its backend's workers).
+        self.releases: list = []
 
     def _admit(self, events: np.ndarray, until_us: int | None = None) -> tuple[int, int] | None:
         """Checks before anything changes (the kernel checks the time order itself), ``until_us`` as the
@@ -264,24 +266,29 @@ class FusedStream:
         self._release()
 
     def _release(self) -> None:
-        close = getattr(self.kernel, "close", None)  # a banded kernel's threads
+        close = getattr(self.kernel, "close", None)  # a banded kernel's threads or shared memory
         if close is not None:
             close()
+        for hook in self.releases:
+            hook()
+        self.releases = []
 
     def close(self) -> RunResult:
         """The counts so far; ``outputs`` hold what ``feed_all`` kept of the open step (``feed`` returned every estimate)."""
         if self._closed:
             raise BackendError("stream is closed")
         self._closed = True
-        self._release()
         kernel, names = self.kernel, self.pipeline.names
         fmt = kernel.config.fixed
-        counts = {
-            names[0]: {"events_in": self._events_in, "accepted": kernel.accepted,
-                       **{reason: int(c) for reason, c in zip(DROP_REASONS, kernel.drops)}},
-            names[1]: {"spikes": kernel.tot_spikes},
-            names[2]: {name: int(c) for name, c in zip(OUTCOMES, kernel.outcomes)},
-            names[3]: {}}
+        try:
+            counts = {
+                names[0]: {"events_in": self._events_in, "accepted": kernel.accepted,
+                           **{reason: int(c) for reason, c in zip(DROP_REASONS, kernel.drops)}},
+                names[1]: {"spikes": kernel.tot_spikes},
+                names[2]: {name: int(c) for name, c in zip(OUTCOMES, kernel.outcomes)},
+                names[3]: {}}
+        finally:
+            self._release()
         counts = {name: counts[name] for name in self.order}
         outputs = {self.depth_name: canonical(self._held.pop(self.depth_name, np.empty(0, DEPTH_DTYPE)))}
         if self.record_tot:

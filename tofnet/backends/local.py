@@ -172,31 +172,34 @@ class LocalBackend(Backend):
         if isinstance(stream, FusedStream):
             if isinstance(stream.kernel, BandedKernel):
                 stream.kernel.one_band_below = 0  # a run asked for workers: bands, whatever its first packet
-            return self._run_fused(stream, recording.events, progress)
+            return run_fused(stream, recording.events, self.packet_events, progress)
         return run_in_packets(stream, recording.events, self.packet_events, progress)
 
-    def _run_fused(self, stream: FusedStream, events: np.ndarray, progress: ProgressCallback | None) -> RunResult:
-        clock = Stopwatch()
-        total = len(events)
-        depth = _Collector(DEPTH_DTYPE, min(total, RESULT_CAPACITY))
-        tot = _Collector(TOT_DTYPE, 0)
-        seams = []  # where one packet's estimates end: a step may go on in the next packet's
-        for lo in range(0, total, self.packet_events):
-            packet = events[lo:lo + self.packet_events]
-            buffer, offset = depth.reserve(len(packet))
-            out = stream.feed_into(packet, buffer, offset)  # the kernel writes the estimates in place
-            if out is not None:
-                seams.append(offset)
-                depth.commit(len(out.depth))
-                if stream.record_tot:
-                    tot.add(out.tot)
-            if progress is not None:
-                progress(min(lo + self.packet_events, total), total)
-        result = stream.close()
-        result.outputs[stream.depth_name] = stream.kernel.join_packets(depth.array(), seams)
-        if stream.record_tot:
-            result.outputs[stream.tot_name] = canonical(tot.array())
-        return result.timed_by(clock)
+
+def run_fused(stream: FusedStream, events: np.ndarray, packet_events: int,
+              progress: ProgressCallback | None) -> RunResult:
+    """Feed ``events`` to a fused stream in packets, the kernel writing the estimates in place."""
+    clock = Stopwatch()
+    total = len(events)
+    depth = _Collector(DEPTH_DTYPE, min(total, RESULT_CAPACITY))
+    tot = _Collector(TOT_DTYPE, 0)
+    seams = []  # where one packet's estimates end: a step may go on in the next packet's
+    for lo in range(0, total, packet_events):
+        packet = events[lo:lo + packet_events]
+        buffer, offset = depth.reserve(len(packet))
+        out = stream.feed_into(packet, buffer, offset)  # the kernel writes the estimates in place
+        if out is not None:
+            seams.append(offset)
+            depth.commit(len(out.depth))
+            if stream.record_tot:
+                tot.add(out.tot)
+        if progress is not None:
+            progress(min(lo + packet_events, total), total)
+    result = stream.close()
+    result.outputs[stream.depth_name] = stream.kernel.join_packets(depth.array(), seams)
+    if stream.record_tot:
+        result.outputs[stream.tot_name] = canonical(tot.array())
+    return result.timed_by(clock)
 
 
 class _Collector:

@@ -19,9 +19,16 @@ from typing import Iterable
 import numpy as np
 
 from tofnet.backends._channel import Channel
+from tofnet.backends.bands import resolve_workers
 from tofnet.backends.base import Backend, ProgressCallback, RunResult
 from tofnet.backends.graph import GraphExecutor, resolve_probes, sinks_of
-from tofnet.backends.local import binding, payloads_of
+from tofnet.backends.fusion import FusedStream, paper_chain
+from tofnet.backends.local import binding, payloads_of, run_fused
+from tofnet.backends.runtime import camera_of, velocity_source_of
+from tofnet.backends.shared_bands import SharedBandKernel, band_rows
+from tofnet.backends.stream import DEFAULT_PACKET_EVENTS
+from tofnet.compiler.bands import input_reach
+from tofnet.kernels.region import KernelConfig
 from tofnet.backends.remote import RemoteModel, plan_workers, placements_for
 from tofnet.backends.runtime import clock_of, start_time_us
 from tofnet.backends.stream import Collected, GraphStream
@@ -36,7 +43,8 @@ DEFAULT_TIMEOUT = 120.0
 #: Steps per chunk: one synchronisation of host and workers per core-placed process and chunk.
 DEFAULT_CHUNK_STEPS = 250
 _REPLY = {"build": "built", "run": "run", "counts": "counts", "finish": "finished", "get": "get", "set": "set",
-          "param": "param"}
+          "param": "param", "band": "band", "band_run": "band_run", "band_promise": "band_promise",
+          "band_counts": "band_counts", "band_map": "band_map"}
 
 
 def compiled_of(compiled) -> CompiledNetwork:
@@ -60,7 +68,12 @@ class MultiprocBackend(Backend):
         Seconds for all workers to start (spawn, imports, numba cache load or compile);
         default: ``timeout``, so one option bounds every wait.
     chunk_steps
-        Steps run per synchronisation.
+        Steps run per synchronisation (per-core mode).
+    per_core
+        Run one model per compiled core, every spike through the host (the mapping, checked); by
+        default the paper's chain runs each worker's cores as one band over shared memory.
+    packet_events
+        Events per packet of a banded run.
     frac_bits, payload_bits
         Fixed-point format, as for the ``fixed`` backend (docs/fixed_point.md).
     """
@@ -69,10 +82,11 @@ class MultiprocBackend(Backend):
     arithmetic = "fixed"
     family = "fixed"
 
-    def __init__(self, workers: int | None = None, *, timeout: float = DEFAULT_TIMEOUT,
+    def __init__(self, workers: int | str | None = None, *, timeout: float = DEFAULT_TIMEOUT,
                  start_timeout: float | None = None, chunk_steps: int = DEFAULT_CHUNK_STEPS,
-                 frac_bits: int = DEFAULT_FRAC_BITS, payload_bits: int = DEFAULT_PAYLOAD_BITS):
-        workers = (os.cpu_count() or 1) if workers is None else workers
+                 frac_bits: int = DEFAULT_FRAC_BITS, payload_bits: int = DEFAULT_PAYLOAD_BITS,
+                 per_core: bool = False, packet_events: int = DEFAULT_PACKET_EVENTS):
+        workers = (os.cpu_count() or 1) if workers is None else resolve_workers(workers, "multiproc: workers")
         start_timeout = timeout if start_timeout is None else start_timeout
         for label, value in (("workers", workers), ("chunk_steps", chunk_steps)):
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
@@ -83,6 +97,10 @@ class MultiprocBackend(Backend):
         self.workers, self.timeout, self.start_timeout = workers, float(timeout), float(start_timeout)
         self.chunk_steps = chunk_steps
         self.format = FixedPointFormat(frac_bits, payload_bits)
+        #: True: one model per compiled core, spikes through the pipes (checks the mapping); False: the
+        #: paper's chain as one band per worker over shared memory (``shared_bands``), other graphs per core.
+        self.per_core = bool(per_core)
+        self.packet_events = packet_events
 
     def session(self, compiled=None) -> "MultiprocSession":
         """Workers kept alive across runs: ``with backend.session(compiled) as s: s.run(recording)``.
@@ -99,16 +117,19 @@ class MultiprocBackend(Backend):
             result = session.run(recording, probes=probes, record_tot=record_tot, progress=progress)
         return result.timed_by(clock)  # this run paid for starting the workers too
 
-    def open_stream(self, compiled, **options) -> GraphStream:
+    def open_stream(self, compiled, **options) -> GraphStream | FusedStream:
         """A stream on workers of its own; ``close()`` stops them. Options as ``LocalBackend.open_stream``."""
         session = self.session(compiled)
         session.open()
         try:
-            stream = session.open_stream(**options)
+            stream = session.open_stream(**{"fuse": True, **options})
         except BaseException:
             session.close(graceful=False)
             raise
-        stream.on_close = lambda: session.close()
+        if isinstance(stream, FusedStream):
+            stream.releases.append(session.close)
+        else:
+            stream.on_close = lambda: session.close()
         return stream
 
 
@@ -190,9 +211,15 @@ class MultiprocSession:
             self._channels[worker].send(message)
         replies = {}
         for worker, message in messages.items():
-            doing = f"running chunk {self._seq}" if message[0] == "run" else f"answering {message[0]!r}"
+            doing = f"running chunk {self._seq}" if message[0] in ("run", "band_run") else \
+                f"answering {message[0]!r}"
             replies[worker] = self._channels[worker].expect(_REPLY[message[0]], self.backend.timeout, doing)
         return replies
+
+    def _exchange_quietly(self, kind: str) -> None:
+        """Tell every worker ``kind`` (e.g. drop its band) when the session is still open."""
+        if self._state == "open":
+            self._guarded(lambda: self._exchange({w: (kind,) for w in range(len(self._channels))}))
 
     def _guarded(self, action):
         """Run ``action``; on any failure mark the session failed and stop the workers."""
@@ -216,8 +243,11 @@ class MultiprocSession:
 
     def open_stream(self, compiled=None, *, recording: Recording | None = None, intrinsics: Intrinsics | None = None,
                     velocity_source: VelocitySource | None = None, t0_us: int | None = None,
-                    probes: Iterable[str] = (), record_tot: bool = False) -> GraphStream:
-        """A ``GraphStream`` on this session's workers (see ``LocalBackend.open_stream``)."""
+                    probes: Iterable[str] = (), record_tot: bool = False,
+                    fuse: bool = False) -> GraphStream | FusedStream:
+        """A ``GraphStream`` on this session's workers (see ``LocalBackend.open_stream``), model by model,
+        one model per compiled core (as sessions need); ``fuse`` (unless the backend is ``per_core``):
+        the paper's chain as one band per worker over shared memory (a ``FusedStream``)."""
         compiled = self._check_open(compiled)
         network = compiled.network
         known = binding(recording, intrinsics, velocity_source, network)
@@ -225,6 +255,10 @@ class MultiprocSession:
         probes = resolve_probes(network, probes, record_tot)
         sinks = sinks_of(network)
         plans = plan_workers(compiled, len(self._channels))
+        pipeline = None if self.backend.per_core or not fuse else paper_chain(network, "fixed", probes)
+        if pipeline is not None:
+            t0 = clock.t0_us if t0_us is None else int(t0_us)
+            return self._banded_stream(compiled, pipeline, plans, known, t0, f"{pipeline.names[1]}.counts" in probes)
 
         def build(start_us: int) -> GraphExecutor:
             specs: dict[int, list] = {plan.index: [] for plan in plans}
@@ -253,13 +287,38 @@ class MultiprocSession:
                         "workers": len(plans), "startup_s": self.startup_seconds}
         return stream
 
+    def _banded_stream(self, compiled, pipeline, plans, known, t0_us, record_tot: bool) -> FusedStream:
+        """The paper's chain with each worker's share of the cores as one band (``shared_bands``)."""
+        network = compiled.network
+        intr = camera_of(pipeline.intrinsics, pipeline.distortion_model, pipeline.distortion, known,
+                         pipeline.names[3])
+        source = velocity_source_of(pipeline.velocity_source, pipeline.velocity_constant, pipeline.velocity_samples,
+                                    known, pipeline.names[3])
+        config = KernelConfig.from_pipeline(pipeline, intr, self.backend.format)
+        bands = band_rows(compiled, pipeline.names[1], plans)
+        kernel = self._guarded(lambda: SharedBandKernel(
+            config, bands, input_reach(network), source, lambda m: self._guarded(lambda: self._exchange(m)),
+            t0_us or 0))
+        kernel.facts["startup_s"] = self.startup_seconds
+        return FusedStream(self.backend.name, config, pipeline, source, t0_us, record_tot,
+                           order=[p.name for p in network.processes], kernel=kernel)
+
     def run(self, recording: Recording, *, compiled=None, probes: Iterable[str] = (), record_tot: bool = False,
             progress: ProgressCallback | None = None) -> RunResult:
         """Run ``compiled`` (default: the session's) on ``recording``; outputs in canonical order."""
         compiled = self._check_open(compiled)
         clock = Stopwatch()
         t0 = start_time_us(clock_of(compiled.network).t0_us, recording)
-        stream = self.open_stream(compiled, recording=recording, t0_us=t0, probes=probes, record_tot=record_tot)
+        stream = self.open_stream(compiled, recording=recording, t0_us=t0, probes=probes, record_tot=record_tot,
+                                  fuse=True)
+        if isinstance(stream, FusedStream):
+            try:
+                result = run_fused(stream, recording.events, self.backend.packet_events, progress)
+            except BaseException:
+                stream.abort()  # its shared buffers
+                raise
+            self._exchange_quietly("finish")
+            return result.timed_by(clock)
         collected = Collected()
         events, chunk_us = recording.events, self.backend.chunk_steps * stream.timestep_us
         total = len(events)

@@ -1,0 +1,140 @@
+"""multiproc over shared memory: each worker's cores as one band, the same bytes as fixed, nothing left behind."""
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import pytest
+
+from tofnet.backends.multiproc import MultiprocBackend
+from tofnet.backends.registry import get_backend
+from tofnet.backends.shared_memory import SharedBuffer, attach
+from tofnet.compiler import compile_network
+from tofnet.conformance.workers import first_difference
+from tofnet.io.recording import Recording
+from tofnet.networks import denoised_network, depth_network
+from tofnet.testing import TEST_INTRINSICS, merge_events, moving_pattern, noise_events
+
+SENSOR = (40, 30)
+VELOCITY = {"source": "constant", "velocity": [-0.5, 0.2, 0.1], "per": "pixel"}
+RECORDING = Recording(merge_events(moving_pattern(SENSOR, (300, -150), 200_000, seed=1),
+                                   noise_events(SENSOR, 20, 200_000, seed=2)), intrinsics=TEST_INTRINSICS)
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def shm():
+    return sorted(os.listdir("/dev/shm")) if os.path.isdir("/dev/shm") else []
+
+
+def mapped_buffers() -> list[str]:
+    """Processes that still map or hold one of tofnet's shared buffers (memfds named ``tofnet-*``)."""
+    found = []
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            with open(f"/proc/{pid}/maps") as f:
+                if "memfd:tofnet" in f.read():
+                    found.append(pid)
+        except OSError:
+            continue
+    return found
+
+
+def alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    with open(f"/proc/{pid}/stat") as f:  # a zombie is gone for our purposes
+        return f.read().split(")")[-1].split()[0] != "Z"
+
+
+def test_a_shared_buffer_is_never_in_dev_shm_and_maps_in_another_process():
+    before = shm()
+    buffer = SharedBuffer(4096)
+    array = buffer.array("<i8")
+    array[:3] = [7, 8, 9]
+    mapped = attach(buffer.address)  # as a worker maps it (here: the same process)
+    assert bytes(mapped[:8]) == (7).to_bytes(8, "little")
+    assert not [name for name in set(shm()) - set(before) if "tofnet" in name]
+    assert str(os.getpid()) in mapped_buffers()
+    mapped.close()
+    del array
+    buffer.close()
+    buffer.close()  # idempotent
+    assert str(os.getpid()) not in mapped_buffers()
+
+
+@pytest.mark.parametrize("workers", [1, 2, 3])
+def test_bands_on_worker_processes_equal_the_fixed_backend_and_per_core_mode_too(workers):
+    compiled = compile_network(depth_network(SENSOR, input={"refractory": "1ms"}, velocity=VELOCITY), patch=(8, 8))
+    fixed = get_backend("fixed").run(compiled, RECORDING, record_tot=True)
+    with MultiprocBackend(workers=workers, packet_events=333).session() as session:
+        banded = session.run(RECORDING, compiled=compiled, record_tot=True)
+        assert banded.extra["shared_memory"] and len(banded.extra["bands"]) == workers
+        assert first_difference(banded, fixed) == ""
+        again = session.run(RECORDING, compiled=compiled, record_tot=True)  # the workers are kept
+        assert first_difference(again, fixed) == ""
+    per_core = MultiprocBackend(workers=workers, per_core=True).run(compiled, RECORDING, record_tot=True)
+    assert "shared_memory" not in per_core.extra and first_difference(per_core, fixed) == ""
+
+
+def test_other_graphs_run_per_core():
+    compiled = compile_network(denoised_network(SENSOR, velocity=VELOCITY), patch=(8, 8))
+    fixed = get_backend("fixed").run(compiled, RECORDING)
+    result = MultiprocBackend(workers=2).run(compiled, RECORDING)
+    assert "shared_memory" not in result.extra and first_difference(result, fixed) == ""
+
+
+SCRIPT = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, {root!r})
+    from tofnet.backends.multiproc import MultiprocBackend
+    from tofnet.io.recording import Recording
+    from tofnet.networks import depth_network
+    from tofnet.testing import TEST_INTRINSICS, noise_events
+
+    if __name__ == "__main__":
+        recording = Recording(noise_events((240, 180), 200, 2_000_000, seed=3), intrinsics=TEST_INTRINSICS)
+        network = depth_network((240, 180), velocity={{"source": "constant", "velocity": [0.5, 0, 0]}})
+        with MultiprocBackend(workers=2, packet_events=4096).session() as session:
+            print(*session.pids, flush=True)
+            while True:
+                session.run(recording, compiled=network)
+""")
+
+
+def test_kill_9_of_the_parent_mid_run_leaves_no_worker_and_nothing_in_dev_shm(tmp_path):
+    script = tmp_path / "parent.py"
+    script.write_text(SCRIPT.format(root=ROOT))
+    before = shm()
+    parent = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True, cwd=tmp_path)
+    try:
+        pids = [int(p) for p in parent.stdout.readline().split()]
+        assert len(pids) == 2
+        time.sleep(3.0)  # well into the runs: the shared buffers are mapped and in use
+        parent.send_signal(signal.SIGKILL)
+        parent.wait(30)
+        deadline = time.monotonic() + 30
+        while any(alive(p) for p in pids) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert not any(alive(p) for p in pids)
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+    # the buffers were memfds: never in /dev/shm, and gone with the last process mapping them (other
+    # programs on the machine may add their own entries to /dev/shm meanwhile: only tofnet's are checked)
+    assert not [name for name in set(shm()) - set(before) if "tofnet" in name or name.startswith("memfd")]
+    assert mapped_buffers() == []
+
+
+def test_kill_9_of_a_worker_mid_run_is_reported_and_releases_the_buffers():
+    compiled = compile_network(depth_network(SENSOR, velocity=VELOCITY), patch=(8, 8))
+    with MultiprocBackend(workers=2, packet_events=100).session() as session:
+        session.run(RECORDING, compiled=compiled)
+        session._inject_fault(1, "kill")
+        with pytest.raises(Exception, match="killed by signal 9"):
+            session.run(RECORDING, compiled=compiled)
+    assert str(os.getpid()) not in mapped_buffers()

@@ -1,0 +1,81 @@
+"""A multiproc worker's band: the fused kernel over its rows, fed through shared memory (worker side).
+
+The host (``tofnet.backends.shared_bands``) writes each packet's events once into a shared
+buffer; every worker selects its rows (widened by the input reach) from it, runs its
+``TimeOfTravelKernel`` and writes its estimates and time-of-travel spikes into its part of
+two shared output buffers; only small messages (counts, sizes) cross the pipe.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tofnet.backends.shared_memory import attach
+from tofnet.events import DEPTH_DTYPE, EVENT_DTYPE, TOT_DTYPE
+
+
+class BandWorker:
+    """One band of the paper's chain in a worker process (built from the host's ``band`` message)."""
+
+    def __init__(self, spec: dict):
+        from tofnet.backends.runtime import UpdateRows, velocity_table
+        from tofnet.kernels.kernel_config import Region
+        from tofnet.kernels.region import TimeOfTravelKernel
+
+        config = spec["config"]
+        width, _ = config.sensor_size
+        self.config, self.index = config, spec["index"]
+        self.rows, self.outside = spec["rows"], spec["index"] == 0
+        self.kernel = TimeOfTravelKernel(config, Region(0, width, *spec["band"]), 0)
+        source, step, every = spec["velocity_source"], config.timestep_us, config.update_every
+        self.updates = UpdateRows(lambda first, count: velocity_table(source, self.kernel.t0_us, step, every, count,
+                                                                      first), spec["lookahead"])
+        self._events = np.empty(0, EVENT_DTYPE)
+        self.maps: list = []
+        self.remap(spec["buffers"])
+
+    def remap(self, buffers: dict) -> None:
+        """Map the host's (grown) buffers: events, estimates and spikes (``(pid, fd, bytes)`` each)."""
+        self.maps = [attach(buffers[name]) for name in ("events", "depth", "tot")]
+        self.capacity = buffers["capacity"]
+        self.events = np.frombuffer(self.maps[0], EVENT_DTYPE, self.capacity)
+        depth = np.frombuffer(self.maps[1], DEPTH_DTYPE)
+        tot = np.frombuffer(self.maps[2], TOT_DTYPE)
+        self.depth = depth[self.index * self.capacity:(self.index + 1) * self.capacity]
+        self.tot = tot[4 * self.index * self.capacity:4 * (self.index + 1) * self.capacity]
+
+    def run(self, n: int, t0_us: int, record_tot: bool) -> tuple[int, int]:
+        """Select this band's events of the packet's ``n``, run them; ``(estimates, spikes)`` written."""
+        from tofnet.kernels.bands import select_rows
+
+        if self.kernel.t0_us != t0_us:
+            self.kernel.t0_us = t0_us
+            self.updates.clear()
+        if len(self._events) <= n:
+            self._events = np.empty(max(n + 1, 2 * len(self._events)), EVENT_DTYPE)
+        width, height = self.config.sensor_size
+        m = select_rows(self.events[:n], self.rows[0], self.rows[1], width, height, self.outside, self._events)
+        if m == 0:
+            return 0, 0
+        end, n_tot = self.kernel.run_events(self._events[:m], self.updates.rows, self.depth, 0, record_tot)
+        if record_tot and n_tot:
+            self.tot[:n_tot] = self.kernel.buffers()[2][:n_tot]
+        return end, n_tot
+
+    def counts(self) -> tuple:
+        k = self.kernel
+        return k.accepted, [int(c) for c in k.drops], k.tot_spikes, [int(c) for c in k.outcomes]
+
+    def handle(self, message: tuple) -> tuple:
+        kind = message[0]
+        if kind == "band_run":
+            return ("band_run", *self.run(*message[1:]))
+        if kind == "band_promise":
+            self.kernel.promise(message[1])
+            return ("band_promise",)
+        if kind == "band_counts":
+            return ("band_counts", self.counts())
+        if kind == "band_map":
+            self.remap(message[1])
+            return ("band_map",)
+        raise ValueError(f"unknown band message {kind!r}")
