@@ -107,6 +107,15 @@ def test_run_until_out_of_range_is_refused_before_any_work():
         assert session.step == 5
 
 
+def test_a_promise_too_far_ahead_to_run_is_one_line():
+    """In the time range but 2.3e15 steps ahead: numpy's MemoryError became a traceback."""
+    with live("fixed") as session:
+        session.feed(EVENTS[:100])
+        with pytest.raises(BackendError) as err:
+            session.feed(EVENTS[100:200], until_us=2**61 - 1)
+        assert "out of memory" in one_line(err)
+
+
 def test_a_monitor_outside_the_sensor_is_refused_and_not_installed():
     """It raised IndexError and stayed installed, so every later run() failed."""
     with Session(COMPILED, Recording(EVENTS, intrinsics=TEST_INTRINSICS), backend="fixed",

@@ -249,6 +249,11 @@ class Session:
     def _guard(self, action):
         try:
             return action()
+        except MemoryError:  # e.g. a promise far ahead: every step up to it runs at once
+            self._state = "failed"
+            self.stop()
+            raise BackendError(f"session: out of memory running the steps from {self.step} on; run fewer steps "
+                               "(or promise a nearer until_us) at a time; the session is failed") from None
         except BaseException:
             self._state = "failed"
             self.stop()
