@@ -156,3 +156,17 @@ def test_a_fused_stream_refuses_until_us_before_the_packets_last_event():
     assert type(streams[0]).__name__ == "FusedStream"
     outputs = [stream.feed_all(EVENTS[:half], until_us=int(EVENTS["t"][half - 1]) + 1) for stream in streams]
     assert same(*outputs) and len(outputs[0][COMPILED.network.processes[2].name + ".depth"])
+
+
+def test_more_misuses_are_one_line_and_leave_the_session_usable():
+    for target in (5, "input", "input.last_accepted@1,1", None):
+        with pytest.raises(TofnetError) as err:
+            Monitor(target)
+        one_line(err)
+    with Session(COMPILED, Recording(EVENTS, intrinsics=TEST_INTRINSICS), backend="fixed",
+                 monitors="input.last_accepted@1,1") as session:  # one monitor, not its characters
+        with pytest.raises(BackendError) as err:
+            session.feed(EVENTS[:10])  # a recording's session runs it; feed is for a live source
+        assert "use run" in one_line(err)
+        session.run(steps=3)
+        assert session.monitors[0].values.shape == (4, 1)

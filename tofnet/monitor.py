@@ -31,6 +31,8 @@ class Monitor:
     kind: str = ""  # "var" or "port", set when the session binds it
 
     def __post_init__(self) -> None:
+        if not isinstance(self.target, str) or not _TARGET.match(self.target) or "@" in self.target:
+            raise TofnetError(f"monitor: expected a target 'PROCESS.VAR' or 'PROCESS.PORT', got {str(self.target)[:40]!r}")
         if isinstance(self.every, bool) or not isinstance(self.every, int) or self.every < 1:
             raise TofnetError(f"monitor {self.target}: every must be a positive whole number of steps, got {self.every!r}")
         if self.pixels is not None:

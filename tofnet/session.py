@@ -199,6 +199,9 @@ class Session:
     def feed(self, events: np.ndarray, until_us: int | None = None) -> dict[str, np.ndarray]:
         """Live source: feed events (time order); the records of the steps they completed."""
         self._check_open()
+        if self.recording is not None:
+            raise BackendError("session on a recording: use run(...); feed() is for a live source "
+                               "(Session(network, intrinsics=..., velocity_source=...))")
         self._check_packet(events, until_us)
         produced = self._guard(lambda: self.stream.feed_all(events, until_us))
         self._keep(produced)
@@ -317,7 +320,9 @@ class Session:
 
 
 def _monitors(monitors: Iterable[Monitor | str]) -> list[Monitor]:
-    """``Monitor`` objects from monitors or their strings (``"proc.var@x,y"``)."""
+    """``Monitor`` objects from monitors or their strings (``"proc.var@x,y"``); one alone is one."""
+    if isinstance(monitors, (Monitor, str)):
+        monitors = [monitors]
     out = []
     for m in monitors:
         if not isinstance(m, (Monitor, str)):
