@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 
 from tofnet import depth_network
-from tofnet.compiler import (BUDGETS, LOIHI2, Budget, ChipBudget, CompiledNetwork, CoreBudget, auto_patch,
+from tofnet.compiler import (BUDGETS, LOIHI2, Budget, ChipBudget, CoreBudget, auto_patch,
                              compile_network)
 from tofnet.compiler.partition import grid_of, halo_of, max_pixels_per_core, receptive_offsets
 from tofnet.errors import BudgetError, TofnetError
+from tofnet.io.compiled import compiled_from_dict, compiled_to_dict
 from tofnet.processes import DepthProcess, TimeOfTravelProcess
 
 
@@ -246,9 +247,9 @@ def test_compiled_network_round_trips_through_json():
     compiled = compile_network(paper((100, 70), time_of_travel={"distance": 2}),
                                Budget(core=CoreBudget(accumulators=4096), max_chips=2, name="x"),
                                patch={"time_of_travel": (20, 20), "depth": "auto"})
-    data = json.loads(json.dumps(compiled.to_dict()))
-    again = CompiledNetwork.from_dict(data)
-    assert again.to_dict() == compiled.to_dict()
+    data = json.loads(json.dumps(compiled_to_dict(compiled)))
+    again = compiled_from_dict(data)
+    assert compiled_to_dict(again) == compiled_to_dict(compiled)
     assert again.cores == compiled.cores and again.layers == compiled.layers and again.budget == compiled.budget
     assert again.network.process("time_of_travel").distance == 2
     assert again.network.process("time_of_travel").sensor_size == (100, 70)

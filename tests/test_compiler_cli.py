@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from tofnet.cli import main
-from tofnet.compiler import CompiledNetwork
+from tofnet.io.compiled import compiled_from_dict
 from tofnet.io.spec import dump_spec, load_spec, networks_equal
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -38,7 +38,7 @@ def test_compile_json_round_trips(tmp_path, capsys):
     out = tmp_path / "compiled.json"
     assert main(["compile", str(ROOT / "examples" / "paper_distance2.yaml"), "--json", str(out)]) == 0
     data = json.loads(out.read_text())
-    compiled = CompiledNetwork.from_dict(data)
+    compiled = compiled_from_dict(data)
     assert compiled.cores_used == 96 and compiled.network.process("time_of_travel").distance == 2
     assert compiled.cores[0].halo == ((0, 0, 32, 30), (0, 0, 30, 32))
 

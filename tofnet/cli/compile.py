@@ -89,7 +89,8 @@ def handle(args) -> int:
     compiled = compile_network(network, budget=budget, patch=patch)
     print(format_report(compiled))
     if args.json:
-        text = json.dumps(compiled.to_dict(), indent=1) + "\n"
+        from tofnet.io.compiled import compiled_to_dict
+        text = json.dumps(compiled_to_dict(compiled), indent=1) + "\n"
         if args.json == "-":
             sys.stdout.write(text)
         else:

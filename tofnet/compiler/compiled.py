@@ -168,27 +168,6 @@ class CompiledNetwork:
                 "budget": self.budget.name, "cores_used": self.cores_used, "chips_used": self.chips_used,
                 "cores_per_layer": {l.name: l.cores for l in self.layers}}
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-able: the network spec, budget, layers, cores and traffic."""
-        from tofnet.io.spec import network_to_dict, patch_to_data
-        return {"format": "tofnet-compiled/1", "summary": self.summary(),
-                "network": network_to_dict(self.network, full=True), "budget": self.budget.to_dict(),
-                "patch": patch_to_data(self.patch), "host": list(self.host),
-                "layers": [l.to_dict() for l in self.layers], "cores": [c.to_dict() for c in self.cores],
-                "traffic": [t.to_dict() for t in self.traffic]}
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any], *, allow_import: Any = None) -> "CompiledNetwork":
-        """Rebuild from ``to_dict()`` output (the network from its embedded spec; ``allow_import``:
-        the modules its ``module:Class`` types may import, as for ``load_spec``)."""
-        from tofnet.io.spec import network_from_dict, patch_from_data
-        patch = patch_from_data(data.get("patch"))
-        return cls(network=network_from_dict(data["network"], allow_import=allow_import), budget=Budget.from_dict(data["budget"]),
-                   layers=tuple(LayerMapping.from_dict(l) for l in data["layers"]),
-                   cores=tuple(CoreAssignment.from_dict(c) for c in data["cores"]),
-                   traffic=tuple(Traffic.from_dict(t) for t in data["traffic"]),
-                   host=tuple(data["host"]), patch=patch)
-
 
 def network_of(compiled) -> Network:
     """The network of a ``CompiledNetwork``, or a ``Network`` itself."""
