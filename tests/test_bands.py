@@ -208,3 +208,19 @@ def test_events_outside_the_sensor_count_once():
     recording = Recording(events, intrinsics=TEST_INTRINSICS)
     result = with_bands(FixedBackend, [(0, 2), (2, 9), (9, 16)]).run(network, recording)
     assert result.dropped["out_of_bounds"] == 3 and result.accepted == 2 and result.events_in == 5
+
+
+def test_tofnet_run_with_workers_writes_the_same_bytes_and_says_how_it_split(tmp_path, capsys):
+    np.save(tmp_path / "ev.npy", scene((60, 40)).events)
+    common = ["--velocity", "0.5,0,0", "--intrinsics", "200,200,30,20", "--quiet"]
+    for estimator in ("paper", "improved"):
+        outs = []
+        for workers in ("1", "3"):
+            out = tmp_path / f"{estimator}-{workers}.npz"
+            assert main(["run", str(tmp_path / "ev.npy"), "--estimator", estimator, "--workers", workers,
+                         "--out", str(out), *common]) == 0
+            outs.append(out.read_bytes())
+        assert outs[0] == outs[1]
+        text = capsys.readouterr().out
+        assert "(3 bands of rows" in text
+        assert ("run whole:" in text) == (estimator == "improved")

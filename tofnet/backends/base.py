@@ -18,7 +18,7 @@ DROP_REASONS = ("out_of_bounds", "before_t0", "refractory", "same_step")
 REJECT_REASONS = ("no_measurement", "too_near", "too_far", "rotation_dominated")
 
 #: Summary keys that depend on how and where a run went, not on what it computed.
-RUN_SPECIFIC = ("backend", "wall_time_s", "compile_time_s", "kernels_compiled")
+RUN_SPECIFIC = ("backend", "wall_time_s", "compile_time_s", "kernels_compiled", "workers")
 
 #: ``progress(done, total)``: called now and then with events processed so far.
 ProgressCallback = Callable[[int, int], None]
@@ -157,6 +157,9 @@ class RunResult:
             "steps": self.steps, "timestep_s": self.timestep_us * 1e-6, "latency_steps": self.latency_steps,
             "latency_s": self.latency_seconds, "wall_time_s": self.wall_time,
             "compile_time_s": self.compile_time, "kernels_compiled": self.kernels_compiled})
+        if "bands" in self.extra:  # how the work was split (workers, bands of rows, what ran whole)
+            out["workers"] = {"threads": int(self.extra.get("workers", 1)), "bands": len(self.extra["bands"]),
+                              "whole": list(self.extra.get("whole", []))}
         return out
 
 

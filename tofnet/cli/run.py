@@ -49,6 +49,12 @@ def workers_option(text: str) -> int | str:
         raise BackendError(f"--workers: expected a whole number of workers or auto, got {text!r}") from None
 
 
+def workers_line(workers: dict) -> str:
+    """How a run was split: ``2 (2 bands of rows; run whole: time_surface)``."""
+    whole = f"; run whole: {', '.join(workers['whole'])}" if workers["whole"] else ""
+    return f"{workers['threads']} ({workers['bands']} bands of rows{whole})"
+
+
 def add_network_options(p: argparse.ArgumentParser) -> None:
     """Options that choose and adjust the network (shared with ``tofnet demo``)."""
     g = p.add_argument_group("network")
@@ -266,6 +272,7 @@ def format_summary(summary: dict, result, written: dict, network_width) -> str:
     lines = [f"recording      {summary['recording']}  ({width}x{height} px, {summary['steps']} steps of "
              f"{summary['timestep_s'] * 1e3:g} ms)",
              f"backend        {summary['backend']}",
+             *([f"workers        {workers_line(summary['workers'])}"] if summary.get("workers") else []),
              *([f"rotation       {summary['rotation']}"] if summary.get("rotation") else []),
              *([f"undistort      {undistortion_line(summary['undistortion'])}"] if summary.get("undistortion") else []),
              f"events in      {summary['events_in']:>12,}",
