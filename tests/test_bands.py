@@ -224,3 +224,20 @@ def test_tofnet_run_with_workers_writes_the_same_bytes_and_says_how_it_split(tmp
         text = capsys.readouterr().out
         assert "(3 bands of rows" in text
         assert ("run whole:" in text) == (estimator == "improved")
+
+
+def test_a_batch_grid_of_workers_runs_each_task_with_them_and_the_same_counts(tmp_path):
+    from tofnet.batch import PlanError, expand, load_plan
+    from tofnet.batch.worker import run_task
+
+    np.save(tmp_path / "ev.npy", scene((60, 40)).events)
+    (tmp_path / "plan.yaml").write_text("recordings:\n  - {path: ev.npy, intrinsics: '200,200,30,20'}\n"
+                                        "velocity: [0.5, 0, 0]\ngrid:\n  workers: [1, 3]\n")
+    tasks = expand(load_plan(tmp_path / "plan.yaml"))
+    assert [t.parameters for t in tasks] == [{"workers": 1}, {"workers": 3}]
+    rows = [run_task(task) for task in tasks]
+    assert all(r["status"] == "ok" for r in rows), rows
+    assert rows[0]["depth_out"] == rows[1]["depth_out"] > 0 and rows[0]["events_in"] == rows[1]["events_in"]
+    (tmp_path / "plan.yaml").write_text("recordings: [ev.npy]\ngrid:\n  workers: [1, lots]\n")
+    with pytest.raises(PlanError, match=r"grid.workers\[1\]: 'lots'.*whole number of workers"):
+        load_plan(tmp_path / "plan.yaml")

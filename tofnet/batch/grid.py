@@ -10,10 +10,21 @@ from typing import Any, Mapping
 from tofnet.errors import TofnetError, quote
 
 
+#: Grid keys that are backend options (``tofnet run --workers``), not network parameters.
+BACKEND_KEYS = ("workers",)
+
+
 def grid_options() -> dict[str, str]:
-    """Grid keys: the ``tofnet run`` options ``tofnet.api.apply_overrides`` knows, with - or _."""
+    """Grid keys: the ``tofnet run`` options ``tofnet.api.apply_overrides`` knows, with - or _, and the
+    backend's ``workers``."""
     from tofnet.api import OVERRIDES
-    return {**{k.replace("_", "-"): k for k in OVERRIDES}, **{k: k for k in OVERRIDES}}
+    keys = [*OVERRIDES, *BACKEND_KEYS]
+    return {**{k.replace("_", "-"): k for k in keys}, **{k: k for k in keys}}
+
+
+def _check_workers(value) -> None:
+    if value != "auto" and (isinstance(value, bool) or not isinstance(value, int) or value < 0):
+        raise TofnetError("expected a whole number of workers (0 or auto: one per CPU)")
 
 
 def read_grid(self, tree: Mapping) -> dict[str, list[Any]]:
@@ -58,6 +69,9 @@ def check_grid(self, plan) -> None:
         for option, values in plan.grid.items():
             for j, value in enumerate(values):
                 try:
+                    if option in BACKEND_KEYS:
+                        _check_workers(value)
+                        continue
                     apply_overrides(fresh(), **{option: value})
                 except TofnetError as err:
                     raise self.fail(section[keys[option]], j, f"grid.{keys[option]}[{j}]",
@@ -65,7 +79,7 @@ def check_grid(self, plan) -> None:
         if len(plan.grid) > 1:
             for point in plan.combinations():
                 try:
-                    apply_overrides(fresh(), **point)
+                    apply_overrides(fresh(), **{k: v for k, v in point.items() if k not in BACKEND_KEYS})
                 except TofnetError as err:
                     raise self.fail(self.tree, "grid", "grid", f"the point {quote(point, 120)} for network "
                                     f"{network.name!r}: {err}") from None

@@ -101,6 +101,7 @@ def _run(task: Task, recording_path: str, folder: Path) -> dict[str, Any]:
     from tofnet.api import DEFAULT_BACKEND, apply_overrides, load_network, run
     from tofnet.io import read_recording
 
+    from tofnet.batch.grid import BACKEND_KEYS
     from tofnet.batch.reading import open_options
 
     options = task.recording.options
@@ -109,13 +110,15 @@ def _run(task: Task, recording_path: str, folder: Path) -> dict[str, Any]:
     network, compile_options, spec_backend, backend_options = load_network(
         task.network.spec, sensor_size=None if task.network.spec else recording.sensor_size,
         allow_import=task.network.allow_import)
-    apply_overrides(network, **task.parameters)
+    parameters = {k: v for k, v in task.parameters.items() if k not in BACKEND_KEYS}
+    apply_overrides(network, **parameters)
     if options.get("velocity"):
         from tofnet.api import constant_velocity
         constant_velocity(network, options["velocity"])
     backend = task.backend or spec_backend or DEFAULT_BACKEND
     if task.backend and task.backend != spec_backend:
         backend_options = {}  # the spec's options belong to the spec's backend
+    backend_options = {**backend_options, **{k: v for k, v in task.parameters.items() if k in BACKEND_KEYS}}
     result, _ = run(recording, network, backend=backend, backend_options=backend_options,
                     compile_options=compile_options)
     summary = result.summary()
