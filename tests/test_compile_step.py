@@ -56,7 +56,7 @@ def test_warmup_command_reports_each_warmer_and_announces_on_stderr_only(capsys)
     assert "tofnet warmup: compiling kernels, first run only" in err
     assert "compiling kernels" not in out
     line = next(line for line in out.splitlines() if line.startswith("test-probe"))
-    assert "1 kernels compiled" in line and "one fresh kernel" in line
+    assert "1 kernel compiled" in line and "one fresh kernel" in line
     assert "done in" in out.splitlines()[-1]
 
 

@@ -1,4 +1,5 @@
-"""The README's command blocks (```sh) run in order in a fresh folder, as a newcomer types them.
+"""The README's command blocks (```sh) run in order in a fresh folder, as a newcomer types them,
+and then its Python blocks, one after the other in one interpreter, on the files they made.
 
 Installing tofnet and running the test suite are left out (this test is part of that suite and
 runs on the tree itself): ``tofnet`` is this tree's (``python -m tofnet`` with the tree on
@@ -32,6 +33,11 @@ def command_lines(text: str) -> list[str]:
             if line and not line.startswith("#"):
                 lines.append(line)
     return lines
+
+
+def python_blocks(text: str) -> list[str]:
+    """The README's ``python`` blocks, in order."""
+    return re.findall(r"^```python\n(.*?)^```", text, flags=re.S | re.M)
 
 
 def commands(line: str) -> list[list[str]]:
@@ -87,3 +93,9 @@ def test_every_readme_command_runs_in_order_in_a_fresh_folder(tmp_path):
     assert "cores" in printed["tofnet compile examples/paper_240x180.yaml"]
     assert " 0 failed" in printed["tofnet conformance --backend multiproc --case edge"]
     assert "done in" in printed["tofnet warmup"]
+
+    script = "\n".join(python_blocks((ROOT / "README.md").read_text(encoding="utf-8")))
+    done = subprocess.run([sys.executable, "-c", script + "\nprint('estimates', len(result.outputs['depth2.depth']))"], cwd=tmp_path,
+                          env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, f"the README's Python blocks:\n{done.stderr[-2000:]}"
+    assert int(done.stdout.split()[-1]) > 1000

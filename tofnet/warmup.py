@@ -39,19 +39,26 @@ class Warmed:
     compiled: int
 
     def line(self) -> str:
-        how = (f"{self.compiled} kernels compiled in {self.compile_seconds:.1f} s" if self.compiled
+        from tofnet.kernels.compilation import kernels
+        how = (f"{kernels(self.compiled)} compiled in {self.compile_seconds:.1f} s" if self.compiled
                else f"already compiled (cache loaded in {self.compile_seconds:.1f} s)")
         return f"{self.name:<12} {self.seconds:6.1f} s  {how}: {self.what}"
+
+
+def check_names(names: Iterable[str] | None) -> list[str]:
+    """The warmers called ``names`` (all when None); a one-line ``TofnetError`` names an unknown one."""
+    chosen = list(WARMERS) if names is None else list(names)
+    unknown = [name for name in chosen if name not in WARMERS]
+    if unknown:
+        raise TofnetError(f"unknown warmer {unknown[0]!r}; expected one of {', '.join(WARMERS)}")
+    return chosen
 
 
 def warm_up(names: Iterable[str] | None = None, report: Callable[[Warmed], None] | None = None) -> list[Warmed]:
     """Run the warmers called ``names`` (all when None), calling ``report`` after each; what each did."""
     from tofnet.kernels.compilation import Stopwatch
 
-    chosen = list(WARMERS) if names is None else list(names)
-    unknown = [name for name in chosen if name not in WARMERS]
-    if unknown:
-        raise TofnetError(f"unknown warmer {unknown[0]!r}; expected one of {', '.join(WARMERS)}")
+    chosen = check_names(names)
     done = []
     for name in chosen:
         clock = Stopwatch()

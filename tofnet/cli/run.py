@@ -156,9 +156,10 @@ def handle(args) -> int:
     return 0
 
 
-def compile_line(seconds: float, kernels: int) -> str:
+def compile_line(seconds: float, count: int) -> str:
     """The summary's line on kernels compiled during the command (first run only: numba caches them)."""
-    return (f"compile        {seconds:.3f} s  {kernels} kernels compiled, not counted in the network's time "
+    from tofnet.kernels.compilation import kernels
+    return (f"compile        {seconds:.3f} s  {kernels(count)} compiled, not counted in the network's time "
             "(first run only: numba caches them; 'tofnet warmup' does it ahead)")
 
 

@@ -129,6 +129,7 @@ def list_scenarios() -> str:
 
 def format_summary(s: dict) -> str:
     """The summary ``simulate`` returns, as a few lines of text."""
+    from tofnet.kernels.compilation import kernels
     w, h = s["sensor_size"]
     share_on = s["events_on"] / s["events"] if s["events"] else 0.0
     lines = [f"simulated {s['scenario']} ({s['description']}), seed {s['seed']}",
@@ -137,7 +138,7 @@ def format_summary(s: dict) -> str:
              f"  event depth {s['depth_min']:.3f} .. {s['depth_max']:.3f} m (median {s['depth_median']:.3f} m)",
              f"  {s['renders']} renders, largest image step {s['max_render_step_px']:.3f} px; "
              f"{s['sim_time_s']:.1f} s simulating, {s['write_time_s']:.1f} s writing"
-             + (f" ({s['compile_time_s']:.1f} s of it compiling {s['kernels_compiled']} kernels: first run only)"
+             + (f" ({s['compile_time_s']:.1f} s of it compiling {kernels(s['kernels_compiled'])}: first run only)"
                 if s.get("kernels_compiled") else "")]
     if s["out_dir"] and Path(s["out_dir"]).suffix.lower() in FILE_OUTPUTS:
         lines += [f"  {message}" for message in s["files"]]

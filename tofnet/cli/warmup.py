@@ -17,12 +17,14 @@ def register(subparsers) -> None:
 
 
 def handle(args) -> int:
-    from tofnet.warmup import warm_up
+    from tofnet.kernels.compilation import kernels
+    from tofnet.warmup import check_names, warm_up
 
+    names = check_names(args.only or None)  # before saying anything
     started = time.perf_counter()
     print("warming up every kernel tofnet runs (once per install: numba caches them) ...", flush=True)
-    done = warm_up(args.only or None, report=lambda warmed: print(warmed.line(), flush=True))
+    done = warm_up(names, report=lambda warmed: print(warmed.line(), flush=True))
     compiled = sum(w.compiled for w in done)
-    print(f"done in {time.perf_counter() - started:.1f} s: {compiled} kernels compiled"
+    print(f"done in {time.perf_counter() - started:.1f} s: {kernels(compiled)} compiled"
           + ("" if compiled else " (all were already in numba's cache)"))
     return 0

@@ -19,7 +19,7 @@ from typing import Callable
 
 from numba.core import event
 
-__all__ = ["COMPILING", "Stopwatch", "compile_seconds", "kernels_compiled"]
+__all__ = ["COMPILING", "Stopwatch", "compile_seconds", "kernels", "kernels_compiled"]
 
 #: What the log says when a process starts compiling its first kernel.
 COMPILING = "compiling kernels, first run only (20-60 s; numba caches them; 'tofnet warmup' does it ahead) ..."
@@ -73,6 +73,11 @@ def compile_seconds() -> float:
 def kernels_compiled() -> int:
     """Kernels this process compiled (numba cache misses), not counting those loaded from the cache."""
     return _COMPILES.count
+
+
+def kernels(n: int) -> str:
+    """``"1 kernel"``, ``"3 kernels"``: for the lines that report compiles."""
+    return f"{n} kernel{'' if n == 1 else 's'}"
 
 
 class Stopwatch:
