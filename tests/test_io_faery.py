@@ -122,12 +122,14 @@ def test_missing_extra_is_one_line_naming_it(tmp_path, recording, monkeypatch):
 
 
 def test_evt_decoder_keeps_times_monotonic(tmp_path, recording):
-    # faery's EVT decoder gives an event stamped before its predecessor the predecessor's
-    # stamp (documented in docs/formats.md); tofnet reads what it decodes.
+    # An EVT3 event stamped before its predecessor gets the predecessor's stamp (tofnet's EVT3
+    # decoder keeps time order so, and counts it in a note: docs/formats.md, "EVT3 timing").
     events = recording.events.copy()
     events["t"][500] = events["t"][499] - 10
     path = tmp_path / "rec.raw"
     _write(path, events, version="evt3", enforce_monotonic_timestamps=False)
-    read = read_recording(path).events
+    recording = read_recording(path)
+    read = recording.events
     assert read["t"][500] == events["t"][499]
+    assert any(note.startswith("1 EVT3 events") for note in recording.notes)
     assert np.array_equal(np.delete(read, 500), np.delete(events, 500))

@@ -10,7 +10,7 @@ from tofnet.errors import TofnetError
 
 #: Subcommand modules, in the order ``tofnet --help`` lists them.
 SUBCOMMANDS = ("demo", "run", "simulate", "eval", "plot", "compile", "conformance", "info", "convert", "export",
-               "batch", "warmup")
+               "batch", "warmup", "live")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -26,8 +26,9 @@ from numba import njit
 
 from tofnet.events import EVENT_DTYPE
 
-#: Words decoded per block: at most 12 events a word (VECT_12), so 3 M events (39 MB) at most.
-BLOCK_WORDS = 1 << 18
+#: Words decoded per block (about 4 ms of decoding, which a live replay waits for): at most 12 events a
+#: word (VECT_12), so 0.8 M events (10 MB) at most.
+BLOCK_WORDS = 1 << 16
 
 # Decoder state, carried from block to block (an int64 array so the kernel can update it).
 _HIGH, _LOW, _LOOPS, _X, _Y, _POL, _LAST, _CLAMPED, _STARTED, _BAD, _BAD_AT = range(11)

@@ -1,0 +1,166 @@
+"""tofnet live: replay at the recorded speed, the delay of each estimate, late packets, PNG frames, cameras."""
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from formats_helpers import pattern_recording
+from tofnet.api import run as run_recording
+from tofnet.cli import main
+from tofnet.errors import TofnetError
+from tofnet.io.arrays import write_npz_recording
+from tofnet.io.source import open_recording
+from tofnet.live import CameraSource, ReplaySource, packet_bounds, run_live
+from tofnet.networks import depth_network
+
+REAL = Path(__file__).resolve().parents[1].parent / "shared" / "real"  # ../shared/real beside the checkout
+SPAN_S = 0.2
+
+
+@pytest.fixture(scope="module")
+def recording_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("live") / "pattern.npz"
+    write_npz_recording(path, pattern_recording(int(SPAN_S * 1e6)))
+    return path
+
+
+def _network(source):
+    return depth_network(source.sensor_size)
+
+
+def test_packets_split_at_every_step():
+    t = np.array([5, 999, 1000, 1001, 3500], dtype=np.int64)
+    cuts, ends = packet_bounds(t, 0, 1000)
+    assert list(ends) == [1000, 2000, 3000, 4000] and list(cuts) == [0, 2, 4, 4, 5]
+
+
+@pytest.mark.parametrize("speed", [1.0, 2.0])
+def test_replay_takes_the_recordings_time_and_every_delay_is_real(recording_file, speed):
+    with open_recording(recording_file) as source:
+        span_s = (source.read().events["t"][-1] - source.first_time()) * 1e-6
+        replay = ReplaySource(source, speed=speed)
+        started = time.perf_counter()
+        stats, result = run_live(replay, _network(source), backend="fixed")
+        took = time.perf_counter() - started
+    # Paced by the file's clock: never faster than the recording, not much slower on an idle machine.
+    assert stats.wall_s >= 0.95 * span_s / speed
+    assert took < span_s / speed + 30  # generous: the session's warm-up and a loaded machine
+    assert stats.events_in == len(open_recording(recording_file).read().events)
+    assert stats.packets == int(np.ceil(stats.span_us / 1000))
+    assert stats.depth_out > 0 and len(stats.delays_us) == stats.depth_out
+    # An estimate is handed back only once its step is complete on the replay clock: at least
+    # latency + 1 steps after its event's step began.
+    assert min(stats.delays_us) >= 3000
+    assert stats.percentile_ms(50) <= stats.percentile_ms(99)
+
+
+def test_live_estimates_equal_a_whole_run(recording_file):
+    with open_recording(recording_file) as source:
+        whole = source.read()
+        network = _network(source)
+        _, result = run_live(ReplaySource(source, speed=4.0), network, backend="fixed")
+    reference, _ = run_recording(whole, network, backend="fixed")
+    name = result.depth_outputs[0]
+    assert len(result.outputs[name]) > 0
+    assert np.array_equal(np.sort(result.outputs[name], order=["t", "x", "y"]),
+                          np.sort(reference.outputs[name], order=["t", "x", "y"]))
+
+
+def test_falling_behind_is_measured_and_drops_only_when_asked(recording_file):
+    slow = lambda: time.sleep(0.003)  # noqa: E731 - a display that takes 3 ms per 1 ms packet
+    with open_recording(recording_file) as source:
+        total = len(source.read().events)
+        kept, _ = run_live(ReplaySource(source), _network(source), backend="fixed", tick=slow)
+    assert kept.late_packets > 0 and kept.max_behind_us > 50_000
+    assert kept.dropped_events == 0 and kept.events_in == total
+    with open_recording(recording_file) as source:
+        dropped, _ = run_live(ReplaySource(source), _network(source), backend="fixed", tick=slow,
+                              drop_when_late=True)
+    assert dropped.dropped_events > 0 and dropped.dropped_packets > 0
+    assert dropped.events_in + dropped.dropped_events == total
+    assert dropped.max_behind_us < kept.max_behind_us
+
+
+def test_bad_speed_is_one_line(recording_file):
+    with open_recording(recording_file) as source, pytest.raises(TofnetError, match="--speed"):
+        ReplaySource(source, speed=0)
+
+
+class _FakeCamera:
+    """faery's camera stream: packets of any length in faery's dtype, times on the camera's clock."""
+
+    def __init__(self, events):
+        import faery
+        self.packets = []
+        for part in np.array_split(events, 7):
+            raw = np.empty(len(part), faery.EVENTS_DTYPE)
+            raw["t"], raw["x"], raw["y"], raw["on"] = part["t"], part["x"], part["y"], part["p"] == 1
+            self.packets.append(raw)
+
+    def dimensions(self):
+        return (64, 48)
+
+    def __iter__(self):
+        yield from self.packets
+
+
+def test_camera_packets_are_whole_steps_in_order():
+    pytest.importorskip("faery")
+    events = pattern_recording(50_000).events
+    camera = CameraSource(opener=lambda: _FakeCamera(events))
+    assert camera.metadata().sensor_size == (64, 48)
+    got = list(camera.packets())
+    ends = [end for _, end in got]
+    assert all(b > a for a, b in zip(ends, ends[1:]))
+    for packet, end in got:
+        assert len(packet) == 0 or (packet["t"][-1] < end and packet["t"][0] >= end - 1000)
+    # The events of the last, possibly unfinished, step are held back; all others come out once.
+    out = np.concatenate([p for p, _ in got])
+    assert np.array_equal(out, events[:len(out)]) and len(events) - len(out) < 200
+
+
+def test_no_camera_is_one_line(capsys):
+    pytest.importorskip("faery")
+    import importlib.util
+    if importlib.util.find_spec("neuromorphic_drivers") or importlib.util.find_spec("event_camera_drivers"):
+        pytest.skip("camera drivers installed: a camera may be present")
+    assert main(["live", "--camera"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "no event camera found" in err
+
+
+def test_cli_replay_writes_png_frames_atomically(recording_file, tmp_path, capsys):
+    out = tmp_path / "frames"
+    assert main(["live", "--replay", str(recording_file), "--speed", "2", "--velocity", "0,0,1", "--out", str(out),
+                 "--png-every", "0.05s", "--json", str(tmp_path / "stats.json")]) == 0
+    text = capsys.readouterr().out
+    assert "delay          p50" in text and "p99" in text and "PNG frames" in text
+    frames = sorted(p.name for p in out.iterdir())
+    assert frames and all(name.startswith("depth-") and name.endswith(".png") for name in frames)
+    import json
+    stats = json.loads((tmp_path / "stats.json").read_text())
+    assert stats["delay_p99_ms"] >= stats["delay_p50_ms"] >= 3.0
+    (out / "notes.txt").write_text("mine")
+    assert main(["live", "--replay", str(recording_file), "--out", str(out)]) == 2
+    assert "did not write" in capsys.readouterr().err and (out / "notes.txt").read_text() == "mine"
+
+
+@pytest.mark.skipif(not (REAL / "evt3.raw").is_file(), reason="no ../shared/real/evt3.raw (real recordings)")
+def test_real_evt3_window_replays_in_step_with_its_clock():
+    pytest.importorskip("faery")
+    from tofnet.io.calibration import parse_intrinsics
+    from tofnet.io.window import parse_window
+
+    window = parse_window("2s", "0.3s", None)
+    with open_recording(REAL / "evt3.raw", intrinsics=parse_intrinsics("1000,1000,640,360"), window=window) as source:
+        expected = len(open_recording(REAL / "evt3.raw", window=window).read().events)
+        network = depth_network(source.sensor_size)
+        from tofnet.api import constant_velocity
+        constant_velocity(network, "0,0,1")
+        stats, _ = run_live(ReplaySource(source), network, backend="fixed")
+    assert stats.events_in == expected > 10_000
+    assert stats.wall_s >= 0.95 * 0.3 and abs(stats.span_us * 1e-6 - 0.3) < 0.002
+    assert stats.depth_out > 0 and min(stats.delays_us) >= 3000
+    assert np.isfinite(stats.percentile_ms(99))

@@ -1,0 +1,274 @@
+"""Live sources: a network fed packet by packet as the events arrive, with the delay of each estimate measured.
+
+A ``LiveSource`` hands over packets of one timestep (``packet_us``, 1 ms by default) as
+they become complete on its clock, and says what time it is on that clock (``now_us``):
+
+- ``ReplaySource``: a recording replayed at its recorded speed (``speed`` 1.0) or slower
+  or faster; its clock is the file's, started at its first event when the replay starts.
+- ``CameraSource``: a camera through faery's camera streams (``faery.events_stream_from_camera``);
+  its clock is the camera's, tied to this computer's at the first packet.
+
+``run_live`` opens a ``Session`` on the first packet and feeds each packet into it (the
+same stream machinery as ``tofnet run``), hands the depth estimates to ``on_depth`` as
+they come, and measures for each estimate the delay from the start of the timestep of the
+event that caused it (the estimate's stamp minus its output's latency plus one step) to
+the moment ``feed`` handed it back, on the source's clock: at most one step more than
+from the event itself. A packet is *late* when it is fed more than one packet after it
+was complete; with ``drop_when_late`` its events are dropped (and counted), otherwise the
+run falls behind and says by how much. Docs: docs/live.md.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from tofnet.errors import TofnetError
+from tofnet.events import EVENT_DTYPE
+from tofnet.io.recording import Recording
+
+
+class LiveSource(Protocol):
+    """What ``run_live`` needs of a source of events arriving in real time."""
+
+    packet_us: int
+    #: The time of the first event when known before the first packet (a replay), else None.
+    t0_us: int | None
+
+    def metadata(self) -> Recording:
+        """The camera (sensor size, intrinsics, poses or IMU if any), without events."""
+
+    def packets(self) -> Iterator[tuple[np.ndarray, int]]:
+        """``(events, until_us)`` once all events before ``until_us`` have arrived; blocks until then."""
+
+    def now_us(self) -> float:
+        """The present moment on the source's clock (µs)."""
+
+
+def packet_bounds(t: np.ndarray, start_us: int, packet_us: int) -> tuple[np.ndarray, np.ndarray]:
+    """Indexes splitting time-sorted ``t`` at every multiple of ``packet_us`` after ``start_us``, and the
+    packets' ends (µs): packet ``i`` is ``t[cuts[i]:cuts[i + 1]]``, ending at ``ends[i]``."""
+    first = (int(t[0]) - start_us) // packet_us
+    last = (int(t[-1]) - start_us) // packet_us
+    ends = start_us + packet_us * np.arange(first + 1, last + 2, dtype=np.int64)
+    cuts = np.concatenate([[0], np.searchsorted(t, ends, side="left")])
+    return cuts, ends
+
+
+class ReplaySource:
+    """A recording (an open ``EventSource``) replayed at ``speed`` times its recorded speed."""
+
+    def __init__(self, source, speed: float = 1.0, packet_us: int = 1000, chunk_events: int = 1 << 16):
+        if not (isinstance(speed, (int, float)) and np.isfinite(speed) and speed > 0):
+            raise TofnetError(f"--speed: expected a number of times the recorded speed > 0, got {speed!r}")
+        self.source, self.speed, self.packet_us, self.chunk_events = source, float(speed), int(packet_us), chunk_events
+        self.first_us: int | None = None
+        self._wall0: float | None = None
+        self.t0_us = source.window[0] if source.window is not None else source.first_time()
+
+    def metadata(self) -> Recording:
+        return self.source.metadata()
+
+    def now_us(self) -> float:
+        if self._wall0 is None:
+            return float("-inf")
+        return self.first_us + (time.perf_counter() - self._wall0) * self.speed * 1e6
+
+    def _wait_until(self, t_us: int) -> None:
+        ahead = (t_us - self.now_us()) / self.speed * 1e-6
+        if ahead > 0:
+            time.sleep(ahead)
+
+    def packets(self) -> Iterator[tuple[np.ndarray, int]]:
+        carry = np.empty(0, EVENT_DTYPE)
+        last_end = None
+        for chunk in self.source.chunks(self.chunk_events):
+            if not len(chunk):
+                continue
+            if self.first_us is None:  # the clock starts: at the window's start, else the first event
+                self.first_us = int(chunk["t"][0]) if self.t0_us is None else min(self.t0_us, int(chunk["t"][0]))
+                self._wall0, last_end = time.perf_counter(), self.first_us
+            events = np.concatenate([carry, chunk]) if len(carry) else chunk
+            cuts, ends = packet_bounds(events["t"], self.first_us, self.packet_us)
+            # The last packet may go on in the next chunk: keep it back.
+            for i in range(len(ends) - 1):
+                yield from self._empty_until(last_end, int(ends[i]) - self.packet_us)
+                self._wait_until(int(ends[i]))
+                yield events[cuts[i]:cuts[i + 1]], int(ends[i])
+                last_end = int(ends[i])
+            carry = events[cuts[-2]:]
+        if len(carry):
+            end = self.first_us + ((int(carry["t"][-1]) - self.first_us) // self.packet_us + 1) * self.packet_us
+            yield from self._empty_until(last_end, end - self.packet_us)
+            self._wait_until(end)
+            yield carry, end
+
+    def _empty_until(self, last_end: int, until: int) -> Iterator[tuple[np.ndarray, int]]:
+        """Empty packets for the timesteps without events (the clock goes on)."""
+        for end in range(last_end + self.packet_us, until + 1, self.packet_us):
+            self._wait_until(end)
+            yield np.empty(0, EVENT_DTYPE), end
+
+
+class CameraSource:
+    """A camera through faery (``events_stream_from_camera``); one line when there is none."""
+
+    def __init__(self, intrinsics=None, packet_us: int = 1000, opener: Callable | None = None):
+        try:
+            import faery
+        except ImportError:
+            raise TofnetError('camera: faery is not installed (pip install "tofnet[formats]")') from None
+        try:
+            self.stream = (opener or faery.events_stream_from_camera)()
+        except Exception as err:  # noqa: BLE001 - the drivers raise anything; the user needs one line
+            detail = " ".join(str(a) for a in getattr(err, "args", ()) if a) or type(err).__name__
+            raise TofnetError(f"camera: no event camera found through faery ({' '.join(detail.split())[:200]})") \
+                from None
+        self.sensor_size = tuple(int(v) for v in self.stream.dimensions())
+        self.intrinsics, self.packet_us, self.t0_us = intrinsics, int(packet_us), None
+        self._offset_us: float | None = None  # camera time minus this computer's clock (µs)
+
+    def metadata(self) -> Recording:
+        return Recording(events=np.empty(0, EVENT_DTYPE), intrinsics=self.intrinsics, sensor_size=self.sensor_size,
+                         source="camera")
+
+    def now_us(self) -> float:
+        return float("-inf") if self._offset_us is None else time.perf_counter() * 1e6 + self._offset_us
+
+    def packets(self) -> Iterator[tuple[np.ndarray, int]]:
+        carry, start = np.empty(0, EVENT_DTYPE), None
+        for raw in self.stream:
+            if raw is None or not len(raw):
+                continue
+            events = np.empty(len(raw), EVENT_DTYPE)
+            events["t"], events["x"], events["y"] = raw["t"], raw["x"], raw["y"]
+            events["p"] = raw["on"] if "on" in raw.dtype.names else raw["p"]
+            if self._offset_us is None:  # the camera's latest event is "now"
+                self._offset_us = float(events["t"][-1]) - time.perf_counter() * 1e6
+                start = int(events["t"][0])
+            events = np.concatenate([carry, events]) if len(carry) else events
+            cuts, ends = packet_bounds(events["t"], start, self.packet_us)
+            for i in range(len(ends) - 1):  # the last timestep may still receive events
+                yield events[cuts[i]:cuts[i + 1]], int(ends[i])
+            carry = events[cuts[-2]:]
+
+
+@dataclass
+class LiveStats:
+    """What a live run measured. Delays in µs on the source's clock."""
+
+    delays_us: list = field(default_factory=list)
+    events_in: int = 0
+    packets: int = 0
+    late_packets: int = 0
+    dropped_events: int = 0
+    dropped_packets: int = 0
+    max_behind_us: float = 0.0
+    behind_us: float = 0.0  # at the last packet
+    depth_out: int = 0
+    span_us: int = 0  # the source's time covered
+    wall_s: float = 0.0
+    cpu_s: float = 0.0  # this process's CPU time (all threads) during the run
+
+    def percentile_ms(self, q: float) -> float:
+        return float(np.percentile(self.delays_us, q)) * 1e-3 if self.delays_us else float("nan")
+
+    def lines(self) -> list[str]:
+        rate = self.events_in / self.wall_s if self.wall_s > 0 else 0.0
+        out = [f"delay          p50 {self.percentile_ms(50):.2f} ms, p99 {self.percentile_ms(99):.2f} ms, "
+               f"max {self.percentile_ms(100):.2f} ms  (event's step start -> estimate handed back, "
+               f"{len(self.delays_us):,} estimates)",
+               f"events         {self.events_in:,} in {self.wall_s:.2f} s ({rate:,.0f} events/s) for "
+               f"{self.span_us * 1e-6:.2f} s of source time",
+               f"cpu            {self.cpu_s:.2f} s for {self.span_us * 1e-6:.2f} s of source time "
+               f"({100 * self.cpu_s / max(self.span_us * 1e-6, 1e-9):.0f} % of one core; above 100 % it cannot "
+               "keep up)",
+               f"packets        {self.packets:,}, late {self.late_packets:,} (fed more than one packet after "
+               f"they were complete); behind at most {self.max_behind_us * 1e-3:.1f} ms, at the end "
+               f"{self.behind_us * 1e-3:.1f} ms"]
+        if self.dropped_packets:
+            out.append(f"dropped        {self.dropped_events:,} events in {self.dropped_packets:,} late packets "
+                       "(--drop-when-late)")
+        return out
+
+
+def warm_up(compiled, metadata: Recording, backend, backend_options) -> None:
+    """Compile (or load from numba's cache) the kernels a session runs, before the source's clock starts:
+    a throwaway session on two events at the sensor's centre."""
+    from tofnet.session import Session
+
+    width, height = metadata.sensor_size or (2, 2)
+    events = np.zeros(2, EVENT_DTYPE)
+    events["t"], events["x"], events["y"], events["p"] = [0, 1500], width // 2, height // 2, [1, 0]
+    with Session(compiled, metadata, backend=backend, backend_options=backend_options, t0_us=0) as session:
+        session.feed(events, until_us=4000)
+        session.finish()
+
+
+def run_live(source: LiveSource, network, *, backend: str = "fixed", backend_options: dict | None = None,
+             compile_options: dict | None = None, drop_when_late: bool = False,
+             on_depth: Callable[[np.ndarray], None] | None = None, tick: Callable[[], None] | None = None,
+             stop: Callable[[], bool] | None = None) -> tuple[LiveStats, object]:
+    """Run ``network`` on ``source`` until it ends (or ``stop()`` is true); the statistics and the run's
+    ``RunResult``. ``on_depth(records)`` sees each batch of depth estimates as it comes; ``tick()`` is
+    called after every packet (to refresh a display)."""
+    from tofnet.compiler import compile_network
+    from tofnet.session import Session
+
+    compiled = compile_network(network, **(compile_options or {}))
+    warm_up(compiled, source.metadata(), backend, backend_options)
+    stats, session, wall0, cpu0 = LiveStats(), None, time.perf_counter(), time.process_time()
+    primary, step_us, latency = None, source.packet_us, 0
+    first = None
+
+    def open_session(t0_us: int):
+        nonlocal session, primary, step_us, latency, first
+        first = t0_us
+        session = Session(compiled, source.metadata(), backend=backend, backend_options=backend_options, t0_us=t0_us)
+        primary, step_us = session.stream.primary, session.timestep_us
+        latency = session.executor.output_latency(primary) if primary else 0
+
+    try:
+        if source.t0_us is not None:  # before the source's clock starts: opening takes time
+            open_session(source.t0_us)
+        for events, until_us in source.packets():
+            behind = source.now_us() - until_us
+            stats.packets += 1
+            stats.behind_us = max(behind, 0.0)
+            stats.max_behind_us = max(stats.max_behind_us, stats.behind_us)
+            if behind > source.packet_us:
+                stats.late_packets += 1
+                if drop_when_late and len(events):
+                    stats.dropped_events += len(events)
+                    stats.dropped_packets += 1
+                    events = events[:0]
+            if session is None:
+                if not len(events):
+                    continue
+                open_session(int(events["t"][0]))
+            stats.events_in += len(events)
+            produced = session.feed(events, until_us)
+            depth = produced.get(primary) if primary else None
+            if depth is not None and len(depth):
+                now = source.now_us()
+                stats.delays_us.extend((now - (depth["t"] - (latency + 1) * step_us)).tolist())
+                stats.depth_out += len(depth)
+                if on_depth is not None:
+                    on_depth(depth)
+            stats.span_us = until_us - first
+            if tick is not None:
+                tick()
+            if stop is not None and stop():
+                break
+        if session is None:
+            raise TofnetError("live: the source gave no events")
+        result = session.finish()  # the steps still in flight (not counted in the delays: nothing waits for them)
+    finally:
+        if session is not None:
+            session.stop()
+        stats.wall_s, stats.cpu_s = time.perf_counter() - wall0, time.process_time() - cpu0
+    return stats, result
