@@ -28,3 +28,106 @@ def test_nothing_past_the_compiler_names_the_papers_processes():
             continue
         text = path.read_text()
         assert not any(name in text for name in names), f"{path.name} names one of the paper's processes"
+
+
+# --- the import graph: layers and cycles ------------------------------------------------------------------------
+
+#: tofnet's layers, lowest first: a module may import its own layer and those below, never above.
+#: ``tofnet`` is the package's ``__init__`` (a facade over core, processes and networks).
+LAYERS = (
+    {"errors", "events", "units"},
+    {"core", "kernels", "monitor", "fuzzing_checks"},
+    {"compiler"},
+    {"io"},
+    {"processes", "sim"},
+    {"networks", "tofnet"},
+    {"models"},
+    {"backends"},
+    {"session"},
+    {"api", "eval", "conformance", "testing"},
+    {"warmup", "batch", "fuzzing_formats", "fuzzing_storage"},
+    {"cli", "fuzzing_trust"},
+    {"fuzzing"},
+    {"__main__"},
+)
+#: Imports that still run up a layer, each with what removes it (no new entry without one).
+UPWARD_KNOWN = {
+    # issue 25 item 1: the drop/reject vocabulary and the velocity/camera binding move below backends/
+    ("tofnet.kernels.input_filter", "tofnet.backends.base"),
+    ("tofnet.models.input", "tofnet.backends.base"),
+    ("tofnet.models.depth", "tofnet.backends.base"),
+    ("tofnet.models.velocity", "tofnet.backends.runtime"),
+    ("tofnet.models.angular_velocity", "tofnet.backends.runtime"),
+}
+#: Cycles still in the tree, each with what removes it.
+CYCLES_KNOWN = [
+    # issue 25 item 3: readers register without a cycle (the EventSource protocol below the registry)
+    {"tofnet.io.aedat", "tofnet.io.calibration", "tofnet.io.ecd", "tofnet.io.hdf5", "tofnet.io.hdf5_datasets",
+     "tofnet.io.in_memory", "tofnet.io.prophesee", "tofnet.io.rosbag", "tofnet.io.source"},
+    # the output guard and the atomic writers it uses
+    {"tofnet.io.files", "tofnet.io.guard"},
+]
+
+
+def _import_graph() -> dict[str, set[str]]:
+    """Module -> the tofnet modules it imports (function-level imports too; not ``if TYPE_CHECKING:``)."""
+    import ast
+    from pathlib import Path
+    import tofnet
+
+    root = Path(tofnet.__file__).parent
+    modules = {}
+    for path in root.rglob("*.py"):
+        parts = ["tofnet", *path.relative_to(root).with_suffix("").parts]
+        modules[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+
+    def imported(path: Path) -> set[str]:
+        found: set[str] = set()
+
+        class Visitor(ast.NodeVisitor):
+            def visit_If(self, node: ast.If) -> None:
+                test = node.test
+                if getattr(test, "id", None) == "TYPE_CHECKING" or getattr(test, "attr", None) == "TYPE_CHECKING":
+                    for child in node.orelse:
+                        self.visit(child)
+                    return
+                self.generic_visit(node)
+
+            def visit_Import(self, node: ast.Import) -> None:
+                found.update(a.name for a in node.names if a.name.startswith("tofnet"))
+
+            def visit_ImportFrom(self, node: ast.ImportFrom) -> None:
+                if node.level == 0 and node.module and node.module.startswith("tofnet"):
+                    for alias in node.names:
+                        full = f"{node.module}.{alias.name}"
+                        found.add(full if full in modules else node.module)
+
+        Visitor().visit(ast.parse(path.read_text()))
+        return found
+
+    return {name: {m for m in imported(path) if m in modules and m != name} for name, path in modules.items()}
+
+
+def _layer(module: str) -> int:
+    parts = module.split(".")
+    top = parts[1] if len(parts) > 1 else "tofnet"
+    for i, layer in enumerate(LAYERS):
+        if top in layer:
+            return i
+    raise AssertionError(f"{module}: its package {top!r} is in no layer of LAYERS; add it where it belongs")
+
+
+def test_no_import_runs_up_a_layer():
+    graph = _import_graph()
+    upward = {(a, b) for a, targets in graph.items() for b in targets if _layer(b) > _layer(a)}
+    assert upward - UPWARD_KNOWN == set(), "imports that run up a layer (docs/architecture.md)"
+    assert UPWARD_KNOWN - upward == set(), "a known upward import is gone: remove it from UPWARD_KNOWN"
+
+
+def test_no_import_cycle_beyond_the_known_ones():
+    import networkx as nx
+
+    graph = nx.DiGraph([(a, b) for a, targets in _import_graph().items() for b in targets])
+    cycles = [set(c) for c in nx.strongly_connected_components(graph) if len(c) > 1]
+    assert [c for c in cycles if c not in CYCLES_KNOWN] == []
+    assert [c for c in CYCLES_KNOWN if c not in cycles] == [], "a known cycle is gone: remove it from CYCLES_KNOWN"

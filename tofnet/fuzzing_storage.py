@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from tofnet.errors import DataError
-from tofnet.fuzzing import check_recording, require
+from tofnet.fuzzing_checks import check_recording, require
 
 MODES = ("plain", "external", "virtual", "declared", "group", "compressed", "link", "dev-zero")
 STORES = ("regular", "fifo", "dev-zero", "missing", "short", "folder")

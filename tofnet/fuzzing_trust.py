@@ -103,7 +103,7 @@ def _load(name: str):
 def check_trusted(loaded: Loaded) -> None:
     """No module outside the allow list imported, nothing beside the spec run, a plan bounded."""
     from tofnet.batch.bounds import MAX_TASKS
-    from tofnet.fuzzing import check_network, require
+    from tofnet.fuzzing_checks import check_network, require
     require(not loaded.imported, f"only allowed modules are imported (imported {loaded.imported})")
     require(not loaded.beside_ran, "a module beside the spec never runs")
     if loaded.result is None:

@@ -96,9 +96,8 @@ def patch_to_data(patch: Any) -> Any:
 
 def spec_to_dict(spec: Spec | Network, full: bool = False) -> dict[str, Any]:
     """A spec (or a bare network) as plain data, ready for YAML or JSON."""
-    if isinstance(spec, Network):
-        from tofnet.io.spec import Spec
-        spec = Spec(spec)
+    if isinstance(spec, Network):  # a bare network: no description, compile or backend keys
+        return network_to_dict(spec, full=full)
     out = network_to_dict(spec.network, full=full)
     if spec.description:
         out = {"name": out.pop("name"), "description": spec.description, **out}
