@@ -44,7 +44,7 @@ LAYERS = (
     {"models"},
     {"backends"},
     {"session"},
-    {"api", "eval", "conformance", "testing"},
+    {"api", "eval", "conformance", "testing", "live", "live_view"},
     {"warmup", "batch", "fuzzing_formats", "fuzzing_storage"},
     {"cli", "fuzzing_trust"},
     {"fuzzing"},
