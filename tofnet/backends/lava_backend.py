@@ -274,6 +274,10 @@ class LavaExecutor:
         var = type(self.host.node(process).process).var(name)
         if not var.settable:
             raise BackendError(f"{process}.{name} is read-only ({var.doc})")
+        try:
+            var.check(value, self.host.node(process).process.sensor_size)  # range and dtype, as every backend
+        except ValueError as err:
+            raise BackendError(f"{process}.{name}: {err}; the session is unchanged") from None
         shape = self.plans[process].vars[name][0]
         try:
             full = np.broadcast_to(np.asarray(value), shape).astype(var.dtype)
