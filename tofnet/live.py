@@ -196,6 +196,12 @@ class LiveStats:
         return out
 
 
+def live_camera(metadata: Recording) -> dict:
+    """What a live session is told of the camera: its intrinsics and, when the source has poses, its
+    velocity (``Session(network, intrinsics=..., velocity_source=...)``)."""
+    return {"intrinsics": metadata.intrinsics, "velocity_source": metadata.trajectory}
+
+
 def warm_up(compiled, metadata: Recording, backend, backend_options) -> None:
     """Compile (or load from numba's cache) the kernels a session runs, before the source's clock starts:
     a throwaway session on two events at the sensor's centre."""
@@ -204,7 +210,8 @@ def warm_up(compiled, metadata: Recording, backend, backend_options) -> None:
     width, height = metadata.sensor_size or (2, 2)
     events = np.zeros(2, EVENT_DTYPE)
     events["t"], events["x"], events["y"], events["p"] = [0, 1500], width // 2, height // 2, [1, 0]
-    with Session(compiled, metadata, backend=backend, backend_options=backend_options, t0_us=0) as session:
+    with Session(compiled, backend=backend, backend_options=backend_options, t0_us=0,
+                 **live_camera(metadata)) as session:
         session.feed(events, until_us=4000)
         session.finish()
 
@@ -220,6 +227,7 @@ def run_live(source: LiveSource, network, *, backend: str = "fixed", backend_opt
     from tofnet.session import Session
 
     compiled = compile_network(network, **(compile_options or {}))
+    camera = live_camera(source.metadata())
     warm_up(compiled, source.metadata(), backend, backend_options)
     stats, session, wall0, cpu0 = LiveStats(), None, time.perf_counter(), time.process_time()
     primary, step_us, latency = None, source.packet_us, 0
@@ -228,7 +236,7 @@ def run_live(source: LiveSource, network, *, backend: str = "fixed", backend_opt
     def open_session(t0_us: int):
         nonlocal session, primary, step_us, latency, first
         first = t0_us
-        session = Session(compiled, source.metadata(), backend=backend, backend_options=backend_options, t0_us=t0_us)
+        session = Session(compiled, backend=backend, backend_options=backend_options, t0_us=t0_us, **camera)
         primary, step_us = session.stream.primary, session.timestep_us
         latency = session.executor.output_latency(primary) if primary else 0
 
