@@ -1,7 +1,7 @@
 """How a plan's recordings are read: the plan keys that are ``tofnet run``'s input options.
 
 ``intrinsics``, ``calib``, ``camera``, ``velocity``, ``columns``, ``topics``, ``start``,
-``duration``, ``until`` may be given plan-wide (top level) or on a path or glob entry (which
+``duration``, ``until``, ``side``, ``rectify`` (dataset sequence folders) may be given plan-wide (top level) or on a path or glob entry (which
 wins, key by key). They are checked when the plan loads, with the same parsers as the
 command line, and kept as plain values (a calibration file as an absolute path), so a
 task carries them to its worker and its id changes when they do.
@@ -15,7 +15,8 @@ from typing import Any, Callable, Mapping
 from tofnet.errors import TofnetError
 
 #: The reading keys, in the order they are shown.
-READ_KEYS = ("intrinsics", "calib", "camera", "velocity", "columns", "topics", "start", "duration", "until")
+READ_KEYS = ("intrinsics", "calib", "camera", "velocity", "columns", "topics", "start", "duration", "until", "side",
+             "rectify")
 
 
 def read_options(entry: Mapping, defaults: dict[str, Any], where: str,
@@ -41,6 +42,12 @@ def read_options(entry: Mapping, defaults: dict[str, Any], where: str,
                 if unknown:
                     raise TofnetError(f"unknown role {unknown[0]!r}; expected {', '.join(ROLES)}")
                 value = {str(k): str(v) for k, v in value.items()}
+            elif key == "side":
+                if value not in ("left", "right"):
+                    raise TofnetError(f"expected left or right, got {value!r}")
+            elif key == "rectify":
+                if not isinstance(value, bool):
+                    raise TofnetError(f"expected true or false, got {value!r}")
             elif key in ("start", "duration", "until"):
                 if isinstance(value, bool) or not isinstance(value, (str, int, float)):
                     raise TofnetError(f"expected a time like 12.5s, 500ms or @1627000012.5s, got {value!r}")
@@ -106,4 +113,5 @@ def open_options(options: Mapping[str, Any]) -> dict[str, Any]:
     return {"columns": options.get("columns"), "topics": options.get("topics"),
             "intrinsics": parse_intrinsics(options["intrinsics"]) if options.get("intrinsics") else None,
             "calib": options.get("calib"), "camera": options.get("camera"),
-            "window": parse_window(options.get("start"), options.get("duration"), options.get("until"))}
+            "window": parse_window(options.get("start"), options.get("duration"), options.get("until")),
+            "side": options.get("side"), "rectify": bool(options.get("rectify", False))}

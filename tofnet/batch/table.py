@@ -13,6 +13,7 @@ from typing import Any, Iterable
 
 from tofnet.backends.base import DROP_REASONS, REJECT_REASONS
 from tofnet.eval.breakdown import BREAKDOWN_COLUMNS
+from tofnet.eval.frames import CUTOFF_COLUMNS
 from tofnet.io.files import atomic_path
 
 INPUT_COLUMNS = ("task", "task_id", "recording", "recording_name", "scenario", "seed", "duration_s", "network",
@@ -20,7 +21,7 @@ INPUT_COLUMNS = ("task", "task_id", "recording", "recording_name", "scenario", "
 COUNT_COLUMNS = ("events_in", "accepted", "dropped", *(f"dropped_{r}" for r in DROP_REASONS), "tot_spikes",
                  "depth_out", *(f"rejected_{r}" for r in REJECT_REASONS), "steps", "latency_steps")
 METRIC_COLUMNS = ("matched", "coverage_pct", "mean_abs_m", "median_abs_m", "mean_rel_pct", "median_rel_pct",
-                  "bias_rel_pct", *BREAKDOWN_COLUMNS)
+                  "bias_rel_pct", *CUTOFF_COLUMNS, *BREAKDOWN_COLUMNS)
 #: Columns that change from run to run of the same plan.
 TIMING_COLUMNS = ("wall_time_s", "task_time_s", "cpu_time_s", "events_per_s", "worker")
 OUTPUT_COLUMNS = ("depth_file", "summary_file")

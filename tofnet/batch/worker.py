@@ -140,7 +140,8 @@ def _run(task: Task, recording_path: str, folder: Path) -> dict[str, Any]:
         e = evaluation.errors
         out.update(matched=e.n, coverage_pct=_pct(evaluation.coverage), mean_abs_m=_num(e.mean_abs_m),
                    median_abs_m=_num(e.median_abs_m), mean_rel_pct=_num(e.mean_rel_pct),
-                   median_rel_pct=_num(e.median_rel_pct), bias_rel_pct=_num(e.bias_rel_pct))
+                   median_rel_pct=_num(e.median_rel_pct), bias_rel_pct=_num(e.bias_rel_pct),
+                   **{k: _num(v) for k, v in evaluation.cutoffs.items()})
         from tofnet.eval.breakdown import breakdown_columns
         out.update(breakdown_columns(result.depth, evaluation.matches, recording))
         summary["evaluation"] = evaluation.to_dict()

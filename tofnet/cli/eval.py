@@ -18,8 +18,10 @@ def register(subparsers) -> None:
         description="Match each depth estimate to the input event that triggered it (same pixel, "
                     "latency_steps earlier) and report the paper's errors (mean and median absolute [m] "
                     "and relative [%]), coverage and unmatched estimates, overall and per time window. "
-                    "The recording needs per-event ground-truth depth (events_depth.npy), "
-                    "e.g. from `tofnet simulate`.")
+                    "The recording needs ground-truth depth: per event (events_depth.npy, e.g. from "
+                    "`tofnet simulate`) or as frames (a DSEC, MVSEC or M3ED sequence: each estimate is scored "
+                    "against the frames at its own pixel and time), with the mean absolute error at 10, 20 and 30 m "
+                    "cut-offs.")
     p.add_argument("recording", help="the recording the depth was computed from (ECD folder or events file)")
     p.add_argument("depth", help="depth estimates written by `tofnet run` (.npz; .csv with --timestep)")
     p.add_argument("--window", default="100ms",
@@ -31,9 +33,13 @@ def register(subparsers) -> None:
     p.add_argument("--json", metavar="OUT", help="also write the metrics as JSON to OUT ('-' for stdout only)")
     p.add_argument("--force", action="store_true", help="overwrite an existing --json file")
     add_timing_options(p)
-    from tofnet.cli.inputs import add_allow_external, add_window_options
+    p.add_argument("--frames", choices=("nearest", "interpolate"), default="nearest",
+                   help="ground truth as frames (DSEC disparity, MVSEC/M3ED depth images): the frame nearest to the "
+                        "estimate's time, or the two around it interpolated (default nearest)")
+    from tofnet.cli.inputs import add_allow_external, add_sequence_options, add_window_options
     add_window_options(p)
     add_allow_external(p)
+    add_sequence_options(p)
     p.set_defaults(handler=handle)
 
 
@@ -49,19 +55,22 @@ def add_timing_options(p: argparse.ArgumentParser) -> None:
 
 
 def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = None,
-                latency_steps: int | None = None, window=None, allow_external: bool = False):
+                latency_steps: int | None = None, window=None, allow_external: bool = False,
+                side: str | None = None, rectify: bool = False):
     """Read a recording and a depth file; complete the depth timing from the options.
 
     Returns ``(recording, depth, meta)``. The options fill what the file lacks and must
     agree with what it has; ``t0_us`` is then recovered from the stamps
     (``t = t0 + (step + 1) * dt``). With a time ``window`` only its events are read and
-    only the estimates whose input step lies in it are kept.
+    only the estimates whose input step lies in it are kept. ``side`` and ``rectify`` open a dataset
+    sequence folder as the run did.
     """
     from tofnet.io import read_depth
     from tofnet.io.source import open_recording
     from tofnet.units import seconds
 
-    with open_recording(recording_path, window=window, allow_external=allow_external) as source:
+    with open_recording(recording_path, window=window, allow_external=allow_external, side=side,
+                        rectify=rectify) as source:
         recording = source.read()
         bounds = source.window
     depth, meta = read_depth(depth_path)
@@ -133,15 +142,18 @@ def handle(args) -> int:
         from tofnet.io.files import check_output
         check_output(args.json, force=args.force, inputs=[*recording_files(args.recording), Path(args.depth)],
                      what="--json")
-    from tofnet.cli.inputs import window_option
+    from tofnet.cli.inputs import sequence_options, window_option
     recording, depth, meta = load_inputs(args.recording, args.depth, timestep=args.timestep,
                                          latency_steps=args.latency_steps, window=window_option(args),
-                                         allow_external=args.allow_external)
+                                         allow_external=args.allow_external, **sequence_options(args))
     undistortion = (meta.get("summary") or {}).get("undistortion")
+    if undistortion and recording.frame_gt is not None and recording.frame_gt.pixel_map is not None:
+        raise DataError(f"{args.depth}: the estimates are at undistorted pixels, the ground truth is placed through "
+                        "the rectification map from raw pixels; run with --rectify (or --no-undistort) instead")
     if undistortion:  # the estimates are at undistorted pixels: match them to events moved there too
         from tofnet.eval.undistorted import lens_from_summary, undistorted_recording
         recording = undistorted_recording(recording, *lens_from_summary(undistortion))
-    result = evaluate(recording, depth, meta, window_s=window_s)
+    result = evaluate(recording, depth, meta, window_s=window_s, interpolate=args.frames == "interpolate")
     from tofnet.eval.rotation import format_share_split, split_by_true_share
     shares, what = split_by_true_share(recording, depth, result)
     data = result.to_dict()

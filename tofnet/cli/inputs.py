@@ -20,6 +20,22 @@ def add_input_options(p: argparse.ArgumentParser) -> None:
     add_allow_external(g)
     add_camera_options(p)
     add_window_options(p)
+    add_sequence_options(p)
+
+
+def add_sequence_options(p: argparse.ArgumentParser) -> None:
+    """``--side`` and ``--rectify`` for dataset sequence folders (DSEC, MVSEC, TUM-VIE, M3ED)."""
+    g = p.add_argument_group("dataset sequence folders")
+    g.add_argument("--side", choices=("left", "right"),
+                   help="which event camera of a DSEC, MVSEC, TUM-VIE or M3ED sequence folder (default left)")
+    g.add_argument("--rectify", action="store_true",
+                   help="DSEC: move the events through events/SIDE/rectify_map.h5 (the rectified camera, as the "
+                        "disparity ground truth); default: raw pixels, the ground truth looked up through the map")
+
+
+def sequence_options(args) -> dict:
+    """``side`` and ``rectify`` for ``open_recording``."""
+    return {"side": getattr(args, "side", None), "rectify": bool(getattr(args, "rectify", False))}
 
 
 def add_allow_external(p) -> None:
@@ -79,4 +95,5 @@ def input_options(args) -> dict:
             raise TofnetError(f"--topic: expected ROLE=NAME (e.g. events=/dvs/events), got {item!r}")
         topics[role.strip()] = name.strip()
     return {"columns": getattr(args, "columns", None), "topics": topics or None, "window": window_option(args),
-            "allow_external": bool(getattr(args, "allow_external", False)), **camera_options(args)}
+            "allow_external": bool(getattr(args, "allow_external", False)), **camera_options(args),
+            **sequence_options(args)}

@@ -102,6 +102,8 @@ class Evaluation:
     timestep_us: int
     latency_steps: int
     matches: Matches | None = field(default=None, repr=False, compare=False)
+    ground_truth: str = "per event"
+    cutoffs: dict = field(default_factory=dict)
 
     @property
     def matched(self) -> int:
@@ -113,6 +115,7 @@ class Evaluation:
         return {"source": self.source, "events_in": self.events_in, "estimates": self.estimates,
                 "matched": self.matched, "unmatched": self.unmatched, "gt_invalid": self.gt_invalid,
                 "coverage": _number(self.coverage), **self.errors.to_dict(),
+                **{k: _number(v) for k, v in self.cutoffs.items()}, "ground_truth": self.ground_truth,
                 "t0_us": self.t0_us, "timestep_s": self.timestep_us * 1e-6,
                 "latency_steps": self.latency_steps, "window_s": self.window_s,
                 "windows": [w.to_dict() for w in self.windows]}
@@ -124,6 +127,7 @@ class Evaluation:
         """A readable text report: totals, the paper's four errors, then one row per window."""
         dt = self.timestep_us * 1e-6
         lines = [f"source        {self.source}",
+                 f"ground truth  {self.ground_truth}",
                  f"timing        step {format_seconds(dt)}, latency {self.latency_steps} steps "
                  f"({format_seconds(self.latency_steps * dt)})",
                  f"events in     {self.events_in:>10d}",
@@ -136,6 +140,10 @@ class Evaluation:
                  f"{'abs error [m]':14}{_fmt(self.errors.mean_abs_m, 3)}{_fmt(self.errors.median_abs_m, 3)}",
                  f"{'rel error [%]':14}{_fmt(self.errors.mean_rel_pct, 2)}{_fmt(self.errors.median_rel_pct, 2)}",
                  f"{'bias [%]':14}{'':10}{_fmt(self.errors.bias_rel_pct, 2)}   (signed: (z - z_gt) / z_gt)"]
+        if self.cutoffs:
+            lines.append("mean abs error [m] of true depths up to " + ", ".join(
+                f"{name.removeprefix('mean_abs_cut').removesuffix('_m')} m: {_fmt(v, 3, 0)}"
+                for name, v in self.cutoffs.items()))
         if windows and self.windows:
             lines += ["", f"per window of {format_seconds(self.window_s)} (seconds since t0; "
                           f"estimates counted at their triggering input step)",
@@ -160,14 +168,23 @@ def _pct(value: float) -> str:
 
 def evaluate_arrays(depth: np.ndarray, events: np.ndarray, gt_depth: np.ndarray, *, t0_us: int,
                     timestep_us: int, latency_steps: int, window_s: float = DEFAULT_WINDOW_S,
-                    source: str = "<memory>") -> Evaluation:
+                    source: str = "<memory>", frame_gt=None, interpolate: bool = False) -> Evaluation:
     """Match ``depth`` (``DEPTH_DTYPE``) to ``events`` and their ``gt_depth`` (m) and compute metrics.
 
     ``window_s`` is the length of the per-window metrics in seconds, windows starting
-    at ``t0_us``; 0 or less gives no windows.
+    at ``t0_us``; 0 or less gives no windows. With ``frame_gt`` (``tofnet.io.frames.FrameDepth``)
+    each estimate is scored against the frames at its own pixel and time (``tofnet.eval.frames``;
+    ``interpolate``: the two frames around it) instead of its event's ``gt_depth``.
     """
+    from tofnet.eval.frames import cutoff_means, frame_matches
+
     matches = match_estimates(depth, events, gt_depth, t0_us=t0_us, timestep_us=timestep_us,
                               latency_steps=latency_steps)
+    what = "per event"
+    if frame_gt is not None:
+        matches = frame_matches(depth, matches, events, frame_gt, t0_us=t0_us, timestep_us=timestep_us,
+                                interpolate=interpolate)
+        what = f"{len(frame_gt)} {frame_gt.what} ({'interpolated' if interpolate else 'nearest'} in time)"
     valid = matches.valid
     errors = ErrorStats.of(depth["z"][valid], matches.gt[valid])
     events_in = int(len(events))
@@ -176,18 +193,22 @@ def evaluate_arrays(depth: np.ndarray, events: np.ndarray, gt_depth: np.ndarray,
     return Evaluation(source=source, events_in=events_in, estimates=int(len(depth)),
                       unmatched=matches.n_unmatched, gt_invalid=matches.n_gt_invalid, coverage=coverage,
                       errors=errors, window_s=float(window_s), windows=windows, t0_us=int(t0_us),
-                      timestep_us=int(timestep_us), latency_steps=int(latency_steps), matches=matches)
+                      timestep_us=int(timestep_us), latency_steps=int(latency_steps), matches=matches,
+                      ground_truth=what, cutoffs=cutoff_means(depth["z"][valid], matches.gt[valid]))
 
 
-def evaluate(recording, depth: np.ndarray, meta: dict, *, window_s: float = DEFAULT_WINDOW_S) -> Evaluation:
-    """Metrics of ``depth`` (with its ``meta``: ``t0_us``, ``timestep_us``, ``latency_steps``) on a ``Recording``."""
+def evaluate(recording, depth: np.ndarray, meta: dict, *, window_s: float = DEFAULT_WINDOW_S,
+             interpolate: bool = False) -> Evaluation:
+    """Metrics of ``depth`` (with its ``meta``: ``t0_us``, ``timestep_us``, ``latency_steps``) on a ``Recording``;
+    against its ground-truth frames when it has them (``frame_gt``; ``interpolate`` in time)."""
     if recording.gt_depth is None:
         raise DataError(f"{recording.source}: no per-event ground-truth depth (events_depth.npy); "
                         f"eval needs it, e.g. from a recording made by `tofnet simulate`")
     meta = require_timing(meta)
     return evaluate_arrays(depth, recording.events, recording.gt_depth, t0_us=int(meta["t0_us"]),
                            timestep_us=int(meta["timestep_us"]), latency_steps=int(meta["latency_steps"]),
-                           window_s=window_s, source=recording.source)
+                           window_s=window_s, source=recording.source,
+                           frame_gt=getattr(recording, "frame_gt", None), interpolate=interpolate)
 
 
 def require_timing(meta: dict) -> dict:

@@ -54,7 +54,7 @@ def read_recording(path: str | Path, sensor_size: tuple[int, int] | None = None,
                    columns: str | tuple[str, ...] | None = None, topics: dict[str, str] | None = None,
                    progress=None, window=None, intrinsics: Intrinsics | None = None,
                    calib: str | Path | None = None, camera: str | None = None,
-                   allow_external: bool = False) -> Recording:
+                   allow_external: bool = False, side: str | None = None, rectify: bool = False) -> Recording:
     """Read a whole recording in any format ``tofnet.io.detect`` knows (see ``docs/formats.md``).
 
     An ECD folder, an events ``.txt``, ``.npy``/``.npz`` arrays, AEDAT4, Prophesee RAW/DAT,
@@ -67,6 +67,7 @@ def read_recording(path: str | Path, sensor_size: tuple[int, int] | None = None,
     ``window`` (``tofnet.io.window.TimeWindow``) reads only that time window; ``intrinsics``
     or a calibration file ``calib`` (``camera`` picks one of several) replace the camera's.
     ``allow_external`` lets an HDF5 file keep data in other files (refused otherwise).
+    ``side`` and ``rectify`` apply to dataset sequence folders (``tofnet.io.sequences``).
     Raises ``DataError`` for a missing path, an unknown format or no events. For large
     files, ``open_recording`` reads in chunks.
     """
@@ -74,7 +75,7 @@ def read_recording(path: str | Path, sensor_size: tuple[int, int] | None = None,
 
     with open_recording(path, sensor_size=sensor_size, columns=columns, topics=topics,
                         window=window, intrinsics=intrinsics, calib=calib, camera=camera,
-                        allow_external=allow_external) as source:
+                        allow_external=allow_external, side=side, rectify=rectify) as source:
         return source.read(progress)
 
 

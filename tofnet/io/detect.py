@@ -25,12 +25,15 @@ FORMATS = {
     "hdf5": "HDF5 (DSEC/TUM-VIE, MVSEC or M3ED layout)",
     "rosbag1": "ROS1 bag (dvs_msgs/EventArray)",
 }
+from tofnet.io.sequences import SEQUENCE_FORMATS  # noqa: E402 (folder layouts: DSEC, MVSEC, TUM-VIE, M3ED)
+
+FORMATS.update(SEQUENCE_FORMATS)
 
 #: What a suffix promises, for the message when the content disagrees.
 _SUFFIX_NAMES = {".h5": "HDF5", ".hdf5": "HDF5", ".aedat4": "AEDAT4", ".bag": "a ROS1 bag", ".npy": "numpy",
                  ".npz": "numpy .npz", ".raw": "Prophesee RAW", ".dat": "Prophesee DAT", ".es": "Event Stream"}
 _HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
-_EXPECTED = ("an ECD folder or an events file (.txt, .npy, .npz, .aedat4, .raw, .dat, .es, .h5/.hdf5, .bag)")
+_EXPECTED = ("an ECD or dataset sequence folder or an events file (.txt, .npy, .npz, .aedat4, .raw, .dat, .es, .h5/.hdf5, .bag)")
 
 
 def detect_format(path: str | Path) -> str:
@@ -39,7 +42,8 @@ def detect_format(path: str | Path) -> str:
     if "\x00" in str(path) or not path.exists():
         raise DataError(located(path, None, f"no such file or folder; expected {_EXPECTED}"))
     if path.is_dir():
-        return "ecd"
+        from tofnet.io.sequences import sequence_kind
+        return sequence_kind(path) or "ecd"
     # Only a regular file is read: a FIFO, a device (/dev/zero), a socket is refused unread.
     try:
         with open_regular(path, "recording file") as handle:

@@ -68,7 +68,9 @@ class Recording:
 
     ``trajectory`` is the ground-truth camera motion (a ``VelocitySource``, usually
     built from ECD ``groundtruth.txt``); ``gt_depth`` the true depth of each event in
-    metres (simulated recordings), aligned with ``events``.
+    metres (simulated recordings), aligned with ``events``; ``frame_gt`` ground-truth depth as
+    frames (``tofnet.io.frames.FrameDepth``: dataset sequences), which ``tofnet eval`` scores
+    estimates against at their own pixel and time.
     """
 
     events: np.ndarray
@@ -79,6 +81,7 @@ class Recording:
     imu: np.ndarray | None = None
     source: str = "<memory>"
     notes: list[str] = field(default_factory=list)
+    frame_gt: object | None = None
 
     def __post_init__(self) -> None:
         if self.events.dtype != EVENT_DTYPE:

@@ -64,6 +64,8 @@ class EventSource:
         self._origin_us = 0  # the file's first event, which relative window times count from
         self._first_index = 0  # file index of the first event in the window (for _depth)
         self._last_seen_us: int | None = None  # latest time decoded, for "the window is past the end"
+        self.frame_gt = None  # ground truth as frames (tofnet.io.frames.FrameDepth): dataset sequences
+        self.remap = None  # moves each packet's pixels (tofnet.io.sequences.PixelRemap: DSEC --rectify)
 
     # --- to implement -------------------------------------------------------------
     def _packets(self, size_hint: int) -> Iterable[np.ndarray]:
@@ -72,7 +74,7 @@ class EventSource:
 
     def _depth(self, events: np.ndarray, first_index: int) -> np.ndarray | None:
         """True depth (m, NaN unknown) of ``events``, which start at event ``first_index`` of the file."""
-        return None
+        return None if self.frame_gt is None else self.frame_gt.at_events(events)
 
     def first_time(self) -> int | None:
         """The file's first event time (µs), ``None`` without events. Readers with an index override
@@ -169,13 +171,14 @@ class EventSource:
                                                          f"{reason(err)}")) from None
             check_packet(packet, done, self.path)
             done += len(packet)
-            yield packet
+            yield packet if self.remap is None else self.remap(packet)
 
     def metadata(self) -> Recording:
         """What is known about the camera before reading the events: a ``Recording`` without
         events (for streams, which read them in chunks)."""
         return Recording(events=np.empty(0, EVENT_DTYPE), intrinsics=self.intrinsics, trajectory=self.trajectory,
-                         sensor_size=self.sensor_size, imu=self.imu, source=str(self.path), notes=self.notes)
+                         sensor_size=self.sensor_size, imu=self.imu, source=str(self.path), notes=self.notes,
+                         frame_gt=self.frame_gt)
 
     def read(self, progress: ProgressHook | None = None) -> Recording:
         """All events and metadata as a ``Recording``; ``DataError`` when there are no events."""
@@ -192,7 +195,8 @@ class EventSource:
         del parts
         recording = Recording(events=events, intrinsics=self.intrinsics, trajectory=self.trajectory,
                               sensor_size=self.sensor_size, imu=self.imu, source=str(self.path),
-                              notes=list(self.notes))
+                              notes=list(self.notes) + ([self.remap.note()] if self.remap is not None else []),
+                              frame_gt=self.frame_gt)
         if depths:
             recording.gt_depth = np.concatenate(depths)
         if recording.sensor_size is None:
@@ -301,7 +305,7 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
                    columns: str | tuple[str, ...] | None = None,
                    topics: dict[str, str] | None = None, window=None, intrinsics: Intrinsics | None = None,
                    calib: str | Path | None = None, camera: str | None = None,
-                   allow_external: bool = False) -> EventSource:
+                   allow_external: bool = False, side: str | None = None, rectify: bool = False) -> EventSource:
     """Open any recording ``detect_format`` knows; see the module docstring.
 
     ``sensor_size`` (width, height px) overrides the file's; ``columns`` gives the column
@@ -311,9 +315,11 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
     ``intrinsics``, or a calibration file ``calib`` (``read_camera_file``; ``camera`` picks one of
     several), replace the recording's camera (the image size of the file fills a missing sensor size).
     ``allow_external`` lets an HDF5 file keep data in other files (external storage,
-    virtual datasets, external links; refused otherwise).
+    virtual datasets, external links; refused otherwise). ``side`` (left, right) and ``rectify`` apply to
+    dataset sequence folders (``tofnet.io.sequences``).
     """
     from tofnet.io.detect import detect_format
+    from tofnet.io.sequences import SEQUENCE_FORMATS
 
     path = Path(path)
     kind = detect_format(path)
@@ -321,8 +327,14 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
         raise DataError(located(path, None, f"--columns applies to plain numpy arrays (.npy/.npz), not {kind} files"))
     if topics and kind != "rosbag1":
         raise DataError(located(path, None, f"topics apply to ROS bags, not {kind} files"))
+    if (side is not None or rectify) and kind not in SEQUENCE_FORMATS:
+        raise DataError(located(path, None, "--side and --rectify apply to dataset sequence folders (DSEC, MVSEC, "
+                                            f"TUM-VIE, M3ED), not {kind} recordings"))
     try:
-        if kind in ("aedat4", "evt", "dat", "es"):
+        if kind in SEQUENCE_FORMATS:
+            from tofnet.io.sequences import open_sequence
+            source = open_sequence(path, kind, side=side, rectify=rectify, allow_external=allow_external)
+        elif kind in ("aedat4", "evt", "dat", "es"):
             from tofnet.io.prophesee import open_faery
             source = open_faery(path, kind)
         elif kind == "hdf5":
@@ -341,7 +353,7 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
         raise DataError(located(path, None, f"not a readable {FORMAT_NAMES.get(kind, kind)} file: "
                                             f"{reason(err)}")) from None
     try:
-        if kind not in OWN_FORMATS:
+        if kind not in OWN_FORMATS and kind not in SEQUENCE_FORMATS:
             fill_from_side_files(source)
         if sensor_size is not None:
             width, height = (int(v) for v in sensor_size)
