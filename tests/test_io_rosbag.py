@@ -108,7 +108,8 @@ def test_stereo_bag_prefers_left_and_topics_override(tmp_path, recording):
     assert source.topics["events"] == "/davis/left/events"
     assert any("--topic events=" in note for note in source.notes)
     assert open_recording(path, topics={"events": "/davis/right/events"}).topics["events"] == "/davis/right/events"
-    with pytest.raises(DataError, match="topic '/dvs/imu' for events: expected dvs_msgs/msg/EventArray, found "
+    with pytest.raises(DataError, match="topic '/dvs/imu' for events: expected dvs_msgs/msg/EventArray or "
+                                        "event_camera_msgs/msg/EventPacket, found "
                                         "sensor_msgs/msg/Imu"):
         open_recording(path, topics={"events": "/dvs/imu"})
     with pytest.raises(DataError, match="unknown topic role"):
@@ -123,5 +124,6 @@ def test_bag_without_events_lists_its_topics(tmp_path):
     store = typestore()
     with Writer(tmp_path / "empty.bag") as writer:
         writer.add_connection("/chatter", "std_msgs/msg/String", typestore=store)
-    with pytest.raises(DataError, match="no dvs_msgs/EventArray topic; topics: '/chatter'"):
+    with pytest.raises(DataError, match="no dvs_msgs/EventArray or event_camera_msgs/EventPacket topic; "
+                                        "topics: '/chatter'"):
         read_recording(tmp_path / "empty.bag")

@@ -33,12 +33,15 @@ def decode_errors(kind: str) -> tuple[type[BaseException], ...]:
     if kind in OWN_FORMATS:
         return ()
     errors = _LIBRARY_ERRORS
-    if kind == "rosbag1":
+    if kind in ("rosbag1", "rosbag2"):
         errors += (AssertionError,)  # rosbags checks some record fields with assert
         try:
             from rosbags.rosbag1 import ReaderError
+            from rosbags.rosbag2 import ReaderError as Reader2Error
             from rosbags.serde import SerdeError  # a message that does not deserialise
-            errors += (ReaderError, SerdeError)
+            errors += (ReaderError, Reader2Error, SerdeError)
+            import sqlite3
+            errors += (sqlite3.Error,)  # a .db3 that is not a rosbag2 database
         except ImportError:
             pass
     return errors

@@ -23,7 +23,8 @@ FORMATS = {
     "dat": "Prophesee DAT",
     "es": "Event Stream (.es)",
     "hdf5": "HDF5 (DSEC/TUM-VIE, MVSEC or M3ED layout)",
-    "rosbag1": "ROS1 bag (dvs_msgs/EventArray)",
+    "rosbag1": "ROS1 bag (dvs_msgs/EventArray, event_camera_msgs/EventPacket)",
+    "rosbag2": "ROS 2 bag: a folder with metadata.yaml, or one .db3 (sqlite3) or .mcap file",
 }
 from tofnet.io.sequences import SEQUENCE_FORMATS  # noqa: E402 (folder layouts: DSEC, MVSEC, TUM-VIE, M3ED)
 
@@ -31,9 +32,13 @@ FORMATS.update(SEQUENCE_FORMATS)
 
 #: What a suffix promises, for the message when the content disagrees.
 _SUFFIX_NAMES = {".h5": "HDF5", ".hdf5": "HDF5", ".aedat4": "AEDAT4", ".bag": "a ROS1 bag", ".npy": "numpy",
+                 ".db3": "a ROS 2 sqlite3 bag", ".mcap": "MCAP",
                  ".npz": "numpy .npz", ".raw": "Prophesee RAW", ".dat": "Prophesee DAT", ".es": "Event Stream"}
 _HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
-_EXPECTED = ("an ECD or dataset sequence folder or an events file (.txt, .npy, .npz, .aedat4, .raw, .dat, .es, .h5/.hdf5, .bag)")
+_EXPECTED = ("an ECD or dataset sequence folder, a ROS 2 bag folder or an events file (.txt, .npy, .npz, .aedat4, "
+             ".raw, .dat, .es, .h5/.hdf5, .bag, .db3, .mcap)")
+#: ROS 2 storage files: sqlite3 (``.db3``) and MCAP.
+_ROSBAG2_MAGIC = (b"SQLite format 3\x00", b"\x89MCAP")
 
 
 def detect_format(path: str | Path) -> str:
@@ -42,6 +47,8 @@ def detect_format(path: str | Path) -> str:
     if "\x00" in str(path) or not path.exists():
         raise DataError(located(path, None, f"no such file or folder; expected {_EXPECTED}"))
     if path.is_dir():
+        if (path / "metadata.yaml").is_file():
+            return "rosbag2"
         from tofnet.io.sequences import sequence_kind
         return sequence_kind(path) or "ecd"
     # Only a regular file is read: a FIFO, a device (/dev/zero), a socket is refused unread.
@@ -63,6 +70,8 @@ def detect_format(path: str | Path) -> str:
         return "hdf5"
     if head.startswith(b"#ROSBAG V2.0"):
         return "rosbag1"
+    if head.startswith(_ROSBAG2_MAGIC):
+        return "rosbag2"
     if head.startswith(b"#ROSBAG"):
         raise DataError(located(path, None, "only ROS1 bags version 2.0 are supported"))
     if head.startswith(b"\x93NUMPY"):

@@ -12,7 +12,7 @@ EXTRAS = {
     "faery": ("formats", "AEDAT4, Prophesee RAW (EVT2/EVT3) and DAT, Event Stream files"),
     "h5py": ("hdf5", "HDF5 files (DSEC, TUM-VIE, MVSEC, M3ED layouts)"),
     "hdf5plugin": ("hdf5plugin", "compressed HDF5 datasets (Blosc, Zstandard, LZ4, ...)"),
-    "rosbags": ("ros", "ROS1 bags"),
+    "rosbags": ("ros", "ROS1 and ROS 2 bags"),
 }
 
 

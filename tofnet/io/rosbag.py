@@ -1,21 +1,17 @@
-"""ROS1 bags through rosbags: ``dvs_msgs/EventArray`` events with poses, IMU and camera info.
+"""ROS1 and ROS 2 bags through rosbags: events with poses, IMU and camera info.
 
-The layout of ECD's original ``slider_depth.bag`` (``/dvs/events``, ``/dvs/camera_info``,
-``/dvs/imu``, ``/optitrack/davis``) and of MVSEC's bags. Topics are found by message
-type; when a type has several topics, one whose name contains ``left`` wins, else the
-first by name (noted). ``topics={"events": ..., "pose": ..., "imu": ..., "camera_info": ...}``
-overrides the choice.
+Events come from ``dvs_msgs/EventArray`` (ROS1, and ROS 2 ports) or
+``event_camera_msgs/EventPacket`` (``evt3`` and ``mono``; what the maintained
+metavision_driver and libcaer_driver publish), decoded in ``tofnet.io.ros_events``.
+ROS1 bags (``#ROSBAG V2.0``), ROS 2 bags (a folder with ``metadata.yaml``, or one
+``.db3`` sqlite3 / ``.mcap`` file) are read by rosbags.
 
-rosbags reads the container (chunks, compression, index); EventArray messages are
-decoded with numpy straight from their ROS1 serialisation (13 bytes per event), which
-is far faster than building one Python object per event. Event times ``sec.nsec``
-become µs rounded half up (as ``events.txt`` seconds are); ``nsec`` must be below 10^9.
-
-A bag carries each connection's message definition (its text and md5sum). Every
-connection of a topic tofnet reads must have the standard definition of its type (the
-md5sum in the bag, and the md5sum of the definition text it carries): a look-alike (an
-``EventArray`` whose stamps are ``int64``, the same size) would otherwise be decoded as
-the standard one.
+Topics are found by message type, as in ECD's ``slider_depth.bag`` (``/dvs/events``,
+``/dvs/camera_info``, ``/dvs/imu``, ``/optitrack/davis``) and MVSEC's bags; when a type
+has several topics, one in the events' namespace, else one containing ``left``, else the
+first by name wins (noted). ``topics={"events": ..., "pose": ..., "imu": ..., "camera_info": ...}``
+overrides the choice. Every connection tofnet reads must carry its type's standard
+message definition (``tofnet.io.ros_types``); stamps' nanoseconds must be below 10^9.
 """
 
 from __future__ import annotations
@@ -27,90 +23,23 @@ import numpy as np
 
 from tofnet.errors import DataError, located, quote, reason
 from tofnet.io.extras import require
+from tofnet.io.ros_events import _EVENT_WIRE, NSEC_PER_S, PacketDecoder, decode_event_array  # noqa: F401
+from tofnet.io.ros_types import DVS_MSGS, ROLES, definition_problem, standard_digests, typestore  # noqa: F401
 from tofnet.io.source import EventSource
 
-#: Message types tofnet reads, by role (rosbags spells them the ROS2 way).
-ROLES = {"events": "dvs_msgs/msg/EventArray", "pose": "geometry_msgs/msg/PoseStamped",
-         "imu": "sensor_msgs/msg/Imu", "camera_info": "sensor_msgs/msg/CameraInfo"}
-
-#: One ``dvs_msgs/Event`` as serialised by ROS1: x, y, ts (sec, nsec), polarity.
-_EVENT_WIRE = np.dtype([("x", "<u2"), ("y", "<u2"), ("sec", "<u4"), ("nsec", "<u4"), ("p", "u1")])
-
-#: dvs_msgs definitions (rpg_dvs_ros), registered to deserialise and to write bags.
-DVS_MSGS = {
-    "dvs_msgs/msg/Event": "uint16 x\nuint16 y\ntime ts\nbool polarity\n",
-    "dvs_msgs/msg/EventArray": "std_msgs/Header header\nuint32 height\nuint32 width\ndvs_msgs/Event[] events\n",
-}
-
-
-def typestore():
-    """A ROS1 Noetic typestore that also knows ``dvs_msgs``."""
-    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
-
-    store = get_typestore(Stores.ROS1_NOETIC)
-    types = {}
-    for name, text in DVS_MSGS.items():
-        types.update(get_types_from_msg(text, name))
-    store.register(types)
-    return store
-
-
-def decode_event_array(raw: bytes | memoryview, where: object = "EventArray") -> tuple[np.ndarray, tuple[int, int]]:
-    """A serialised ``dvs_msgs/EventArray``: its events (``EVENT_DTYPE``) and (width, height);
-    ``DataError`` naming ``where`` for a stamp whose nanoseconds are not below 10^9."""
-    from tofnet.events import EVENT_DTYPE
-
-    buffer = memoryview(raw)
-    frame_id_length = int(np.frombuffer(buffer, "<u4", 1, 12)[0])
-    offset = 16 + frame_id_length
-    height, width, count = (int(v) for v in np.frombuffer(buffer, "<u4", 3, offset))
-    wire = np.frombuffer(buffer, _EVENT_WIRE, count, offset + 12)
-    bad = np.flatnonzero(wire["nsec"] >= _NSEC_PER_S)
-    if bad.size:
-        i = int(bad[0])
-        raise DataError(located(where, None, f"event {i}: ts nanoseconds {int(wire['nsec'][i])} (expected below 10^9)"))
-    events = np.empty(count, dtype=EVENT_DTYPE)
-    events["t"] = wire["sec"].astype(np.int64) * 1_000_000 + (wire["nsec"].astype(np.int64) + 500) // 1000
-    events["x"], events["y"], events["p"] = wire["x"], wire["y"], wire["p"] != 0
-    return events, (width, height)
-
-
-#: A ``time``'s nanoseconds are below this.
-_NSEC_PER_S = 1_000_000_000
-
-
-def standard_digests(store) -> dict[str, str]:
-    """md5sum of the standard definition of each type tofnet reads (ROS1's rule)."""
-    return {msgtype: store.generate_msgdef(msgtype, ros_version=1)[1] for msgtype in ROLES.values()}
-
-
-def definition_digest(connection) -> str | None:
-    """md5sum of the definition text a connection carries (None when it cannot be parsed)."""
-    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
-
-    try:
-        store = get_typestore(Stores.EMPTY)
-        store.register(get_types_from_msg(connection.msgdef.data, connection.msgtype))
-        return store.generate_msgdef(connection.msgtype, ros_version=1)[1]
-    except Exception:  # rosbags' parser raises several kinds (and asserts) on a hostile text
-        return None
+_EVENT_PACKET = "event_camera_msgs/msg/EventPacket"
+_SQLITE_MAGIC = b"SQLite format 3\x00"
 
 
 class RosbagSource(EventSource):
-    """A ROS1 bag: events from one EventArray topic; poses, IMU and calibration from the others."""
+    """A ROS bag: events from one EventArray/EventPacket topic; poses, IMU and calibration from the others."""
 
-    format = "rosbag1"
-
-    def __init__(self, path: str | Path, topics: dict[str, str] | None = None):
+    def __init__(self, path: str | Path, topics: dict[str, str] | None = None, kind: str = "rosbag1"):
         super().__init__(path)
         require("rosbags", self.path)
-        from rosbags.rosbag1 import Reader, ReaderError
-
-        self.reader = Reader(self.path)
-        try:
-            self.reader.open()
-        except (ReaderError, OSError) as err:
-            raise DataError(located(self.path, None, f"not a readable ROS1 bag ({reason(err)})")) from None
+        self.format = kind
+        self.ros_version = 1 if kind == "rosbag1" else 2
+        self.reader = _open(self.path, kind)
         try:
             self.topics = self._choose(dict(topics or {}))
             self._check_definitions()
@@ -120,6 +49,9 @@ class RosbagSource(EventSource):
             raise
         self.detail = f"events on {self.topics['events']}"
 
+    def _types(self, topic: str) -> str | None:
+        return self.reader.topics[topic].msgtype
+
     def _choose(self, overrides: dict[str, str]) -> dict[str, str]:
         available = self.reader.topics
         unknown = set(overrides) - set(ROLES)
@@ -127,14 +59,14 @@ class RosbagSource(EventSource):
             raise DataError(located(self.path, None, f"unknown topic role(s) {', '.join(quote(r, 20) for r in sorted(unknown))}; "
                                                      f"expected {', '.join(ROLES)}"))
         chosen = {}
-        for role, msgtype in ROLES.items():
-            candidates = sorted(name for name, info in available.items() if info.msgtype == msgtype)
+        for role, msgtypes in ROLES.items():
+            candidates = sorted(name for name, info in available.items() if info.msgtype in msgtypes)
             if role in overrides:
                 name = overrides[role]
-                if name not in available or available[name].msgtype != msgtype:
+                if name not in available or available[name].msgtype not in msgtypes:
                     found = available[name].msgtype if name in available else "no such topic"
-                    raise DataError(located(self.path, None, f"topic {quote(name)} for {role}: expected {msgtype}, "
-                                                             f"found {found}"))
+                    raise DataError(located(self.path, None, f"topic {quote(name)} for {role}: expected "
+                                                             f"{' or '.join(msgtypes)}, found {found}"))
                 chosen[role] = name
             elif candidates:
                 namespace = chosen.get("events", "").rsplit("/", 1)[0]
@@ -147,54 +79,71 @@ class RosbagSource(EventSource):
         if "events" not in chosen:
             found = ", ".join(f"{quote(name)} ({quote(info.msgtype)})"
                               for name, info in sorted(available.items())[:10]) or "none"
-            raise DataError(located(self.path, None, f"no dvs_msgs/EventArray topic; topics: {found}"))
+            raise DataError(located(self.path, None, f"no dvs_msgs/EventArray or event_camera_msgs/EventPacket topic; "
+                                                     f"topics: {found}"))
         for name, info in sorted(available.items()):
             if name not in chosen.values():
                 self.streams[name] = f"{info.msgtype}, {info.msgcount} messages"
         return chosen
 
     def _check_definitions(self) -> None:
-        """Every connection of a chosen topic has its type's standard definition (md5sum and text)."""
-        digests = standard_digests(typestore())
-        for role, topic in self.topics.items():
+        """Every connection of a chosen topic has its type's standard definition (digest and text)."""
+        from tofnet.io.ros_types import standard_digest
+
+        for topic in self.topics.values():
             for connection in (c for c in self.reader.connections if c.topic == topic):
-                expected = digests[ROLES[role]]
-                if connection.digest != expected:
-                    what = f"md5sum {quote(connection.digest, 40)}"
-                elif definition_digest(connection) != expected:  # the text may lie about its md5sum
-                    what = "the md5sum of its definition text"
-                else:
-                    continue
-                raise DataError(located(self.path, None, f"topic {quote(topic)}: {ROLES[role]} with a non-standard "
-                                                         f"message definition ({what} differs from the standard "
-                                                         f"{expected}); not decoded"))
+                problem = definition_problem(connection, self.ros_version)
+                if problem == "unchecked":
+                    self.notes.append(f"{topic}: the bag holds no message definition of {connection.msgtype} "
+                                      "(sqlite3 bags before ROS 2 Iron); decoded as the standard one")
+                elif problem:
+                    expected = standard_digest(connection.msgtype, self.ros_version)
+                    raise DataError(located(self.path, None, f"topic {quote(topic)}: {connection.msgtype} with a "
+                                                             f"non-standard message definition ({problem} differs from "
+                                                             f"the standard {expected}); not decoded"))
 
     def _messages(self, role: str):
         connections = [c for c in self.reader.connections if c.topic == self.topics[role]]
         return self.reader.messages(connections=connections)
 
+    def _deserialize(self, raw, msgtype: str):
+        store = typestore(self.ros_version)
+        return store.deserialize_ros1(raw, msgtype) if self.ros_version == 1 else store.deserialize_cdr(raw, msgtype)
+
     def _read_side_topics(self) -> None:
-        store = typestore()
-        if "camera_info" in self.topics:
-            for _, _, raw in self._messages("camera_info"):
-                self._camera_info(store.deserialize_ros1(raw, ROLES["camera_info"]))
-                break
-        if "pose" in self.topics:
-            rows = [_pose_row(store.deserialize_ros1(raw, ROLES["pose"]), self._where("pose"))
-                    for _, _, raw in self._messages("pose")]
-            if len(rows) >= 2:
+        for role, reader in (("camera_info", None), ("pose", _pose_row), ("imu", _imu_row)):
+            if role not in self.topics:
+                continue
+            msgtype = ROLES[role][0]
+            if reader is None:
+                for _, _, raw in self._messages(role):
+                    self._camera_info(self._deserialize(raw, msgtype))
+                    break
+                continue
+            rows = [reader(self._deserialize(raw, msgtype), self._where(role)) for _, _, raw in self._messages(role)]
+            if role == "imu":
+                self.imu = np.asarray(rows).reshape(-1, 7)
+            elif len(rows) >= 2:
                 from tofnet.io.groundtruth import Trajectory
                 rows = np.asarray(rows)
                 self.trajectory = Trajectory(rows[:, 0], rows[:, 1:4], rows[:, 4:8],
                                              source=f"{self.path}:{self.topics['pose']}")
-        if "imu" in self.topics:
-            rows = [_imu_row(store.deserialize_ros1(raw, ROLES["imu"]), self._where("imu"))
-                    for _, _, raw in self._messages("imu")]
-            self.imu = np.asarray(rows).reshape(-1, 7)
         for _, _, raw in self._messages("events"):
-            _, size = decode_event_array(raw, self._where("events"))
+            if self._types(self.topics["events"]) == _EVENT_PACKET:
+                message = self._deserialize(raw, _EVENT_PACKET)
+                size, encoding = (int(message.width), int(message.height)), str(message.encoding)
+                self.detail = f"EventPacket {encoding}"
+                if encoding == "evt3" and (self.trajectory is not None or self.imu is not None):
+                    self.notes.append("EventPacket evt3 events are on the camera's clock (time_base is not used), "
+                                      "poses and IMU on the bag's header stamps")
+            else:
+                _, size = self._event_array(raw, self._where("events"))
             self.sensor_size = self.sensor_size or (size if min(size) > 0 else None)
             break
+
+    def _event_array(self, raw, where):
+        from tofnet.io.ros_events import decode_event_array_cdr
+        return decode_event_array(raw, where) if self.ros_version == 1 else decode_event_array_cdr(raw, where)
 
     def _camera_info(self, info) -> None:
         from tofnet.io.hdf5 import intrinsics_from
@@ -213,18 +162,82 @@ class RosbagSource(EventSource):
 
     def _packets(self, size_hint: int) -> Iterable[np.ndarray]:
         where = self._where("events")
-        for _, _, raw in self._messages("events"):
-            events, _ = decode_event_array(raw, where)
+        packets = self._types(self.topics["events"]) == _EVENT_PACKET
+        decoder = PacketDecoder(where) if packets else None
+        for index, (_, _, raw) in enumerate(self._messages("events")):
+            if decoder is not None:
+                events = decoder.decode(self._deserialize(raw, _EVENT_PACKET), index)
+            else:
+                events, _ = self._event_array(raw, where)
             if len(events):
                 yield events
+        if decoder is not None and decoder.untimed:
+            self.notes.append(f"{decoder.untimed} EVT3 events before the topic's first time stamp (TIME_HIGH, "
+                              "TIME_LOW): not decoded, as event_camera_codecs does")
 
     def close(self) -> None:
         self.reader.close()
 
 
+def _open(path: Path, kind: str):
+    """An open reader with ``topics``, ``connections``, ``messages(connections=)`` and ``close()``."""
+    if kind == "rosbag1":
+        from rosbags.rosbag1 import Reader, ReaderError
+
+        reader, errors, what = Reader(path), (ReaderError, OSError), "ROS1 bag"
+    else:
+        from rosbags.rosbag2 import ReaderError
+        from rosbags.rosbag2.reader import DirectoryReader, McapReader, Sqlite3Reader
+
+        from tofnet.io.guard import note_read
+
+        if path.is_dir():
+            storage = DirectoryReader(path)
+            for part in [path / "metadata.yaml", *sorted(path.glob("*.db3")), *sorted(path.glob("*.mcap"))]:
+                note_read(part)  # rosbags opens them: protected from the command's outputs all the same
+        else:
+            with open(path, "rb") as handle:
+                storage = (Sqlite3Reader if handle.read(16) == _SQLITE_MAGIC else McapReader)(path)
+        reader, errors, what = _Rosbag2(storage), (ReaderError, OSError, KeyError, ValueError), "ROS 2 bag"
+    try:
+        reader.open()
+    except errors as err:
+        raise DataError(located(path, None, f"not a readable {what} ({reason(err)})")) from None
+    return reader
+
+
+class _Rosbag2:
+    """rosbags' ROS 2 storage readers (folder, sqlite3 or MCAP file) with rosbag1's ``Reader`` interface."""
+
+    def __init__(self, storage):
+        self.storage = storage
+        self.topics: dict = {}
+
+    def open(self) -> None:
+        from rosbags.interfaces import TopicInfo
+
+        self.storage.open()
+        for connection in self.storage.connections:
+            info = self.topics.get(connection.topic)
+            msgtype = connection.msgtype if info is None or info.msgtype == connection.msgtype else None
+            count = connection.msgcount + (info.msgcount if info else 0)
+            self.topics[connection.topic] = TopicInfo(msgtype, connection.msgdef, count,
+                                                      (info.connections if info else []) + [connection])
+
+    @property
+    def connections(self):
+        return self.storage.connections
+
+    def messages(self, connections=()):
+        return self.storage.messages(connections or self.storage.connections, None, None)
+
+    def close(self) -> None:
+        self.storage.close()
+
+
 def _stamp(header, where: str) -> float:
     """A header's stamp in seconds; its nanoseconds must be below 10^9."""
-    if not 0 <= header.stamp.nanosec < _NSEC_PER_S:
+    if not 0 <= header.stamp.nanosec < NSEC_PER_S:
         raise DataError(located(where, None, f"header stamp nanoseconds {header.stamp.nanosec} (expected below 10^9)"))
     return header.stamp.sec + header.stamp.nanosec * 1e-9
 

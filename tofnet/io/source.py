@@ -325,7 +325,7 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
     kind = detect_format(path)
     if columns is not None and kind not in ("npy", "npz"):
         raise DataError(located(path, None, f"--columns applies to plain numpy arrays (.npy/.npz), not {kind} files"))
-    if topics and kind != "rosbag1":
+    if topics and kind not in ("rosbag1", "rosbag2"):
         raise DataError(located(path, None, f"topics apply to ROS bags, not {kind} files"))
     if (side is not None or rectify) and kind not in SEQUENCE_FORMATS:
         raise DataError(located(path, None, "--side and --rectify apply to dataset sequence folders (DSEC, MVSEC, "
@@ -340,9 +340,9 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
         elif kind == "hdf5":
             from tofnet.io.hdf5 import open_hdf5
             source = open_hdf5(path, allow_external)
-        elif kind == "rosbag1":
+        elif kind in ("rosbag1", "rosbag2"):
             from tofnet.io.rosbag import RosbagSource
-            source = RosbagSource(path, topics)
+            source = RosbagSource(path, topics, kind)
         else:
             from tofnet.io.in_memory import RecordingSource, read_in_memory
             recording, span = read_in_memory(path, kind, columns, window)
@@ -378,4 +378,5 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
 
 #: Format names for messages.
 FORMAT_NAMES = {"aedat4": "AEDAT4", "evt": "Prophesee RAW", "dat": "Prophesee DAT", "es": "Event Stream",
-                "hdf5": "HDF5", "rosbag1": "ROS1 bag"}
+                "hdf5": "HDF5", "rosbag1": "ROS1 bag",
+                "rosbag2": "ROS 2 bag"}
