@@ -5,7 +5,11 @@ any other interpreter only the one-line refusal is checked.
 """
 
 import importlib.util
+import os
+import subprocess
 import sys
+import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -106,3 +110,19 @@ def test_a_model_failing_inside_lava_is_one_error_naming_the_process_not_a_hang(
     with pytest.raises(BackendError) as err:
         get_backend("lava").run(case.network, case.recording)
     assert str(err.value).startswith("lava backend: process 'velocity' failed in step 0: velocity.a_t: 1 records")
+
+
+@needs_lava
+def test_a_session_left_open_does_not_keep_the_interpreter_from_exiting():
+    script = textwrap.dedent("""
+        from tofnet.conformance.cases import get_case
+        from tofnet.session import Session
+        case = get_case("edge+u").build()
+        session = Session(case.network, case.recording, backend="lava")
+        session.run(steps=5)
+        print("ran", session.step)
+    """)  # never stopped: the runtime must still stop at exit (multiprocessing would wait for it)
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120, cwd=root,
+                          env={**os.environ, "PYTHONPATH": str(root)})
+    assert done.returncode == 0 and done.stdout.strip() == "ran 5", done.stderr[-2000:]

@@ -10,6 +10,7 @@ backends put a ``GraphExecutor``, so runs, streams and sessions work as they do 
 
 from __future__ import annotations
 
+import atexit
 import queue
 import sys
 import weakref
@@ -224,7 +225,10 @@ class LavaExecutor:
                                    f"events, more than the event source holds per step ({self.capacity}); "
                                    "raise the backend's source_capacity")
         self._feed.put((end, now))
-        self._started = True
+        if not self._started:
+            # before multiprocessing's own exit handler, which would wait for Lava's processes for ever
+            atexit.register(self._finalizer)
+            self._started = True
         try:
             self.source.run(condition=RunSteps(num_steps=end - first), run_cfg=self.run_cfg)
         except Exception as err:
@@ -257,6 +261,7 @@ class LavaExecutor:
     def release(self) -> None:
         """Stop the Lava runtime (its processes); the executor cannot run after this."""
         self._finalizer()
+        atexit.unregister(self._finalizer)
 
     # -- state ----------------------------------------------------------------------------------
     def get_var(self, process: str, name: str) -> np.ndarray:
