@@ -196,3 +196,33 @@ def test_a_folder_that_cannot_be_listed_is_never_tofnets(tmp_path, monkeypatch):
         raise PermissionError(13, "Permission denied")
     monkeypatch.setattr(guard.os, "scandir", unreadable)
     assert guard.foreign_entries(tmp_path / "out") == ["(a folder that cannot be listed: Permission denied)"]
+
+
+def test_the_outputs_fuzz_target_sees_what_the_guard_prevents(tmp_path, monkeypatch):
+    """With the guard switched off, the fuzzer's ``outputs`` target reports the damage it finds."""
+    from tofnet import fuzzing
+    from tofnet.io import files
+
+    kinds = {}
+    for case in fuzzing.seeds("outputs"):
+        kinds[" ".join(case)] = fuzzing.outcome(fuzzing.TARGETS["outputs"], case, tmp_path)[0]
+    assert set(kinds.values()) <= {"error", "accepted"}, kinds
+    monkeypatch.setattr(files, "input_among", lambda *a, **k: None)
+    monkeypatch.setattr(files, "inputs_under", lambda *a, **k: None)
+    monkeypatch.setattr(files, "foreign_entries", lambda *a, **k: [])
+    off = {" ".join(case): fuzzing.outcome(fuzzing.TARGETS["outputs"], case, tmp_path)[0]
+           for case in fuzzing.seeds("outputs")}
+    assert off["convert rec mine --force --quiet"] == "invalid"
+    assert off["run rec --spec spec.yaml --out out.npz --json vel.txt --force --quiet"] == "invalid"
+    assert off["export d.npz --ply rec/groundtruth.txt --force"] == "invalid"
+
+
+def test_an_output_name_too_long_is_one_line(folder, tmp_path, capsys):
+    """Found by the fuzzer's outputs target: os.stat's ENAMETOOLONG escaped as a traceback."""
+    long = tmp_path / ("9" * 300 + ".npz")
+    err = one_line_error(capsys, ["run", str(folder), "--velocity", "0.5,0,0", "--out", str(long), "--quiet"])
+    assert err.endswith("--out: File name too long")
+    assert one_line_error(capsys, ["convert", str(folder), str(long), "--quiet"]).endswith("File name too long")
+    for argv in (["run", str(long), "--velocity", "0.5,0,0", "--out", str(tmp_path / "d.npz"), "--quiet"],
+                 ["info", str(long)], ["convert", str(long), str(tmp_path / "c.npz")]):
+        assert "no such file or folder" in one_line_error(capsys, argv)  # an input name too long: one line

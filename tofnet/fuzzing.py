@@ -159,10 +159,21 @@ def _storage_targets() -> None:
 _storage_targets()
 
 
+def _outputs_target() -> None:
+    """Issue 27's outputs: command lines whose outputs name inputs (``tofnet.fuzzing_outputs``)."""
+    from tofnet.fuzzing_outputs import check_untouched, run_case
+    TARGETS["outputs"] = Target("outputs", run_case, check_untouched, kind="words")
+
+
+_outputs_target()
+
+
 def outcome(target: Target, case: Any, folder: Path) -> tuple[str, str]:
     """``("error" | "accepted" | "traceback" | "invalid", detail)`` for one case."""
     try:
         result = target.run(case, folder)
+    except Invalid as err:  # a target that checks while it runs (outputs)
+        return "invalid", str(err)
     except TofnetError as err:
         text = str(err)
         if "\n" in text or len(text) > MAX_MESSAGE:
@@ -228,6 +239,9 @@ def seeds(name: str) -> list:
     if name == "cli options":
         return [["--timestep", "1ms"], ["--refractory", "5ms", "--distance", "2", "--sensor-size", "64x48"],
                 ["--velocity", "0.5,0,0", "--patch", "30x30", "--counter-bits", "6", "--update-every", "3"]]
+    if name == "outputs":
+        from tofnet.fuzzing_outputs import SEEDS
+        return [list(words) for words in SEEDS]
     from tofnet.fuzzing_formats import FORMAT_FILES, format_seeds
     from tofnet.fuzzing_trust import TRUST_FILES, trust_seeds
     if name in FORMAT_FILES:

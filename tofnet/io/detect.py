@@ -7,6 +7,7 @@ vs ``.dat`` without a telling header) and names text files.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from tofnet.errors import DataError, located, quote
@@ -44,7 +45,7 @@ _ROSBAG2_MAGIC = (b"SQLite format 3\x00", b"\x89MCAP")
 def detect_format(path: str | Path) -> str:
     """The key of ``FORMATS`` for ``path``; ``DataError`` when it is missing or unknown."""
     path = Path(path)
-    if "\x00" in str(path) or not path.exists():
+    if "\x00" in str(path) or not os.path.exists(path):  # os.path: a name too long is "missing", not OSError
         raise DataError(located(path, None, f"no such file or folder; expected {_EXPECTED}"))
     if path.is_dir():
         if (path / "metadata.yaml").is_file():

@@ -150,7 +150,10 @@ def recording_files(path: str | Path) -> list[Path]:
     """The files a recording at ``path`` is read from (a folder's, or a file and its
     side files); outputs must not overwrite any of them."""
     path = Path(path)
-    if path.is_dir():
-        return [path / name for name in SIDE_FILES if _present(path / name)]
-    names = [name for name in SIDE_FILES if name not in (EVENTS, GT_DEPTH)] + [f"{path.stem}_depth.npy"]
-    return [path] + [path.parent / name for name in names if _present(path.parent / name)]
+    try:
+        if path.is_dir():
+            return [path / name for name in SIDE_FILES if _present(path / name)]
+        names = [name for name in SIDE_FILES if name not in (EVENTS, GT_DEPTH)] + [f"{path.stem}_depth.npy"]
+        return [path] + [path.parent / name for name in names if _present(path.parent / name)]
+    except (OSError, ValueError):  # a name the system refuses (too long, NUL): the reader says so in one line
+        return [path]

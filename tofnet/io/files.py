@@ -312,7 +312,13 @@ def check_output(path: str | Path, *, force: bool = False, inputs: Iterable[str 
     path = Path(path)
     if path.name in ("", ".", "..") or "\x00" in str(path):
         raise DataError(located(path, None, f"{what}: expected a {'folder' if folder else 'file'} name"))
-    inputs = list(inputs)
+    try:
+        return _check_output(path, force, list(inputs), what, option, folder)
+    except OSError as err:  # a name too long, a loop of symlinks, ...: the system's reason, one line
+        raise DataError(located(path, None, f"{what}: {_reason(err)}")) from None
+
+
+def _check_output(path: Path, force: bool, inputs: list, what: str, option: str, folder: bool) -> Path:
     source = input_among(path, inputs) if path.exists() or path.is_symlink() else None
     if source is not None:
         raise DataError(located(path, None, f"{what} would overwrite the input {source}; choose another name"))
