@@ -45,7 +45,7 @@ LAYERS = (
     {"backends"},
     {"session"},
     {"api", "eval", "conformance", "testing", "live", "live_view"},
-    {"warmup", "batch", "fuzzing_formats", "fuzzing_storage"},
+    {"warmup", "batch", "fuzzing_formats", "fuzzing_storage", "fuzzing_sessions"},
     {"cli", "fuzzing_trust"},
     {"fuzzing"},
     {"__main__"},

@@ -150,10 +150,10 @@ _format_targets()
 
 
 def _storage_targets() -> None:
-    """Where a file's data is: HDF5 external/virtual storage, ROS definitions (``tofnet.fuzzing_storage``)."""
-    from tofnet.fuzzing_storage import STORAGE_TARGETS, check_outcome
-    for name, (run, _, _) in STORAGE_TARGETS.items():
-        TARGETS[name] = Target(name, run, check_outcome)
+    """Where a file's data is (HDF5 storage, ROS definitions) and session misuse (``tofnet.fuzzing_storage``)."""
+    from tofnet.fuzzing_storage import STORAGE_TARGETS
+    for name, (run, check, _, _) in STORAGE_TARGETS.items():
+        TARGETS[name] = Target(name, run, check)
 
 
 _storage_targets()

@@ -28,6 +28,7 @@ import numpy as np
 
 from tofnet.errors import DataError
 from tofnet.fuzzing_checks import check_recording, require
+from tofnet.fuzzing_sessions import check_replayed, number as _number, run_session, session_seeds
 
 MODES = ("plain", "external", "virtual", "declared", "group", "compressed", "link", "dev-zero")
 STORES = ("regular", "fifo", "dev-zero", "missing", "short", "folder")
@@ -59,13 +60,6 @@ def _recipe(data: bytes) -> dict[str, list[int]]:
         if words:
             out.setdefault(words[0], [_number(w) for w in words[1:]])
     return out
-
-
-def _number(word: str) -> int:
-    try:
-        return abs(int(word))
-    except ValueError:
-        return len(word)
 
 
 def _pick(values: list[int], i: int, default: int = 0) -> int:
@@ -231,22 +225,26 @@ def random_recipe(rng, name: str) -> bytes:
         lines = [f"allow {rng.randint(0, 1)}", f"store {rng.randrange(len(STORES))}"]
         lines += [f"{column} {rng.randrange(len(MODES)) if rng.random() < 0.4 else 0} {rng.choice((0, 3, 6, 64, 10**12))} "
                   f"{rng.randrange(70)}" for column in _COLUMNS]
+    elif name == "session":
+        lines = [" ".join([rng.choice(("feed", "feed", "feed", "set", "monitor", "run"))] +
+                          [str(rng.randrange(400)) for _ in range(3)]) for _ in range(rng.randint(1, 10))]
     else:
         lines = [f"{key} {rng.randrange(8) if rng.random() < 0.3 else 0}" for key in ("ts", "x", "y", "polarity", "extra")]
         lines += [f"md5 {rng.randrange(3)}", f"nsec {rng.choice((0, 999, 10**9 - 10**6, 10**9, 3 * 10**9))}"]
     return ("\n".join(lines) + "\n").encode()
 
 
-#: Target name -> (run, seeds, the library it needs).
-STORAGE_TARGETS = {"hdf5 storage": (_hdf5, _hdf5_seeds, "h5py"),
-                   "ros definitions": (_rosbag, _rosbag_seeds, "rosbags")}
+#: Target name -> (run, check, seeds, the library it needs); the session target is ``tofnet.fuzzing_sessions``'s.
+STORAGE_TARGETS = {"hdf5 storage": (_hdf5, check_outcome, _hdf5_seeds, "h5py"),
+                   "ros definitions": (_rosbag, check_outcome, _rosbag_seeds, "rosbags"),
+                   "session": (run_session, check_replayed, session_seeds, "numpy")}
 
 
 def storage_seeds(name: str) -> list[bytes]:
     """Valid recipes of target ``name`` (none when its library is not installed)."""
     import importlib.util
 
-    run, make, library = STORAGE_TARGETS[name]
+    _, _, make, library = STORAGE_TARGETS[name]
     return make() if importlib.util.find_spec(library) is not None else []
 
 
