@@ -126,3 +126,13 @@ def test_a_session_left_open_does_not_keep_the_interpreter_from_exiting():
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120, cwd=root,
                           env={**os.environ, "PYTHONPATH": str(root)})
     assert done.returncode == 0 and done.stdout.strip() == "ran 5", done.stderr[-2000:]
+
+
+@needs_lava
+def test_the_command_line_runs_the_suite_on_lava_under_python_3_10():
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run([sys.executable, "-m", "tofnet", "conformance", "--backend", "lava", "--against", "fixed",
+                           "--case", "edge+u", "--case", "time-surface-texture"], capture_output=True, text=True,
+                          timeout=300, cwd=root, env={**os.environ, "PYTHONPATH": str(root)})
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    assert "2 cases: 1 passed, 1 not applicable, 0 failed (lava vs fixed" in done.stdout
