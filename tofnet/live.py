@@ -221,8 +221,9 @@ def run_live(source: LiveSource, network, *, backend: str = "fixed", backend_opt
              on_depth: Callable[[np.ndarray], None] | None = None, tick: Callable[[], None] | None = None,
              stop: Callable[[], bool] | None = None) -> tuple[LiveStats, object]:
     """Run ``network`` on ``source`` until it ends (or ``stop()`` is true); the statistics and the run's
-    ``RunResult``. ``on_depth(records)`` sees each batch of depth estimates as it comes; ``tick()`` is
-    called after every packet (to refresh a display)."""
+    ``RunResult`` (counts, latency; its outputs only those of the last steps, run at the end: the
+    estimates are not kept). ``on_depth(records)`` sees every batch of depth estimates as it comes
+    (the last steps' too); ``tick()`` is called after every packet (to refresh a display)."""
     from tofnet.compiler import compile_network
     from tofnet.session import Session
 
@@ -236,7 +237,8 @@ def run_live(source: LiveSource, network, *, backend: str = "fixed", backend_opt
     def open_session(t0_us: int):
         nonlocal session, primary, step_us, latency, first
         first = t0_us
-        session = Session(compiled, backend=backend, backend_options=backend_options, t0_us=t0_us, **camera)
+        session = Session(compiled, backend=backend, backend_options=backend_options, t0_us=t0_us,
+                          keep_outputs=False, **camera)  # on_depth sees them; memory stays flat for hours
         primary, step_us = session.stream.primary, session.timestep_us
         latency = session.executor.output_latency(primary) if primary else 0
 
@@ -275,6 +277,9 @@ def run_live(source: LiveSource, network, *, backend: str = "fixed", backend_opt
         if session is None:
             raise TofnetError("live: the source gave no events")
         result = session.finish()  # the steps still in flight (not counted in the delays: nothing waits for them)
+        for name in result.depth_outputs if on_depth is not None else ():
+            if len(result.outputs[name]):
+                on_depth(result.outputs[name])
     finally:
         if session is not None:
             session.stop()

@@ -40,7 +40,8 @@ class Session:
     events); ``backend``: a name, a ``Backend``, or an open ``MultiprocSession`` (whose
     workers it then uses and leaves running); ``probes``: output ports to keep besides
     the sinks (``record_tot``: every time-of-travel counter port); ``monitors``: ``Monitor``
-    objects or their strings (``"proc.var@x,y"``).
+    objects or their strings (``"proc.var@x,y"``); ``keep_outputs`` False: what ``run``/``feed``
+    return is not also kept for ``outputs()`` and ``finish()`` (a live source running for hours).
     ``step`` is the next step to run: every step before it has run. The session works on
     its own copy of the network: ``set`` never changes the caller's processes.
     """
@@ -48,7 +49,7 @@ class Session:
     def __init__(self, network, recording: Recording | None = None, *, backend: str | Backend = "fixed",
                  backend_options: dict | None = None, compile_options: dict | None = None,
                  probes: Iterable[str] = (), record_tot: bool = False, monitors: Iterable[Monitor | str] = (),
-                 intrinsics=None, velocity_source=None, t0_us: int | None = None):
+                 intrinsics=None, velocity_source=None, t0_us: int | None = None, keep_outputs: bool = True):
         from tofnet.compiler import CompiledNetwork, compile_network
 
         compiled = network if isinstance(network, CompiledNetwork) else compile_network(
@@ -69,6 +70,7 @@ class Session:
         self.timestep_us = self.stream.timestep_us
         self._cursor = 0  # next event of the recording to feed
         self._collected = Collected()
+        self._keep_outputs = keep_outputs
         self._state = "open"
         self._clock = Stopwatch()
         self._sample()
@@ -218,7 +220,8 @@ class Session:
             self.stream._admit(events, until_us)
 
     def _keep(self, produced: dict[str, np.ndarray]) -> None:
-        self._collected.add(produced)
+        if self._keep_outputs:
+            self._collected.add(produced)
         for m in self.monitors:
             if m.kind == "port" and m.target in produced and len(produced[m.target]):
                 m.record_port(produced[m.target])
@@ -272,13 +275,15 @@ class Session:
 
     def finish(self) -> RunResult:
         """Run what is left of the recording and the steps still in flight; the whole run's result
-        (every output since the session opened, every count). The session ends."""
+        (every output since the session opened, every count; ``keep_outputs`` False: the outputs of
+        the steps run now only). The session ends."""
         self._check_open()
         if self.recording is not None:
             self.run()
         result = self._guard(self.stream.close)
         self._keep(result.outputs)
-        result.outputs = self._collected.joined(result.payloads, self.stream._empty)
+        if self._keep_outputs:  # else only the steps run now, in flight until the end
+            result.outputs = self._collected.joined(result.payloads, self.stream._empty)
         result.timed_by(self._clock)
         self._state = "finished"
         self.stop()
