@@ -33,6 +33,9 @@ FORMAT_FILES = {
     "event stream": ("rec.es", "faery"),
     "hdf5": ("rec.h5", "h5py"),
     "rosbag": ("rec.bag", "rosbags"),
+    "rosbag2 (.db3)": ("rec.db3", "rosbags"),
+    "rosbag2 (.mcap)": ("rec.mcap", "rosbags"),
+    "event packets (.bag)": ("rec.bag", "rosbags"),
 }
 _SENSOR = (16, 12)
 
@@ -135,6 +138,10 @@ def _writers(name: str) -> list:
         return [_as_npz(_dsec_datasets), _as_npz(_mvsec_datasets)]
     if name == "rosbag":
         return [_write_bag]
+    if name.startswith("rosbag2"):
+        return [functools.partial(_write_bag2, name.endswith(".mcap)"))]
+    if name == "event packets (.bag)":
+        return [functools.partial(_write_packets, "evt3"), functools.partial(_write_packets, "mono")]
     if name == "aedat4":
         from tofnet.io.aedat import write_aedat4
         return [lambda path, recording: write_aedat4(path, [recording.events], recording)]
@@ -219,6 +226,57 @@ def _write_bag(path: Path, recording) -> None:
                 pose=types["geometry_msgs/msg/Pose"](position=types["geometry_msgs/msg/Point"](*p),
                                                      orientation=types["geometry_msgs/msg/Quaternion"](*q)))
             writer.write(connection, int(round(t * 1e9)), store.serialize_ros1(pose, "geometry_msgs/msg/PoseStamped"))
+
+
+def _write_bag2(mcap: bool, path: Path, recording) -> None:
+    """The events as ROS 2 ``dvs_msgs/EventArray`` messages (two a message), one storage file."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    from tofnet.io.ros_types import typestore
+
+    store = typestore(2)
+    types, events = store.types, recording.events
+    stamp = [types["builtin_interfaces/msg/Time"](sec=int(t) // 10**6, nanosec=int(t) % 10**6 * 1000) for t in events["t"]]
+    folder = path.with_name(path.name + ".d")
+    with Writer(folder, version=9, storage_plugin=StoragePlugin.MCAP if mcap else StoragePlugin.SQLITE3) as writer:
+        connection = writer.add_connection("/dvs/events", "dvs_msgs/msg/EventArray", typestore=store)
+        for start in range(0, len(events), 2):
+            message = types["dvs_msgs/msg/EventArray"](
+                header=types["std_msgs/msg/Header"](stamp=stamp[start], frame_id="dvs"), height=_SENSOR[1],
+                width=_SENSOR[0], events=[types["dvs_msgs/msg/Event"](x=int(events["x"][i]), y=int(events["y"][i]),
+                                                                     ts=stamp[i], polarity=bool(events["p"][i]))
+                                          for i in range(start, min(start + 2, len(events)))])
+            writer.write(connection, int(events["t"][start]) * 1000, store.serialize_cdr(message, "dvs_msgs/msg/EventArray"))
+    next(folder.glob("*.mcap" if mcap else "*.db3")).rename(path)
+    for left in folder.iterdir():
+        left.unlink()
+    folder.rmdir()
+
+
+def _write_packets(encoding: str, path: Path, recording) -> None:
+    """The events as ROS1 ``event_camera_msgs/EventPacket`` messages (three a message) in ``encoding``."""
+    from rosbags.rosbag1 import Writer
+
+    from tofnet.io.ros_types import typestore
+
+    store = typestore(1)
+    types, events = store.types, recording.events
+    with Writer(path) as writer:
+        connection = writer.add_connection("/event_camera/events", "event_camera_msgs/msg/EventPacket", typestore=store)
+        for start in range(0, len(events), 3):
+            part = events[start:start + 3]
+            if encoding == "mono":  # time_base 0, dt in ns
+                words = (part["t"].astype(np.uint64) * np.uint64(1000) | part["x"].astype(np.uint64) << np.uint64(32)
+                         | part["y"].astype(np.uint64) << np.uint64(48) | part["p"].astype(np.uint64) << np.uint64(63))
+            else:  # TIME_HIGH, TIME_LOW, ADDR_Y, ADDR_X per event
+                words = np.array([[0x8000 | int(t) >> 12, 0x6000 | int(t) & 0xFFF, int(y), 0x2000 | int(p) << 11 | int(x)]
+                                  for t, x, y, p in part], dtype=np.uint16).ravel()
+            message = types["event_camera_msgs/msg/EventPacket"](
+                header=types["std_msgs/msg/Header"](seq=start, stamp=types["builtin_interfaces/msg/Time"](sec=1, nanosec=0),
+                                                    frame_id="event_camera"),
+                height=_SENSOR[1], width=_SENSOR[0], seq=start, time_base=0, encoding=encoding, is_bigendian=False,
+                events=words.astype(words.dtype.newbyteorder("<")).view(np.uint8))
+            writer.write(connection, 1_000_000_000 + start, store.serialize_ros1(message, "event_camera_msgs/msg/EventPacket"))
 
 
 def format_seeds(name: str) -> list[bytes]:

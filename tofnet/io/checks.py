@@ -41,7 +41,11 @@ def decode_errors(kind: str) -> tuple[type[BaseException], ...]:
             from rosbags.serde import SerdeError  # a message that does not deserialise
             errors += (ReaderError, Reader2Error, SerdeError)
             import sqlite3
-            errors += (sqlite3.Error,)  # a .db3 that is not a rosbag2 database
+
+            import apsw  # rosbags reads .db3 through apsw too
+            errors += (sqlite3.Error, apsw.Error)  # a .db3 that is not (or no longer) a rosbag2 database
+            if kind == "rosbag2":  # rosbags' MCAP reader reads a record's stated length at once
+                errors += (MemoryError,)
         except ImportError:
             pass
     return errors

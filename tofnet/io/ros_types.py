@@ -50,11 +50,6 @@ def standard_digest(msgtype: str, ros_version: int) -> str:
     return store.generate_msgdef(msgtype, ros_version=1)[1] if ros_version == 1 else store.hash_rihs01(msgtype)
 
 
-def standard_digests(store=None) -> dict[str, str]:
-    """md5sum of the standard ROS1 definition of each type tofnet reads."""
-    return {msgtype: standard_digest(msgtype, 1) for types in ROLES.values() for msgtype in types}
-
-
 def definition_digest(connection, ros_version: int) -> str | None:
     """The digest (as ``standard_digest``) of the definition text a connection carries; None when it
     carries none or it cannot be parsed."""

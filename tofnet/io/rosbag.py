@@ -24,7 +24,7 @@ import numpy as np
 from tofnet.errors import DataError, located, quote, reason
 from tofnet.io.extras import require
 from tofnet.io.ros_events import _EVENT_WIRE, NSEC_PER_S, PacketDecoder, decode_event_array  # noqa: F401
-from tofnet.io.ros_types import DVS_MSGS, ROLES, definition_problem, standard_digests, typestore  # noqa: F401
+from tofnet.io.ros_types import DVS_MSGS, ROLES, definition_problem, typestore  # noqa: F401
 from tofnet.io.source import EventSource
 
 _EVENT_PACKET = "event_camera_msgs/msg/EventPacket"
@@ -47,7 +47,7 @@ class RosbagSource(EventSource):
         except BaseException:
             self.reader.close()
             raise
-        self.detail = f"events on {self.topics['events']}"
+        self.detail = f"events on {self.topics['events']}" + (f", {self.detail}" if self.detail else "")
 
     def _types(self, topic: str) -> str | None:
         return self.reader.topics[topic].msgtype
