@@ -44,7 +44,7 @@ LAYERS = (
     {"models"},
     {"backends"},
     {"session"},
-    {"api", "eval", "conformance", "testing", "live", "live_view"},
+    {"api", "eval", "conformance", "testing", "testing_datasets", "live", "live_view"},
     {"warmup", "batch", "fuzzing_formats", "fuzzing_storage", "fuzzing_sessions"},
     {"cli", "fuzzing_trust"},
     {"fuzzing"},
@@ -63,7 +63,8 @@ UPWARD_KNOWN = {
 CYCLES_KNOWN = [
     # issue 25 item 3: readers register without a cycle (the EventSource protocol below the registry)
     {"tofnet.io.aedat", "tofnet.io.calibration", "tofnet.io.ecd", "tofnet.io.hdf5", "tofnet.io.hdf5_datasets",
-     "tofnet.io.in_memory", "tofnet.io.prophesee", "tofnet.io.rosbag", "tofnet.io.source"},
+     "tofnet.io.in_memory", "tofnet.io.prophesee", "tofnet.io.rosbag", "tofnet.io.source", "tofnet.io.sequences",
+     "tofnet.io.sequences_other"},
     # the output guard and the atomic writers it uses
     {"tofnet.io.files", "tofnet.io.guard"},
 ]

@@ -16,7 +16,7 @@ from tofnet.errors import DataError  # noqa: E402
 from tofnet.events import DEPTH_DTYPE, make_events  # noqa: E402
 from tofnet.io import detect_format, read_recording  # noqa: E402
 from tofnet.io.frames import FrameDepth, disparity_to_depth  # noqa: E402
-from tofnet.io.sequences import sequence_name  # noqa: E402
+from tofnet.io.layouts import sequence_name  # noqa: E402
 from tofnet.testing_datasets import BASELINE_M, INTRINSICS, SIZE, make_dsec  # noqa: E402
 
 

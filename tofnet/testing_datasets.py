@@ -83,11 +83,121 @@ def make_dsec(folder: str | Path, *, depth_m: float = 2.0, velocity=(-0.5, 0.0, 
 
 
 def depth_frames(depth_m: float, duration_s: float, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
-    """Depth images ``(n, H, W)`` of the plane (NaN in the first column) and their times (s)."""
+    """Depth images ``(n, H, W)`` of the plane (NaN in the first column) and their times (s from 0)."""
     times = np.arange(0, duration_s, 1.0 / rate_hz)
     images = np.full((len(times), SIZE[1], SIZE[0]), depth_m, dtype=np.float32)
     images[:, :, 0] = np.nan
     return images, times
 
 
-__all__ = ["SIZE", "INTRINSICS", "BASELINE_M", "plane_events", "make_dsec", "depth_frames"]
+def camera_poses(velocity, times_s: np.ndarray) -> np.ndarray:
+    """Camera-to-world 4x4 transforms of a camera moving at ``velocity`` (m/s) without turning."""
+    poses = np.tile(np.eye(4), (len(times_s), 1, 1))
+    poses[:, :3, 3] = np.asarray(times_s)[:, None] * np.asarray(velocity, dtype=np.float64)[None]
+    return poses
+
+
+#: MVSEC's clock: seconds since the epoch; the fixture starts here (s).
+MVSEC_T0_S = 1_506_117_900.0
+
+
+def make_mvsec(folder: str | Path, *, name: str = "indoor_flying1", depth_m: float = 2.0,
+               velocity=(-0.5, 0.0, 0.0), duration_s: float = 2.2, rate_hz: float = 20.0) -> Path:
+    """An MVSEC sequence folder: ``<name>_data.hdf5``, ``<name>_gt.hdf5`` (poses, raw depth images) and
+    ``<scene>_calib/camchain-imucam-<scene>.yaml``."""
+    import h5py
+    import yaml
+
+    folder = Path(folder)
+    folder.mkdir(parents=True)
+    events = plane_events(depth_m, velocity, duration_s)
+    rows = np.column_stack([events["x"], events["y"], MVSEC_T0_S + events["t"] * 1e-6,
+                            np.where(events["p"] > 0, 1, -1)]).astype(np.float64)
+    with h5py.File(folder / f"{name}_data.hdf5", "w") as h5:
+        h5.create_dataset("davis/left/events", data=rows)
+        h5.create_dataset("davis/right/events", data=rows)
+    images, times = depth_frames(depth_m, duration_s, rate_hz)
+    with h5py.File(folder / f"{name}_gt.hdf5", "w") as h5:
+        h5.create_dataset("davis/left/depth_image_raw", data=images)
+        h5.create_dataset("davis/left/depth_image_raw_ts", data=MVSEC_T0_S + times)
+        pose_times = np.arange(0, duration_s + 0.05, 0.01)
+        h5.create_dataset("davis/left/pose", data=camera_poses(velocity, pose_times))
+        h5.create_dataset("davis/left/pose_ts", data=MVSEC_T0_S + pose_times)
+    scene = name.rstrip("0123456789")
+    k = INTRINSICS
+    camera = {"camera_model": "pinhole", "intrinsics": [k.fx, k.fy, k.cx, k.cy], "distortion_model": "equidistant",
+              "distortion_coeffs": [0.0, 0.0, 0.0, 0.0], "resolution": list(SIZE)}
+    (folder / f"{scene}_calib").mkdir()
+    (folder / f"{scene}_calib" / f"camchain-imucam-{scene}.yaml").write_text(
+        yaml.safe_dump({"cam0": camera, "cam1": camera}))
+    return folder
+
+
+def _basalt_pose(matrix=None) -> dict:
+    return {"px": 0.0, "py": 0.0, "pz": 0.0, "qx": 0.0, "qy": 0.0, "qz": 0.0, "qw": 1.0}
+
+
+def make_tumvie(folder: str | Path, *, name: str = "mocap-desk2", depth_m: float = 2.0, velocity=(-0.5, 0.0, 0.0),
+                duration_s: float = 2.2) -> Path:
+    """A TUM-VIE sequence folder: ``<name>-events_left.h5``, ``camera-calibrationA.json``,
+    ``mocap-imu-calibrationA.json`` and ``<name>-vi_gt_data/{mocap_data,imu_data}.txt``."""
+    import h5py
+
+    folder = Path(folder)
+    folder.mkdir(parents=True)
+    t0 = 1_600_000_000_000_000
+    events = plane_events(depth_m, velocity, duration_s)
+    with h5py.File(folder / f"{name}-events_left.h5", "w") as h5:
+        _columns(h5, "events", events, t0 + events["t"].astype(np.int64))
+        ms = np.searchsorted(events["t"], np.arange(0, int(events["t"][-1]) // 1000 + 1) * 1000)
+        h5.create_dataset("ms_to_idx", data=ms.astype(np.uint64))
+    k = INTRINSICS
+    kb4 = {"camera_type": "kb4", "intrinsics": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy,
+                                                "k1": 0.0, "k2": 0.0, "k3": 0.0, "k4": 0.0}}
+    frame = {"camera_type": "kb4", "intrinsics": {"fx": 700.0, "fy": 700.0, "cx": 512.0, "cy": 512.0,
+                                                  "k1": 0.0, "k2": 0.0, "k3": 0.0, "k4": 0.0}}
+    (folder / "camera-calibrationA.json").write_text(json.dumps({"value0": {
+        "T_imu_cam": [_basalt_pose()] * 4, "intrinsics": [frame, frame, kb4, kb4],
+        "resolution": [[1024, 1024], [1024, 1024], list(SIZE), list(SIZE)]}}))
+    (folder / "mocap-imu-calibrationA.json").write_text(json.dumps({"value0": {"T_imu_marker": _basalt_pose()}}))
+    gt = folder / f"{name}-vi_gt_data"
+    gt.mkdir()
+    times = np.arange(0, duration_s + 0.05, 0.005)
+    positions = times[:, None] * np.asarray(velocity)[None]
+    (gt / "mocap_data.txt").write_text("# timestamp[us] tx ty tz qx qy qz qw\n" + "".join(
+        f"{t0 + int(round(t * 1e6))} {p[0]:.9f} {p[1]:.9f} {p[2]:.9f} 0 0 0 1\n" for t, p in zip(times, positions)))
+    (gt / "imu_data.txt").write_text("# timestamp[us] gx gy gz ax ay az\n" + "".join(
+        f"{t0 + int(round(t * 1e6))} 0 0 0 0 9.81 0\n" for t in times))
+    return folder
+
+
+def make_m3ed(folder: str | Path, *, name: str = "car_urban_day_1", depth_m: float = 2.0,
+              velocity=(-0.5, 0.0, 0.0), duration_s: float = 2.2, rate_hz: float = 10.0) -> Path:
+    """An M3ED sequence folder: ``<name>_data.h5`` (prophesee/left with its calib) and ``<name>_depth_gt.h5``."""
+    import h5py
+
+    folder = Path(folder)
+    folder.mkdir(parents=True)
+    events = plane_events(depth_m, velocity, duration_s)
+    k = INTRINSICS
+    with h5py.File(folder / f"{name}_data.h5", "w") as h5:
+        _columns(h5, "prophesee/left", events, events["t"].astype(np.int64))
+        ms = np.searchsorted(events["t"], np.arange(0, int(events["t"][-1]) // 1000 + 1) * 1000)
+        h5.create_dataset("prophesee/left/ms_map_idx", data=ms.astype(np.uint64))
+        h5.create_dataset("prophesee/left/calib/intrinsics", data=[k.fx, k.fy, k.cx, k.cy])
+        h5.create_dataset("prophesee/left/calib/distortion_coeffs", data=[0.0, 0.0, 0.0, 0.0])
+        h5.create_dataset("prophesee/left/calib/distortion_model", data="equidistant")
+        h5.create_dataset("prophesee/left/calib/resolution", data=list(SIZE))
+    images, times = depth_frames(depth_m, duration_s, rate_hz)
+    with h5py.File(folder / f"{name}_depth_gt.h5", "w") as h5:
+        h5.create_dataset("ts", data=np.round(times * 1e6).astype(np.int64))
+        h5.create_dataset("Cn_T_C0", data=np.linalg.inv(camera_poses(velocity, times)))
+        h5.create_dataset("depth/prophesee/left", data=images)
+    return folder
+
+
+#: Each layout's fixture maker.
+MAKERS = {"dsec": make_dsec, "mvsec": make_mvsec, "tumvie": make_tumvie, "m3ed": make_m3ed}
+
+__all__ = ["SIZE", "INTRINSICS", "BASELINE_M", "MAKERS", "plane_events", "make_dsec", "make_mvsec", "make_tumvie",
+           "make_m3ed", "depth_frames", "camera_poses"]

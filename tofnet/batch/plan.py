@@ -365,5 +365,5 @@ class _PlanReader:
 def _recording_name(path: Path) -> str:
     """A recording's default name: its dataset sequence's (``sequence_name``: also for the events file in a
     DSEC folder), its folder name, or its file name without the suffix."""
-    from tofnet.io.sequences import sequence_name
+    from tofnet.io.layouts import sequence_name
     return sequence_name(path) or (path.name if path.is_dir() else path.stem)

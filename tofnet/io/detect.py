@@ -27,7 +27,7 @@ FORMATS = {
     "rosbag1": "ROS1 bag (dvs_msgs/EventArray, event_camera_msgs/EventPacket)",
     "rosbag2": "ROS 2 bag: a folder with metadata.yaml, or one .db3 (sqlite3) or .mcap file",
 }
-from tofnet.io.sequences import SEQUENCE_FORMATS  # noqa: E402 (folder layouts: DSEC, MVSEC, TUM-VIE, M3ED)
+from tofnet.io.layouts import SEQUENCE_FORMATS  # noqa: E402 (folder layouts: DSEC, MVSEC, TUM-VIE, M3ED)
 
 FORMATS.update(SEQUENCE_FORMATS)
 
@@ -50,7 +50,7 @@ def detect_format(path: str | Path) -> str:
     if path.is_dir():
         if (path / "metadata.yaml").is_file():
             return "rosbag2"
-        from tofnet.io.sequences import sequence_kind
+        from tofnet.io.layouts import sequence_kind
         return sequence_kind(path) or "ecd"
     # Only a regular file is read: a FIFO, a device (/dev/zero), a socket is refused unread.
     try:

@@ -33,8 +33,10 @@ from tofnet.io.recording import Intrinsics
 from tofnet.io.source import EventSource
 
 
-def open_hdf5(path: Path, allow_external: bool = False) -> EventSource:
+def open_hdf5(path: Path, allow_external: bool = False, side: str = "left") -> EventSource:
     """The reader for the layout found in ``path``; ``DataError`` naming the groups otherwise.
+
+    ``side``: the camera of an MVSEC (``davis/SIDE``) or M3ED (``prophesee/SIDE``) file.
 
     ``allow_external``: read datasets whose data is in other files (external storage,
     virtual datasets, external links), each checked (``tofnet.io.hdf5_checks``)."""
@@ -49,10 +51,10 @@ def open_hdf5(path: Path, allow_external: bool = False) -> EventSource:
             return DsecSource(path, h5)
         if "davis/left/events" in h5:
             from tofnet.io.hdf5_datasets import MvsecSource
-            return MvsecSource(path, h5)
+            return MvsecSource(path, h5, side)
         if _has(h5, "prophesee/left", ("x", "y", "t", "p")):
             from tofnet.io.hdf5_datasets import M3edSource
-            return M3edSource(path, h5)
+            return M3edSource(path, h5, side)
         keys = h5.keys()
         found = ", ".join(quote(key, 20) for key in keys[:10]) + (", ..." if len(keys) > 10 else "") or "nothing"
         raise DataError(located(path, None, f"no event datasets; expected events/{{x,y,t,p}} (DSEC, TUM-VIE), "

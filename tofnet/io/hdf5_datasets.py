@@ -1,9 +1,11 @@
 """MVSEC and M3ED HDF5 files, with their ground truth (poses, depth images) from the companion file.
 
-Ground-truth depth comes as images at given times; the true depth of an event is the
-value of the image nearest in time at the event's pixel (NaN where the image has 0,
+Ground-truth depth comes as images at given times (``DepthImages``, a
+``tofnet.io.frames.FrameDepth``, the source's ``frame_gt``); the true depth of an event is
+the value of the image nearest in time at the event's pixel (NaN where the image has 0,
 NaN or inf, or when the nearest image is more than ``MAX_DEPTH_GAP_S`` away). Only the
-images a chunk needs are read.
+images a chunk needs are read. The ground truth is the left camera's: with ``side="right"``
+the depth images are not given to the right camera's events.
 """
 
 from __future__ import annotations
@@ -17,37 +19,35 @@ import numpy as np
 from tofnet.errors import DataError, located, reason
 from tofnet.events import MAX_TIME_US
 from tofnet.io.hdf5 import ColumnsSource, read_calib_group
+from tofnet.io.frames import FrameDepth
 from tofnet.io.hdf5_checks import H5File
 
 #: An event further than this from every depth image gets no true depth (s).
 MAX_DEPTH_GAP_S = 0.1
 
 
-class DepthImages:
-    """Depth images ``(n, H, W)`` metres at times ``times_us``: per-event lookup."""
+class DepthImages(FrameDepth):
+    """Depth images ``(n, H, W)`` metres in an HDF5 dataset at times ``times_us`` (a ``FrameDepth``).
 
-    def __init__(self, dataset, times_us: np.ndarray, source: object):
+    The file is opened again (with the same checks) when the source that opened it has been closed:
+    ``tofnet eval`` reads the frames its estimates need after the events were read."""
+
+    def __init__(self, dataset, times_us: np.ndarray, source: Path, allow_external: bool = False):
         if dataset.ndim != 3 or dataset.shape[0] != len(times_us):
             raise DataError(located(source, None, f"depth images {dataset.shape} do not match {len(times_us)} "
                                                   "timestamps"))
-        self.dataset, self.times_us = dataset, times_us
-        self.height, self.width = dataset.shape[1:]
+        super().__init__(times_us, self._read, dataset.shape[1:], source, max_gap_s=MAX_DEPTH_GAP_S)
+        self.dataset, self.name, self.allow_external = dataset, dataset.name.lstrip("/"), allow_external
+
+    def _read(self, k: int) -> np.ndarray:
+        if not self.dataset.id.valid:
+            import h5py
+            self.dataset = H5File(h5py.File(self.source, "r"), self.source, self.allow_external).dataset(self.name)
+        return self.dataset[k]
 
     def lookup(self, events: np.ndarray) -> np.ndarray:
         """True depth (m) of each event, NaN where unknown."""
-        t = events["t"]
-        after = np.clip(np.searchsorted(self.times_us, t), 0, len(self.times_us) - 1)
-        before = np.clip(after - 1, 0, len(self.times_us) - 1)
-        nearest = np.where(np.abs(self.times_us[before] - t) <= np.abs(self.times_us[after] - t), before, after)
-        depth = np.full(len(events), np.nan)
-        ok = (np.abs(self.times_us[nearest] - t) <= MAX_DEPTH_GAP_S * 1e6) & (events["x"] < self.width) & \
-             (events["y"] < self.height)
-        for frame in np.unique(nearest[ok]):
-            pick = ok & (nearest == frame)
-            image = self.dataset[int(frame)]
-            depth[pick] = image[events["y"][pick], events["x"][pick]]
-        depth[~np.isfinite(depth) | (depth <= 0)] = np.nan
-        return depth
+        return self.at_events(events)
 
 
 def matrix_to_quaternion(rotation: np.ndarray) -> np.ndarray:
@@ -131,9 +131,6 @@ class _GroundTruthMixin:
             self.gt = None
             raise
 
-    def _depth(self, events: np.ndarray, first_index: int) -> np.ndarray | None:
-        return self.depth_images.lookup(events)
-
     def close(self) -> None:
         gt = getattr(self, "gt", None)
         for handle in (self.handle, gt.handle if gt is not None else None):
@@ -144,36 +141,39 @@ class _GroundTruthMixin:
 class MvsecSource(_GroundTruthMixin, ColumnsSource):
     """MVSEC ``*_data.hdf5`` (left DAVIS) with ``*_gt.hdf5`` poses and raw depth images."""
 
-    def __init__(self, path: Path, h5: H5File):
+    def __init__(self, path: Path, h5: H5File, side: str = "left"):
         from tofnet.io.source import EventSource
         EventSource.__init__(self, path)
         self.h5, self.handle, self.gt = h5, h5.handle, None
-        self.detail = "MVSEC layout, davis/left"
-        self.rows = h5.dataset("davis/left/events")
+        self.detail = f"MVSEC layout, davis/{side}"
+        if f"davis/{side}/events" not in h5:
+            raise DataError(located(path, None, f"no davis/{side}/events"))
+        self.rows = h5.dataset(f"davis/{side}/events")
         if self.rows.ndim != 2 or self.rows.shape[1] != 4:
-            raise DataError(located(path, None, f"davis/left/events: expected (n, 4) rows x, y, t, p; "
+            raise DataError(located(path, None, f"davis/{side}/events: expected (n, 4) rows x, y, t, p; "
                                                 f"got shape {self.rows.shape}"))
         self.n_events = self.n_rows = int(self.rows.shape[0])
-        if "davis/left/image_raw" in h5 and h5.dataset("davis/left/image_raw").ndim == 3:
-            images = h5.dataset("davis/left/image_raw")
+        if f"davis/{side}/image_raw" in h5 and h5.dataset(f"davis/{side}/image_raw").ndim == 3:
+            images = h5.dataset(f"davis/{side}/image_raw")
             height, width = images.shape[1:]
             self.sensor_size = (int(width), int(height))
-            self.streams["davis/left/image_raw"] = f"{images.shape[0]} images"
-        if "davis/left/imu" in h5 and "davis/left/imu_ts" in h5:
-            self.imu = np.column_stack([h5.value("davis/left/imu_ts"), h5.value("davis/left/imu")])
-        for key in (k for k in h5.keys("davis") if k != "left"):
+            self.streams[f"davis/{side}/image_raw"] = f"{images.shape[0]} images"
+        if f"davis/{side}/imu" in h5 and f"davis/{side}/imu_ts" in h5:
+            self.imu = np.column_stack([h5.value(f"davis/{side}/imu_ts"), h5.value(f"davis/{side}/imu")])
+        for key in (k for k in h5.keys("davis") if k != side):
             self.streams[f"davis/{key}"] = "not read"
         gt_path = _companion(path, "_gt", (".hdf5", ".h5"))
         if gt_path is None:
             self.notes.append("no *_gt.hdf5 next to the file: no poses or depth")
             return
         with self._opened_gt(gt_path) as gt:
-            if "davis/left/pose" in gt:
-                self.trajectory = trajectory_from_matrices(gt.value("davis/left/pose_ts"),
-                                                           gt.value("davis/left/pose"), f"{gt_path}:davis/left/pose")
-            if "davis/left/depth_image_raw" in gt:
-                self.depth_images = DepthImages(gt.dataset("davis/left/depth_image_raw"),
-                                                image_times_us(gt, "davis/left/depth_image_raw_ts", 1e6), gt_path)
+            if f"davis/{side}/pose" in gt:
+                self.trajectory = trajectory_from_matrices(gt.value(f"davis/{side}/pose_ts"), gt.value(
+                    f"davis/{side}/pose"), f"{gt_path}:davis/{side}/pose")
+            if side == "left" and "davis/left/depth_image_raw" in gt:
+                self.frame_gt = DepthImages(gt.dataset("davis/left/depth_image_raw"),
+                                            image_times_us(gt, "davis/left/depth_image_raw_ts", 1e6), gt_path,
+                                            gt.allow_external)
                 self.has_depth = True
         self.notes.append(f"poses and depth from {gt_path.name}")
 
@@ -193,13 +193,15 @@ class MvsecSource(_GroundTruthMixin, ColumnsSource):
 class M3edSource(_GroundTruthMixin, ColumnsSource):
     """M3ED ``*_data.h5`` (left Prophesee) with ``*_depth_gt.h5`` (or ``*_pose_gt.h5``) ground truth."""
 
-    def __init__(self, path: Path, h5: H5File):
-        super().__init__(path, h5, "prophesee/left", t_offset=0)
+    def __init__(self, path: Path, h5: H5File, side: str = "left"):
+        if f"prophesee/{side}/t" not in h5:
+            raise DataError(located(path, None, f"no prophesee/{side}/{{x,y,t,p}}"))
+        super().__init__(path, h5, f"prophesee/{side}", t_offset=0)
         self.gt = None
-        self.detail = "M3ED layout, prophesee/left"
-        self.intrinsics, self.sensor_size = read_calib_group(h5, "prophesee/left/calib", path)
-        if "prophesee/left/ms_map_idx" in h5 and h5.dataset("prophesee/left/ms_map_idx").ndim == 1:
-            self.ms_index = h5.dataset("prophesee/left/ms_map_idx")  # M3ED's ms_to_idx (µs from 0: t_offset 0)
+        self.detail = f"M3ED layout, prophesee/{side}"
+        self.intrinsics, self.sensor_size = read_calib_group(h5, f"prophesee/{side}/calib", path)
+        if f"prophesee/{side}/ms_map_idx" in h5 and h5.dataset(f"prophesee/{side}/ms_map_idx").ndim == 1:
+            self.ms_index = h5.dataset(f"prophesee/{side}/ms_map_idx")  # M3ED's ms_to_idx (µs from 0: t_offset 0)
         for key in sorted(set(h5.keys()) - {"prophesee"}):
             self.streams[key] = "not read"
         gt_path = _companion(path, "_depth_gt", (".h5", ".hdf5")) or _companion(path, "_pose_gt", (".h5", ".hdf5"))
@@ -208,12 +210,12 @@ class M3edSource(_GroundTruthMixin, ColumnsSource):
             return
         with self._opened_gt(gt_path) as gt:
             times_us = image_times_us(gt, "ts", 1.0) if "ts" in gt else None
-            if "Cn_T_C0" in gt and times_us is not None:
+            if side == "left" and "Cn_T_C0" in gt and times_us is not None:  # the left camera's poses
                 # Cn_T_C0 maps the first camera frame into camera n: the camera-to-world pose is its inverse.
                 self.trajectory = trajectory_from_matrices(times_us * 1e-6, np.linalg.inv(gt.value("Cn_T_C0")),
                                                            f"{gt_path}:Cn_T_C0")
-            if "depth/prophesee/left" in gt and times_us is not None:
-                self.depth_images = DepthImages(gt.dataset("depth/prophesee/left"), times_us, gt_path)
+            if side == "left" and "depth/prophesee/left" in gt and times_us is not None:
+                self.frame_gt = DepthImages(gt.dataset("depth/prophesee/left"), times_us, gt_path, gt.allow_external)
                 self.has_depth = True
         self.notes.append(f"ground truth from {gt_path.name}")
 

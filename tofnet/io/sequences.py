@@ -13,7 +13,8 @@ what the dataset ships beside the events (``open_sequence``):
   distortion); without it the ground truth is looked up through the map instead.
 - **MVSEC**, **TUM-VIE**, **M3ED**: ``tofnet.io.sequences_other``.
 
-The recording's name (batch plans) is the sequence folder's (``sequence_name``), also for a
+The layouts are told apart by ``tofnet.io.layouts``. The recording's name (batch plans) is the
+sequence folder's (``tofnet.io.layouts.sequence_name``), also for a
 path to the events file inside it. A folder that is almost a sequence (calibration or ground
 truth missing, ground truth of another time range) is a one-line ``DataError`` naming the file.
 """
@@ -26,46 +27,7 @@ import numpy as np
 
 from tofnet.errors import DataError, located
 from tofnet.events import EVENT_DTYPE
-
-#: Folder layouts ``detect_format`` recognises, with a one-line description.
-SEQUENCE_FORMATS = {
-    "dsec": "DSEC sequence folder (events/left/events.h5, calibration/cam_to_cam.yaml, disparity/)",
-    "mvsec": "MVSEC sequence folder (*_data.hdf5, *_gt.hdf5, *_calib/camchain-imucam-*.yaml)",
-    "tumvie": "TUM-VIE sequence folder (*-events_left.h5, calibration JSON, mocap_data.txt)",
-    "m3ed": "M3ED sequence folder (*_data.h5, *_depth_gt.h5)",
-}
-SIDES = ("left", "right")
-
-
-def sequence_kind(folder: Path) -> str | None:
-    """The key of ``SEQUENCE_FORMATS`` for a folder, ``None`` when it is none of them (an ECD folder)."""
-    if (folder / "events" / "left" / "events.h5").exists() or (folder / "events" / "right" / "events.h5").exists():
-        return "dsec"
-    if (folder / "calibration" / "cam_to_cam.yaml").exists() or (folder / "disparity").is_dir():
-        raise DataError(located(folder / "events" / "left" / "events.h5", None,
-                                "missing: a DSEC sequence folder needs its events (events/left/events.h5 "
-                                "or events/right/events.h5)"))
-    from tofnet.io.sequences_other import other_kind
-    return other_kind(folder)
-
-
-def sequence_name(path: str | Path) -> str | None:
-    """The sequence a folder or events file belongs to (its folder's name), ``None`` for other paths.
-
-    ``<seq>/events/left/events.h5`` -> ``seq`` (``seq-right`` for the right camera);
-    ``<seq>_data.hdf5`` (MVSEC), ``<seq>_data.h5`` (M3ED), ``<seq>-events_left.h5`` (TUM-VIE) -> ``seq``.
-    """
-    path = Path(path)
-    if path.name == "events.h5" and path.parent.name in SIDES and path.parent.parent.name == "events":
-        folder = path.parent.parent.parent.resolve()
-        return folder.name + ("-right" if path.parent.name == "right" else "")
-    for ending in ("_data.hdf5", "_data.h5", "-events_left.h5"):
-        if path.name.endswith(ending) and len(path.name) > len(ending):
-            return path.name[:-len(ending)]
-    if path.is_dir():
-        return path.resolve().name
-    return None
-
+from tofnet.io.layouts import SIDES
 
 def open_sequence(folder: Path, kind: str, *, side: str | None = None, rectify: bool = False,
                   allow_external: bool = False):

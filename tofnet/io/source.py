@@ -319,7 +319,7 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
     dataset sequence folders (``tofnet.io.sequences``).
     """
     from tofnet.io.detect import detect_format
-    from tofnet.io.sequences import SEQUENCE_FORMATS
+    from tofnet.io.layouts import SEQUENCE_FORMATS
 
     path = Path(path)
     kind = detect_format(path)

@@ -1,0 +1,115 @@
+"""MVSEC, TUM-VIE and M3ED sequence folders, and one command per dataset layout, run and scored."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from tests.optional import optional
+
+h5py = optional("h5py")
+
+from tofnet.cli import main  # noqa: E402
+from tofnet.errors import DataError  # noqa: E402
+from tofnet.io import detect_format, read_recording  # noqa: E402
+from tofnet.io.layouts import sequence_name  # noqa: E402
+from tofnet.testing_datasets import INTRINSICS, MAKERS, SIZE  # noqa: E402
+
+VELOCITY = np.array([-0.5, 0.0, 0.0])
+
+
+@pytest.fixture(scope="module")
+def folders(tmp_path_factory):
+    root = tmp_path_factory.mktemp("datasets")
+    names = {"dsec": "zurich_city_00_a", "mvsec": "indoor_flying1", "tumvie": "mocap-desk2", "m3ed": "car_urban_day_1"}
+    return {kind: make(root / names[kind], duration_s=2.2) for kind, make in MAKERS.items()}
+
+
+@pytest.mark.parametrize("kind, name", [("mvsec", "indoor_flying1"), ("tumvie", "mocap-desk2"),
+                                        ("m3ed", "car_urban_day_1")])
+def test_each_folder_is_a_recording_with_its_calibration_and_poses(folders, kind, name):
+    folder = folders[kind]
+    assert detect_format(folder) == kind and sequence_name(folder) == name
+    events_file = next(p for p in folder.iterdir() if p.name.endswith(("_data.hdf5", "_data.h5", "-events_left.h5")))
+    assert sequence_name(events_file) == name
+    recording = read_recording(folder)
+    assert recording.intrinsics.fx == INTRINSICS.fx and recording.sensor_size == SIZE
+    t = recording.events["t"][len(recording.events) // 2: len(recording.events) // 2 + 1] * 1e-6
+    np.testing.assert_allclose(recording.trajectory.velocity_at(t)[0], VELOCITY, atol=1e-4)
+    if kind == "tumvie":
+        assert recording.gt_depth is None and recording.frame_gt is None
+        np.testing.assert_allclose(recording.imu[0, 1:], [0, 9.81, 0, 0, 0, 0])  # accel after the gyro in the file
+    else:
+        known = np.isfinite(recording.gt_depth)
+        np.testing.assert_allclose(recording.gt_depth[known], 2.0)
+        assert not known[recording.events["x"] == 0].any()
+
+
+def test_the_right_camera_gets_no_left_ground_truth(folders):
+    recording = read_recording(folders["mvsec"], side="right")
+    assert "davis/right" in recording.notes[-1] or recording.frame_gt is None
+    assert recording.gt_depth is None and recording.frame_gt is None
+
+
+def _copy(folders, kind, tmp_path):
+    return shutil.copytree(folders[kind], tmp_path / folders[kind].name)
+
+
+def test_mvsec_without_its_calibration_names_what_is_missing(folders, tmp_path):
+    folder = _copy(folders, "mvsec", tmp_path)
+    shutil.rmtree(folder / "indoor_flying_calib")
+    with pytest.raises(DataError, match="missing: the MVSEC calibration") as err:
+        read_recording(folder)
+    assert "\n" not in str(err.value)
+
+
+def test_ground_truth_of_another_sequence_is_one_line(folders, tmp_path):
+    folder = _copy(folders, "m3ed", tmp_path)
+    with h5py.File(folder / "car_urban_day_1_depth_gt.h5", "r+") as h5:
+        h5["ts"][...] = h5["ts"][...] + 3_600_000_000
+    with pytest.raises(DataError, match=r"car_urban_day_1_depth_gt.h5: ground truth .* does not overlap the events"):
+        read_recording(folder)
+
+
+def test_tumvie_calibration_missing_several_or_without_mocap_calibration(folders, tmp_path):
+    folder = _copy(folders, "tumvie", tmp_path)
+    (folder / "mocap-imu-calibrationA.json").unlink()
+    recording = read_recording(folder)
+    assert recording.trajectory is None and any("mocap_data.txt not used" in n for n in recording.notes)
+    shutil.copy(folder / "camera-calibrationA.json", folder / "camera-calibrationB.json")
+    with pytest.raises(DataError, match="2 TUM-VIE camera calibration files"):
+        read_recording(folder)
+    for path in folder.glob("camera-calibration*.json"):
+        path.unlink()
+    with pytest.raises(DataError, match="missing: the TUM-VIE camera calibration"):
+        read_recording(folder)
+
+
+def test_a_folder_with_two_sequences_is_refused(folders, tmp_path):
+    folder = _copy(folders, "m3ed", tmp_path)
+    shutil.copy(folder / "car_urban_day_1_data.h5", folder / "car_urban_day_2_data.h5")
+    with pytest.raises(DataError, match="2 files \\*_data.h5"):
+        read_recording(folder)
+
+
+@pytest.mark.parametrize("kind", ["dsec", "mvsec", "tumvie", "m3ed"])
+@pytest.mark.parametrize("estimator", ["paper", "improved"])
+def test_one_command_per_dataset_runs_a_2s_window_and_eval_scores_it(folders, kind, estimator, tmp_path, capsys):
+    out = tmp_path / "depth.npz"
+    motion = ["--velocity=-0.5,0,0"] if kind == "dsec" else []  # DSEC ships no poses
+    assert main(["run", str(folders[kind]), "--estimator", estimator, "--start", "0.1s", "--duration", "2s",
+                 "--out", str(out), *motion]) == 0
+    capsys.readouterr()
+    if kind == "tumvie":  # TUM-VIE ships poses, not depth
+        assert main(["eval", str(folders[kind]), str(out), "--start", "0.1s", "--duration", "2s"]) != 0
+        assert "no ground-truth depth" in capsys.readouterr().err
+        return
+    assert main(["eval", str(folders[kind]), str(out), "--start", "0.1s", "--duration", "2s", "--frames",
+                 "interpolate", "--json", "-"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert "interpolated" in data["ground_truth"]
+    assert data["matched"] > 1000 and data["median_rel_pct"] < 3.0
+    assert data["mean_abs_cut10_m"] == pytest.approx(data["mean_abs_m"])
