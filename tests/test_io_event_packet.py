@@ -245,3 +245,54 @@ def test_evt3_bytes_of_odd_length_are_refused(tmp_path):
     write_packets(tmp_path / "odd.bag", 1, "evt3", [(0, words.view(np.uint8)[:-1])])
     with pytest.raises(DataError, match="bytes of evt3 events"):
         read_recording(tmp_path / "odd.bag")
+
+
+def _humble(folder, version, storage_identifier):
+    """Rewrite a bag folder as event_camera_py's samples are: older metadata.yaml (no type hash), and
+    for sqlite3 a database without message definitions (ROS 2 Humble)."""
+    import sqlite3
+
+    for db3 in folder.glob("*.db3"):
+        connection = sqlite3.connect(db3)
+        connection.execute("DELETE FROM message_definitions")
+        connection.execute("UPDATE topics SET type_description_hash=''")
+        connection.commit()
+        connection.close()
+    storage = next(p for p in folder.iterdir() if p.suffix in (".db3", ".mcap"))
+    (folder / "metadata.yaml").write_text(f"""rosbag2_bagfile_information:
+  version: {version}
+  storage_identifier: "{storage_identifier}"
+  relative_file_paths:
+    - {storage.name}
+  duration:
+    nanoseconds: 1795796872
+  starting_time:
+    nanoseconds_since_epoch: 1675954746294044105
+  message_count: 1
+  topics_with_message_count:
+    - topic_metadata:
+        name: {TOPIC}
+        type: event_camera_msgs/msg/EventPacket
+        serialization_format: cdr
+        offered_qos_profiles: ""
+      message_count: 1
+  compression_format: ""
+  compression_mode: ""
+""")
+
+
+def test_the_metadata_of_event_camera_py_samples(tmp_path):
+    """test_events_ros2_1: version 4, sqlite3 of Humble (no definitions: noted); test_events_2: version 5 with
+    an empty storage_identifier and an MCAP file (read as its content says)."""
+    packets = [(0, words.view(np.uint8)) for words in evt3_packets()]
+    expected = spec_evt3(evt3_packets())
+    write_packets(tmp_path / "test_events_ros2_1", 2, "evt3", packets)
+    _humble(tmp_path / "test_events_ros2_1", 4, "sqlite3")
+    read = read_recording(tmp_path / "test_events_ros2_1")
+    assert np.array_equal(read.events, expected)
+    assert any(f"{TOPIC}: the bag holds no message definition" in note for note in read.notes)
+    write_packets(tmp_path / "test_events_2", 2, "evt3", packets, storage="mcap")
+    _humble(tmp_path / "test_events_2", 5, "")
+    read = read_recording(tmp_path / "test_events_2")
+    assert np.array_equal(read.events, expected)
+    assert any("names no storage plugin" in note for note in read.notes)

@@ -40,6 +40,8 @@ class RosbagSource(EventSource):
         self.format = kind
         self.ros_version = 1 if kind == "rosbag1" else 2
         self.reader = _open(self.path, kind)
+        if getattr(self.reader, "note", None):
+            self.notes.append(self.reader.note)
         try:
             self.topics = self._choose(dict(topics or {}))
             self._check_definitions()
@@ -191,17 +193,24 @@ def _open(path: Path, kind: str):
 
         from tofnet.io.guard import note_read
 
-        if path.is_dir():
-            storage = DirectoryReader(path)
-            for part in [path / "metadata.yaml", *sorted(path.glob("*.db3")), *sorted(path.glob("*.mcap"))]:
-                note_read(part)  # rosbags opens them: protected from the command's outputs all the same
-        else:
-            with open(path, "rb") as handle:
-                storage = (Sqlite3Reader if handle.read(16) == _SQLITE_MAGIC else McapReader)(path)
+        def by_content(file: Path):
+            with open(file, "rb") as handle:
+                return (Sqlite3Reader if handle.read(16) == _SQLITE_MAGIC else McapReader)(file)
+
+        files = sorted(path.glob("*.db3")) + sorted(path.glob("*.mcap")) if path.is_dir() else []
+        for part in [path / "metadata.yaml", *files] if files else []:
+            note_read(part)  # rosbags opens them: protected from the command's outputs all the same
+        storage = DirectoryReader(path) if path.is_dir() else by_content(path)
         reader, errors, what = _Rosbag2(storage), (ReaderError, OSError, KeyError, ValueError), "ROS 2 bag"
     try:
         reader.open()
     except errors as err:
+        # metadata.yaml with an empty storage_identifier (as in event_camera_py's MCAP sample): one
+        # storage file, read as its content says
+        if kind == "rosbag2" and "Storage plugin" in str(err) and len(files) == 1:
+            fallback = _open(files[0], kind)
+            fallback.note = f"metadata.yaml names no storage plugin: {files[0].name} read as its content says"
+            return fallback
         raise DataError(located(path, None, f"not a readable {what} ({reason(err)})")) from None
     return reader
 
@@ -212,6 +221,7 @@ class _Rosbag2:
     def __init__(self, storage):
         self.storage = storage
         self.topics: dict = {}
+        self.note: str | None = None  # how the bag was opened, when unusually
 
     def open(self) -> None:
         from rosbags.interfaces import TopicInfo
