@@ -22,15 +22,15 @@ from typing import Callable, Sequence
 import numpy as np
 
 from tofnet.backends._workers import _Worker
-from tofnet.backends.base import REJECT_REASONS
+from tofnet.backends.band_merge import BandsBase, merge
 from tofnet.backends.remote import Placement, RemoteModel
 from tofnet.compiler.bands import Band, halo_rows
 from tofnet.compiler.partition import halo_of, receptive_offsets
 from tofnet.errors import BackendError
-from tofnet.events import DEPTH_DTYPE, EVENT_DTYPE, TOT_DTYPE
-from tofnet.kernels.bands import merge_by_step, select_rows
-from tofnet.kernels.input_filter import ACCEPTED, NEVER, first_out_of_order
-from tofnet.kernels.kernel_config import KernelConfig, KernelOutput, Region
+from tofnet.events import DEPTH_DTYPE, EVENT_DTYPE
+from tofnet.kernels.bands import select_rows
+from tofnet.kernels.input_filter import NEVER
+from tofnet.kernels.kernel_config import KernelConfig, Region
 from tofnet.kernels.region import TimeOfTravelKernel
 
 #: Packets with fewer events run their bands one after the other in the caller's thread: handing
@@ -80,8 +80,8 @@ class BandPool:
             self._pool = None
 
 
-class BandedKernel:
-    """The fused kernel over ``bands`` (``TimeOfTravelKernel``'s streaming API, as ``FusedStream`` uses it).
+class BandedKernel(BandsBase):
+    """The fused kernel over ``bands`` in threads (``TimeOfTravelKernel``'s streaming API, as ``FusedStream`` uses it).
 
     Estimates and time-of-travel spikes of a call are those of one whole-sensor kernel, merged
     in the canonical order (``run_events`` sorts always: the trigger-event order of a one-kernel
@@ -89,19 +89,13 @@ class BandedKernel:
     """
 
     def __init__(self, config: KernelConfig, bands: Sequence[Band], reach: int, threads: int, t0_us: int = 0):
-        self.config = config
+        super().__init__(config, t0_us)
         self._planned, self._reach, self._threads = list(bands), reach, threads
-        self._t0 = int(t0_us)
         self.kernels: list[TimeOfTravelKernel] = []  # built for the first packet (``_build``)
         self._pool: BandPool | None = None
         self._lock = threading.Lock()
-        self._t_hi = NEVER  # the latest event time fed or promised (every band checks its part too)
-        self._out = np.empty(0, DEPTH_DTYPE)
         self._scratch = np.empty(0, DEPTH_DTYPE)
-        self._tot = np.empty(0, TOT_DTYPE)
-        self._broken = False
-        #: What a run reports about how it ran (``RunResult.extra``).
-        self.facts: dict = {"workers": 1, "bands": []}
+        self.facts = {"workers": 1, "bands": []}
         #: A first packet of fewer events keeps one band (``_build``); ``run`` sets 0: its packets are large.
         self.one_band_below = SERIAL_BELOW
 
@@ -122,38 +116,17 @@ class BandedKernel:
                 kernel.promise(self._t_hi)
         self.facts = {"workers": self._pool.threads, "bands": [list(b) for b in self.bands]}
 
-    # -- what FusedStream reads ----------------------------------------------------------------
-    @property
-    def t0_us(self) -> int:
-        return self._t0
-
-    @t0_us.setter
+    @BandsBase.t0_us.setter
     def t0_us(self, value: int) -> None:
         self._t0 = int(value)
         for kernel in self.kernels:
             kernel.t0_us = value
 
-    @property
-    def accepted(self) -> int:
-        return sum(k.accepted for k in self.kernels)
-
-    @property
-    def drops(self) -> np.ndarray:
-        return np.sum([k.drops for k in self.kernels], axis=0) if self.kernels else np.zeros(ACCEPTED, np.int64)
-
-    @property
-    def tot_spikes(self) -> int:
-        return sum(k.tot_spikes for k in self.kernels)
-
-    @property
-    def outcomes(self) -> np.ndarray:
-        return np.sum([k.outcomes for k in self.kernels], axis=0) if self.kernels else \
-            np.zeros(len(REJECT_REASONS) + 1, np.int64)
+    def _band_counts(self) -> list[tuple]:
+        return [(k.accepted, k.drops, k.tot_spikes, k.outcomes) for k in self.kernels]
 
     def buffers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        if len(self.kernels) == 1:
-            return self.kernels[0].buffers()
-        return self._out, np.empty(0, np.int64), self._tot
+        return self.kernels[0].buffers() if len(self.kernels) == 1 else super().buffers()
 
     def promise(self, until_us: int) -> None:
         self._t_hi = max(self._t_hi, int(until_us))
@@ -167,40 +140,19 @@ class BandedKernel:
         if self._pool is not None:
             self._pool.close()
 
-    # -- running -------------------------------------------------------------------------------
-    def process_events(self, events: np.ndarray, velocity, *, record_tot: bool = False, copy: bool = True,
-                       into: np.ndarray | None = None, offset: int = 0) -> KernelOutput:
-        spikes_before = self.tot_spikes
-        end, n_tot = self.run_events(events, velocity, into, offset, record_tot)
-        depth = (self._out[:end] if into is None else into[offset:end])
-        tot = self._tot[:n_tot] if record_tot else None
-        if copy:
-            depth = depth.copy()
-            tot = tot.copy() if tot is not None else None
-        return KernelOutput(depth, np.empty(0, np.int64), tot, self.tot_spikes - spikes_before)
-
     def run_events(self, events: np.ndarray, velocity, into: np.ndarray | None = None, offset: int = 0,
                    record_tot: bool = False, span: tuple[int, int] | None = None,
                    canonical: bool = True) -> tuple[int, int]:
-        """As ``TimeOfTravelKernel.run_events``; the estimates are always in the canonical order."""
-        if self._broken:
-            raise BackendError("kernel state is invalid after an earlier error; start a new one")
+        """As ``TimeOfTravelKernel.run_events``; with several bands the estimates are in the canonical order."""
+        into, offset = self._output(events, into, offset)
         n = len(events)
-        if into is None:
-            if len(self._out) < n:
-                self._out = np.empty(max(n, 2 * len(self._out)), DEPTH_DTYPE)
-            into, offset = self._out, 0
-        elif len(into) < offset + n:
-            raise BackendError(f"output buffer holds {len(into)} estimates, {offset + n} may be written")
         if n == 0:
             return offset, 0
         if not self.kernels:
             self._build(n)
         if len(self.kernels) == 1:  # one band: the one-worker path, nothing to select or merge
             return self.kernels[0].run_events(events, velocity, into, offset, record_tot, span, canonical)
-        if first_out_of_order(events["t"], self._t_hi) >= 0:  # refused before any band changes
-            raise BackendError("events are not sorted by time (input spikes: by step): each packet must be in "
-                               "time order and follow the previous one; it was refused and the state is unchanged")
+        self._refuse_out_of_order(events)
         width, height = self.config.sensor_size
         if len(self._scratch) < n * len(self.kernels):  # band b writes from b * n: at most one estimate per event
             self._scratch = np.empty(max(n * len(self.kernels), 2 * len(self._scratch)), DEPTH_DTYPE)
@@ -225,28 +177,12 @@ class BandedKernel:
             self._broken = True  # some bands ran the packet, others did not
             raise
         self._t_hi = max(self._t_hi, int(events["t"][-1]))
-        parts = np.array([(b * n, end) for b, (end, _) in enumerate(ends)], np.int64).reshape(-1, 2)
-        end = merge_by_step(words(scratch)[0], scratch["step"], parts, words(into)[0], offset, 7)
-        n_tot = 0
-        if record_tot:
-            n_tot = sum(t for _, t in ends)
-            if len(self._tot) < n_tot:
-                self._tot = np.empty(max(n_tot, 2 * len(self._tot)), TOT_DTYPE)
-            tots = [k.buffers()[2][:t] for k, (_, t) in zip(self.kernels, ends)]
-            joined = np.concatenate(tots) if tots else np.empty(0, TOT_DTYPE)
-            bounds = np.cumsum([0] + [len(t) for t in tots])
-            flat, width = words(joined)
-            merge_by_step(flat, joined["step"], np.stack([bounds[:-1], bounds[1:]], 1).astype(np.int64),
-                          words(self._tot)[0], 0, width)
-        return end, n_tot
-
-
-def words(records: np.ndarray) -> tuple[np.ndarray, int]:
-    """A contiguous record array as flat words and the words per record (a view): 32-bit words when
-    the records are whole words (depth records: 7), else bytes."""
-    size = records.dtype.itemsize
-    word = np.uint32 if size % 4 == 0 else np.uint8
-    return records.view(word).reshape(-1), size // np.dtype(word).itemsize
+        end = merge(scratch, [(b * n, e) for b, (e, _) in enumerate(ends)], into, offset)
+        if not record_tot:
+            return end, 0
+        tots = [k.buffers()[2][:t] for k, (_, t) in zip(self.kernels, ends)]
+        bounds = np.cumsum([0] + [len(t) for t in tots])
+        return end, self._merged_tot(np.concatenate(tots), np.stack([bounds[:-1], bounds[1:]], 1))
 
 
 def band_placer(bands: Sequence[Band], threads: int):
