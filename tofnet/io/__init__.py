@@ -58,7 +58,7 @@ def read_recording(path: str | Path, sensor_size: tuple[int, int] | None = None,
     """Read a whole recording in any format ``tofnet.io.detect`` knows (see ``docs/formats.md``).
 
     An ECD folder, an events ``.txt``, ``.npy``/``.npz`` arrays, AEDAT4, Prophesee RAW/DAT,
-    Event Stream, HDF5 (DSEC/TUM-VIE, MVSEC, M3ED) or a ROS1 bag, recognised by content.
+    Event Stream, HDF5 (DSEC/TUM-VIE, MVSEC, M3ED) or a ROS1 or ROS 2 bag, recognised by content.
     For a file, ``calib.txt``, ``groundtruth.txt``, ``imu.txt`` and ``sensor_size.txt``
     in the same folder fill in what the file does not hold, and ``<stem>_depth.npy``
     gives the true depth per event of text/numpy files. ``sensor_size`` (width, height
