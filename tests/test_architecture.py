@@ -46,7 +46,7 @@ LAYERS = (
     {"session"},
     {"api", "eval", "conformance", "testing", "testing_datasets", "live", "live_view"},
     {"warmup", "batch", "fuzzing_formats", "fuzzing_storage", "fuzzing_sessions"},
-    {"cli", "fuzzing_trust"},
+    {"cli", "fuzzing_trust", "fuzzing_outputs"},
     {"fuzzing"},
     {"__main__"},
 )
@@ -65,8 +65,6 @@ CYCLES_KNOWN = [
     {"tofnet.io.aedat", "tofnet.io.calibration", "tofnet.io.ecd", "tofnet.io.hdf5", "tofnet.io.hdf5_datasets",
      "tofnet.io.in_memory", "tofnet.io.prophesee", "tofnet.io.rosbag", "tofnet.io.source", "tofnet.io.sequences",
      "tofnet.io.sequences_other"},
-    # the output guard and the atomic writers it uses
-    {"tofnet.io.files", "tofnet.io.guard"},
 ]
 
 

@@ -115,12 +115,12 @@ class _FillsUp:
 
 def test_hdf5_full_disk_while_writing_is_one_line_and_no_file(tmp_path, monkeypatch, capsys):
     optional("h5py")
-    from tofnet.io import files
+    from tofnet.io import lenient_file
 
     source = tmp_path / "big.npy"
     write_events_npy(source, _events(300_000))
     real_open = open
-    monkeypatch.setattr(files, "open", lambda *a, **k: _FillsUp(real_open(*a, **k), 1 << 20), raising=False)
+    monkeypatch.setattr(lenient_file, "open", lambda *a, **k: _FillsUp(real_open(*a, **k), 1 << 20), raising=False)
     assert main(["convert", str(source), str(tmp_path / "out.h5"), "--quiet", "--sensor-size", "240x180"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.splitlines() == [f"tofnet convert: error: {tmp_path / 'out.h5'}: cannot write: No space left on device"]

@@ -45,7 +45,7 @@ def build(folder: Path) -> Path:
     from tofnet.events import DEPTH_DTYPE, make_events
     from tofnet.io.depth import write_depth
     from tofnet.io.ecd import write_ecd
-    from tofnet.io.guard import write_manifest
+    from tofnet.io.files import write_manifest
     from tofnet.io.recording import Intrinsics
 
     root = folder / "outputs-case"
@@ -98,7 +98,7 @@ def _state(paths: list[Path]) -> dict[str, tuple]:
 def run_case(words: list[str], folder: Path) -> dict:
     """Run one command line over a fresh fixture; the protected files' state, unchanged."""
     from tofnet.cli import build_parser
-    from tofnet.fuzzing import Invalid
+    from tofnet.fuzzing_checks import Invalid
     from tofnet.io.guard import reading
 
     if not words or words[0] not in COMMANDS:

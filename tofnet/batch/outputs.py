@@ -56,7 +56,7 @@ def check_batch_output(plan: Plan, *, force: bool = False, resume: bool = False)
 
 def mark_output(plan: Plan) -> None:
     """Create the output folder and its manifest (before any task writes there)."""
-    from tofnet.io.guard import write_manifest
+    from tofnet.io.files import write_manifest
 
     names = list(BATCH_FILES)
     cache = plan.cache.resolve()

@@ -12,6 +12,7 @@ are listed in docs/reliability.md.
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import shutil
 import stat
@@ -20,7 +21,7 @@ from pathlib import Path
 from typing import IO, Iterable, Iterator
 
 from tofnet.errors import DataError, located, quote
-from tofnet.io.guard import MANIFEST, foreign_entries, input_among, inputs_under, note_read, write_manifest
+from tofnet.io.guard import MANIFEST, foreign_entries, input_among, inputs_under, note_read
 
 
 def _reason(err: OSError) -> str:
@@ -230,69 +231,19 @@ def _refuse_foreign(folder: Path, what: str) -> None:
                                               "an empty folder or one it wrote: choose another name"))
 
 
-class LenientFile:
-    """A file for a library that writes through Python (h5py's file-object driver) and
-    cannot survive a failed write: libhdf5 whose close fails on a full disk stays half
-    open and crashes the interpreter later (SIGSEGV). A failed write here is remembered
-    (``error``), and every write after it is dropped, so the library closes cleanly; the
-    caller stops early and raises ``error`` once the library is closed. Unbuffered, so
-    the error is seen at the write that fails.
-    """
-
-    def __init__(self, path: str | Path):
-        self.handle = open(path, "w+b", buffering=0)
-        self.error: OSError | None = None
-
-    def write(self, data) -> int:
-        if self.error is None:
-            try:
-                view = memoryview(data)
-                done = 0
-                while done < len(view.cast("B")):
-                    done += self.handle.write(view.cast("B")[done:])
-            except OSError as err:
-                self.error = err
-        return len(memoryview(data).cast("B"))
-
-    def readinto(self, buffer) -> int:
-        return self.handle.readinto(buffer)
-
-    def read(self, size: int = -1) -> bytes:
-        return self.handle.read(size)
-
-    def seek(self, offset: int, whence: int = 0) -> int:
-        return self.handle.seek(offset, whence)
-
-    def tell(self) -> int:
-        return self.handle.tell()
-
-    def truncate(self, size: int | None = None) -> int:
-        if self.error is None:
-            try:
-                return self.handle.truncate(size)
-            except OSError as err:
-                self.error = err
-        return size if size is not None else self.tell()
-
-    def flush(self) -> None:
-        pass  # unbuffered
-
-    def close(self) -> None:
-        self.handle.close()
-
-    def __enter__(self) -> "LenientFile":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-        if exc[0] is None and self.error is not None:
-            raise self.error
-
-
 def write_text_atomic(path: str | Path, text: str) -> None:
     """Write UTF-8 ``text`` to ``path`` atomically."""
     with atomic_write(path, "w", encoding="utf-8") as handle:
         handle.write(text)
+
+
+def write_manifest(folder: str | Path, written_by: str, files: Iterable[str] | None = None) -> None:
+    """Mark ``folder`` as tofnet's (``tofnet.io.guard.MANIFEST``): ``files`` are relative
+    names (default: every file in it now)."""
+    folder = Path(folder)
+    if files is None:
+        files = sorted(str(p.relative_to(folder)) for p in folder.rglob("*") if p.name != MANIFEST and p.is_file())
+    write_text_atomic(folder / MANIFEST, json.dumps({"written_by": written_by, "files": list(files)}, indent=1) + "\n")
 
 
 # ---------------------------------------------------------------- checking outputs before the work

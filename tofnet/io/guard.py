@@ -121,13 +121,3 @@ def foreign_entries(folder: str | Path) -> list[str]:
     listed = {MANIFEST, *(str(name).split("/")[0] for name in manifest["files"])} if manifest else set()
     return [name for name in names if name not in listed
             and not (manifest and name.startswith(".") and name.endswith(".part"))]
-
-
-def write_manifest(folder: str | Path, written_by: str, files: Iterable[str] | None = None) -> None:
-    """Mark ``folder`` as tofnet's: ``files`` (relative names; default: everything in it now)."""
-    from tofnet.io.files import write_text_atomic
-
-    folder = Path(folder)
-    if files is None:
-        files = sorted(str(p.relative_to(folder)) for p in folder.rglob("*") if p.name != MANIFEST and p.is_file())
-    write_text_atomic(folder / MANIFEST, json.dumps({"written_by": written_by, "files": list(files)}, indent=1) + "\n")

@@ -252,7 +252,7 @@ def write_hdf5(path: str | Path, chunks: Iterable[np.ndarray], meta) -> int:
     """
     h5py = require("h5py", path)
     written, next_ms, t_offset = 0, 0, None
-    from tofnet.io.files import LenientFile
+    from tofnet.io.lenient_file import LenientFile
 
     # Through LenientFile: a failed write (a full disk) is raised once libhdf5 has closed
     # the file; raised inside libhdf5 it crashes the interpreter later (SIGSEGV).
