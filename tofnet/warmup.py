@@ -137,5 +137,16 @@ def _pipeline() -> str:
 #: Seconds of each scenario the pipeline warmer simulates (enough for events in every one).
 PIPELINE_S = 0.02
 
+def _workers() -> str:
+    from tofnet.backends.registry import get_backend
+    from tofnet.conformance import get_case
+
+    scene = get_case("patch-d2").build()
+    for fuse in (True, False):
+        get_backend("fixed", workers=2, fuse=fuse).run(scene.network, scene.recording, record_tot=True)
+    return "the bands' kernels (fixed with 2 workers, fused and model by model)"
+
+
 register_warmer("backends", _families_warmer(("float", "fixed")))
 register_warmer("pipeline", _pipeline)
+register_warmer("workers", _workers)
