@@ -113,3 +113,36 @@ def test_one_command_per_dataset_runs_a_2s_window_and_eval_scores_it(folders, ki
     assert "interpolated" in data["ground_truth"]
     assert data["matched"] > 1000 and data["median_rel_pct"] < 3.0
     assert data["mean_abs_cut10_m"] == pytest.approx(data["mean_abs_m"])
+
+
+@pytest.mark.slow
+def test_the_worked_commands_of_formats_md_datasets_run_as_written(tmp_path):
+    """The ``sh`` block of docs/formats.md "Datasets", typed in a fresh folder."""
+    import os
+    import re
+    import shlex
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    text = (root / "docs" / "formats.md").read_text(encoding="utf-8")
+    section = text.split("## Datasets: sequence folders", 1)[1].split("\n## ", 1)[0]
+    block = re.search(r"^```sh\n(.*?)^```", section, flags=re.S | re.M).group(1)
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    outputs = {}
+    for line in block.splitlines():
+        words = shlex.split(line.split("  #", 1)[0])
+        if words[0] == "tofnet":
+            words = [sys.executable, "-m", "tofnet", *words[1:]]
+        elif words[:2] == ["python", "examples/dataset_folders.py"]:
+            words = [sys.executable, str(root / words[1]), *words[2:]]
+        done = subprocess.run(words, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, f"{line}: {done.stderr[-400:]}"
+        assert "Traceback" not in done.stderr
+        outputs[line] = done.stdout
+    evals = [out for line, out in outputs.items() if line.startswith("tofnet eval")]
+    assert len(evals) == 3
+    for out in evals:
+        mean = float(re.search(r"abs error \[m\]\s+([\d.]+)", out).group(1))
+        assert "ground truth" in out and mean < 0.1  # the plane is 2 m away
