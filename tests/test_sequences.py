@@ -38,6 +38,13 @@ def test_a_dsec_folder_is_a_recording_named_after_the_folder(dsec):
     assert not known[recording.events["x"] < 2].any() and known[recording.events["x"] >= 2].all()
 
 
+def test_the_events_file_of_a_dsec_folder_reads_the_whole_sequence(dsec):
+    recording = read_recording(dsec / "events" / "left" / "events.h5")
+    assert recording.frame_gt is not None and np.isfinite(recording.gt_depth).any()
+    with pytest.raises(DataError, match="--side right: the file is the left camera's"):
+        read_recording(dsec / "events" / "left" / "events.h5", side="right")
+
+
 def test_plan_names_come_from_the_sequence_folder(dsec):
     from tofnet.batch.plan import _recording_name
     assert _recording_name(dsec / "events" / "left" / "events.h5") == "zurich_city_00_a"
@@ -146,3 +153,19 @@ def test_run_and_eval_a_dsec_folder_from_the_command_line(dsec, tmp_path, capsys
     assert data["ground_truth"].startswith("5 disparity maps")
     assert data["matched"] > 100 and data["median_rel_pct"] < 5
     assert data["mean_abs_cut10_m"] == pytest.approx(data["mean_abs_m"])  # every true depth is 2 m
+
+
+def test_a_batch_over_the_events_files_of_dsec_folders_scores_them_by_folder_name(tmp_path):
+    import csv
+    optional("distributed")
+    make_dsec(tmp_path / "zurich_city_00_a", duration_s=0.5)
+    make_dsec(tmp_path / "zurich_city_01_a", duration_s=0.5, depth_m=3.0)
+    (tmp_path / "plan.yaml").write_text('recordings:\n  - {glob: "*/events/left/events.h5", velocity: [-0.5, 0, 0]}\n'
+                                        "keep: [metrics]\n")
+    assert main(["batch", str(tmp_path / "plan.yaml"), "--workers", "1", "--quiet"]) == 0
+    with open(tmp_path / "plan-results" / "results.csv", newline="") as handle:
+        rows = {row["recording_name"]: row for row in csv.DictReader(handle)}
+    assert sorted(rows) == ["zurich_city_00_a", "zurich_city_01_a"]
+    for row in rows.values():
+        assert row["status"] == "ok" and 0 < float(row["mean_abs_cut10_m"]) < 0.1
+        assert row["mean_abs_cut10_m"] == row["mean_abs_m"]

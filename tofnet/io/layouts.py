@@ -46,6 +46,18 @@ def sequence_name(path: str | Path) -> str | None:
     return None
 
 
+def dsec_sequence_of(path: Path) -> tuple[Path, str] | None:
+    """``(sequence folder, side)`` for ``<seq>/events/{left,right}/events.h5`` beside
+    ``<seq>/calibration/cam_to_cam.yaml`` (read as the whole sequence), else ``None``."""
+    path = Path(path)
+    if path.name != "events.h5" or path.parent.name not in SIDES or path.parent.parent.name != "events":
+        return None
+    folder = path.parent.parent.parent
+    if not (folder / "calibration" / "cam_to_cam.yaml").exists():
+        return None
+    return folder, path.parent.name
+
+
 #: Each layout's events file pattern.
 PATTERNS = {"mvsec": "*_data.hdf5", "m3ed": "*_data.h5", "tumvie": "*-events_left.h5"}
 

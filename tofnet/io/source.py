@@ -319,7 +319,7 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
     dataset sequence folders (``tofnet.io.sequences``).
     """
     from tofnet.io.detect import detect_format
-    from tofnet.io.layouts import SEQUENCE_FORMATS
+    from tofnet.io.layouts import SEQUENCE_FORMATS, dsec_sequence_of
 
     path = Path(path)
     kind = detect_format(path)
@@ -327,6 +327,11 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
         raise DataError(located(path, None, f"--columns applies to plain numpy arrays (.npy/.npz), not {kind} files"))
     if topics and kind not in ("rosbag1", "rosbag2"):
         raise DataError(located(path, None, f"topics apply to ROS bags, not {kind} files"))
+    sequence = dsec_sequence_of(path) if kind == "hdf5" else None  # <seq>/events/SIDE/events.h5: the whole sequence
+    if sequence is not None:
+        if side is not None and side != sequence[1]:
+            raise DataError(located(path, None, f"--side {side}: the file is the {sequence[1]} camera's"))
+        kind, path, side = "dsec", *sequence
     if (side is not None or rectify) and kind not in SEQUENCE_FORMATS:
         raise DataError(located(path, None, "--side and --rectify apply to dataset sequence folders (DSEC, MVSEC, "
                                             f"TUM-VIE, M3ED), not {kind} recordings"))
