@@ -48,6 +48,19 @@ def test_each_folder_is_a_recording_with_its_calibration_and_poses(folders, kind
         assert not known[recording.events["x"] == 0].any()
 
 
+@pytest.mark.parametrize("kind, name", [("mvsec", "indoor_flying1_data.hdf5"), ("tumvie", "mocap-desk2-events_left.h5")])
+def test_an_events_file_alone_takes_the_calibration_its_dataset_ships_beside_it(folders, kind, name):
+    recording = read_recording(folders[kind] / name)
+    assert recording.intrinsics.fx == INTRINSICS.fx and recording.trajectory is not None
+
+
+def test_an_mvsec_file_without_its_calibration_reads_as_before(folders, tmp_path):
+    folder = _copy(folders, "mvsec", tmp_path)
+    shutil.rmtree(folder / "indoor_flying_calib")
+    recording = read_recording(folder / "indoor_flying1_data.hdf5", side="right")
+    assert recording.intrinsics is None and recording.gt_depth is None
+
+
 def test_the_right_camera_gets_no_left_ground_truth(folders):
     recording = read_recording(folders["mvsec"], side="right")
     assert "davis/right" in recording.notes[-1] or recording.frame_gt is None

@@ -65,6 +65,25 @@ def open_other(folder: Path, kind: str, side: str, allow_external: bool):
     return source
 
 
+def complete_file(source, side: str) -> None:
+    """An MVSEC or TUM-VIE events file read alone (not its folder) and without intrinsics: the calibration
+    the dataset ships, found as for the folder (here or one folder up); nothing when there is none."""
+    from tofnet.io.hdf5_datasets import MvsecSource
+
+    path = source.path
+    tumvie = path.name.endswith(("-events_left.h5", "-events_right.h5"))
+    if source.intrinsics is not None or not (tumvie or isinstance(source, MvsecSource)):
+        return
+    try:
+        if tumvie:
+            _tumvie(path.parent, source, path, "left" if path.name.endswith("-events_left.h5") else "right")
+        else:
+            _mvsec(path.parent, source, side)
+    except DataError as err:
+        if ": missing: the " not in str(err):
+            raise
+
+
 class _Span:
     """A time span (seconds) with ``FrameDepth.span_us``, for ``check_overlap`` of poses."""
 

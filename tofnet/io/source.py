@@ -332,7 +332,7 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
         if side is not None and side != sequence[1]:
             raise DataError(located(path, None, f"--side {side}: the file is the {sequence[1]} camera's"))
         kind, path, side = "dsec", *sequence
-    if (side is not None or rectify) and kind not in SEQUENCE_FORMATS:
+    if (side is not None and kind not in SEQUENCE_FORMATS and kind != "hdf5") or (rectify and kind not in SEQUENCE_FORMATS):
         raise DataError(located(path, None, "--side and --rectify apply to dataset sequence folders (DSEC, MVSEC, "
                                             f"TUM-VIE, M3ED), not {kind} recordings"))
     try:
@@ -344,7 +344,7 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
             source = open_faery(path, kind)
         elif kind == "hdf5":
             from tofnet.io.hdf5 import open_hdf5
-            source = open_hdf5(path, allow_external)
+            source = open_hdf5(path, allow_external, side or "left")
         elif kind in ("rosbag1", "rosbag2"):
             from tofnet.io.rosbag import RosbagSource
             source = RosbagSource(path, topics, kind)
@@ -360,6 +360,9 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
     try:
         if kind not in OWN_FORMATS and kind not in SEQUENCE_FORMATS:
             fill_from_side_files(source)
+        if kind == "hdf5":  # an MVSEC or TUM-VIE file: the calibration its dataset ships beside it
+            from tofnet.io.sequences_other import complete_file
+            complete_file(source, side or "left")
         if sensor_size is not None:
             width, height = (int(v) for v in sensor_size)
             problem = sensor_size_problem(width, height)
