@@ -1,9 +1,10 @@
 """Scoring estimates against ground truth that comes as frames (depth images, disparity maps).
 
 Each estimate is given the true depth of the frames (``tofnet.io.frames.FrameDepth``) at
-its own pixel and time: the time of the event that triggered it (``tofnet.eval.match``),
-or the middle of its triggering input step when no event was found; the frame nearest in
-time, or the two around it interpolated (``interpolate``). Benchmarks on these datasets
+its own pixel and the time of the event that triggered it (``tofnet.eval.match``): the
+frame nearest in time, or the two around it interpolated (``interpolate``). An estimate
+whose event was not found stays unmatched, as with per-event ground truth, so
+``matched + unmatched + gt_invalid = estimates`` holds for both. Benchmarks on these datasets
 also report the mean absolute error of the pixels nearer than a cut-off (``cutoff_means``).
 """
 
@@ -21,13 +22,13 @@ CUTOFFS_M = (10.0, 20.0, 30.0)
 CUTOFF_COLUMNS = tuple(f"mean_abs_cut{c:g}_m" for c in CUTOFFS_M)
 
 
-def frame_matches(depth: np.ndarray, matches: Matches, events: np.ndarray, frame_gt, *, t0_us: int,
-                  timestep_us: int, interpolate: bool = False) -> Matches:
+def frame_matches(depth: np.ndarray, matches: Matches, events: np.ndarray, frame_gt, *,
+                  interpolate: bool = False) -> Matches:
     """``matches`` with the ground truth of the frames at each estimate's pixel and time (module docstring)."""
-    t = np.int64(t0_us) + matches.input_step * np.int64(timestep_us) + np.int64(timestep_us // 2)
     found = matches.found
-    t[found] = events["t"][matches.event_index[found]]
-    gt = frame_gt.at(t, depth["x"], depth["y"], interpolate=interpolate)
+    gt = np.full(len(depth), np.nan)
+    gt[found] = frame_gt.at(events["t"][matches.event_index[found]], depth["x"][found], depth["y"][found],
+                            interpolate=interpolate)
     return Matches(gt, matches.event_index, matches.input_step)
 
 

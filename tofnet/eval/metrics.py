@@ -134,7 +134,9 @@ class Evaluation:
                  f"estimates     {self.estimates:>10d}   coverage {_pct(self.coverage)}",
                  f"matched       {self.matched:>10d}",
                  f"unmatched     {self.unmatched:>10d}   (no event at the pixel in input step s-{self.latency_steps})",
-                 f"gt invalid    {self.gt_invalid:>10d}   (matched event without a positive finite depth)",
+                 f"gt invalid    {self.gt_invalid:>10d}   ("
+                 + ("matched event without a positive finite depth)" if self.ground_truth == "per event" else
+                    "no positive finite depth in the frames at the estimate's pixel and time)"),
                  "",
                  f"{'':14}{'mean':>10}{'median':>10}",
                  f"{'abs error [m]':14}{_fmt(self.errors.mean_abs_m, 3)}{_fmt(self.errors.median_abs_m, 3)}",
@@ -182,8 +184,7 @@ def evaluate_arrays(depth: np.ndarray, events: np.ndarray, gt_depth: np.ndarray,
                               latency_steps=latency_steps)
     what = "per event"
     if frame_gt is not None:
-        matches = frame_matches(depth, matches, events, frame_gt, t0_us=t0_us, timestep_us=timestep_us,
-                                interpolate=interpolate)
+        matches = frame_matches(depth, matches, events, frame_gt, interpolate=interpolate)
         what = f"{len(frame_gt)} {frame_gt.what} ({'interpolated' if interpolate else 'nearest'} in time)"
     valid = matches.valid
     errors = ErrorStats.of(depth["z"][valid], matches.gt[valid])
