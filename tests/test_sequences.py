@@ -153,6 +153,8 @@ def test_run_and_eval_a_dsec_folder_from_the_command_line(dsec, tmp_path, capsys
     assert data["ground_truth"].startswith("5 disparity maps")
     assert data["matched"] > 100 and data["median_rel_pct"] < 5
     assert data["mean_abs_cut10_m"] == pytest.approx(data["mean_abs_m"])  # every true depth is 2 m
+    assert main(["plot", "error", str(dsec), str(out), "--rectify", "--out", str(tmp_path / "error.png")]) == 0
+    assert (tmp_path / "error.png").stat().st_size > 1000
 
 
 def test_a_batch_over_the_events_files_of_dsec_folders_scores_them_by_folder_name(tmp_path):

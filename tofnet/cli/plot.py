@@ -48,8 +48,9 @@ def register(subparsers) -> None:
     g.add_argument("--backend", default="fixed", help="backend that runs it (default fixed)")
     g.add_argument("--velocity", metavar="TX,TY,TZ", help="constant camera velocity in m/s instead of the poses")
     p.add_argument("--force", action="store_true", help="overwrite existing PNG files")
-    from tofnet.cli.inputs import add_allow_external
+    from tofnet.cli.inputs import add_allow_external, add_sequence_options
     add_allow_external(p)
+    add_sequence_options(p)
     add_timing_options(p)
     p.set_defaults(handler=handle)
 
@@ -59,6 +60,7 @@ def handle(args) -> int:
         return handle_units(args)
     if args.depth is None:
         raise TofnetError(f"plot {args.kind}: give the depth file written by `tofnet run` after the recording")
+    from tofnet.cli.inputs import sequence_options
     from tofnet.eval.metrics import require_timing
     from tofnet.eval.plots import available_kinds, figure, save_figure
     from tofnet.io.ecd import recording_files
@@ -70,7 +72,7 @@ def handle(args) -> int:
         raise TofnetError(f"--error-window must be positive or 'auto', got {args.error_window!r}")
     recording, depth, meta = load_inputs(args.recording, args.depth, timestep=args.timestep,
                                          latency_steps=args.latency_steps,
-                                         allow_external=args.allow_external)
+                                         allow_external=args.allow_external, **sequence_options(args))
     require_timing(meta)
     options = {"window": args.window, "window_s": window_s, "reduce": args.reduce, "with_gt": not args.no_gt}
     depth_path = Path(args.depth)
