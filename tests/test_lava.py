@@ -1,6 +1,6 @@
 """The lava backend: tofnet graphs as Lava processes, byte for byte what the fixed backend computes.
 
-Needs lava-nc 0.10 (Python 3.10): `.ci/run` makes that venv when a Python 3.10 exists. Under
+Needs lava-nc 0.10 (Python 3.10): tests/test_lava_venv.py makes that venv when a Python 3.10 exists. Under
 any other interpreter only the one-line refusal is checked.
 """
 
