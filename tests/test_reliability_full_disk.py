@@ -152,3 +152,36 @@ def test_aedat4_encoder_errors_are_one_line(tmp_path, monkeypatch, capsys):
     assert err.splitlines() == [f"tofnet convert: error: {tmp_path / 'out.aedat4'}: cannot write: "
                                 "No space left on device"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["small.npy"]
+
+
+def test_export_maps_on_a_full_file_system_is_one_line_and_no_folder(tmp_path):
+    from tofnet.events import DEPTH_DTYPE
+    from tofnet.io.depth import write_depth
+
+    depth = np.zeros(200, dtype=DEPTH_DTYPE)
+    depth["t"], depth["x"], depth["z"] = np.arange(200) * 1000, 1, 1.5
+    write_depth(tmp_path / "d.npz", depth, t0_us=0, timestep_us=1000, latency_steps=0)
+    with tmpfs("2m") as full:  # 200 windows of 240x180 maps need ~70 MB
+        done = _tofnet("export", str(tmp_path / "d.npz"), "--maps", str(full / "maps"), "--window", "1ms",
+                       "--sensor-size", "240x180")
+        lines = done.stderr.strip().splitlines()
+        assert done.returncode == 2 and len(lines) == 1, done.stderr[-2000:]
+        assert f"{full / 'maps'}/" in lines[0] and "No space left on device" in lines[0]
+        assert os.listdir(full) == []  # the partial folder is removed
+
+
+def test_numpys_short_write_on_a_full_disk_is_named(tmp_path, monkeypatch):
+    """numpy reports a short write as "N requested and M written", with no errno."""
+    import shutil
+
+    from tofnet.errors import DataError
+    from tofnet.io import files
+    from tofnet.io.npy import write_npy
+
+    def short(*args, **kwargs):
+        raise OSError("43200 requested and 34784 written")
+    monkeypatch.setattr(np, "save", short)
+    monkeypatch.setattr(files.shutil, "disk_usage", lambda path: shutil._ntuple_diskusage(10**9, 10**9, 4096))
+    with pytest.raises(DataError, match=r"a.npy: cannot write: No space left on device \(43200 requested"):
+        write_npy(tmp_path / "a.npy", np.zeros(3))
+    assert os.listdir(tmp_path) == []

@@ -12,6 +12,7 @@ are listed in docs/reliability.md.
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
 import shutil
@@ -20,12 +21,20 @@ import tempfile
 from pathlib import Path
 from typing import IO, Iterable, Iterator
 
-from tofnet.errors import DataError, located, quote
+from tofnet.errors import DataError, located, quote, reason
 from tofnet.io.guard import MANIFEST, foreign_entries, input_among, inputs_under, note_read
 
 
-def _reason(err: OSError) -> str:
-    return err.strerror or type(err).__name__
+def _reason(err: OSError, folder: Path | None = None) -> str:
+    """The system's reason; numpy's short writes carry none ("N requested and M written"):
+    a full file system under ``folder`` is then named as the reason."""
+    if err.strerror:
+        return err.strerror
+    if folder is not None:
+        with contextlib.suppress(OSError):
+            if shutil.disk_usage(folder).free < MIN_FREE_BYTES:  # a short write on a (nearly) full disk
+                return f"{os.strerror(errno.ENOSPC)} ({reason(err)})"
+    return reason(err)
 
 
 def open_regular(path: str | Path, what: str = "file") -> IO[bytes]:
@@ -132,10 +141,11 @@ def atomic_write(path: str | Path, mode: str = "wb", encoding: str | None = None
         refuse_input(path)
         os.replace(tmp, path)
     except BaseException as err:
+        why = _reason(err, path.parent) if isinstance(err, OSError) else None  # before the space is freed
         with contextlib.suppress(OSError):
             os.unlink(tmp)
-        if isinstance(err, OSError):
-            raise DataError(located(path, None, f"cannot write: {_reason(err)}")) from None
+        if why is not None:
+            raise DataError(located(path, None, f"cannot write: {why}")) from None
         raise
     _sync_folder(path.parent)
 
@@ -187,10 +197,11 @@ def atomic_path(path: str | Path, folder: bool = False, written_by: str = "tofne
             refuse_input(path)
             os.replace(tmp, path)
     except BaseException as err:
+        why = _reason(err, path.parent) if isinstance(err, OSError) else None  # before the space is freed
         with contextlib.suppress(OSError):
             shutil.rmtree(tmp) if tmp.is_dir() else os.unlink(tmp)
-        if isinstance(err, OSError):
-            raise DataError(located(path, None, f"cannot write: {_reason(err)}")) from None
+        if why is not None:
+            raise DataError(located(path, None, f"cannot write: {why}")) from None
         if isinstance(err, DataError) and str(tmp) in str(err):  # name the output, not its temporary copy
             raise DataError(str(err).replace(str(tmp), str(path))) from None
         raise
