@@ -56,6 +56,8 @@ def test_disparity_to_depth_is_f_b_over_d():
     depth = disparity_to_depth(np.array([[0.0, 18.0, 36.0]]), q)
     assert np.isnan(depth[0, 0])
     np.testing.assert_allclose(depth[0, 1:], [60 * BASELINE_M / 18, 60 * BASELINE_M / 36])
+    q[3, 2] = -q[3, 2]  # the baseline written with the other sign
+    np.testing.assert_allclose(disparity_to_depth(np.array([[18.0]]), q), [[60 * BASELINE_M / 18]])
 
 
 def _frames(pixel_map=None):

@@ -129,10 +129,13 @@ def disparity_to_depth(disparity_px: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Depth (m) of a disparity map (px, 0 = unknown) with OpenCV's reprojection matrix ``Q``.
 
     ``Q[2, 3]`` is the rectified focal length f (px) and ``1 / Q[3, 2]`` the baseline b (m),
-    so depth = f * b / disparity (``Q[3, 3]`` corrects for different principal points).
+    so depth = f * b / disparity (``Q[3, 3]`` corrects for different principal points), whichever
+    sign the baseline was written with.
     """
     d = np.asarray(disparity_px, dtype=np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):
         depth = q[2, 3] / (q[3, 2] * d + q[3, 3])
+    if q[2, 3] * q[3, 2] < 0:  # Q written for a baseline of the other sign (Tx > 0): depth is still f * b / d
+        depth = -depth
     depth[~(d > 0) | ~np.isfinite(depth) | (depth <= 0)] = np.nan
     return depth
