@@ -121,10 +121,11 @@ def _reason(err: BaseException) -> str:
 
 def _looks_like_calib_txt(text: str) -> bool:
     lines = [line.strip() for line in text.splitlines() if line.strip() and not line.strip().startswith("#")]
-    return len(lines) == 1 and all(_is_number(f) for f in lines[0].split())
+    return len(lines) == 1 and all(is_number(f) for f in lines[0].split())
 
 
-def _is_number(field: str) -> bool:
+def is_number(field: str) -> bool:
+    """Whether ``field`` reads as a float."""
     try:
         float(field)
         return True

@@ -176,6 +176,7 @@ def _pose_matrix(entry, path: Path) -> np.ndarray:
 
 def _rows(path: Path, columns: int) -> tuple[list[str], np.ndarray]:
     """The header words and the numbers of a whitespace table with a ``#`` header line."""
+    from tofnet.io.calibration import is_number
     from tofnet.io.groundtruth import finite_number, read_text
 
     header, rows = [], []
@@ -183,7 +184,7 @@ def _rows(path: Path, columns: int) -> tuple[list[str], np.ndarray]:
         fields = line.split()
         if not fields:
             continue
-        if fields[0].startswith("#") or not rows and not _numeric(fields[0]):
+        if fields[0].startswith("#") or not rows and not is_number(fields[0]):
             header = header or [f.lstrip("#") for f in fields if f.lstrip("#")]
             continue
         if len(fields) != columns:
@@ -192,14 +193,6 @@ def _rows(path: Path, columns: int) -> tuple[list[str], np.ndarray]:
     if not rows:
         raise DataError(located(path, None, "no rows"))
     return header, np.asarray(rows)
-
-
-def _numeric(text: str) -> bool:
-    try:
-        float(text)
-        return True
-    except ValueError:
-        return False
 
 
 def read_mocap(path: Path, marker_to_camera: np.ndarray):
