@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np  # noqa: E402
 
 from accuracy import _key, as_written, default_backend, recording_for, run_network, scenario_config  # noqa: E402
-from tofnet.backends.runtime import UpdateRows, angular_velocity_table, velocity_table  # noqa: E402
+from tofnet.models.binding import UpdateRows, angular_velocity_table, velocity_table  # noqa: E402
 from tofnet.eval.metrics import evaluate  # noqa: E402
 from tofnet.io.recording import Recording  # noqa: E402
 from tofnet.io.rotation import PoseAngularVelocity  # noqa: E402

@@ -51,14 +51,7 @@ LAYERS = (
     {"__main__"},
 )
 #: Imports that still run up a layer, each with what removes it (no new entry without one).
-UPWARD_KNOWN = {
-    # issue 25 item 1: the drop/reject vocabulary and the velocity/camera binding move below backends/
-    ("tofnet.kernels.input_filter", "tofnet.backends.base"),
-    ("tofnet.models.input", "tofnet.backends.base"),
-    ("tofnet.models.depth", "tofnet.backends.base"),
-    ("tofnet.models.velocity", "tofnet.backends.runtime"),
-    ("tofnet.models.angular_velocity", "tofnet.backends.runtime"),
-}
+UPWARD_KNOWN: set[tuple[str, str]] = set()
 #: Cycles still in the tree, each with what removes it.
 CYCLES_KNOWN = [
     # issue 25 item 3: readers register without a cycle (the EventSource protocol below the registry)

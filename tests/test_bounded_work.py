@@ -49,7 +49,7 @@ def _gyroscope(values, bias):
     ([1.797e308, -1.797e308, 1.797e308], [0, 0, 0]),  # overflows interpolating between samples
 ])
 def test_a_huge_gyro_value_is_one_line_without_numpy_warnings(values, bias):
-    from tofnet.backends.runtime import angular_velocity_table
+    from tofnet.models.binding import angular_velocity_table
     gyroscope = _gyroscope(values, bias)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # numpy's RuntimeWarning must not come first

@@ -2,7 +2,6 @@
 
 import numpy as np
 
-from tofnet.backends.base import REJECT_REASONS
 from tofnet.backends.graph import canonical
 import pytest
 
@@ -13,6 +12,7 @@ from tofnet.kernels.fixed_point import FixedPointFormat
 from tofnet.kernels.input_filter import InputFilter
 from tofnet.kernels.region import KernelConfig, TimeOfTravelKernel
 from tofnet.kernels.time_of_travel import N_REASONS, axis_count, outcome
+from tofnet.models.depth import REJECT_REASONS
 
 SENSOR = (19, 14)
 T0 = 3_000

@@ -88,7 +88,7 @@ def test_velocity_comes_from_the_a_t_records_and_any_update_rate():
     ramp = LinearVelocity(VELOCITY, (1.5 * VELOCITY[0], 1.5 * VELOCITY[1], 0.1), 0.2)  # m/s over 0.2 s
     recording = Recording(EVENTS, intrinsics=TEST_INTRINSICS, sensor_size=SENSOR, trajectory=ramp)
     result, _ = run(recording, network({"source": "groundtruth", "update_every": 3}), backend="fixed")
-    from tofnet.backends.runtime import velocity_table
+    from tofnet.models.binding import velocity_table
 
     def rows(first, count):  # update j is sent in step 3j: the velocity at its start
         return velocity_table(ramp, 0, 1000, 3, count, first), first
@@ -234,7 +234,7 @@ def test_run_eval_and_compile_from_the_command_line(tmp_path, capsys):
     depth, meta = read_depth(out)
     assert meta["latency_steps"] == 1 and len(depth) > 1000
     assert abs(np.median(depth["z"]) - 1.0) < 0.03  # the texture is at 1 m
-    for line in ("first events", "dropped", "burst", "too few points", "bad fit", "time_surface.quality"):
+    for line in ("accepted", "dropped", "burst", "too few points", "bad fit", "time_surface.quality"):
         assert line in printed, line
     assert "tot spikes" not in printed
     assert main(["eval", str(tmp_path / "rec"), str(out), "--json", str(tmp_path / "eval.json")]) == 0

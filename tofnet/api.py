@@ -62,7 +62,7 @@ def default_network(recording: Recording | None = None, *, sensor_size: tuple[in
 def check_lens_once(network: Network, recording: Recording | None, source: str) -> None:
     """Refuse a network that would correct a distorted lens twice: spikes moved to undistorted
     pixels (an ``UndistortProcess``) and a velocity process that also takes the lens into account."""
-    from tofnet.backends.runtime import camera_of
+    from tofnet.models.binding import camera_of
     from tofnet.errors import TofnetError
 
     moved = network.of_type(UndistortProcess)

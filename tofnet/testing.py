@@ -263,6 +263,7 @@ class LinearVelocity:
 
 
 # -- a process written as a user would write one: a declaration, a model, a registration -------
+from tofnet.core.counters import Count  # noqa: E402
 from tofnet.core.params import Param  # noqa: E402
 from tofnet.core.ports import Payload, PortSpec  # noqa: E402
 from tofnet.core.process import Process  # noqa: E402
@@ -280,6 +281,7 @@ class ParityGateProcess(Process):
     inports = (PortSpec("events", Payload.POLARITY, 1, "spikes"),)
     outports = (PortSpec("passed", Payload.POLARITY, 1, "the spikes of the chosen parity"),)
     params = (Param("parity", "int", 0, doc="0: pixels with x + y even; 1: odd", minimum=0, maximum=1),)
+    counters = (Count("passed", "output", "spikes of the chosen parity sent on"),)
     resources_per_pixel = {"accumulators": 1, "neurons": 1}
 
 

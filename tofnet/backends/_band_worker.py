@@ -18,7 +18,7 @@ class BandWorker:
     """One band of the paper's chain in a worker process (built from the host's ``band`` message)."""
 
     def __init__(self, spec: dict):
-        from tofnet.backends.runtime import UpdateRows, velocity_table
+        from tofnet.models.binding import UpdateRows, velocity_table
         from tofnet.kernels.kernel_config import Region
         from tofnet.kernels.region import TimeOfTravelKernel
 

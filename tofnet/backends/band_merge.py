@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from tofnet.backends.base import REJECT_REASONS
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, TOT_DTYPE
 from tofnet.kernels.bands import merge_by_step
 from tofnet.kernels.input_filter import ACCEPTED, NEVER, first_out_of_order
 from tofnet.kernels.kernel_config import KernelConfig, KernelOutput
+from tofnet.models.depth import REJECT_REASONS
 
 
 def words(records: np.ndarray) -> tuple[np.ndarray, int]:

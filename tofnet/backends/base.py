@@ -11,14 +11,10 @@ import numpy as np
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE
 
-#: Reasons the input process drops an event, in report order.
-DROP_REASONS = ("out_of_bounds", "before_t0", "refractory", "same_step")
-#: Reasons the depth process rejects an estimate, in report order (``rotation_dominated``: eq. 7's
-#: translational share at or below ``min_share``; only with an angular velocity input).
-REJECT_REASONS = ("no_measurement", "too_near", "too_far", "rotation_dominated")
-
 #: Summary keys that depend on how and where a run went, not on what it computed.
 RUN_SPECIFIC = ("backend", "wall_time_s", "compile_time_s", "kernels_compiled", "workers")
+#: Summary keys for reports only, not stored with the depth files' facts (those stay as they were).
+REPORT_ONLY = ("readers", "latency")
 
 #: ``progress(done, total)``: called now and then with events processed so far.
 ProgressCallback = Callable[[int, int], None]
@@ -45,6 +41,7 @@ class RunResult:
     timestep_us: int
     latency: dict[str, int]
     payloads: dict[str, str] = field(default_factory=dict)
+    declared: dict[str, dict[str, dict]] = field(default_factory=dict)
     wall_time: float = 0.0
     extra: dict = field(default_factory=dict)
     #: Seconds the run spent compiling kernels or loading numba's cache (not in ``wall_time``), and
@@ -87,40 +84,59 @@ class RunResult:
     def depth(self, value: np.ndarray) -> None:
         self.outputs[self.depth_output] = value
 
-    def _processes_counting(self, key: str) -> list[dict[str, int]]:
-        return [c for c in self.counts.values() if key in c]
+    def of_kind(self, process: str, kind: str) -> dict[str, int]:
+        """The counts of ``process`` whose declared kind is ``kind`` (``tofnet.core.counters.KINDS``)."""
+        counted = self.counts.get(process, {})
+        return {name: int(counted.get(name, 0)) for name, what in self.declared.get(process, {}).items()
+                if what["kind"] == kind}
+
+    @property
+    def readers(self) -> dict[str, dict]:
+        """Per process that reads the events: ``events_in``, ``accepted`` and ``dropped`` by reason
+        (each accounts for every event once)."""
+        return {name: {"events_in": sum(self.of_kind(name, "read").values()),
+                       "accepted": sum(self.of_kind(name, "accepted").values()),
+                       "dropped": self.of_kind(name, "dropped")}
+                for name in self.counts if self.of_kind(name, "read")}
+
+    def _first_reader(self) -> dict:
+        return next(iter(self.readers.values()), {"events_in": 0, "accepted": 0, "dropped": {}})
 
     @property
     def events_in(self) -> int:
-        """Events the network was given (each input process sees every event)."""
-        found = self._processes_counting("events_in")
-        return found[0]["events_in"] if found else 0
+        """Events the network was given (each reader reads every event)."""
+        return self._first_reader()["events_in"]
 
     @property
     def accepted(self) -> int:
-        return sum(c["accepted"] for c in self._processes_counting("events_in"))
+        """Events the first reader accepted (``readers`` has every reader's)."""
+        return self._first_reader()["accepted"]
 
     @property
     def dropped(self) -> dict[str, int]:
-        """Drops by reason, summed over the input processes."""
-        out = dict.fromkeys(DROP_REASONS, 0)
-        for c in self._processes_counting("events_in"):
-            for reason in DROP_REASONS:
-                out[reason] += c.get(reason, 0)
-        return out
+        """The first reader's drops by reason (``readers`` has every reader's)."""
+        return self._first_reader()["dropped"]
 
     @property
     def rejected(self) -> dict[str, int]:
         """Rejections by reason of the process behind the depth output."""
-        if not self.depth_outputs:
-            return dict.fromkeys(REJECT_REASONS, 0)
-        c = self.counts.get(self.depth_output.split(".")[0], {})
-        return {reason: c.get(reason, 0) for reason in REJECT_REASONS}
+        if len(self.depth_outputs) != 1:
+            return {}
+        return self.of_kind(self.depth_output.split(".")[0], "rejected")
+
+    def totals(self) -> dict[str, int]:
+        """The summary's totals (``Count.total``, e.g. ``tot_spikes``), summed over the processes."""
+        out: dict[str, int] = {}
+        for process, declared in self.declared.items():
+            for name, what in declared.items():
+                if what.get("total"):
+                    out[what["total"]] = out.get(what["total"], 0) + int(self.counts.get(process, {}).get(name, 0))
+        return out
 
     @property
     def tot_spikes(self) -> int:
-        """Time-of-travel spikes sent, summed over the processes that count ``spikes``."""
-        return sum(c["spikes"] for c in self._processes_counting("spikes"))
+        """Time-of-travel spikes sent (the ``tot_spikes`` total)."""
+        return self.totals().get("tot_spikes", 0)
 
     @property
     def tot(self) -> np.ndarray | None:
@@ -142,18 +158,19 @@ class RunResult:
         """What the run computed, the same on every backend of one arithmetic: counts, outputs, steps,
         latency (no backend name, times or machine facts). Depth files store this, so that integer
         backends write the same bytes."""
-        return {k: v for k, v in self.summary().items() if k not in RUN_SPECIFIC}
+        return {k: v for k, v in self.summary().items() if k not in RUN_SPECIFIC + REPORT_ONLY}
 
     def summary(self) -> dict:
         """Plain-data summary (for JSON and the CLI)."""
         out = {"backend": self.backend, "events_in": self.events_in, "accepted": self.accepted,
-               "dropped": self.dropped, "tot_spikes": self.tot_spikes}
+               "dropped": self.dropped, "tot_spikes": 0, **self.totals()}
         if len(self.depth_outputs) == 1:
             out["depth_out"] = int(len(self.depth))
             out["rejected"] = self.rejected
         out.update({
             "outputs": {name: int(len(records)) for name, records in self.outputs.items()},
             "counts": {name: dict(c) for name, c in self.counts.items()},
+            "readers": self.readers, "latency": dict(self.latency),
             "steps": self.steps, "timestep_s": self.timestep_us * 1e-6, "latency_steps": self.latency_steps,
             "latency_s": self.latency_seconds, "wall_time_s": self.wall_time,
             "compile_time_s": self.compile_time, "kernels_compiled": self.kernels_compiled})
@@ -161,10 +178,6 @@ class RunResult:
             out["workers"] = {"threads": int(self.extra.get("workers", 1)), "bands": len(self.extra["bands"]),
                               "whole": list(self.extra.get("whole", []))}
         return out
-
-
-def empty_counts(reasons: Iterable[str]) -> dict[str, int]:
-    return {reason: 0 for reason in reasons}
 
 
 class Backend(ABC):

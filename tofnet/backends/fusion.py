@@ -14,10 +14,10 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from tofnet.backends.base import DROP_REASONS, RunResult
+from tofnet.backends.base import RunResult
 from tofnet.backends.graph import canonical
-from tofnet.backends.runtime import UpdateRows, velocity_table
 from tofnet.backends.stream import check_packet
+from tofnet.core.counters import kinds_of
 from tofnet.core.network import Network
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, TOT_DTYPE
@@ -25,7 +25,9 @@ from tofnet.io.recording import VelocitySource
 from tofnet.kernels.compilation import Stopwatch
 from tofnet.kernels.region import KernelConfig, KernelOutput, TimeOfTravelKernel, copy_records
 from tofnet.models.base import concat
+from tofnet.models.binding import UpdateRows, velocity_table
 from tofnet.models.depth import OUTCOMES
+from tofnet.models.input import input_counts
 from tofnet.models.registry import _registered
 from tofnet.processes import DepthProcess, InputProcess, TimeOfTravelProcess, VelocityProcess
 
@@ -282,8 +284,7 @@ class FusedStream:
         fmt = kernel.config.fixed
         try:
             counts = {
-                names[0]: {"events_in": self._events_in, "accepted": kernel.accepted,
-                           **{reason: int(c) for reason, c in zip(DROP_REASONS, kernel.drops)}},
+                names[0]: input_counts(self._events_in, kernel.accepted, kernel.drops),
                 names[1]: {"spikes": kernel.tot_spikes},
                 names[2]: {name: int(c) for name, c in zip(OUTCOMES, kernel.outcomes)},
                 names[3]: {}}
@@ -299,5 +300,7 @@ class FusedStream:
             self.backend, outputs, counts, last_step + 1 + self.pipeline.latency_steps,
             t0, self.timestep_us,
             {name: self._latency(name) for name in outputs}, dict(self.payloads),
+            {name: kinds_of(kind.counters) for name, kind in zip(names, (InputProcess, TimeOfTravelProcess,
+                                                                           DepthProcess, VelocityProcess))},
             extra={**({"frac_bits": fmt.frac_bits, "payload_bits": fmt.payload_bits} if fmt else {}),
                    **getattr(kernel, "facts", {})}).timed_by(self._clock)

@@ -16,7 +16,8 @@ from tofnet.backends.bands import BandedKernel, band_placer, resolve_workers, th
 from tofnet.backends.base import Backend, ProgressCallback, RunResult
 from tofnet.backends.fusion import FusedStream, PipelineParams, paper_chain
 from tofnet.backends.graph import GraphExecutor, canonical, resolve_probes, sinks_of
-from tofnet.backends.runtime import camera_of, clock_of, start_time_us, velocity_source_of
+from tofnet.backends.runtime import clock_of, start_time_us
+from tofnet.models.binding import camera_of, velocity_source_of
 from tofnet.backends.stream import DEFAULT_PACKET_EVENTS, GraphStream, run_in_packets
 from tofnet.compiler.bands import input_reach, plan_bands
 from tofnet.compiler.compiled import network_of

@@ -24,7 +24,7 @@ from tofnet.backends.base import Backend, ProgressCallback, RunResult
 from tofnet.backends.graph import GraphExecutor, resolve_probes, sinks_of
 from tofnet.backends.fusion import FusedStream, paper_chain
 from tofnet.backends.local import binding, payloads_of, run_fused
-from tofnet.backends.runtime import camera_of, velocity_source_of
+from tofnet.models.binding import camera_of, velocity_source_of
 from tofnet.backends.shared_bands import SharedBandKernel, band_rows
 from tofnet.backends.stream import DEFAULT_PACKET_EVENTS
 from tofnet.compiler.bands import input_reach

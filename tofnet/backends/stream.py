@@ -8,6 +8,7 @@ import numpy as np
 
 from tofnet.backends.base import ProgressCallback, RunResult
 from tofnet.backends.graph import GraphExecutor
+from tofnet.core.counters import kinds_of
 from tofnet.errors import BackendError
 from tofnet.events import EVENT_DTYPE, MAX_TIME_US
 from tofnet.kernels.compilation import Stopwatch
@@ -173,7 +174,7 @@ class GraphStream:
         return RunResult(self.backend, outputs, counts, steps, self.t0_us, self.timestep_us,
                          {name: ex.output_latency(name) for name in wanted},
                          {name: ex.payload_of(name) for name in wanted},
-                         extra=dict(self.extra)).timed_by(self._clock)
+                         {p.name: kinds_of(type(p).counters) for p in ex.network.processes}, extra=dict(self.extra)).timed_by(self._clock)
 
 
 class Collected:

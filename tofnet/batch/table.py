@@ -11,15 +11,15 @@ import math
 from pathlib import Path
 from typing import Any, Iterable
 
-from tofnet.backends.base import DROP_REASONS, REJECT_REASONS
 from tofnet.eval.breakdown import BREAKDOWN_COLUMNS
 from tofnet.eval.frames import CUTOFF_COLUMNS
 from tofnet.io.files import atomic_path
 
 INPUT_COLUMNS = ("task", "task_id", "recording", "recording_name", "scenario", "seed", "duration_s", "network",
                  "backend")
-COUNT_COLUMNS = ("events_in", "accepted", "dropped", *(f"dropped_{r}" for r in DROP_REASONS), "tot_spikes",
-                 "depth_out", *(f"rejected_{r}" for r in REJECT_REASONS), "steps", "latency_steps")
+#: Count columns; ``dropped_<reason>`` and ``rejected_<reason>`` follow ``dropped`` and ``depth_out`` with
+#: the reasons the networks' processes declare (``Process.counters``), as the rows name them.
+COUNT_COLUMNS = ("events_in", "accepted", "dropped", "tot_spikes", "depth_out", "steps", "latency_steps")
 METRIC_COLUMNS = ("matched", "coverage_pct", "mean_abs_m", "median_abs_m", "mean_rel_pct", "median_rel_pct",
                   "bias_rel_pct", *CUTOFF_COLUMNS, *BREAKDOWN_COLUMNS)
 #: Columns that change from run to run of the same plan.
@@ -31,9 +31,13 @@ PLOTTED = ("median_rel_pct", "mean_rel_pct", "bias_rel_pct", "coverage_pct", "de
 DURATIONS = ("timestep", "refractory")
 
 
-def columns(parameters: Iterable[str]) -> list[str]:
-    """The table's columns for a plan whose grid sweeps ``parameters``."""
-    return [*INPUT_COLUMNS, *parameters, "status", "error", *COUNT_COLUMNS, *METRIC_COLUMNS, *TIMING_COLUMNS,
+def columns(parameters: Iterable[str], rows: Iterable[dict] = ()) -> list[str]:
+    """The table's columns for a plan whose grid sweeps ``parameters``, with the reasons ``rows`` count."""
+    keys = dict.fromkeys(key for row in rows for key in row)
+    dropped = [k for k in keys if k.startswith("dropped_")]
+    rejected = [k for k in keys if k.startswith("rejected_")]
+    counts = [*COUNT_COLUMNS[:3], *dropped, *COUNT_COLUMNS[3:5], *rejected, *COUNT_COLUMNS[5:]]
+    return [*INPUT_COLUMNS, *parameters, "status", "error", *counts, *METRIC_COLUMNS, *TIMING_COLUMNS,
             *OUTPUT_COLUMNS]
 
 
@@ -43,8 +47,8 @@ def sort_rows(rows: Iterable[dict]) -> list[dict]:
 
 def write_table(rows: list[dict], parameters: Iterable[str], out_dir: Path, stem: str = "results") -> list[Path]:
     """Write ``results.csv`` (and ``results.parquet`` when pyarrow imports); the paths written."""
-    names = columns(parameters)
     rows = sort_rows(rows)
+    names = columns(parameters, rows)
     written = [out_dir / f"{stem}.csv"]
     with atomic_path(written[0]) as tmp, open(tmp, "w", newline="", encoding="utf-8") as f:
         writer = csv.writer(f)

@@ -18,7 +18,6 @@ import uuid
 from pathlib import Path
 from typing import Any
 
-from tofnet.backends.base import DROP_REASONS, REJECT_REASONS
 from tofnet.batch.tasks import Task
 from tofnet.errors import TofnetError
 from tofnet.io.files import write_text_atomic
@@ -126,9 +125,9 @@ def _run(task: Task, recording_path: str, folder: Path) -> dict[str, Any]:
     out: dict[str, Any] = {
         "backend": backend, "events_in": summary["events_in"], "accepted": summary["accepted"],
         "dropped": sum(summary["dropped"].values()),
-        **{f"dropped_{r}": summary["dropped"].get(r, 0) for r in DROP_REASONS},
+        **{f"dropped_{r}": n for r, n in summary["dropped"].items()},  # the first reader's reasons
         "tot_spikes": summary["tot_spikes"], "depth_out": summary.get("depth_out"),
-        **{f"rejected_{r}": summary.get("rejected", {}).get(r) for r in REJECT_REASONS},
+        **{f"rejected_{r}": n for r, n in summary.get("rejected", {}).items()},
         "steps": summary["steps"], "latency_steps": summary["latency_steps"],
         "wall_time_s": summary["wall_time_s"],
         "events_per_s": summary["events_in"] / summary["wall_time_s"] if summary["wall_time_s"] > 0 else None,

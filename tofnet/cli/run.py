@@ -182,8 +182,8 @@ def undistortion_of(network, recording, result, args) -> dict | None:
     """How the network treated the lens: through the velocity term (raw pixels), by moving spikes
     (an undistort process), or not at all; None when there is no lens to speak of."""
     from tofnet.api import lens_is_distorted
-    from tofnet.backends.runtime import camera_of
     from tofnet.errors import TofnetError
+    from tofnet.models.binding import camera_of
     from tofnet.processes import UndistortProcess, VelocityProcess
 
     found = network.of_type(UndistortProcess)
@@ -267,6 +267,28 @@ def write_outputs(out: Path, result, summary: dict, record_tot: bool, check=None
     return paths
 
 
+def reader_lines(summary: dict) -> list[str]:
+    """Where every event went, once per process that reads the events (``RunResult.readers``)."""
+    readers = summary.get("readers") or {"": {"events_in": summary["events_in"], "accepted": summary["accepted"],
+                                              "dropped": summary["dropped"]}}
+    lines = []
+    for name, account in readers.items():
+        lines.append(f"events in      {account['events_in']:>12,}" + (f"  read by {name}" if len(readers) > 1 else ""))
+        lines.append(f"  accepted     {account['accepted']:>12,}")
+        lines += [f"  dropped      {count:>12,}  {reason.replace('_', ' ')}"
+                  for reason, count in account["dropped"].items()]
+    return lines
+
+
+def latency_lines(summary: dict) -> list[str]:
+    """The steps from an event to each output (one line when there is one output)."""
+    ms = summary["timestep_s"] * 1e3
+    latency = summary.get("latency") or {}
+    if len(set(latency.values())) <= 1:
+        return [f"latency        {summary['latency_steps']} steps ({summary['latency_s'] * 1e3:g} ms)"]
+    return [f"latency        {steps} steps ({steps * ms:g} ms)  {name}" for name, steps in latency.items()]
+
+
 def format_summary(summary: dict, result, written: dict, network_width) -> str:
     """The closing report: where every event went, what each process did, and how fast."""
     width, height = network_width
@@ -276,32 +298,16 @@ def format_summary(summary: dict, result, written: dict, network_width) -> str:
              *([f"workers        {workers_line(summary['workers'])}"] if summary.get("workers") else []),
              *([f"rotation       {summary['rotation']}"] if summary.get("rotation") else []),
              *([f"undistort      {undistortion_line(summary['undistortion'])}"] if summary.get("undistortion") else []),
-             f"events in      {summary['events_in']:>12,}",
-             f"  accepted     {summary['accepted']:>12,}"]
+             *reader_lines(summary)]
     depth_names = result.depth_outputs
-    own = result.counts.get(depth_names[0].split(".")[0], {}) if len(depth_names) == 1 else {}
-    dropped = dict(summary["dropped"])
-    if "burst" in own:  # the time-surface estimator reads the events itself: its first events, drops, rejections
-        lines[-1] = f"  first events {summary['accepted']:>12,}"
-        dropped = {reason: own[reason] for reason in ("out_of_bounds", "before_t0", "burst")}
-    for reason, count in dropped.items():
-        lines.append(f"  dropped      {count:>12,}  {reason.replace('_', ' ')}")
-    if "burst" in own:
+    if len(depth_names) == 1:
+        lines += [f"{total.replace('_', ' '):<14} {count:>12,}" for total, count in result.totals().items()]
         lines.append(f"depth out      {summary['depth_out']:>12,}  -> {written[depth_names[0]]}")
-        lines += [f"  rejected     {count:>12,}  {reason.replace('_', ' ')}" for reason, count in own.items()
-                  if reason not in ("events_in", "accepted", *dropped, "emitted")
-                  and (count or reason != "rotation_dominated")]
-    elif len(depth_names) == 1:
-        lines.append(f"tot spikes     {summary['tot_spikes']:>12,}")
-        lines.append(f"depth out      {summary['depth_out']:>12,}  -> {written[depth_names[0]]}")
-        rotating = str(summary.get("rotation") or "").startswith("eq. 7")
-        for reason, count in summary["rejected"].items():
-            if reason == "rotation_dominated" and not (rotating or count):
-                continue  # eq. 8 never rejects for rotation
-            lines.append(f"  rejected     {count:>12,}  {reason.replace('_', ' ')}")
+        lines += [f"  rejected     {count:>12,}  {reason.replace('_', ' ')}"
+                  for reason, count in summary["rejected"].items() if count]
     else:
         for process, counts in summary["counts"].items():
-            if counts and "events_in" not in counts:
+            if counts and process not in summary.get("readers", {}):
                 told = ", ".join(f"{k.replace('_', ' ')} {v:,}" for k, v in counts.items())
                 lines.append(f"{process:<14} {told}")
     for name, path in written.items():
@@ -317,13 +323,14 @@ def format_summary(summary: dict, result, written: dict, network_width) -> str:
             lines.append(f"depth range    {np.percentile(z, 5):.3f} .. {np.percentile(z, 95):.3f} m (5th-95th pct), "
                          f"median {np.median(z):.3f} m{which}")
     rate = summary["events_in"] / summary["wall_time_s"] if summary["wall_time_s"] > 0 else float("inf")
-    lines.append(f"latency        {summary['latency_steps']} steps ({summary['latency_s'] * 1e3:g} ms)")
+    lines += latency_lines(summary)
     lines.append(f"wall time      {summary['wall_time_s']:.3f} s network ({rate / 1e6:.2f} M events/s), "
                  f"{summary['total_time_s']:.3f} s in all")
     if summary.get("kernels_compiled"):
         lines.append(compile_line(summary["compile_time_s"], summary["kernels_compiled"]))
-    out_of_bounds = summary["dropped"].get("out_of_bounds", 0)
-    if out_of_bounds:
-        lines.append(f"warning        {out_of_bounds:,} events lay outside the {width}x{height} sensor; "
-                     "pass --sensor-size if the recording is larger")
+    for reader, account in list(summary.get("readers", {}).items())[:1]:  # every reader sees the same events
+        for reason, count in account["dropped"].items():
+            warning = result.declared.get(reader, {}).get(reason, {}).get("warning")
+            if count and warning:
+                lines.append(f"warning        {count:,} {warning.format(width=width, height=height)}")
     return "\n".join(lines)

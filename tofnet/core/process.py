@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 from typing import Any, ClassVar
 
+from tofnet.core.counters import Count
 from tofnet.core.params import Param
 from tofnet.core.ports import InPort, OutPort, PortSpec
 from tofnet.core.vars import Var
@@ -31,6 +32,9 @@ class Process:
     vars: ClassVar[tuple[Var, ...]] = ()
     #: Per-pixel needs on a neuromorphic core, e.g. ``{"accumulators": 8, "neurons": 4}``.
     resources_per_pixel: ClassVar[dict[str, int]] = {}
+    #: What the process counts (``Count``: events read, accepted, dropped and rejected by reason,
+    #: outputs); its models' ``counts()`` return these keys. Results and reports add them up from here.
+    counters: ClassVar[tuple[Count, ...]] = ()
     #: ``"core"``: runs on neuromorphic cores; ``"host"``: runs off-chip (input, velocity).
     placement: ClassVar[str] = "core"
 

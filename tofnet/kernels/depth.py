@@ -6,7 +6,7 @@ import math
 
 from numba import njit
 
-# Rejection reasons, in tofnet.backends.base.REJECT_REASONS order; EMITTED means kept.
+# Rejection codes, in the order of the rejection reasons ``DepthProcess.counters`` declares; EMITTED means kept.
 EMITTED, NO_MEASUREMENT, TOO_NEAR, TOO_FAR = -1, 0, 1, 2
 
 

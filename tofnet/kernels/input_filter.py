@@ -16,12 +16,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from tofnet.backends.base import DROP_REASONS
-
-# Indices into the drop counter array, in DROP_REASONS order; ACCEPTED follows them, so a
-# counter array of 5 slots takes ``counts[admit(...)] += 1`` without a branch.
+# Indices into the drop counter array (the drop reasons ``InputProcess.counters`` declares, in
+# that order); ACCEPTED follows them, so a counter array of 5 slots takes
+# ``counts[admit(...)] += 1`` without a branch.
 OUT_OF_BOUNDS, BEFORE_T0, REFRACTORY, SAME_STEP, ACCEPTED = range(5)
-assert DROP_REASONS == ("out_of_bounds", "before_t0", "refractory", "same_step")
 
 NEVER = -(1 << 62)  # "no event yet" (µs): far enough back that any refractory period has passed
 
@@ -99,7 +97,7 @@ class InputFilter:
 
     @property
     def drops(self) -> np.ndarray:
-        """Drop counts in DROP_REASONS order (a view)."""
+        """Drop counts by slot (``OUT_OF_BOUNDS`` ... ``SAME_STEP``; a view)."""
         return self._counts[:ACCEPTED]
 
     @property
@@ -117,10 +115,6 @@ class InputFilter:
                               self._counts)
         self.events_in += n
         return out_step[:count], out_x[:count], out_y[:count], out_p[:count]
-
-    @property
-    def dropped(self) -> dict[str, int]:
-        return {reason: int(c) for reason, c in zip(DROP_REASONS, self.drops)}
 
 
 @njit(cache=True)

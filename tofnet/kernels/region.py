@@ -77,7 +77,7 @@ class TimeOfTravelKernel:
         self._rec[:] = NEVER
         self._stamp = self._rec.view(np.int32)
         self._stamp.reshape(-1, 2 * stride)[:, :4] = tt.IDLE
-        self.rejected = self._counts[tt.REJECTED:tt.EMITTED]  # REJECT_REASONS order (a view)
+        self.rejected = self._counts[tt.REJECTED:tt.EMITTED]  # the rejection reasons' order (a view)
         self._out, self._raw, self._tot = np.empty(0, DEPTH_DTYPE), np.empty(0, np.int64), np.empty(0, TOT_DTYPE)
         self._broken = False
         # Scalars and empty arrays the per-packet path needs, looked up once.
@@ -122,7 +122,7 @@ class TimeOfTravelKernel:
 
     @property
     def drops(self) -> np.ndarray:
-        """Events ``process_events`` dropped so far, in DROP_REASONS order (a view)."""
+        """Events ``process_events`` dropped so far, by drop slot (a view)."""
         return self._counts[:ACCEPTED]
 
     def _reserve(self, n_out: int, n_spikes: int) -> None:
@@ -358,7 +358,7 @@ class TimeOfTravelKernel:
 
     @property
     def outcomes(self) -> np.ndarray:
-        """Depth neurons reached so far by outcome: REJECT_REASONS, then emitted (a view)."""
+        """Depth neurons reached so far by outcome: the rejection reasons, then emitted (a view)."""
         return self._counts[tt.REJECTED:tt.EMITTED + 1]
 
     def unit_state(self) -> tuple[np.ndarray, np.ndarray]:

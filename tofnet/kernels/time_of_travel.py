@@ -70,7 +70,7 @@ OK, UNSORTED, PENDING_FULL, NO_VELOCITY = 0, 1, 2, 3
 N_PEND, CURRENT, BASE, T_HI, NEED_FIRST, NEED_LAST = range(6)
 N_CURSOR = 6
 # Count slots: input_filter's drop reasons and ACCEPTED (0-4), depth outcomes (5-10:
-# the N_REASONS of REJECT_REASONS, emitted, no unit fired), time-of-travel spikes. The
+# the N_REASONS rejection reasons ``DepthProcess.counters`` declares, emitted, no unit fired), time-of-travel spikes. The
 # fused kernel computes eq. 8 only, so it never counts ``rotation_dominated`` (slot 8).
 # ``HALO``: where the filter's outcomes for a halo pixel go (a band's halo pixel belongs to
 # another band, which counts it), so a banded run counts every event once.
@@ -133,7 +133,7 @@ def axis_count(m_positive: int, m_negative: int) -> int:
 
 @njit(cache=True)
 def outcome(fired: int, measured: bool, z, min_depth, max_depth) -> int:
-    """``depth.classify`` without branches, as a count slot offset: REJECT_REASONS index,
+    """``depth.classify`` without branches, as a count slot offset: rejection reason index,
     N_REASONS emitted, N_REASONS + 1 no unit fired (the depth neuron received nothing)."""
     near = np.int64(z <= min_depth)
     far = np.int64(z >= max_depth) & (1 - near)

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tofnet.backends.runtime import UpdateRows, angular_velocity_table, intrinsics_of
+from tofnet.models.binding import UpdateRows, angular_velocity_table, intrinsics_of
 from tofnet.core.ports import Payload
 from tofnet.errors import DataError
 from tofnet.io.groundtruth import Trajectory

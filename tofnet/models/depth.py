@@ -5,16 +5,20 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from tofnet.backends.base import REJECT_REASONS
+from tofnet.core.counters import names_of
 from tofnet.core.ports import Payload
-from tofnet.kernels.depth import (EMITTED, classify, classify_rotation, float_depth, float_depth_rotation,
-                                  signed_axis_count, translational_share)
+from tofnet.kernels.depth import (EMITTED, ROTATION_DOMINATED, classify, classify_rotation, float_depth,
+                                  float_depth_rotation, signed_axis_count, translational_share)
 from tofnet.kernels.region import KernelConfig, TimeOfTravelKernel
+from tofnet.kernels.time_of_travel import N_REASONS
 from tofnet.models.base import Model, ModelContext, StepModel, records
 from tofnet.processes import DepthProcess
 
+#: Rejection reasons in the kernels' code order (``tofnet.kernels.depth``), as the process declares them.
+REJECT_REASONS = names_of(DepthProcess.counters, "rejected")
 #: Outcomes a depth neuron counts: the rejection reasons, then emitted estimates.
-OUTCOMES = REJECT_REASONS + ("emitted",)
+OUTCOMES = REJECT_REASONS + names_of(DepthProcess.counters, "output")
+assert len(REJECT_REASONS) == N_REASONS and REJECT_REASONS[ROTATION_DOMINATED] == "rotation_dominated"
 
 
 @njit(cache=True)

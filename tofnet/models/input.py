@@ -4,12 +4,22 @@ from __future__ import annotations
 
 import numpy as np
 
-from tofnet.backends.base import DROP_REASONS
+from tofnet.core.counters import names_of
 from tofnet.core.ports import Payload
 from tofnet.errors import BackendError
-from tofnet.kernels.input_filter import NEVER, InputFilter, first_out_of_order
+from tofnet.kernels.input_filter import ACCEPTED, NEVER, REFRACTORY, InputFilter, first_out_of_order
 from tofnet.models.base import Model, ModelContext, concat, records
 from tofnet.processes import InputProcess
+
+#: Drop reasons in the filter's slot order (``tofnet.kernels.input_filter``), as the process declares them.
+DROP_REASONS = names_of(InputProcess.counters, "dropped")
+assert len(DROP_REASONS) == ACCEPTED and DROP_REASONS[REFRACTORY] == "refractory"
+
+
+def input_counts(events_in: int, accepted: int, drops) -> dict[str, int]:
+    """The input process's counts (``InputProcess.counters``) from the filter's drop slots."""
+    return {"events_in": int(events_in), "accepted": int(accepted),
+            **{reason: int(c) for reason, c in zip(DROP_REASONS, drops)}}
 
 
 def check_time_order(events: np.ndarray, after_us: int | None, who: str) -> None:
@@ -87,5 +97,4 @@ class InputModel(Model):
 
     def counts(self) -> dict[str, int]:
         flt = self.filter
-        return {"events_in": flt.events_in, "accepted": flt.accepted,
-                **{reason: int(c) for reason, c in zip(DROP_REASONS, flt.drops)}}
+        return input_counts(flt.events_in, flt.accepted, flt.drops)

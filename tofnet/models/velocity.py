@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tofnet.backends.runtime import UpdateRows, camera_of, velocity_source_of, velocity_table
+from tofnet.models.binding import UpdateRows, camera_of, velocity_source_of, velocity_table
 from tofnet.core.ports import Payload
 from tofnet.kernels.lens import Lens, lens_of, sample_table
 from tofnet.kernels.velocity import velocity_term

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from tofnet.core.counters import Count
 from tofnet.core.params import Param
 from tofnet.core.ports import Payload, PortSpec
 from tofnet.core.process import Process
@@ -27,6 +28,8 @@ class BackgroundActivityFilterProcess(Process):
 
     inports = (PortSpec("events", Payload.POLARITY, 1, "spikes to filter, one per pixel and step at most"),)
     outports = (PortSpec("passed", Payload.POLARITY, 1, "the spikes a neighbour supports"),)
+    counters = (Count("passed", "output", "spikes a neighbour supports"),
+                Count("isolated", "dropped", "no neighbour spiked within the window"))
     params = (
         Param("radius", "int", 1, unit="px", doc="neighbourhood (Chebyshev distance) that supports a spike",
               minimum=1, maximum=16),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from tofnet.core.counters import Count
 from tofnet.core.params import Param
 from tofnet.core.ports import Payload, PortSpec
 from tofnet.core.process import Process
@@ -33,6 +34,12 @@ class DepthProcess(Process):
                  "connected, eq. 8 when not", required=False),
     )
     outports = (PortSpec("depth", Payload.DEPTH, 1, "depth estimate, metres", required=False),)
+    counters = (Count("no_measurement", "rejected", "no signed count on either axis"),
+                Count("too_near", "rejected", "below min_depth"),
+                Count("too_far", "rejected", "beyond max_depth"),
+                Count("rotation_dominated", "rejected", "eq. 7's translational share at or below min_share (only "
+                      "with an angular velocity input)"),
+                Count("emitted", "output", "estimates sent"))
     params = (
         Param("min_depth", "length", 0.05, unit="m", doc="estimates at or below are rejected", minimum=0.0),
         Param("max_depth", "length", 20.0, unit="m", doc="estimates at or above are rejected", minimum=0.0),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from tofnet.core.counters import Count
 from tofnet.core.params import Param
 from tofnet.core.ports import Payload, PortSpec
 from tofnet.core.process import Process
@@ -34,6 +35,14 @@ class InputProcess(Process):
     """
 
     outports = (PortSpec("events", Payload.POLARITY, 1, "one spike per active pixel, carrying its polarity"),)
+    counters = (Count("events_in", "read", "events of the recording"),
+                Count("accepted", "accepted", "events sent on as spikes"),
+                Count("out_of_bounds", "dropped", "outside sensor_size",
+                      warning="events lay outside the {width}x{height} sensor; pass --sensor-size if the "
+                              "recording is larger"),
+                Count("before_t0", "dropped", "before the start of step 0"),
+                Count("refractory", "dropped", "within the refractory period of the pixel's last accepted event"),
+                Count("same_step", "dropped", "the pixel already sent a spike in this step"))
     params = (
         Param("sensor_size", "size", (240, 180), unit="px", doc="sensor (width, height)"),
         Param("timestep", "duration", "1ms", unit="s", doc="duration of one network step",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from tofnet.core.counters import Count
 from tofnet.core.params import Param
 from tofnet.core.ports import Payload, PortSpec
 from tofnet.core.process import Process
@@ -21,6 +22,7 @@ class TimeOfTravelProcess(Process):
 
     inports = (PortSpec("events", Payload.POLARITY, 1, "input spikes: trigger and facilitating"),)
     outports = (PortSpec("counts", Payload.COUNT, 4, "counter values per direction (+u, -u, +v, -v), steps"),)
+    counters = (Count("spikes", "output", "counter spikes sent", total="tot_spikes"),)
     params = (
         Param("distance", "int", 1, unit="px", doc="pixels between facilitating and trigger pixel",
               minimum=1, maximum=255),

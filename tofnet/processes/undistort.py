@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from tofnet.core.counters import Count
 from tofnet.core.params import Param
 from tofnet.core.ports import Payload, PortSpec
 from tofnet.core.process import Process
@@ -52,6 +53,9 @@ class UndistortProcess(Process):
     inports = (PortSpec("events", Payload.POLARITY, 1, "spikes at raw sensor pixels, one per pixel and step at most"),)
     outports = (PortSpec("undistorted", Payload.POLARITY, 1, "the spikes at their undistorted pixels, one per "
                          "pixel and step"),)
+    counters = (Count("passed", "output", "spikes sent at their undistorted pixels"),
+                Count("left_image", "dropped", "undistorted outside the sensor"),
+                Count("merged", "dropped", "a second spike on one undistorted pixel in a step"))
     params = (
         Param("model", "str", None, optional=True, choices=MODELS,
               doc="lens model; from the recording's calibration when null (with coefficients)"),

@@ -1,0 +1,100 @@
+"""Processes declare their counts; results and the run summary add them up per process, and every
+event is accounted for once per process that reads the events."""
+
+from pathlib import Path
+
+import pytest
+
+from tofnet.api import run
+from tofnet.cli.run import format_summary
+from tofnet.core.counters import KINDS, Count
+from tofnet.core.network import Network
+from tofnet.core.process import Process
+from tofnet.networks import denoised_network, depth_network, improved_network, multi_distance_network
+from tofnet.processes import TimeSurfaceProcess, VelocityProcess
+from tofnet.testing import TEST_INTRINSICS, ParityGateProcess, merge_events, moving_pattern, noise_events
+from tofnet.io.recording import Recording
+
+SENSOR = (24, 18)
+FLOW = (250.0, -120.0)  # px/s
+VELOCITY = [-FLOW[0] / TEST_INTRINSICS.fx, -FLOW[1] / TEST_INTRINSICS.fy, 0.0]  # a texture at 1 m
+CONSTANT = {"source": "constant", "velocity": VELOCITY}
+EVENTS = merge_events(moving_pattern(SENSOR, FLOW, 120_000, seed=3, sample_us=50, start_us=1_000),
+                      noise_events(SENSOR, 10, 120_000, seed=4))
+OUTSIDE = EVENTS[-3:].copy()
+OUTSIDE["x"] = SENSOR[0] + 2  # three events beyond the sensor: dropped out of bounds by every reader
+OUTSIDE["t"] = EVENTS["t"][-1]
+RECORDING = Recording(merge_events(EVENTS, OUTSIDE), intrinsics=TEST_INTRINSICS, sensor_size=SENSOR)
+
+
+def two_readers() -> Network:
+    """The paper's network with the time-surface estimator beside it (both read the events) and a
+    user's process on the input's spikes."""
+    paper = depth_network(SENSOR, velocity=CONSTANT)
+    surface = TimeSurfaceProcess(name="surface", sensor_size=SENSOR)
+    velocity = VelocityProcess(name="surface_velocity", per="pixel", **CONSTANT)
+    velocity.a_t.connect(surface.a_t)
+    gate = ParityGateProcess(name="gate")
+    paper.process("input").events.connect(gate.events)
+    return Network([*paper.processes, surface, velocity, gate], name="two_readers")
+
+
+NETWORKS = {
+    "paper": lambda: depth_network(SENSOR, velocity=CONSTANT),
+    "improved": lambda: improved_network(SENSOR, velocity=CONSTANT),
+    "distances": lambda: multi_distance_network(SENSOR, velocity=CONSTANT),
+    "denoised": lambda: denoised_network(SENSOR, velocity=CONSTANT),
+    "two readers": two_readers,
+}
+
+
+def test_every_built_in_process_declares_the_counts_its_models_keep():
+    for process_type in Process._registry.values():
+        for count in process_type.counters:
+            assert count.kind in KINDS and count.name
+    with pytest.raises(TypeError, match="kind"):
+        Count("x", "lost")
+
+
+@pytest.mark.parametrize("name", list(NETWORKS))
+def test_the_summary_accounts_for_every_event_once_per_reader(name):
+    network = NETWORKS[name]()
+    result, _ = run(RECORDING, network, backend="reference")
+    readers = [p.name for p in network.processes if any(c.kind == "read" for c in type(p).counters)]
+    summary = result.summary()
+    assert list(summary["readers"]) == readers and readers
+    for reader, account in summary["readers"].items():
+        assert account["events_in"] == len(RECORDING.events), reader
+        assert account["events_in"] == account["accepted"] + sum(account["dropped"].values()), reader
+        assert account["dropped"]["out_of_bounds"] == len(OUTSIDE), reader
+        assert account["accepted"] == result.counts[reader]["accepted"] > 0
+    first = summary["readers"][readers[0]]
+    assert (summary["events_in"], summary["accepted"], summary["dropped"]) == \
+        (first["events_in"], first["accepted"], first["dropped"])
+    assert summary["latency"] == result.latency and set(result.latency) == set(result.outputs)
+    # every count a model kept is one its process declares
+    for process in network.processes:
+        assert set(result.counts[process.name]) <= {c.name for c in type(process).counters}, process.name
+
+    text = format_summary({**summary, "recording": "rec", "total_time_s": 1.0}, result,
+                          {out: Path(f"{out}.npz") for out in result.outputs}, SENSOR)
+    accepted = [int(line.split()[1].replace(",", "")) for line in text.splitlines() if line.startswith("  accepted")]
+    assert accepted == [summary["readers"][r]["accepted"] for r in readers]
+    assert text.count("events in") == len(readers)
+    assert text.count(f"warning        {len(OUTSIDE)} events lay outside the 24x18 sensor") == 1
+    latencies = set(result.latency.values())
+    latency_lines = [line for line in text.splitlines() if line.startswith("latency")]
+    assert len(latency_lines) == (1 if len(latencies) == 1 else len(result.latency))
+
+
+def test_two_readers_are_not_summed_and_each_output_has_its_latency():
+    result, _ = run(RECORDING, two_readers(), backend="reference")
+    summary = result.summary()
+    assert summary["accepted"] == result.counts["input"]["accepted"]  # not input's + the surface's
+    assert "rejected" not in summary and result.rejected == {}  # two depth outputs: per process in counts
+    assert result.latency["surface.depth"] == 1 and result.latency["depth.depth"] == 2
+    assert result.counts["gate"]["passed"] == len(result.outputs["gate.passed"])
+    assert result.declared["gate"] == {"passed": {"kind": "output", "total": ""}}
+    assert summary["tot_spikes"] == result.counts["time_of_travel"]["spikes"] > 0
+    # the depth files' facts stay as they were: the report-only keys are not in them
+    assert "readers" not in result.facts() and "latency" not in result.facts()
