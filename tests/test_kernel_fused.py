@@ -20,8 +20,10 @@ T0 = 3_000
 
 def config(*, refractory_us=2_500, per_polarity=False, distance=1, counter_bits=6, fixed=None, per_pixel=False,
            update_every=1):
-    return KernelConfig(SENSOR, 1e-3, distance, counter_bits, 0.05, 20.0, update_every, per_pixel, 5,
-                        (200.0, 190.0, 9.0, 6.5), fixed, refractory_us, per_polarity)
+    return KernelConfig(sensor_size=SENSOR, timestep=1e-3, distance=distance, counter_bits=counter_bits, min_depth=0.05,
+                        max_depth=20.0, update_every=update_every, per_pixel=per_pixel, patch_size=5,
+                        intrinsics=(200.0, 190.0, 9.0, 6.5), fixed=fixed, refractory_us=refractory_us,
+                        refractory_per_polarity=per_polarity)
 
 
 def random_events(seed, n=12_000, duration_us=150_000):

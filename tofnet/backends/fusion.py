@@ -23,11 +23,13 @@ from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, TOT_DTYPE
 from tofnet.io.recording import VelocitySource
 from tofnet.kernels.compilation import Stopwatch
+from tofnet.kernels.kernel_config import UnitSettings, microseconds
 from tofnet.kernels.region import KernelConfig, KernelOutput, TimeOfTravelKernel, copy_records
 from tofnet.models.base import concat
 from tofnet.models.binding import UpdateRows, velocity_table
 from tofnet.models.depth import OUTCOMES
 from tofnet.models.input import input_counts
+from tofnet.models.time_of_travel import unit_settings
 from tofnet.models.registry import _registered
 from tofnet.processes import DepthProcess, InputProcess, TimeOfTravelProcess, VelocityProcess
 
@@ -65,16 +67,21 @@ class PipelineParams:
     @property
     def timestep_us(self) -> int:
         """Timestep in whole microseconds (events are stamped in µs)."""
-        return int(round(self.timestep * 1e6))
+        return microseconds(self.timestep)
 
     @property
     def refractory_us(self) -> int:
-        return int(round(self.refractory * 1e6))
+        return microseconds(self.refractory)
+
+    @property
+    def units(self) -> UnitSettings:
+        """What the units take (``models.time_of_travel.unit_settings`` made them)."""
+        return UnitSettings(distance=self.distance, counter_bits=self.counter_bits)
 
     @property
     def counter_max(self) -> int:
-        """Largest counter value before overflow: ``2**counter_bits - 1``."""
-        return (1 << self.counter_bits) - 1
+        """Largest counter value before overflow (``UnitSettings.counter_max``)."""
+        return self.units.counter_max
 
     @property
     def latency_steps(self) -> int:
@@ -108,9 +115,10 @@ def paper_chain(network: Network, family: str, probes=()) -> PipelineParams | No
         return None
     if not set(probes) <= {tot.counts.qualified_name, dep.depth.qualified_name}:
         return None
+    units = unit_settings(tot)
     return PipelineParams(
         sensor_size=network.sensor_size, timestep=inp.timestep, t0=inp.t0, refractory=inp.refractory,
-        refractory_per_polarity=inp.refractory_per_polarity, distance=tot.distance, counter_bits=tot.counter_bits,
+        refractory_per_polarity=inp.refractory_per_polarity, distance=units.distance, counter_bits=units.counter_bits,
         min_depth=dep.min_depth, max_depth=dep.max_depth, velocity_source=vel.source,
         velocity_constant=vel.velocity, velocity_samples=vel.samples, velocity_per=vel.per,
         velocity_patch_size=vel.patch_size, update_every=vel.update_every,

@@ -44,7 +44,36 @@ class Region:
         return (in_y & near_x) | (in_x & near_y)
 
 
+def counter_max(counter_bits: int) -> int:
+    """Largest counter value before it overflows to 0: ``2**counter_bits - 1`` (steps)."""
+    return (1 << int(counter_bits)) - 1
+
+
+def microseconds(seconds: float) -> int:
+    """``seconds`` as whole microseconds (events are stamped in µs): the one conversion."""
+    return int(round(seconds * 1e6))
+
+
 @dataclass(frozen=True)
+class UnitSettings:
+    """What the time-of-travel units take from a ``TimeOfTravelProcess``: ``distance`` (px) and
+    ``counter_bits``, with the counter's largest value derived here."""
+
+    distance: int
+    counter_bits: int
+
+    @property
+    def counter_max(self) -> int:
+        return counter_max(self.counter_bits)
+
+
+#: The depth-side fields of a configuration whose kernel runs the units alone (``emit_depth``
+#: False): not read, given so that the configuration is complete.
+_UNITS_ALONE = dict(min_depth=0.05, max_depth=20.0, update_every=1, per_pixel=True, patch_size=1,
+                    intrinsics=(1.0, 1.0, 0.0, 0.0), emit_depth=False)
+
+
+@dataclass(frozen=True, kw_only=True)
 class KernelConfig:
     """Everything the kernel needs besides spikes and velocities (plain data, picklable).
 
@@ -79,15 +108,29 @@ class KernelConfig:
     @classmethod
     def from_pipeline(cls, pipeline, intrinsics, fixed: FixedPointFormat | None = None) -> "KernelConfig":
         """From a ``PipelineParams`` and an ``Intrinsics`` (its distortion is the lens)."""
-        return cls(tuple(pipeline.sensor_size), pipeline.timestep, pipeline.distance, pipeline.counter_bits,
-                   pipeline.min_depth, pipeline.max_depth, pipeline.update_every,
-                   pipeline.velocity_per == "pixel", pipeline.velocity_patch_size,
-                   (intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy), fixed,
-                   pipeline.refractory_us, pipeline.refractory_per_polarity, lens=lens_of(intrinsics))
+        units = pipeline.units
+        return cls(sensor_size=tuple(pipeline.sensor_size), timestep=pipeline.timestep, distance=units.distance,
+                   counter_bits=units.counter_bits, min_depth=pipeline.min_depth, max_depth=pipeline.max_depth,
+                   update_every=pipeline.update_every, per_pixel=pipeline.velocity_per == "pixel",
+                   patch_size=pipeline.velocity_patch_size,
+                   intrinsics=(intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy), fixed=fixed,
+                   refractory_us=pipeline.refractory_us, refractory_per_polarity=pipeline.refractory_per_polarity,
+                   lens=lens_of(intrinsics))
+
+    @classmethod
+    def units_alone(cls, sensor_size: tuple[int, int], timestep: float, units: UnitSettings) -> "KernelConfig":
+        """The time-of-travel units without depth neurons (``timestep`` s): what the units' model runs."""
+        return cls(sensor_size=tuple(sensor_size), timestep=timestep, distance=units.distance,
+                   counter_bits=units.counter_bits, **_UNITS_ALONE)
 
     @property
     def timestep_us(self) -> int:
-        return int(round(self.timestep * 1e6))
+        return microseconds(self.timestep)
+
+    @property
+    def counter_max(self) -> int:
+        """Largest counter value (``counter_max``)."""
+        return counter_max(self.counter_bits)
 
     @property
     def seconds_per_count(self) -> float:

@@ -59,7 +59,7 @@ class TimeOfTravelKernel:
         ip[[tt.N_SAMPLES, tt.PEND_SIZE, tt.AT_REC, tt.REC_SIZE]] = n_samples, sizes[tt.AT_PEND], start, rec_size
         ip[tt.EMIT_DEPTH] = int(config.emit_depth)
         ip[[tt.X0, tt.Y0, tt.X1, tt.Y1, tt.DISTANCE, tt.COUNTER_MAX, tt.REBASE_AT, tt.UPDATE_EVERY]] = (
-            r.x0, r.y0, r.x1, r.y1, d, (1 << config.counter_bits) - 1, tt.REBASE_AFTER, config.update_every)
+            r.x0, r.y0, r.x1, r.y1, d, config.counter_max, tt.REBASE_AFTER, config.update_every)
         fmt = config.fixed
         if fmt is not None:
             ip[[tt.FIXED, tt.FRAC_BITS, tt.PAYLOAD_BITS, tt.MIN_RAW, tt.MAX_RAW]] = (

@@ -28,7 +28,7 @@ def counters(kernel: TimeOfTravelKernel, now: int) -> tuple[np.ndarray, np.ndarr
     tt.flush_pending(kernel._ints, kernel._floats)
     step, polarity = kernel.unit_state()
     counter = np.where(step >= 0, now - step, 0)
-    counter[(counter < 1) | (counter > (1 << kernel.config.counter_bits) - 1)] = 0
+    counter[(counter < 1) | (counter > kernel.config.counter_max)] = 0
     polarity = np.where(counter > 0, polarity, 0).astype(np.uint8)
     return np.ascontiguousarray(counter.transpose(2, 0, 1)), np.ascontiguousarray(polarity.transpose(2, 0, 1))
 

@@ -117,9 +117,12 @@ class DepthEventModel(Model):
         field = ctx.input_meta(process, "a_t")
         counts = ctx.input_meta(process, "counts")
         self.rotating = rotating(ctx)
-        config = KernelConfig(tuple(ctx.sensor_size), ctx.timestep_s, counts.distance, 1, process.min_depth,
-                              process.max_depth, 1, field.per_pixel, field.patch_size, field.intrinsics,
-                              ctx.fixed_format, min_share=process.min_share if self.rotating else None,
+        # the depth neurons alone: no units (counter_bits is not read) and velocity rows as they come
+        config = KernelConfig(sensor_size=tuple(ctx.sensor_size), timestep=ctx.timestep_s, distance=counts.distance,
+                              counter_bits=1, min_depth=process.min_depth, max_depth=process.max_depth,
+                              update_every=1, per_pixel=field.per_pixel, patch_size=field.patch_size,
+                              intrinsics=field.intrinsics, fixed=ctx.fixed_format,
+                              min_share=process.min_share if self.rotating else None,
                               rotation_intrinsics=ctx.input_meta(process, "b_w").intrinsics if self.rotating else None,
                               lens=field.lens)
         self.kernel = TimeOfTravelKernel(config, ctx.region, ctx.t0_us)

@@ -7,6 +7,7 @@ import numpy as np
 from tofnet.core.counters import names_of
 from tofnet.core.ports import Payload
 from tofnet.errors import BackendError
+from tofnet.kernels.kernel_config import microseconds
 from tofnet.kernels.input_filter import ACCEPTED, NEVER, REFRACTORY, InputFilter, first_out_of_order
 from tofnet.models.base import Model, ModelContext, concat, records
 from tofnet.processes import InputProcess
@@ -46,7 +47,7 @@ class InputModel(Model):
 
     def __init__(self, process: InputProcess, ctx: ModelContext):
         super().__init__(process, ctx)
-        self.filter = InputFilter(ctx.sensor_size, ctx.t0_us, ctx.timestep_us, round(process.refractory * 1e6),
+        self.filter = InputFilter(ctx.sensor_size, ctx.t0_us, ctx.timestep_us, microseconds(process.refractory),
                                   process.refractory_per_polarity)
         self._waiting: list[np.ndarray] = []
         self._latest_us: int | None = None
@@ -91,7 +92,7 @@ class InputModel(Model):
 
     def set_param(self, name: str, value) -> None:
         if name == "refractory":  # events fed from now on are filtered with the new period
-            self.filter.refractory_us = int(round(value * 1e6))
+            self.filter.refractory_us = microseconds(value)
             return
         super().set_param(name, value)
 

@@ -9,10 +9,16 @@ import numpy as np
 from tofnet.core.ports import Payload
 from tofnet.errors import BackendError
 from tofnet.events import DIRECTION_OFFSETS
+from tofnet.kernels.kernel_config import UnitSettings
 from tofnet.kernels.region import KernelConfig, TimeOfTravelKernel
 from tofnet.kernels.unit_state import counters, set_counters
 from tofnet.models.base import Model, ModelContext, StepModel, records
 from tofnet.processes import TimeOfTravelProcess
+
+
+def unit_settings(process: TimeOfTravelProcess) -> UnitSettings:
+    """What the units take from the process (every time-of-travel model and the fused chain use this)."""
+    return UnitSettings(distance=int(process.distance), counter_bits=int(process.counter_bits))
 
 
 @dataclass(frozen=True)
@@ -34,7 +40,8 @@ class _SendsCounts:
 
     @classmethod
     def output_meta(cls, process: TimeOfTravelProcess, ctx: ModelContext) -> dict:
-        return {"counts": CountsInfo(int(process.distance), (1 << int(process.counter_bits)) - 1, ctx.timestep_us)}
+        units = unit_settings(process)
+        return {"counts": CountsInfo(units.distance, units.counter_max, ctx.timestep_us)}
 
 
 def check_one_spike_per_pixel(process, step: int, xs: np.ndarray, ys: np.ndarray, width: int) -> None:
@@ -46,7 +53,7 @@ def check_one_spike_per_pixel(process, step: int, xs: np.ndarray, ys: np.ndarray
 
 def check_counter_values(process: TimeOfTravelProcess, name: str, value: np.ndarray) -> None:
     """Counters must be 0 (idle) .. the counter maximum; polarities 0 or 1."""
-    top = (1 << int(process.counter_bits)) - 1 if name == "counter" else 1
+    top = unit_settings(process).counter_max if name == "counter" else 1
     if value.min(initial=0) < 0 or value.max(initial=0) > top:
         what = f"counter values must be in 0..{top} ({process.counter_bits}-bit counters)" if name == "counter" \
             else "polarity values must be 0 or 1"
@@ -60,7 +67,7 @@ class TimeOfTravelStepModel(_SendsCounts, StepModel):
         super().__init__(process, ctx)
         width, height = ctx.sensor_size
         self.distance = int(process.distance)
-        self.counter_max = (1 << int(process.counter_bits)) - 1
+        self.counter_max = unit_settings(process).counter_max
         self.counter = np.zeros((4, height, width), dtype=np.int64)
         self.polarity = np.zeros((4, height, width), dtype=np.int8)
         self.width, self.height = width, height
@@ -123,9 +130,7 @@ class TimeOfTravelEventModel(_SendsCounts, Model):
 
     def __init__(self, process: TimeOfTravelProcess, ctx: ModelContext):
         super().__init__(process, ctx)
-        config = KernelConfig(tuple(ctx.sensor_size), ctx.timestep_s, int(process.distance),
-                              int(process.counter_bits), 0.05, 20.0, 1, True, 1, (1.0, 1.0, 0.0, 0.0),
-                              emit_depth=False)
+        config = KernelConfig.units_alone(ctx.sensor_size, ctx.timestep_s, unit_settings(process))
         self.kernel = TimeOfTravelKernel(config, ctx.region, ctx.t0_us)
         self._no_velocity = np.zeros((0, 3))
 
