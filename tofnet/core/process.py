@@ -35,6 +35,9 @@ class Process:
     #: What the process counts (``Count``: events read, accepted, dropped and rejected by reason,
     #: outputs); its models' ``counts()`` return these keys. Results and reports add them up from here.
     counters: ClassVar[tuple[Count, ...]] = ()
+    #: Steps the process adds between what it receives (or reads) and what it sends on its output
+    #: ports, beyond the one step of each connection (results give each output's latency from it).
+    added_latency_steps: ClassVar[int] = 0
     #: ``"core"``: runs on neuromorphic cores; ``"host"``: runs off-chip (input, velocity).
     placement: ClassVar[str] = "core"
 

@@ -88,10 +88,10 @@ class Model:
 
     @classmethod
     def latency_steps(cls, process: Process) -> int:
-        """Steps the model itself adds between what it receives (or reads) and what it sends,
-        beyond the one step of each connection: it stamps its outputs that much later. The
-        executor adds it to the outputs' latency and runs that much longer at the end."""
-        return 0
+        """Steps the model adds between what it receives (or reads) and what it sends, beyond the
+        one step of each connection: the process's ``added_latency_steps``. It stamps its outputs
+        that much later; the executor adds it to the outputs' latency and runs that much longer."""
+        return type(process).added_latency_steps
 
     @classmethod
     def output_meta(cls, process: Process, ctx: ModelContext) -> dict[str, Any]:

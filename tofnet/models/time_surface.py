@@ -20,7 +20,7 @@ from tofnet.models.base import Model, ModelContext, concat, records, take
 from tofnet.processes.time_surface import QUALITY, TimeSurfaceProcess
 
 #: A host process answers in the step after the event (the estimator's ``latency_steps``).
-LATENCY_STEPS = 1
+LATENCY_STEPS = TimeSurfaceProcess.added_latency_steps
 #: Process parameters that are ``TimeSurfaceConfig`` fields of the same name and unit.
 CONFIG_PARAMS = ("model", "radius", "ahead_px", "window", "window_depth", "window_px", "turn", "min_points", "min_spread",
                  "outlier_px", "iterations", "max_rms_px", "trim_px", "hold_px", "hold_fit_rms_px", "behind_depth",
@@ -85,10 +85,6 @@ class TimeSurfaceModel(Model):
         self._waiting: list[tuple[np.ndarray, ...]] = []  # event columns (t, x, y, p) not run yet
         self._latest_us: int | None = None
         self._depth, self._quality = Payload.DEPTH.dtype, QUALITY.dtype
-
-    @classmethod
-    def latency_steps(cls, process: TimeSurfaceProcess) -> int:
-        return LATENCY_STEPS
 
     # -- events -------------------------------------------------------------------------------
     def feed(self, events: np.ndarray) -> None:

@@ -114,6 +114,7 @@ class TimeSurfaceProcess(Process):
                 "(0: none yet, the refractory_depth hold applies)", channels=2, settable=True,
                 low=0, high=(1 << 31) - 1))
     placement = "host"
+    added_latency_steps = 1  # it answers in the step after the event
 
     def _check(self) -> None:
         values = self._values
