@@ -52,13 +52,8 @@ LAYERS = (
 )
 #: Imports that still run up a layer, each with what removes it (no new entry without one).
 UPWARD_KNOWN: set[tuple[str, str]] = set()
-#: Cycles still in the tree, each with what removes it.
-CYCLES_KNOWN = [
-    # issue 25 item 3: readers register without a cycle (the EventSource protocol below the registry)
-    {"tofnet.io.aedat", "tofnet.io.calibration", "tofnet.io.ecd", "tofnet.io.hdf5", "tofnet.io.hdf5_datasets",
-     "tofnet.io.in_memory", "tofnet.io.prophesee", "tofnet.io.rosbag", "tofnet.io.source", "tofnet.io.sequences",
-     "tofnet.io.sequences_other"},
-]
+#: Cycles still in the tree, each with what removes it (none today: keep it so).
+CYCLES_KNOWN: list[set[str]] = []
 
 
 def _import_graph() -> dict[str, set[str]]:

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from tofnet.errors import DataError, located, quote, reason
-from tofnet.io.source import EventSource
+from tofnet.io.event_source import EventSource
 
 #: Standard gravity, m/s² per g (DV's accelerometer unit).
 GRAVITY = 9.80665

@@ -5,7 +5,9 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from tofnet.errors import DataError, located
+import numpy as np
+
+from tofnet.errors import DataError, located, quote
 from tofnet.io.files import write_text_atomic
 from tofnet.io.groundtruth import finite_number, read_text
 from tofnet.io.recording import Intrinsics
@@ -124,6 +126,33 @@ def _looks_like_calib_txt(text: str) -> bool:
     return len(lines) == 1 and all(is_number(f) for f in lines[0].split())
 
 
+
+#: Distortion model names as datasets write them -> tofnet's (``Intrinsics.distortion_model``).
+MODEL_NAMES = {"radtan": "radtan", "plumb_bob": "radtan", "radial-tangential": "radtan", "pinhole": "radtan",
+               "equidistant": "equidistant", "fisheye": "equidistant", "kb4": "equidistant"}
+
+
+def intrinsics_from(matrix, coefficients, model: str) -> Intrinsics:
+    """``Intrinsics`` from ``[fx, fy, cx, cy]`` and distortion coefficients of a named model.
+
+    radtan: ``k1 k2 p1 p2 [k3]`` (k3 = 0 when absent); equidistant: ``k1 k2 k3 k4``.
+    """
+    model_name = MODEL_NAMES.get(str(model).lower().strip())
+    if model_name is None:
+        raise ValueError(f"unknown distortion model {quote(str(model), 20)}; expected one of "
+                         f"{', '.join(sorted(MODEL_NAMES))}")
+    coefficients = tuple(float(c) for c in np.ravel(coefficients))
+    if model_name == "radtan" and len(coefficients) == 4:
+        coefficients = coefficients + (0.0,)
+    expected = 5 if model_name == "radtan" else 4
+    if coefficients and len(coefficients) != expected:
+        raise ValueError(f"{model_name} distortion needs {expected} coefficients, got {len(coefficients)}")
+    if not any(coefficients):
+        coefficients = ()
+    fx, fy, cx, cy = (float(v) for v in np.ravel(matrix)[:4])
+    return Intrinsics(fx, fy, cx, cy, distortion=coefficients,
+                      distortion_model=model_name if coefficients else "radtan")
+
 def is_number(field: str) -> bool:
     """Whether ``field`` reads as a float."""
     try:
@@ -134,8 +163,6 @@ def is_number(field: str) -> bool:
 
 
 def _camera_from(data, camera, sensor_size):
-    from tofnet.io.hdf5 import intrinsics_from  # the one model-name table (radtan, plumb_bob, equidistant, kb4)
-
     if not isinstance(data, dict):
         raise ValueError(f"expected a mapping at the top, got {type(data).__name__}")
     if "value0" in data:  # TUM-VIE / Basalt JSON

@@ -139,3 +139,16 @@ def disparity_to_depth(disparity_px: np.ndarray, q: np.ndarray) -> np.ndarray:
         depth = -depth
     depth[~(d > 0) | ~np.isfinite(depth) | (depth <= 0)] = np.nan
     return depth
+
+
+def check_overlap(source, frames, path: Path) -> None:
+    """Ground-truth frames that are not in the events' time range belong to another sequence: a one-line error."""
+    first = source.first_time()
+    last = source._window_end_us()
+    lo, hi = frames.span_us()
+    if first is None or last is None:
+        return
+    if hi < first or lo > last:
+        raise DataError(located(path, None, f"ground truth {lo * 1e-6:.6f}..{hi * 1e-6:.6f} s does not overlap "
+                                            f"the events {first * 1e-6:.6f}..{last * 1e-6:.6f} s "
+                                            f"({source.path.name}): the ground truth of another sequence?"))

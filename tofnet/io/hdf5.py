@@ -25,48 +25,13 @@ from pathlib import Path
 
 import numpy as np
 
-from tofnet.errors import DataError, located, quote, reason
+from tofnet.errors import DataError, located
 from tofnet.events import MAX_TIME_US
 from tofnet.io.extras import require
 from tofnet.io.hdf5_checks import H5File
 from tofnet.io.recording import Intrinsics
-from tofnet.io.source import EventSource
-
-
-def open_hdf5(path: Path, allow_external: bool = False, side: str = "left") -> EventSource:
-    """The reader for the layout found in ``path``; ``DataError`` naming the groups otherwise.
-
-    ``side``: the camera of an MVSEC (``davis/SIDE``) or M3ED (``prophesee/SIDE``) file.
-
-    ``allow_external``: read datasets whose data is in other files (external storage,
-    virtual datasets, external links), each checked (``tofnet.io.hdf5_checks``)."""
-    h5py = require("h5py", path)
-    try:
-        handle = h5py.File(path, "r")
-    except OSError as err:
-        raise DataError(located(path, None, f"not a readable HDF5 file ({reason(err)})")) from None
-    h5 = H5File(handle, path, allow_external)
-    try:
-        if _has(h5, "events", ("x", "y", "t", "p")):
-            return DsecSource(path, h5)
-        if "davis/left/events" in h5:
-            from tofnet.io.hdf5_datasets import MvsecSource
-            return MvsecSource(path, h5, side)
-        if _has(h5, "prophesee/left", ("x", "y", "t", "p")):
-            from tofnet.io.hdf5_datasets import M3edSource
-            return M3edSource(path, h5, side)
-        keys = h5.keys()
-        found = ", ".join(quote(key, 20) for key in keys[:10]) + (", ..." if len(keys) > 10 else "") or "nothing"
-        raise DataError(located(path, None, f"no event datasets; expected events/{{x,y,t,p}} (DSEC, TUM-VIE), "
-                                            f"davis/left/events (MVSEC) or prophesee/left/{{x,y,t,p}} (M3ED); "
-                                            f"found {found}"))
-    except BaseException:
-        handle.close()
-        raise
-
-
-def _has(h5: H5File, group: str, names: tuple[str, ...]) -> bool:
-    return group in h5 and all(f"{group}/{name}" in h5 for name in names)
+from tofnet.io.calibration import intrinsics_from
+from tofnet.io.event_source import EventSource
 
 
 def scalar(h5: H5File, name: str, default=None):
@@ -186,33 +151,6 @@ class DsecSource(ColumnsSource):
         self.intrinsics, size, _ = read_camera_file(yaml_path, "cam0" if side == "left" else "cam3")
         self.sensor_size = self.sensor_size or size
         self.notes.append(f"intrinsics from {yaml_path}")
-
-
-#: Distortion model names as datasets write them -> tofnet's (``Intrinsics.distortion_model``).
-MODEL_NAMES = {"radtan": "radtan", "plumb_bob": "radtan", "radial-tangential": "radtan", "pinhole": "radtan",
-               "equidistant": "equidistant", "fisheye": "equidistant", "kb4": "equidistant"}
-
-
-def intrinsics_from(matrix, coefficients, model: str) -> Intrinsics:
-    """``Intrinsics`` from ``[fx, fy, cx, cy]`` and distortion coefficients of a named model.
-
-    radtan: ``k1 k2 p1 p2 [k3]`` (k3 = 0 when absent); equidistant: ``k1 k2 k3 k4``.
-    """
-    model_name = MODEL_NAMES.get(str(model).lower().strip())
-    if model_name is None:
-        raise ValueError(f"unknown distortion model {quote(str(model), 20)}; expected one of "
-                         f"{', '.join(sorted(MODEL_NAMES))}")
-    coefficients = tuple(float(c) for c in np.ravel(coefficients))
-    if model_name == "radtan" and len(coefficients) == 4:
-        coefficients = coefficients + (0.0,)
-    expected = 5 if model_name == "radtan" else 4
-    if coefficients and len(coefficients) != expected:
-        raise ValueError(f"{model_name} distortion needs {expected} coefficients, got {len(coefficients)}")
-    if not any(coefficients):
-        coefficients = ()
-    fx, fy, cx, cy = (float(v) for v in np.ravel(matrix)[:4])
-    return Intrinsics(fx, fy, cx, cy, distortion=coefficients,
-                      distortion_model=model_name if coefficients else "radtan")
 
 
 def read_calib_group(h5: H5File, group: str, path: object) -> tuple[Intrinsics | None, tuple[int, int] | None]:

@@ -142,7 +142,7 @@ class MvsecSource(_GroundTruthMixin, ColumnsSource):
     """MVSEC ``*_data.hdf5`` (left DAVIS) with ``*_gt.hdf5`` poses and raw depth images."""
 
     def __init__(self, path: Path, h5: H5File, side: str = "left"):
-        from tofnet.io.source import EventSource
+        from tofnet.io.event_source import EventSource
         EventSource.__init__(self, path)
         self.h5, self.handle, self.gt = h5, h5.handle, None
         self.detail = f"MVSEC layout, davis/{side}"

@@ -14,7 +14,7 @@ import numpy as np
 
 from tofnet.errors import DataError, located
 from tofnet.io.recording import Recording
-from tofnet.io.source import EventSource, ProgressHook
+from tofnet.io.event_source import EventSource, ProgressHook
 
 
 class RecordingSource(EventSource):

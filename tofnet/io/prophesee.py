@@ -18,7 +18,7 @@ import numpy as np
 
 from tofnet.errors import DataError, located, quote, reason
 from tofnet.io.extras import require
-from tofnet.io.source import EventSource
+from tofnet.io.event_source import EventSource
 
 #: Width/height passed to faery when the header has no geometry: the largest it accepts,
 #: so no event is refused; the sensor size is then reported as unknown.

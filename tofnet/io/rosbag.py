@@ -25,7 +25,7 @@ from tofnet.errors import DataError, located, quote, reason
 from tofnet.io.extras import require
 from tofnet.io.ros_events import _EVENT_WIRE, NSEC_PER_S, PacketDecoder, decode_event_array  # noqa: F401
 from tofnet.io.ros_types import DVS_MSGS, ROLES, definition_problem, typestore  # noqa: F401
-from tofnet.io.source import EventSource
+from tofnet.io.event_source import EventSource
 
 _EVENT_PACKET = "event_camera_msgs/msg/EventPacket"
 _SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -148,7 +148,7 @@ class RosbagSource(EventSource):
         return decode_event_array(raw, where) if self.ros_version == 1 else decode_event_array_cdr(raw, where)
 
     def _camera_info(self, info) -> None:
-        from tofnet.io.hdf5 import intrinsics_from
+        from tofnet.io.calibration import intrinsics_from
 
         k = np.asarray(info.K if hasattr(info, "K") else info.k, dtype=np.float64)
         coefficients = np.asarray(info.D if hasattr(info, "D") else info.d, dtype=np.float64)

@@ -27,6 +27,7 @@ import numpy as np
 
 from tofnet.errors import DataError, located
 from tofnet.events import EVENT_DTYPE
+from tofnet.io.frames import check_overlap
 from tofnet.io.layouts import SIDES
 
 def open_sequence(folder: Path, kind: str, *, side: str | None = None, rectify: bool = False,
@@ -52,7 +53,7 @@ def _required(path: Path, what: str) -> Path:
 def open_dsec(folder: Path, side: str, rectify: bool, allow_external: bool):
     """A DSEC sequence (module docstring)."""
     from tofnet.io.calibration import read_camera_file
-    from tofnet.io.hdf5 import open_hdf5
+    from tofnet.io.hdf5_open import open_hdf5
 
     events = _required(folder / "events" / side / "events.h5", f"the {side} events of the DSEC sequence")
     calib = _required(folder / "calibration" / "cam_to_cam.yaml",
@@ -172,19 +173,6 @@ def read_times(path: Path, scale: float = 1.0, column: int = 0) -> np.ndarray:
     if not times:
         raise DataError(located(path, None, "no timestamps"))
     return np.asarray(times, dtype=np.int64)
-
-
-def check_overlap(source, frames, path: Path) -> None:
-    """Ground-truth frames that are not in the events' time range belong to another sequence: a one-line error."""
-    first = source.first_time()
-    last = source._window_end_us()
-    lo, hi = frames.span_us()
-    if first is None or last is None:
-        return
-    if hi < first or lo > last:
-        raise DataError(located(path, None, f"ground truth {lo * 1e-6:.6f}..{hi * 1e-6:.6f} s does not overlap "
-                                            f"the events {first * 1e-6:.6f}..{last * 1e-6:.6f} s "
-                                            f"({source.path.name}): the ground truth of another sequence?"))
 
 
 class PixelRemap:

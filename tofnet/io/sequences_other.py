@@ -38,8 +38,8 @@ def _one(folder: Path, pattern: str, what: str) -> Path:
 
 def open_other(folder: Path, kind: str, side: str, allow_external: bool):
     """The ``EventSource`` of an MVSEC, TUM-VIE or M3ED sequence folder (module docstring)."""
-    from tofnet.io.hdf5 import open_hdf5
-    from tofnet.io.sequences import check_overlap
+    from tofnet.io.hdf5_open import open_hdf5
+    from tofnet.io.frames import check_overlap
 
     if kind == "tumvie":
         events = _one(folder, f"*-events_{side}.h5", f"the {side} events of the TUM-VIE sequence")
