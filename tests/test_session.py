@@ -182,3 +182,25 @@ def test_run_monitor_and_plot_units_from_the_command_line(tmp_path):
     assert main(["plot", "units", str(folder), "--pixel", "10,8", "--window", "0.02:0.06", "--out", str(png),
                  "--velocity=-0.5,0.2,0.1"]) == 0
     assert png.stat().st_size > 10_000
+
+
+def test_a_session_asks_a_backend_what_it_declares_it_can_do():
+    from tofnet.backends.base import Backend
+
+    class RunOnly(Backend):  # a user's backend that only runs whole recordings
+        name = "run-only"
+
+        def run(self, compiled, recording, **options):
+            raise AssertionError("not called")
+
+    with pytest.raises(BackendError, match="offers no streams") as err:
+        Session(COMPILED, RECORDING, backend=RunOnly())
+    assert "\n" not in str(err.value)
+
+    class Streaming(type(get_backend("fixed"))):  # declares "stream" by inheritance: sessions open it
+        name = "streaming"
+
+    with Session(COMPILED, RECORDING, backend=Streaming()) as s:
+        s.run(steps=30)
+        assert s.step == 30
+    assert get_backend("multiproc").capabilities == {"stream", "workers"}

@@ -78,9 +78,10 @@ class Session:
     # -- opening and closing --------------------------------------------------------------------
     def _open(self, options: dict):
         backend = self.backend
-        if hasattr(backend, "pids") and callable(getattr(backend, "open_stream", None)):
+        capabilities = getattr(backend, "capabilities", frozenset())
+        if "open session" in capabilities:
             return backend.open_stream(self.compiled, **options)  # an open multiproc session: its workers, not ours
-        if callable(getattr(backend, "session", None)):  # multiproc: workers kept for the session
+        if "workers" in capabilities:  # multiproc: workers kept for the session
             self._resource = backend.session(self.compiled)
             self._resource.open()
             try:
@@ -88,13 +89,10 @@ class Session:
             except BaseException:
                 self._resource.close(graceful=False)
                 raise
-        opener = getattr(backend, "open_stream", None)
-        if opener is None:
-            raise BackendError(f"backend {backend.name!r} offers no streams, which a session needs")
-        try:
-            return opener(self.compiled, fuse=False, **options)
-        except TypeError:
-            return opener(self.compiled, **options)
+        if "stream" not in capabilities:
+            raise BackendError(f"backend {getattr(backend, 'name', type(backend).__name__)!r} offers no streams, "
+                               f"which a session needs (Backend.capabilities has no 'stream')")
+        return backend.open_stream(self.compiled, fuse=False, **options)
 
     def _bind_monitors(self, monitors: list[Monitor]) -> list[str]:
         """Check each monitor's target and pixels (inside the process's sensor); the ports among them

@@ -191,6 +191,10 @@ class Backend(ABC):
     name: str = ""
     arithmetic: str = "float"
     family: str = "float"
+    #: What a ``Session`` may ask of it (declared, never probed): ``"stream"``: ``open_stream(compiled,
+    #: fuse=..., recording=..., ...)`` as ``LocalBackend``'s; ``"workers"``: ``session(compiled)`` keeps
+    #: worker processes for a session's lifetime; ``"open session"``: it is such a running session.
+    capabilities: frozenset[str] = frozenset()
 
     @abstractmethod
     def run(self, compiled, recording, *, probes: Iterable[str] = (), record_tot: bool = False,

@@ -78,6 +78,8 @@ class MultiprocBackend(Backend):
         Fixed-point format, as for the ``fixed`` backend (docs/fixed_point.md).
     """
 
+    capabilities = frozenset({"stream", "workers"})
+
     name = "multiproc"
     arithmetic = "fixed"
     family = "fixed"
@@ -139,6 +141,9 @@ class MultiprocSession:
     After any failure (a worker's exception, death or timeout) every worker is stopped
     and the session refuses further runs.
     """
+
+    #: A ``Session`` given one opens its streams on these workers (``Backend.capabilities``).
+    capabilities = frozenset({"open session"})
 
     def __init__(self, backend: MultiprocBackend, compiled: CompiledNetwork | None = None):
         self.backend = backend
