@@ -65,3 +65,8 @@ def format_seconds(value: float) -> str:
     if magnitude >= 1e-3:
         return f"{value * 1e3:g} ms"
     return f"{value * 1e6:g} µs"
+
+
+def format_steps(n: int) -> str:
+    """``"1 step"``, ``"2 steps"``."""
+    return f"{n} step" if n == 1 else f"{n} steps"

@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 from tofnet.errors import TofnetError
+from tofnet.units import format_steps
 
 
 def register(subparsers) -> None:
@@ -68,7 +69,7 @@ def handle(args) -> int:
         where = (f"{compiled.cores_used} neuromorphic cores on {compiled.chips_used} chip(s)" if compiled.cores_used
                  else "off-chip (host)")
         print(f"      {label}: {result.events_in:,} events in, {len(result.depth):,} depth estimates -> "
-              f"{out / name}; {where}; latency {result.latency_steps} steps; network time {result.wall_time:.2f} s")
+              f"{out / name}; {where}; latency {format_steps(result.latency_steps)}; network time {result.wall_time:.2f} s")
 
     print("[3/4] scoring against the ground truth")
     for (label, (depth, meta)), (_, _, name) in zip(runs.items(), ESTIMATORS):

@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 from tofnet.errors import TofnetError
+from tofnet.units import format_steps
 
 
 def register(subparsers) -> None:
@@ -96,7 +97,7 @@ def handle(args) -> int:
     print(f"source         {origin} ({how}, {network.sensor_size[0]}x{network.sensor_size[1]} px, packets of "
           f"{step_us / 1000:g} ms)")
     latency = result.latency.get(result.depth_outputs[0], 0) if result.depth_outputs else 0
-    print(f"backend        {backend}; depth latency {latency} steps ({latency * step_us / 1000:g} ms)")
+    print(f"backend        {backend}; depth latency {format_steps(latency)} ({latency * step_us / 1000:g} ms)")
     print(f"depth out      {stats.depth_out:,}")
     for line in stats.lines():
         print(line)

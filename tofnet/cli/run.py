@@ -7,7 +7,8 @@ import json
 import time
 from pathlib import Path
 
-from tofnet.errors import BackendError, TofnetError, quote
+from tofnet.errors import BackendError, TofnetError
+from tofnet.units import format_steps
 
 
 def register(subparsers) -> None:
@@ -182,7 +183,6 @@ def undistortion_of(network, recording, result, args) -> dict | None:
     """How the network treated the lens: through the velocity term (raw pixels), by moving spikes
     (an undistort process), or not at all; None when there is no lens to speak of."""
     from tofnet.api import lens_is_distorted
-    from tofnet.errors import TofnetError
     from tofnet.models.binding import camera_of
     from tofnet.processes import UndistortProcess, VelocityProcess
 
@@ -285,8 +285,8 @@ def latency_lines(summary: dict) -> list[str]:
     ms = summary["timestep_s"] * 1e3
     latency = summary.get("latency") or {}
     if len(set(latency.values())) <= 1:
-        return [f"latency        {summary['latency_steps']} steps ({summary['latency_s'] * 1e3:g} ms)"]
-    return [f"latency        {steps} steps ({steps * ms:g} ms)  {name}" for name, steps in latency.items()]
+        return [f"latency        {format_steps(summary['latency_steps'])} ({summary['latency_s'] * 1e3:g} ms)"]
+    return [f"latency        {format_steps(steps)} ({steps * ms:g} ms)  {name}" for name, steps in latency.items()]
 
 
 def format_summary(summary: dict, result, written: dict, network_width) -> str:
