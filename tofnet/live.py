@@ -204,15 +204,20 @@ def live_camera(metadata: Recording) -> dict:
 
 def warm_up(compiled, metadata: Recording, backend, backend_options) -> None:
     """Compile (or load from numba's cache) the kernels a session runs, before the source's clock starts:
-    a throwaway session on two events at the sensor's centre."""
+    a throwaway session on 20 ms of a texture sliding across the sensor, so that every path a real
+    packet takes (filtering, timing, emitting depth) is compiled, not only the first one."""
     from tofnet.session import Session
+    from tofnet.testing import moving_pattern
 
     width, height = metadata.sensor_size or (2, 2)
-    events = np.zeros(2, EVENT_DTYPE)
-    events["t"], events["x"], events["y"], events["p"] = [0, 1500], width // 2, height // 2, [1, 0]
+    events = moving_pattern((width, height), (300.0, 200.0), 20_000, sample_us=500)
+    cuts, ends = packet_bounds(events["t"], 0, 1000)
     with Session(compiled, backend=backend, backend_options=backend_options, t0_us=0,
                  **live_camera(metadata)) as session:
-        session.feed(events, until_us=4000)
+        for i, end in enumerate(ends):  # 1 ms packets, as the run feeds them, then empty ones
+            session.feed(events[cuts[i]:cuts[i + 1]], until_us=int(end))
+        for end in range(int(ends[-1]) + 1000, int(ends[-1]) + 4000, 1000):
+            session.feed(events[:0], until_us=end)
         session.finish()
 
 
