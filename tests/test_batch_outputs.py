@@ -12,7 +12,6 @@ import pytest
 
 from tofnet.batch import expand, load_plan
 from tofnet.batch.outputs import check_batch_output, fingerprint, mark_output, plan_inputs
-from tofnet.cli import main
 from tofnet.errors import TofnetError
 from tofnet.events import make_events
 from tofnet.io.guard import MANIFEST

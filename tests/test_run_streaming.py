@@ -3,7 +3,6 @@
 import tracemalloc
 
 import numpy as np
-import pytest
 
 from tofnet.api import run, run_source
 from tofnet.cli import main

@@ -149,7 +149,8 @@ def handle(args) -> int:
     undistortion = (meta.get("summary") or {}).get("undistortion")
     if undistortion and recording.frame_gt is not None and recording.frame_gt.pixel_map is not None:
         raise DataError(f"{args.depth}: the estimates are at undistorted pixels, the ground truth is placed through "
-                        "the rectification map from raw pixels; run with --rectify (or --no-undistort) instead")
+                        "the rectification map from raw pixels; run with --rectify and a network without an "
+                        "undistort process instead")
     if undistortion:  # the estimates are at undistorted pixels: match them to events moved there too
         from tofnet.eval.undistorted import lens_from_summary, undistorted_recording
         recording = undistorted_recording(recording, *lens_from_summary(undistortion))

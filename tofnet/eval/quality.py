@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -109,10 +110,8 @@ def read_quality(path) -> np.ndarray:
     return records
 
 
-def quality_beside(depth_path) -> "Path | None":
+def quality_beside(depth_path) -> Path | None:
     """The one ``<stem>.*.quality.npz`` beside a depth file (what ``tofnet run`` writes), or None."""
-    from pathlib import Path
-
     depth_path = Path(depth_path)
     found = sorted(depth_path.parent.glob(f"{depth_path.stem}.*.quality.npz"))
     return found[0] if len(found) == 1 else None
