@@ -63,8 +63,10 @@ def test_an_mvsec_file_without_its_calibration_reads_as_before(folders, tmp_path
 
 def test_the_right_camera_gets_no_left_ground_truth(folders):
     recording = read_recording(folders["mvsec"], side="right")
-    assert "davis/right" in recording.notes[-1] or recording.frame_gt is None
     assert recording.gt_depth is None and recording.frame_gt is None
+    assert "no davis/right poses or depth in indoor_flying1_gt.hdf5 (its depth images are davis/left's)" \
+        in recording.notes, recording.notes
+    assert any(note.startswith("poses and depth from") for note in read_recording(folders["mvsec"]).notes)
 
 
 def _copy(folders, kind, tmp_path):

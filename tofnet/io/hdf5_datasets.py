@@ -175,7 +175,12 @@ class MvsecSource(_GroundTruthMixin, ColumnsSource):
                                             image_times_us(gt, "davis/left/depth_image_raw_ts", 1e6), gt_path,
                                             gt.allow_external)
                 self.has_depth = True
-        self.notes.append(f"poses and depth from {gt_path.name}")
+        found = " and ".join(what for what, got in (("poses", self.trajectory is not None), ("depth", self.has_depth))
+                             if got)
+        left_only = "davis/left/depth_image_raw" in gt and side != "left"
+        left_only = " (its depth images are davis/left's)" if left_only else ""
+        self.notes.append((f"{found} from {gt_path.name}" if found else f"no davis/{side} poses or depth in "
+                           f"{gt_path.name}") + left_only)
 
     def _times(self, lo: int, hi: int) -> np.ndarray:
         from tofnet.io.arrays import seconds_to_us  # as events_from_columns converts them
@@ -186,8 +191,8 @@ class MvsecSource(_GroundTruthMixin, ColumnsSource):
 
         for start in range(first, last, size_hint):
             rows = self.rows[start:min(start + size_hint, last)]
-            yield events_from_columns({"x": rows[:, 0], "y": rows[:, 1], "t": rows[:, 2], "p": rows[:, 3]},
-                                      f"{self.path} (davis/left/events rows {start}..{start + len(rows) - 1})")
+            where = f"{self.path} ({self.rows.name.lstrip('/')} rows {start}..{start + len(rows) - 1})"
+            yield events_from_columns({"x": rows[:, 0], "y": rows[:, 1], "t": rows[:, 2], "p": rows[:, 3]}, where)
 
 
 class M3edSource(_GroundTruthMixin, ColumnsSource):
