@@ -182,3 +182,16 @@ def test_aedat4_without_calib_runs_with_intrinsics_and_velocity(tmp_path, capsys
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "nothing.yaml" in err
     assert np.isfinite(recording.intrinsics.fx)
+
+
+def test_camera_of_a_one_camera_file_is_refused_not_ignored(tmp_path):
+    from types import SimpleNamespace
+
+    from tofnet.io.calibration import set_camera
+
+    (tmp_path / "calib.txt").write_text("199.1 198.8 132.2 110.7\n")
+    source = SimpleNamespace(intrinsics=None, sensor_size=(240, 180), notes=[])
+    with pytest.raises(DataError, match=r"^--camera cam9: .*calib.txt holds one camera \(calib.txt\)"):
+        set_camera(source, None, tmp_path / "calib.txt", "cam9")
+    set_camera(source, None, tmp_path / "calib.txt", None)
+    assert source.intrinsics.fx == pytest.approx(199.1)

@@ -239,6 +239,9 @@ def set_camera(source, intrinsics: Intrinsics | None, calib: str | Path | None,
     had = source.intrinsics is not None
     if calib is not None:
         intrinsics, size, what = read_camera_file(calib, camera, source.sensor_size)
+        if camera is not None and (what == "calib.txt" or what.startswith("camera_info")):
+            raise DataError(f"--camera {camera}: {calib} holds one camera ({what}); --camera picks one of a file "
+                            "with several")
         if source.sensor_size is None and size is not None:
             source.sensor_size = size
             source.notes.append(f"sensor size {size[0]}x{size[1]} from {calib}")
