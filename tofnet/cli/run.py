@@ -303,8 +303,9 @@ def format_summary(summary: dict, result, written: dict, network_width) -> str:
     if len(depth_names) == 1:
         lines += [f"{total.replace('_', ' '):<14} {count:>12,}" for total, count in result.totals().items()]
         lines.append(f"depth out      {summary['depth_out']:>12,}  -> {written[depth_names[0]]}")
+        # Every declared reason, zeros too: a zero says the check ran and rejected nothing.
         lines += [f"  rejected     {count:>12,}  {reason.replace('_', ' ')}"
-                  for reason, count in summary["rejected"].items() if count]
+                  for reason, count in summary["rejected"].items()]
     else:
         for process, counts in summary["counts"].items():
             if counts and process not in summary.get("readers", {}):
