@@ -13,8 +13,15 @@ SUBCOMMANDS = ("demo", "run", "simulate", "eval", "plot", "compile", "conformanc
                "batch", "warmup", "live")
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser with its errors on one line (no usage block), as the commands' own errors."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="tofnet",
         description="Low-latency depth from event timing: simulate, compile, run and evaluate the paper's network.")
     from tofnet import __version__
