@@ -323,9 +323,11 @@ def format_summary(summary: dict, result, written: dict, network_width) -> str:
             which = "" if len(depth_names) == 1 else f" ({name})"
             lines.append(f"depth range    {np.percentile(z, 5):.3f} .. {np.percentile(z, 95):.3f} m (5th-95th pct), "
                          f"median {np.median(z):.3f} m{which}")
-    rate = summary["events_in"] / summary["wall_time_s"] if summary["wall_time_s"] > 0 else float("inf")
+    # A network time below the clock's resolution gives no rate worth printing (not "inf").
+    rate = (f"{summary['events_in'] / summary['wall_time_s'] / 1e6:.2f} M events/s"
+            if summary["wall_time_s"] >= 1e-4 else "too short to give a rate")
     lines += latency_lines(summary)
-    lines.append(f"wall time      {summary['wall_time_s']:.3f} s network ({rate / 1e6:.2f} M events/s), "
+    lines.append(f"wall time      {summary['wall_time_s']:.3f} s network ({rate}), "
                  f"{summary['total_time_s']:.3f} s in all")
     if summary.get("kernels_compiled"):
         lines.append(compile_line(summary["compile_time_s"], summary["kernels_compiled"]))
