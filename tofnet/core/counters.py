@@ -40,3 +40,15 @@ def kinds_of(counts: tuple[Count, ...]) -> dict[str, dict]:
     declaration order."""
     return {c.name: {"kind": c.kind, "total": c.total, **({"warning": c.warning} if c.warning else {})}
             for c in counts}
+
+
+def reader_counts(accepted: str) -> tuple[Count, ...]:
+    """The counts every process that reads the recording's events keeps: all it read, those it took
+    (``accepted``: what they are), and the drops any reader has (outside the sensor, before step 0).
+    A reader adds its own drops after these."""
+    return (Count("events_in", "read", "events of the recording"),
+            Count("accepted", "accepted", accepted),
+            Count("out_of_bounds", "dropped", "outside sensor_size",
+                  warning="events lay outside the {width}x{height} sensor; pass --sensor-size if the "
+                          "recording is larger"),
+            Count("before_t0", "dropped", "before the start of step 0"))

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from tofnet.core.counters import Count
+from tofnet.core.counters import Count, reader_counts
 from tofnet.core.params import Param
 from tofnet.core.ports import Payload, PortSpec
 from tofnet.core.process import Process
@@ -35,12 +35,7 @@ class InputProcess(Process):
     """
 
     outports = (PortSpec("events", Payload.POLARITY, 1, "one spike per active pixel, carrying its polarity"),)
-    counters = (Count("events_in", "read", "events of the recording"),
-                Count("accepted", "accepted", "events sent on as spikes"),
-                Count("out_of_bounds", "dropped", "outside sensor_size",
-                      warning="events lay outside the {width}x{height} sensor; pass --sensor-size if the "
-                              "recording is larger"),
-                Count("before_t0", "dropped", "before the start of step 0"),
+    counters = (*reader_counts("events sent on as spikes"),
                 Count("refractory", "dropped", "within the refractory period of the pixel's last accepted event"),
                 Count("same_step", "dropped", "the pixel already sent a spike in this step"))
     params = (

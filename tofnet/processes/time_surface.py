@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from tofnet.core.counters import Count
+from tofnet.core.counters import Count, reader_counts
 from tofnet.core.params import Param
 from tofnet.core.ports import Payload, PortSpec
 from tofnet.core.process import Process
@@ -46,12 +46,7 @@ class TimeSurfaceProcess(Process):
         PortSpec("depth", Payload.DEPTH, 1, "depth estimate per accepted first event, metres", required=False),
         PortSpec("quality", QUALITY, 1, "the fit behind each estimate (aligned with depth)", required=False),
     )
-    counters = (Count("events_in", "read", "events of the recording"),
-                Count("accepted", "accepted", "first events of an edge at a pixel"),
-                Count("out_of_bounds", "dropped", "outside sensor_size",
-                      warning="events lay outside the {width}x{height} sensor; pass --sensor-size if the "
-                              "recording is larger"),
-                Count("before_t0", "dropped", "before the start of step 0"),
+    counters = (*reader_counts("first events of an edge at a pixel"),
                 Count("burst", "dropped", "not the first event of an edge (within the burst window)"),
                 *(Count(reason, "rejected", "an estimate the fit refused: " + reason.replace("_", " "))
                   for reason in ("no_motion", "nothing_behind", "too_few_points", "ill_conditioned", "bad_fit",
