@@ -1,13 +1,10 @@
 """Watching numba compile (or load from its cache) tofnet's kernels, so runs can say so and not count it.
 
-numba compiles a kernel on its first call with new argument types and keeps the machine
-code on disk (``cache=True``): the first run on a fresh install pays 20-40 s, later runs
-load the cache in a fraction of a second. numba announces both through its event API: the
-compiler lock is held for a compile or a cache load (``numba:compiler_lock``), and a real
-compile, a cache miss, is ``numba:compile``. One listener per process, registered when this
-package is imported, adds up the seconds under the lock and counts the misses; a
-``Stopwatch`` takes the difference over a run. The first miss of a process is logged (logger
-``tofnet.kernels``, level INFO) the moment it starts, so a command can say "compiling kernels".
+A first run on a fresh install compiles for 20-40 s, later runs load numba's disk cache.
+One listener per process on numba's event API adds up the seconds spent compiling or
+loading and counts real compiles; a ``Stopwatch`` takes the difference over a run, and
+the first compile of a process is logged (logger ``tofnet.kernels``, INFO) the moment it
+starts. Which numba events: docs/backends.md, "Compiling the kernels".
 """
 
 from __future__ import annotations

@@ -1,13 +1,11 @@
 """The velocity term ``A t`` seen through a distorted lens, per sample of the depth layer.
 
 A time-of-travel unit times an edge between two *raw* neighbouring pixels, so the depth
-neuron needs the edge's velocity on the raw sensor, not in the ideal pinhole image. Paper
-eq. 2 gives the ideal image velocity ``A(p') t / Z`` at the ideal point ``p'`` of a raw
-pixel ``p``; on the sensor it is ``J(p') A(p') t / Z`` with ``J = d raw / d ideal`` the
-Jacobian of the lens's distortion at ``p'``. So each sample (a pixel, or a patch centre)
-gets, once, its ideal point and ``J``, and the depth neurons use ``J A(p') t`` where the
-pinhole network uses ``A(p) t``. Eq. 8 then holds on the raw pixels unchanged: no event
-moves, no pixel is lost. With no distortion ``p' = p`` and ``J = I``, exactly.
+neuron needs the edge's velocity on the raw sensor: each sample (a pixel, or a patch
+centre) gets, once, its ideal point ``p'`` and the distortion's Jacobian ``J = d raw /
+d ideal`` there, and the depth neurons use ``J A(p') t`` (px·m/s) where the pinhole network
+uses ``A(p) t``. Without distortion ``p' = p`` and ``J = I``, exactly. Why this keeps eq. 8
+on the raw pixels: docs/formats.md, "In the network: through the velocity term".
 """
 
 from __future__ import annotations

@@ -1,15 +1,10 @@
 """The canonical order of outputs: by step, then y, then x (docs/semantics.md, "Output order").
 
-The fused kernel writes estimates in the order of the events that triggered them;
-``sort_by_pixel`` puts each step's estimates in pixel order in place, in time linear in
-the estimates plus the sensor's rows (a counting sort by row, then an insertion sort by
-column within rows, which hold one or two estimates each), called from inside the kernel
-so that a packet pays no extra dispatch. ``pixel_order`` is the same order as a
-permutation, for records of any payload (``backends.graph.canonical``).
-
-``sort_by_pixel`` moves records as raw 32-bit words: a depth record (``DEPTH_DTYPE``: t i8,
-x u2, y u2, z f8, step i8; 28 bytes, packed) is 7 words, and its word 2 is ``(y << 16) | x``
-on little-endian machines, the sort key itself.
+``sort_by_pixel`` puts each step's estimates of the fused kernel (written in trigger order)
+in pixel order in place, in time linear in the estimates plus the sensor's rows, from
+inside the kernel so that a packet pays no extra dispatch; ``pixel_order`` is the same
+order as a permutation, for records of any payload (``backends.graph.canonical``). How the
+sort works on raw 32-bit words: docs/performance.md, "How the kernel is built".
 """
 
 from __future__ import annotations

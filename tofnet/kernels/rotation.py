@@ -1,19 +1,10 @@
-"""The rotational image flow ``B ω`` of paper eq. 7, per pixel.
+"""The rotational image flow ``B ω`` of paper eq. 7, per pixel (px/s).
 
-A static point seen by a camera turning at ``ω = (ωx, ωy, ωz)`` rad/s (camera frame:
-x right, y down, z forward) moves in the image, whatever its depth, at
-
-    flow_u = (x y / fy) ωx − (fx + x²/fx) ωy + (fx/fy) y ωz
-    flow_v = (fy + y²/fy) ωx − (x y / fx) ωy − (fy/fx) x ωz        (px/s)
-
-with ``x = u − cx``, ``y = v − cy`` (Longuet-Higgins & Prazdny 1980, here for
-``fx != fy``). Derivation: a point ``P`` fixed in the world has, in the camera frame,
-``dP/dt = −t − ω × P`` (``t`` the camera's velocity); with ``u = fx X/Z + cx`` and
-``X/Z = x/fx``, ``Y/Z = y/fy``, the ``ω`` terms of ``du/dt = fx (Ẋ Z − X Ż) / Z²``
-give ``flow_u`` and the ``t`` terms give ``(A t)_u / Z`` (paper eq. 2), likewise for
-``v``. So the image velocity is ``A t / Z + B ω`` (``tests/test_rotation_kernels.py``
-checks the signs against a projected point). For ``fx = fy = f`` this is
-``B = [[x y/f, −(f + x²/f), y], [f + y²/f, −x y/f, −x]]``; the paper prints B with typos.
+A static point seen by a camera turning at ``ω`` rad/s (camera frame: x right, y down,
+z forward) moves in the image at ``B ω`` whatever its depth, so the image velocity is
+``A t / Z + B ω``. The formula (Longuet-Higgins & Prazdny, for ``fx != fy``; the paper
+prints B with typos) and its derivation: docs/rotation.md, "The equation";
+``tests/test_rotation_kernels.py`` checks the signs against a projected point.
 """
 
 from __future__ import annotations

@@ -1,42 +1,15 @@
 """Event-driven time-of-travel layer and depth neuron (numba core; the API is ``tofnet.kernels.region``).
 
-Implements docs/semantics.md with the timestamp formulation: a unit stores the step
-``a`` of its last facilitation and that spike's polarity instead of a counter, so
-``counter = now - a`` at the start of step ``now`` and the work is proportional to
-events, not to pixels x steps. An accepted input spike of input step ``k``
-
-- triggers the four units of its pixel in step ``now = k+1`` (pixel inside the region),
-- facilitates unit ``(pixel + distance*D, D)`` in step ``k+1`` for each direction ``D``
-  (pixel inside the region or its halo),
-- and the counters that fired reach the pixel's depth neuron in step ``k+2``.
-
-``process`` takes either accepted spikes (input step, x, y, polarity), or raw events
-(t µs, x, y, polarity; ``process_events``) that it runs through the input filter
-(``input_filter.admit``) in the same pass ("fused": one read of each event, no
-intermediate arrays). Events must then be in time order; a packet that is not is
-refused before any state changes (``UNSORTED``) and ``region`` runs it unfused.
-
-All triggers of a step are resolved before any facilitation of that step: a spike
-triggers at once and its facilitations wait in ``pend`` until a spike of a later step
-arrives (in this call or a later one), so packets may be split anywhere.
-
-State layout (docs/performance.md has the measurements behind it). One record of
-``stride`` int64 words per pixel of the region padded by ``2*distance`` (facilitation
-writes need no bounds checks; padding units never trigger): words 0-1 hold the four
-units' int32 stamps ``((a - base) << 1) | polarity`` (channel order +u, -u, +v, -v),
-words 2.. the input filter's last-event times, so the filter and the triggers of an
-event touch one cache line. ``base`` moves forward ("rebase") before the stamps could
-overflow int32, about every 2**30 steps. For a trigger of polarity ``p`` the
-difference ``key - stamp`` with ``key = ((now - base) << 1) | p`` is ``2*(now - a)``
-when the polarities match and odd otherwise, so one subtraction tests both. Idle units
-hold ``IDLE``, whose difference exceeds any counter maximum.
-
-The per-event path has no data-dependent branches after the filter (random input
-makes them mispredict): unit firing, axis counts and the depth outcome are computed
-with integer masks, and every triggered pixel writes an output record that only
-counts when emitted. The record of the event ``PREFETCH`` places ahead, and the lines
-a buffered facilitation writes, are prefetched (they pay off once the records outgrow
-L2; they cost nothing measurable below).
+Implements docs/semantics.md ("Time-of-travel units", "Depth neuron") with work
+proportional to events, not pixels x steps: a unit stores the step ``a`` of its last
+facilitation and that spike's polarity instead of a counter (``counter = now - a``).
+``process`` takes accepted spikes (input step, x, y, polarity), or raw events (t µs, x, y,
+polarity; ``process_events``) that it runs through ``input_filter.admit`` in the same pass
+("fused"); a packet of raw events out of time order is refused before any state changes
+(``UNSORTED``) and ``region`` runs it unfused. Facilitations wait in ``pend`` until a
+later step's spike arrives, so packets may be split anywhere. The state layout (stamps,
+rebase, one cache line per pixel), the branch-free event path and the prefetching, with
+the measurements behind them: docs/performance.md, "How the kernel is built".
 """
 
 from __future__ import annotations

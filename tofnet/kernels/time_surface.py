@@ -1,27 +1,13 @@
 """Depth from the local slope of the time surface (beyond the paper; docs/time_surface.md).
 
 The numba core of the time-surface estimator; the streaming API and the parameters are in
-``tofnet.kernels.time_surface_estimator``, the method and the measurements behind the
-defaults in docs/time_surface.md. Per pixel and polarity the state holds the time (µs) of
-the last *first event* of an edge: the surface ``T(u, v)``. Per event:
-
-1. first-event rule: an event of a pixel and polarity whose last first event is more recent
-   than its hold (``hold_px`` times the time per pixel the last fit there measured, if that
-   fit was within ``hold_fit_rms_px`` of its points, else the refractory period) is part of
-   the same edge's burst: dropped;
-   a first event is fitted only when the two pixels just behind it along the image motion fired
-   within the time a surface at ``behind_depth`` takes to move that far (``nothing_behind``);
-2. gather the first events of the same polarity within ``radius`` pixels that the edge has
-   already crossed (at most ``ahead_px`` along the image motion ``A t``), no older than the
-   window (the scene's depth scale, ``window_depth``, or ``window_px`` crossings at the pace the
-   two pixels behind measured, whichever is shorter) nor than the camera's last turn;
-3. fit the time along the motion, per line of pixels parallel to it (``fit_rows``) or as a
-   plane (``fit_plane``), dropping the farthest point while it is more than ``outlier_px``
-   pixels off, at most ``iterations`` times; check points, spread and rms;
-4. ``∇T`` (s/px) is the time of travel (docs/semantics.md, depth neuron: ``td = dT/du``, positive for motion
-   towards +u): ``Z = (A t)·∇T``, or ``(A t)·∇T / (1 − (B ω)·∇T)`` with a rotation.
-
-Every event ends in exactly one count slot (``COUNT_NAMES``).
+``tofnet.kernels.time_surface_estimator``. Per pixel and polarity the state holds the time
+(µs) of the last *first event* of an edge: the surface ``T(u, v)``. Per event: the
+first-event rule (a burst's later events are dropped), gather the first events the edge
+has crossed, fit the time along the image motion (``fit_rows`` or ``fit_plane``), check the
+fit, and ``Z = (A t)·∇T`` (``∇T`` s/px, the depth neuron's ``td``), or eq. 7 with a
+rotation. Each step and its parameters: docs/time_surface.md, "1. Method". Every event
+ends in exactly one count slot (``COUNT_NAMES``).
 """
 
 from __future__ import annotations

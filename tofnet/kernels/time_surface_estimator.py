@@ -33,50 +33,13 @@ MAX_VELOCITY_ROWS = 1 << 16
 
 @dataclass(frozen=True)
 class TimeSurfaceConfig:
-    """Parameters of the estimator (plain data; docs/time_surface.md has what each default was chosen on).
+    """Parameters of the estimator (plain data, picklable).
 
     Times in seconds, lengths in pixels (px), depths in metres; "the time a surface at depth
-    D takes per pixel" is ``D / |A t|`` seconds at the event's pixel.
-
-    - ``model``: ``"rows"`` (each line of pixels parallel to the motion has its own offset,
-      one shared slope along it) or ``"plane"`` (Benosman et al. 2014's plane).
-    - ``radius`` px: the fit looks at the ``(2 radius + 1)²`` square around the event, at
-      the pixels at most ``ahead_px`` ahead along the image motion (the pixels the edge has
-      crossed; the event itself always counts).
-    - ``window`` s, ``window_depth`` m: the oldest first event used is the larger of
-      ``window`` and the time a surface at ``window_depth`` takes to move ``radius`` px;
-      never one from before the camera's last turn (``turn``: a change of velocity larger
-      than that fraction of the speed; 0 = never).
-    - ``window_px`` px: nor one older than the time the edge takes to move that far at its own
-      pace, the larger of the two pixels just behind's (1 and 2 px) ages per pixel: an older
-      point is another edge's (0: off).
-    - ``min_points``, ``min_spread`` px², ``max_rms_px`` px: a fit needs that many points on
-      lines of two or more, that variance along the motion within the lines (the plane: left
-      over by the position across it), and at most that rms distance from the fit.
-    - ``outlier_px`` px, ``iterations``: while the farthest point is more than ``outlier_px``
-      from the fit, drop it and refit, at most ``iterations`` times.
-    - ``trim_px`` px (plane only): drop the points the plane puts within that distance of
-      the window's ends and refit (``0``: off).
-    - ``behind_depth`` m: fit a first event only when the two pixels just behind it along the
-      image motion (1 and 2 px) had first events of its polarity no longer ago than the time
-      a surface at that depth takes to move that far (an edge crossed them; in noise they
-      fired at unrelated times), in either order; otherwise ``nothing_behind`` (0: off).
-    - First events: ``hold_px`` times the time per pixel the last fit at a pixel measured is
-      its hold (a fit whose rms distance exceeds ``hold_fit_rms_px`` px measured nothing and
-      leaves the hold as it was); before a fit, the larger of ``refractory`` and the time a
-      surface at ``refractory_depth`` takes per pixel; never above ``max_hold``.
-    - ``consistency`` (fraction, 0 = off): emit only when the pixel's previous estimate, at
-      most ``consistency_window`` s older, agrees within this relative difference.
-    - ``min_depth``, ``max_depth`` m: kept when strictly between. ``min_denominator``: with
-      a rotation, ``1 − (B ω)·∇T`` below it is ``rotation_dominated``.
-    - ``lens`` (model, coefficients): ``A t`` taken through that lens onto the raw pixels
-      (``tofnet.kernels.lens``); None: a pinhole.
-    - ``rotation_intrinsics`` ``(fx, fy, cx, cy)`` px: where ``B ω`` is evaluated (with
-      velocity rows of six columns); None: ``intrinsics``.
-    - ``timestep`` s, ``latency_steps``: an estimate's ``step`` is its event's input step
-      plus ``latency_steps``; ``A t`` (per pixel with ``per_pixel``, else at the centre of
-      ``patch_size`` px patches, as ``tofnet.kernels.velocity.sample_point``) comes from the
-      velocity update that step holds, ``(step - 1) // update_every`` (docs/semantics.md).
+    D takes per pixel" is ``D / |A t|`` seconds at the event's pixel. What each field does,
+    its unit, default and what it was chosen on: docs/time_surface.md, section 3 (the rules
+    it enters: section 1). ``sensor_size`` (width, height) px; ``intrinsics`` and
+    ``rotation_intrinsics`` ``(fx, fy, cx, cy)`` px.
     """
 
     sensor_size: tuple[int, int]

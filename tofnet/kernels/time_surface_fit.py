@@ -117,21 +117,17 @@ def _rms(sq, kept, slope):
 def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, lines, used, give_up_rms=math.inf):
     """Time per pixel along the image motion from lines of pixels parallel to it, robustly.
 
-    Under a pure translation a pixel sees the signal of the pixel behind it along the motion,
-    shifted by the time the image takes to move between them; with equal thresholds even
-    their reference levels stay in step, so their first events differ by exactly that time,
-    while pixels on different lines see different signals and fire at unrelated phases, and
-    a curved edge bends the surface across the motion only. So each line (``pg``: index of
-    the point's line across the motion, the event's is ``middle``) gets its own offset and
-    only the slope along ``ps`` is shared: ``t = c_line + τ_s s``. Outliers go one at a time
-    as in ``fit_plane``. ``lines`` (``N_L`` columns, zero on entry and on return; its line 0
-    must be one no point is on, as with the estimator's ``4 radius + 3`` lines) and ``used``
-    are scratch, and so is ``pg`` past the points kept. Returns ``(code, τ_s, τ_w, c, kept,
-    rms_px)`` like ``fit_plane``: ``kept`` counts the points on lines of two or more (the others carry no slope), the
+    Fits ``t = c_line + τ_s s``: each line (``pg``: index of the point's line across the
+    motion, the event's is ``middle``) gets its own offset and only the slope along ``ps``
+    is shared, since pixels on one line see the same signal delayed while different lines
+    fire at unrelated phases (docs/time_surface.md, "1. Method", step 3). Outliers go one at
+    a time as in ``fit_plane``. ``lines`` (``N_L`` columns, zero on entry and on return; its
+    line 0 must be one no point is on, as with the estimator's ``4 radius + 3`` lines),
+    ``used`` and ``pg`` past the points kept are scratch. Returns ``(code, τ_s, τ_w, c, kept,
+    rms_px)`` like ``fit_plane``: ``kept`` counts the points on lines of two or more, the
     spread is their variance along ``s`` within their lines, ``τ_w`` the slope of the lines'
-    offsets across the motion and ``c`` the offset of the event's line. A fit whose last pass
-    leaves it above ``give_up_rms`` px rms returns ``FIT_OVER_RMS`` at once (with that pass's
-    ``τ_s`` and rms): the caller rejects it whatever its offsets.
+    offsets across the motion and ``c`` the offset of the event's line. A last pass above
+    ``give_up_rms`` px rms returns ``FIT_OVER_RMS`` at once (with its ``τ_s`` and rms).
     """
     middle = (lines.shape[0] - 1) // 2
     n_used = 0

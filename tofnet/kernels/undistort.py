@@ -1,21 +1,12 @@
 """Lens undistortion (OpenCV conventions): the per-pixel map and the event remap.
 
-Two models, as ``Intrinsics.distortion_model`` names them, on normalised coordinates
-``x = (u - cx) / fx``, ``y = (v - cy) / fy`` of the ideal (undistorted) pinhole camera:
-
-- ``radtan`` (``calib.txt``, ROS ``plumb_bob``, ``cv::projectPoints``), coefficients
-  ``k1 k2 p1 p2 k3``: with ``r² = x² + y²``,
-  ``x_d = x (1 + k1 r² + k2 r⁴ + k3 r⁶) + 2 p1 x y + p2 (r² + 2 x²)``,
-  ``y_d = y (1 + k1 r² + k2 r⁴ + k3 r⁶) + p1 (r² + 2 y²) + 2 p2 x y``.
-- ``equidistant`` (``cv::fisheye``, Kannala-Brandt; DSEC, M3ED), coefficients
-  ``k1 k2 k3 k4``: with ``θ = atan(r)``, ``θ_d = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸)``,
-  ``(x_d, y_d) = (θ_d / r) (x, y)``.
-
-A raw pixel ``(u, v)`` of the sensor is a distorted point; its undistorted image
-coordinates are ``(fx x + cx, fy y + cy)`` where ``(x, y)`` solves the model for
-``x_d = (u - cx) / fx``, ``y_d = (v - cy) / fy`` (what ``cv::undistortPoints`` returns
-with ``P = K``). The inverse is solved by Newton's method to ``1e-12`` in normalised
-units, which OpenCV's fixed five iterations do not guarantee at strong distortion.
+Two models, as ``Intrinsics.distortion_model`` names them: ``radtan`` (``k1 k2 p1 p2 k3``;
+``calib.txt``, ROS ``plumb_bob``) and ``equidistant`` (``k1 k2 k3 k4``; OpenCV fisheye,
+DSEC, M3ED), on normalised coordinates ``x = (u - cx) / fx``, ``y = (v - cy) / fy``.
+A raw pixel is a distorted point; its undistorted image coordinates (px, same camera
+matrix, as ``cv::undistortPoints`` with ``P = K``) are solved by Newton's method to
+``1e-12`` in normalised units, which OpenCV's fixed five iterations do not guarantee at
+strong distortion. The equations: docs/formats.md, "Lens distortion".
 """
 
 from __future__ import annotations
