@@ -36,11 +36,17 @@ def allowed_imports(allow_import: Iterable[str] | str | None = None) -> tuple[st
     ``TOFNET_ALLOW_IMPORT``. A name allows the module and its submodules (``pkg`` allows
     ``pkg.mod``)."""
     given = [allow_import] if isinstance(allow_import, str) else list(allow_import or ())
-    names = [n for text in [*given, os.environ.get(ENV_ALLOW_IMPORT, "")] for n in re.split(r"[,\s]+", text) if n]
+    return tuple(dict.fromkeys(module_names([*given, os.environ.get(ENV_ALLOW_IMPORT, "")])))
+
+
+def module_names(texts: Iterable[str]) -> list[str]:
+    """The module names in ``texts`` (each one name or a comma/space list); ``SpecError`` for one
+    that is not a dotted name."""
+    names = [n for text in texts for n in re.split(r"[,\s]+", text) if n]
     for name in names:
         if not _MODULE.match(name):
             raise SpecError(f"allowed import {quote(name)}: expected a module name such as my_package.my_module")
-    return tuple(dict.fromkeys(names))
+    return names
 
 
 def check_import(type_name: str, allow: tuple[str, ...], spec_dir: Path | None = None) -> str:
@@ -61,6 +67,25 @@ def check_import(type_name: str, allow: tuple[str, ...], spec_dir: Path | None =
     if spec_dir is not None:
         _refuse_spec_folder(module_name, spec_dir)
     return module_name
+
+
+def module_findable(module_name: str) -> bool:
+    """Whether ``module_name`` is imported, built in or on the Python path, found by looking at
+    the file system only (nothing is imported, no code runs)."""
+    if module_name in sys.modules or module_name in sys.builtin_module_names or _is_entry_point(module_name):
+        return True
+    parts = module_name.split(".")
+    path = None
+    for i in range(len(parts)):
+        name = ".".join(parts[:i + 1])
+        if name in sys.modules:
+            path = getattr(sys.modules[name], "__path__", None)
+            continue
+        found = PathFinder.find_spec(name, path)
+        if found is None:
+            return False
+        path = found.submodule_search_locations
+    return True
 
 
 def _is_entry_point(module_name: str) -> bool:
