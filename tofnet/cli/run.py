@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import time
 from pathlib import Path
 
@@ -41,13 +42,19 @@ def register(subparsers) -> None:
 
 
 def workers_option(text: str) -> int | str:
-    """``--workers``: a whole number, or ``auto``."""
+    """``--workers``: a whole number, or ``auto``; more than the CPUs runs as asked (the bands of rows are
+    the same, a test may want more than the machine has), with one warning line saying so."""
+    from tofnet.io.trust import cpu_count
     if text.strip().lower() == "auto":
         return "auto"
     try:
-        return int(text)
+        value = int(text)
     except ValueError:
         raise BackendError(f"--workers: expected a whole number of workers or auto, got {text!r}") from None
+    if value > cpu_count():
+        logging.getLogger("tofnet.cli").warning(f"warning: --workers: {value} workers on this machine's {cpu_count()} "
+                                                f"CPUs: at most {cpu_count()} run at once")
+    return value
 
 
 def workers_line(workers: dict) -> str:
