@@ -86,16 +86,24 @@ def parse_window(start: object = None, duration: object = None, until: object = 
         return None
     if duration is not None and until is not None:
         raise TofnetError(f"{names[1]} and {names[2]}: give one of them, not both")
-    begin = parse_time(start, names[0]) if start is not None else None
+    begin = _not_before_first(parse_time(start, names[0]), names[0]) if start is not None else None
     length = None
     if duration is not None:
         length = parse_time(duration, names[1], absolute_allowed=False).us
         if length <= 0:
             raise TofnetError(f"{names[1]}: expected a positive duration, got {quote(duration)}")
-    end = parse_time(until, names[2]) if until is not None else None
+    end = _not_before_first(parse_time(until, names[2]), names[2]) if until is not None else None
     if begin is not None and end is not None and begin.absolute == end.absolute and end.us <= begin.us:
         raise TofnetError(f"{names[2]}: {end.text()} is not after {names[0]} {begin.text()}")
     return TimeWindow(begin, length, end)
+
+
+def _not_before_first(point: TimePoint, what: str) -> TimePoint:
+    """A time from the first event must not be negative (nothing is before it); absolute ones may be."""
+    if not point.absolute and point.us < 0:
+        raise TofnetError(f"{what}: {point.text()} is before the first event; expected 0 or more (seconds from "
+                          "the first event), or @T for a time on the file's clock")
+    return point
 
 
 def rows_in(times_s: np.ndarray, start_us: int, stop_us: int | None) -> slice:
