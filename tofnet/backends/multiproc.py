@@ -42,6 +42,8 @@ from tofnet.kernels.fixed_point import DEFAULT_FRAC_BITS, DEFAULT_PAYLOAD_BITS, 
 DEFAULT_TIMEOUT = 120.0
 #: Steps per chunk: one synchronisation of host and workers per core-placed process and chunk.
 DEFAULT_CHUNK_STEPS = 250
+#: Steps per synchronisation at most: a chunk's steps run at once (1000 s at the 1 ms step).
+MAX_CHUNK_STEPS = 1_000_000
 _REPLY = {"build": "built", "run": "run", "counts": "counts", "finish": "finished", "get": "get", "set": "set",
           "param": "param", "band": "band", "band_run": "band_run", "band_promise": "band_promise",
           "band_counts": "band_counts", "band_map": "band_map"}
@@ -93,6 +95,9 @@ class MultiprocBackend(Backend):
         for label, value in (("workers", workers), ("chunk_steps", chunk_steps)):
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise BackendError(f"multiproc: {label} must be a positive whole number, got {value!r}")
+        if chunk_steps > MAX_CHUNK_STEPS:
+            raise BackendError(f"multiproc: chunk_steps must be at most {MAX_CHUNK_STEPS} (steps run between two "
+                               f"synchronisations, each held in memory), got {chunk_steps}")
         for label, value in (("timeout", timeout), ("start_timeout", start_timeout)):
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < float("inf"):
                 raise BackendError(f"multiproc: {label} must be a positive number of seconds, got {value!r}")
