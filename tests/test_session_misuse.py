@@ -108,12 +108,45 @@ def test_run_until_out_of_range_is_refused_before_any_work():
 
 
 def test_a_promise_too_far_ahead_to_run_is_one_line():
-    """In the time range but 2.3e15 steps ahead: numpy's MemoryError became a traceback."""
-    with live("fixed") as session:
-        session.feed(EVENTS[:100])
+    """In the time range but 2.3e15 steps ahead: numpy's MemoryError became a traceback. Now refused
+    before anything changes (more than 2**32 steps at once), so the session goes on."""
+    with live("fixed") as session, live("fixed") as clean:
+        expected = [clean.feed(EVENTS[:100]), clean.feed(EVENTS[100:200], until_us=200_000)]
+        got = [session.feed(EVENTS[:100])]
         with pytest.raises(BackendError) as err:
             session.feed(EVENTS[100:200], until_us=2**61 - 1)
-        assert "out of memory" in one_line(err)
+        assert "more than 2**32" in one_line(err)
+        got.append(session.feed(EVENTS[100:200], until_us=200_000))
+        assert all(same(a, b) for a, b in zip(got, expected)) and len(got[1]["depth.depth"])
+
+
+@pytest.mark.parametrize("name", ["fixed", "reference"])
+def test_a_bare_graph_stream_refuses_a_promise_too_far_ahead(name):
+    """``open_stream(...).feed(events, until_us=2**61 - 1)`` ended in numpy's MemoryError (16.4 PiB)."""
+    from tofnet.backends.registry import get_backend
+    options = {"fuse": False} if name == "fixed" else {}
+    streams = [get_backend(name, **options).open_stream(COMPILED.network, intrinsics=TEST_INTRINSICS,
+                                                        velocity_source=ConstantVelocity(VELOCITY), t0_us=0)
+               for _ in range(2)]
+    with pytest.raises(BackendError) as err:
+        streams[0].feed_all(EVENTS[:100], until_us=2**61 - 1)
+    assert one_line(err).startswith("stream: this packet would run 2305843009213693 steps at once")
+    assert same(*(stream.feed_all(EVENTS[:100], until_us=200_000) for stream in streams))  # nothing changed
+
+
+def test_out_of_memory_while_a_graph_stream_runs_is_one_line_and_closes_it(monkeypatch):
+    from tofnet.backends.graph import GraphExecutor
+    stream = FixedBackend(fuse=False).open_stream(COMPILED.network, intrinsics=TEST_INTRINSICS,
+                                                  velocity_source=ConstantVelocity(VELOCITY), t0_us=0)
+
+    def no_memory(self, end):
+        raise MemoryError
+    monkeypatch.setattr(GraphExecutor, "advance", no_memory)
+    with pytest.raises(BackendError) as err:
+        stream.feed_all(EVENTS[:100], until_us=200_000)
+    assert "out of memory running steps 0 to 200 at once" in one_line(err)
+    with pytest.raises(BackendError, match="stream is closed"):
+        stream.feed_all(EVENTS[100:200])
 
 
 def test_a_monitor_outside_the_sensor_is_refused_and_not_installed():

@@ -65,6 +65,11 @@ def check_packet(events, until_us) -> tuple[int, int] | None:
     return span
 
 
+#: Steps one call may run at once (each step keeps a few records in memory until the call returns):
+#: a promise ``until_us`` or an event further ahead is refused, before anything changes.
+MAX_STEPS_AT_ONCE = 1 << 32
+
+
 class GraphStream:
     """A network running on a stream of events; memory is fixed by the network, not the stream's length.
 
@@ -100,8 +105,19 @@ class GraphStream:
         array, times out of range or order, a bad ``until_us``."""
         if self._closed:
             raise BackendError("stream is closed")
-        check_packet(events, until_us)
+        span = check_packet(events, until_us)
         check_time_order(events, self._latest_us, "stream")
+        ends = [int(until_us)] if until_us is not None else []
+        if span is not None:
+            ends.append(span[1])
+            t0 = span[0] if self.t0_us is None else self.t0_us
+        else:
+            t0 = self.t0_us
+        if ends and t0 is not None:
+            ahead = (max(ends) - t0) // self.timestep_us - (self.executor.clock if self.executor else 0)
+            if ahead > MAX_STEPS_AT_ONCE:
+                raise BackendError(f"stream: this packet would run {ahead} steps at once (up to {max(ends)} µs), more "
+                                   f"than 2**32; feed events or promise until_us nearer, a part at a time")
 
     def feed_all(self, events: np.ndarray, until_us: int | None = None) -> dict[str, np.ndarray]:
         """The records each sink and probe sent in the steps this packet completed."""
@@ -123,7 +139,14 @@ class GraphStream:
         horizon = ex.complete_until()
         if until_us is not None and until_us >= self.t0_us:
             horizon = max(horizon or 0, (until_us - self.t0_us) // self.timestep_us)
-        return ex.advance(horizon) if horizon is not None else {}
+        if horizon is None:
+            return {}
+        try:
+            return ex.advance(horizon)
+        except MemoryError:  # the steps up to the horizon run at once; this stream's state is lost
+            self.abort()
+            raise BackendError(f"stream: out of memory running steps {ex.clock} to {horizon} at once; feed events "
+                               "or promise until_us nearer, a part at a time; the stream is closed") from None
 
     def feed(self, events: np.ndarray, until_us: int | None = None) -> np.ndarray:
         """The records of the primary output (depth, for the paper's network) this packet completed."""
