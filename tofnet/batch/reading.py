@@ -78,6 +78,14 @@ def read_options(entry: Mapping, defaults: dict[str, Any], where: str,
                    "intrinsics and calib: give one of them, not both")
     if "camera" in entry and "calib" not in options:
         raise fail(entry, "camera", f"{where}camera", "picks a camera of a calib file; give calib: FILE")
+    if options.get("camera") is not None and options.get("calib") and ("camera" in entry or "calib" in entry):
+        from tofnet.io.calibration import check_camera_pick
+        key = "camera" if "camera" in entry else "calib"
+        try:
+            check_camera_pick(options["calib"], read_camera_file(options["calib"], options["camera"])[2],
+                              str(options["camera"]), "camera")
+        except TofnetError as err:
+            raise fail(entry, key, f"{where}{key}", str(err)) from None
     if "duration" in options and "until" in options:
         key = "until" if "until" in entry else "duration"
         raise fail(entry, key, f"{where}{key}", "duration and until: give one of them, not both")

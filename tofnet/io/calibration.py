@@ -231,6 +231,13 @@ def _size(size) -> tuple[int, int] | None:
     return width, height
 
 
+def check_camera_pick(calib: str | Path, what: str, where: str, option: str) -> None:
+    """Refuse picking a camera (``option``, e.g. ``--camera`` or a plan's ``camera`` key) of a file that
+    holds one (``what``, as ``read_camera_file`` says): one line starting with ``where``."""
+    if what == "calib.txt" or what.startswith("camera_info"):
+        raise DataError(f"{where}: {calib} holds one camera ({what}); {option} picks one of a file with several")
+
+
 def set_camera(source, intrinsics: Intrinsics | None, calib: str | Path | None,
                camera: str | None) -> None:
     """Give ``source`` the camera of ``--intrinsics`` or ``--calib FILE`` (which win over the file's)."""
@@ -239,9 +246,8 @@ def set_camera(source, intrinsics: Intrinsics | None, calib: str | Path | None,
     had = source.intrinsics is not None
     if calib is not None:
         intrinsics, size, what = read_camera_file(calib, camera, source.sensor_size)
-        if camera is not None and (what == "calib.txt" or what.startswith("camera_info")):
-            raise DataError(f"--camera {camera}: {calib} holds one camera ({what}); --camera picks one of a file "
-                            "with several")
+        if camera is not None:
+            check_camera_pick(calib, what, f"--camera {camera}", "--camera")
         if source.sensor_size is None and size is not None:
             source.sensor_size = size
             source.notes.append(f"sensor size {size[0]}x{size[1]} from {calib}")
