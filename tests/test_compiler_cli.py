@@ -65,7 +65,9 @@ def test_compile_errors_are_one_line(tmp_path, capsys):
 def test_every_example_loads_compiles_and_round_trips(path):
     spec = load_spec(path)
     compiled = spec.compile_network()
-    assert compiled.cores_used > 0 or all(p.placement == "host" for p in spec.network.processes)  # improved.yaml
+    on_cores = {p.name for p in spec.network.processes if p.placement != "host"}
+    assert {c.process for c in compiled.cores} == on_cores  # every core process has cores (none: improved.yaml)
+    assert set(compiled.host) == {p.name for p in spec.network.processes} - on_cores
     again = load_spec(dump_spec(spec))
     assert networks_equal(again.network, spec.network) and again.compile == spec.compile
     assert again.backend == spec.backend
