@@ -1,0 +1,94 @@
+"""Options a user can get wrong: each is one line naming the option (or one warning line), never
+silently accepted (issue 25 item 5's review: --allow-import, --workers, --start, chunk_steps, camera)."""
+
+import logging
+
+import numpy as np
+import pytest
+
+from tofnet.backends.multiproc import MAX_CHUNK_STEPS, MultiprocBackend
+from tofnet.batch import PlanError, load_plan
+from tofnet.cli import main
+from tofnet.cli.run import workers_option
+from tofnet.errors import BackendError
+from tofnet.io.trust import ENV_ALLOW_IMPORT, cpu_count
+from tofnet.io.window import parse_window
+from tofnet.testing import moving_pattern
+
+SENSOR = (24, 16)
+COMMON = ["--velocity", "0.5,0,0", "--intrinsics", "200,200,12,8", "--quiet"]
+
+
+@pytest.fixture
+def events_file(tmp_path):
+    path = tmp_path / "ev.npy"
+    np.save(path, moving_pattern(SENSOR, (300, -150), 50_000, seed=1))
+    return path
+
+
+def error_line(capsys) -> str:
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1, lines
+    return lines[0]
+
+
+def test_allow_import_names_a_module_that_exists(events_file, tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv(ENV_ALLOW_IMPORT, "not_installed_here")  # the standing list is not checked here
+    out = str(tmp_path / "d.npz")
+    for bad, why in (("nosuchmod_zz", "no module 'nosuchmod_zz' on the Python path"),
+                     ("json.nosuch_zz", "no module 'json.nosuch_zz' on the Python path"),
+                     ("../evil", "expected a module name such as my_package.my_module"),
+                     ("", "expected a module name")):
+        with pytest.raises(SystemExit) as exit_:
+            main(["run", str(events_file), "--out", out, "--allow-import", bad, *COMMON])
+        assert exit_.value.code == 2
+        line = error_line(capsys)
+        assert line.startswith("tofnet run: error: argument --allow-import: ") and why in line, line
+    assert main(["run", str(events_file), "--out", out, "--allow-import", "json, tofnet.testing",
+                 "--allow-import", "xml.etree", *COMMON]) == 0
+
+
+def test_more_workers_than_cpus_is_said_once(events_file, tmp_path, capsys, caplog):
+    many = cpu_count() + 5
+    with caplog.at_level(logging.WARNING, logger="tofnet"):
+        assert workers_option(str(many)) == many  # the bands asked for, on the CPUs there are
+        assert workers_option(str(cpu_count())) == cpu_count() and workers_option("auto") == "auto"
+    assert [r.getMessage() for r in caplog.records] == [
+        f"warning: --workers: {many} workers on this machine's {cpu_count()} CPUs: at most {cpu_count()} run at once"]
+    capsys.readouterr()
+    assert main(["run", str(events_file), "--out", str(tmp_path / "d.npz"), "--workers", str(many), *COMMON]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert [line for line in err if "--workers" in line] == [f"tofnet run: warning: --workers: {many} workers on "
+                                                             f"this machine's {cpu_count()} CPUs: at most "
+                                                             f"{cpu_count()} run at once"]
+
+
+def test_a_time_before_the_first_event_is_refused(events_file, capsys):
+    for option in ("--start=-1", "--until=-0.5s", "--start=-1ms"):
+        assert main(["info", str(events_file), option]) == 2
+        name = option.split("=")[0]
+        assert error_line(capsys).startswith(f"tofnet info: error: {name}: -")
+    assert parse_window("@-1s").start.us == -1_000_000  # a file's own clock may be negative
+    assert parse_window("0", "1s").start.us == 0
+
+
+def test_multiproc_chunk_steps_is_bounded():
+    assert MultiprocBackend(workers=1, chunk_steps=MAX_CHUNK_STEPS).chunk_steps == MAX_CHUNK_STEPS
+    for bad in (MAX_CHUNK_STEPS + 1, 10**18, 0, 2.5):
+        with pytest.raises(BackendError, match="multiproc: chunk_steps must be") as err:
+            MultiprocBackend(workers=1, chunk_steps=bad)
+        assert "\n" not in str(err.value)
+
+
+def test_a_plans_camera_key_gets_the_one_camera_check(events_file, tmp_path):
+    (tmp_path / "calib.txt").write_text("200 200 12 8\n")
+    plan = tmp_path / "plan.yaml"
+    for text, where in (("recordings:\n  - {path: ev.npy, calib: calib.txt, camera: cam1}\n", "2: recordings[0].camera"),
+                        ("recordings: [ev.npy]\ncalib: calib.txt\ncamera: cam1\n", "3: camera")):
+        plan.write_text(text)
+        with pytest.raises(PlanError) as err:
+            load_plan(plan)
+        assert str(err.value) == (f"{plan}:{where}: cam1: {tmp_path / 'calib.txt'} holds one camera (calib.txt); "
+                                  "camera picks one of a file with several")
+    plan.write_text("recordings:\n  - {path: ev.npy, calib: calib.txt}\n")
+    assert load_plan(plan)
