@@ -8,9 +8,10 @@ import pytest
 
 from tofnet.backends.event_driven import FixedBackend, FloatBackend
 from tofnet.backends.fusion import pipeline_of
+from tofnet.events import EVENT_DTYPE
 from tofnet.io.recording import Recording
 from tofnet.kernels.fixed_point import FixedPointFormat, depth_tolerance, fixed_depth, quantize
-from tofnet.kernels.region import KernelConfig, TimeOfTravelKernel
+from tofnet.kernels.region import TimeOfTravelKernel
 from tofnet.networks import depth_network
 from tofnet.testing import TEST_INTRINSICS, step_events
 
@@ -78,7 +79,8 @@ def test_the_kernel_reports_the_golden_z_raw(name):
     case = CASES[name]
     net = network(case)
     fmt = FixedPointFormat(case["frac_bits"], case["payload_bits"])
-    kernel = TimeOfTravelKernel(KernelConfig.from_pipeline(pipeline_of(net), TEST_INTRINSICS, fmt))
+    camera = Recording(np.empty(0, EVENT_DTYPE), intrinsics=TEST_INTRINSICS)
+    kernel = TimeOfTravelKernel(pipeline_of(net).kernel_config(camera, fmt))
     steps, xs, ys, ps = (np.array(c) for c in zip(*sorted(map(tuple, case["spikes"]))))
     out = kernel.process(steps, xs, ys, ps, np.tile(case["velocity"], (64, 1)), 0)
     assert sorted(zip(out.depth["x"].tolist(), out.z_raw.tolist())) == \

@@ -38,3 +38,22 @@ def test_fused_equals_unfused_on_a_whole_simulated_scene():
     assert len(fused.depth) > 10_000
     assert compare(fused, unfused, "exact", net).ok
     assert fused.depth.tobytes() == unfused.depth.tobytes() and fused.tot.tobytes() == unfused.tot.tobytes()
+
+
+@pytest.mark.parametrize("timestep", ["9ms", 0.009])
+def test_fused_and_unfused_take_the_timestep_from_the_same_microseconds(timestep):
+    """"9ms" parses to 0.009000000000000001 s, not 0.009: both paths read the clock's whole µs
+    (9000) through the one conversion, so their depths agree to the bit and do not depend on how
+    the timestep was written (the fused float path once used the parsed seconds: last-bit differences)."""
+    from tofnet.sim.engine import generate
+    from tofnet.sim.scenarios import scenario
+
+    recording = generate(scenario("slider", 0.1), seed=0).to_recording()
+    net = depth_network((240, 180), input={"timestep": timestep}, velocity={"per": "pixel"})
+    fused = FloatBackend().run(net, recording)
+    unfused = FloatBackend(fuse=False).run(net, recording)
+    assert len(fused.depth) > 1_000 and fused.timestep_us == 9000
+    assert fused.depth.tobytes() == unfused.depth.tobytes()
+    written_plainly = FloatBackend().run(depth_network((240, 180), input={"timestep": 0.009},
+                                                       velocity={"per": "pixel"}), recording)
+    assert fused.depth.tobytes() == written_plainly.depth.tobytes()

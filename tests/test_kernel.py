@@ -7,6 +7,7 @@ import pytest
 
 from tofnet.errors import BackendError
 from tofnet.kernels.fixed_point import FixedPointFormat
+from tofnet.kernels.kernel_config import DepthSettings, UnitSettings
 from tofnet.kernels.region import KernelConfig, Region, TimeOfTravelKernel
 
 PLUS_U, MINUS_U, PLUS_V, MINUS_V = range(4)
@@ -15,9 +16,11 @@ STEPS = 400  # velocity table rows the helpers provide
 
 def config(sensor, *, distance=1, counter_bits=8, fixed=None, min_depth=0.05, max_depth=20.0, update_every=1,
            per_pixel=True, patch_size=30, intrinsics=(200.0, 200.0, 0.0, 0.0)):
-    return KernelConfig(sensor_size=tuple(sensor), timestep=1e-3, distance=distance, counter_bits=counter_bits,
-                        min_depth=min_depth, max_depth=max_depth, update_every=update_every, per_pixel=per_pixel,
-                        patch_size=patch_size, intrinsics=intrinsics, fixed=fixed)
+    return KernelConfig(sensor_size=tuple(sensor), timestep_us=1000,
+                        units=UnitSettings(distance=distance, counter_bits=counter_bits),
+                        depth=DepthSettings(min_depth=min_depth, max_depth=max_depth, update_every=update_every,
+                                            per_pixel=per_pixel, patch_size=patch_size, intrinsics=intrinsics),
+                        fixed=fixed)
 
 
 def arrays(spikes):

@@ -10,6 +10,7 @@ from tofnet.events import make_events
 from tofnet.kernels.depth import EMITTED, ROTATION_DOMINATED, classify, signed_axis_count
 from tofnet.kernels.fixed_point import FixedPointFormat
 from tofnet.kernels.input_filter import InputFilter
+from tofnet.kernels.kernel_config import DepthSettings, InputFilterSettings, UnitSettings
 from tofnet.kernels.region import KernelConfig, TimeOfTravelKernel
 from tofnet.kernels.time_of_travel import N_REASONS, axis_count, outcome
 from tofnet.models.depth import REJECT_REASONS
@@ -20,10 +21,12 @@ T0 = 3_000
 
 def config(*, refractory_us=2_500, per_polarity=False, distance=1, counter_bits=6, fixed=None, per_pixel=False,
            update_every=1):
-    return KernelConfig(sensor_size=SENSOR, timestep=1e-3, distance=distance, counter_bits=counter_bits, min_depth=0.05,
-                        max_depth=20.0, update_every=update_every, per_pixel=per_pixel, patch_size=5,
-                        intrinsics=(200.0, 190.0, 9.0, 6.5), fixed=fixed, refractory_us=refractory_us,
-                        refractory_per_polarity=per_polarity)
+    return KernelConfig(sensor_size=SENSOR, timestep_us=1000, units=UnitSettings(distance=distance,
+                                                                                  counter_bits=counter_bits),
+                        depth=DepthSettings(min_depth=0.05, max_depth=20.0, update_every=update_every,
+                                            per_pixel=per_pixel, patch_size=5, intrinsics=(200.0, 190.0, 9.0, 6.5)),
+                        input_filter=InputFilterSettings(refractory_us=refractory_us, per_polarity=per_polarity),
+                        fixed=fixed)
 
 
 def random_events(seed, n=12_000, duration_us=150_000):
@@ -47,7 +50,8 @@ VELOCITY = np.array([-0.3, 0.2, 0.4])
 
 def two_stage(cfg, events, record_tot=True):
     """The reference for the fused path: InputFilter, then the spike kernel, in one call each."""
-    flt = InputFilter(cfg.sensor_size, T0, cfg.timestep_us, cfg.refractory_us, cfg.refractory_per_polarity)
+    flt = InputFilter(cfg.sensor_size, T0, cfg.timestep_us, cfg.input_filter.refractory_us,
+                      cfg.input_filter.per_polarity)
     kernel = TimeOfTravelKernel(cfg, t0_us=T0)
     steps, xs, ys, ps = flt.feed(events)
     out = kernel.process(steps, xs, ys, ps, *table_rows(VELOCITY)(0, int(steps[-1]) + 3),

@@ -88,15 +88,16 @@ def _warm_up() -> None:
     reporting ready: the host's start-up timeout covers this; run timeouts measure real work."""
     from tofnet.events import TOT_DTYPE
     from tofnet.kernels.fixed_point import FixedPointFormat
-    from tofnet.kernels.kernel_config import UnitSettings
+    from tofnet.kernels.kernel_config import DepthSettings, UnitSettings
     from tofnet.kernels.region import KernelConfig, TimeOfTravelKernel
 
-    units = TimeOfTravelKernel(KernelConfig.units_alone((2, 1), 1e-3, UnitSettings(distance=1, counter_bits=8)))
-    out = units.process(np.array([0, 3]), np.array([0, 1]), np.array([0, 0]), np.array([1, 1]), np.zeros((0, 3)), 0,
-                        record_tot=True)
-    depth = TimeOfTravelKernel(KernelConfig(sensor_size=(2, 1), timestep=1e-3, distance=1, counter_bits=1,
-                                            min_depth=0.05, max_depth=20.0, update_every=1, per_pixel=True,
-                                            patch_size=30, intrinsics=(200.0, 200.0, 0.0, 0.0),
+    units = UnitSettings(distance=1, counter_bits=8)
+    units_alone = TimeOfTravelKernel(KernelConfig(sensor_size=(2, 1), timestep_us=1000, units=units))
+    out = units_alone.process(np.array([0, 3]), np.array([0, 1]), np.array([0, 0]), np.array([1, 1]),
+                              np.zeros((0, 3)), 0, record_tot=True)
+    neurons = DepthSettings(min_depth=0.05, max_depth=20.0, per_pixel=True, patch_size=30,
+                            intrinsics=(200.0, 200.0, 0.0, 0.0))
+    depth = TimeOfTravelKernel(KernelConfig(sensor_size=(2, 1), timestep_us=1000, units=units, depth=neurons,
                                             fixed=FixedPointFormat()))
     velocity = np.zeros(1, dtype=[("step", "<i8"), ("tx", "<f8"), ("ty", "<f8"), ("tz", "<f8")])
     depth.process_counts(out.tot if len(out.tot) else np.empty(0, TOT_DTYPE), velocity)

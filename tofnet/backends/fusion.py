@@ -10,26 +10,29 @@ probe inside the chain, runs the models one by one.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
 from tofnet.backends.base import RunResult
 from tofnet.backends.graph import canonical
+from tofnet.backends.runtime import clock_of
 from tofnet.backends.stream import check_packet
 from tofnet.core.counters import kinds_of
 from tofnet.core.network import Network
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, TOT_DTYPE
-from tofnet.io.recording import VelocitySource
+from tofnet.io.recording import Recording, VelocitySource
 from tofnet.kernels.compilation import Stopwatch
-from tofnet.kernels.kernel_config import UnitSettings, microseconds
+from tofnet.kernels.fixed_point import FixedPointFormat
+from tofnet.kernels.kernel_config import InputFilterSettings, UnitSettings
 from tofnet.kernels.region import KernelConfig, KernelOutput, TimeOfTravelKernel, copy_records
 from tofnet.models.base import concat
 from tofnet.models.binding import UpdateRows, velocity_table
-from tofnet.models.depth import OUTCOMES
-from tofnet.models.input import input_counts
+from tofnet.models.depth import OUTCOMES, depth_settings
+from tofnet.models.input import filter_settings, input_counts
 from tofnet.models.time_of_travel import unit_settings
+from tofnet.models.velocity import velocity_field, velocity_source
 from tofnet.models.registry import _registered
 from tofnet.processes import DepthProcess, InputProcess, TimeOfTravelProcess, VelocityProcess
 
@@ -39,64 +42,41 @@ VELOCITY_LOOKAHEAD = 1024
 
 @dataclass(frozen=True)
 class PipelineParams:
-    """Resolved parameters of input -> time-of-travel -> depth <- velocity.
-
-    Times in seconds, lengths in metres, sizes in pixels.
-    """
+    """The paper's chain recognised: its processes (input, time of travel, depth, velocity) and the
+    settings of its kernels made by the models' own conversions (``*_settings``), on the network's
+    clock (``timestep_us``, µs)."""
 
     sensor_size: tuple[int, int]
-    timestep: float
-    t0: float | None
-    refractory: float
-    refractory_per_polarity: bool
-    distance: int
-    counter_bits: int
-    min_depth: float
-    max_depth: float
-    velocity_source: str
-    velocity_constant: tuple[float, float, float] | None
-    velocity_samples: str | None
-    velocity_per: str
-    velocity_patch_size: int
-    update_every: int
-    intrinsics: tuple[float, float, float, float] | None
+    timestep_us: int
+    input_filter: InputFilterSettings
+    units: UnitSettings
+    depth: DepthProcess
+    velocity: VelocityProcess
     names: tuple[str, str, str, str]  # input, time-of-travel, depth, velocity
-    distortion_model: str | None = None
-    distortion: tuple[float, ...] | None = None
-
-    @property
-    def timestep_us(self) -> int:
-        """Timestep in whole microseconds (events are stamped in µs)."""
-        return microseconds(self.timestep)
-
-    @property
-    def refractory_us(self) -> int:
-        return microseconds(self.refractory)
-
-    @property
-    def units(self) -> UnitSettings:
-        """What the units take (``models.time_of_travel.unit_settings`` made them)."""
-        return UnitSettings(distance=self.distance, counter_bits=self.counter_bits)
-
-    @property
-    def counter_max(self) -> int:
-        """Largest counter value before overflow (``UnitSettings.counter_max``)."""
-        return self.units.counter_max
 
     @property
     def latency_steps(self) -> int:
         """Steps from an input event to its depth: one per connection (input->ToT->depth)."""
         return 2
 
-    def to_dict(self) -> dict:
-        return asdict(self)
+    def kernel_config(self, recording: Recording | None, fixed: FixedPointFormat | None) -> KernelConfig:
+        """The fused kernel's configuration, the camera from ``recording`` (its metadata) where the
+        velocity process takes it; ``fixed`` the fixed-point format (None: float64)."""
+        field = velocity_field(self.velocity, self.sensor_size, recording)
+        return KernelConfig(sensor_size=tuple(self.sensor_size), timestep_us=self.timestep_us, units=self.units,
+                            depth=depth_settings(self.depth, field, int(self.velocity.update_every)),
+                            input_filter=self.input_filter, fixed=fixed)
+
+    def velocity_source(self, recording: Recording | None) -> VelocitySource:
+        """The camera velocity the velocity process reads (``recording``: its metadata)."""
+        return velocity_source(self.velocity, recording)
 
 
 _CHAIN = (InputProcess, TimeOfTravelProcess, DepthProcess, VelocityProcess)
 
 
 def paper_chain(network: Network, family: str, probes=()) -> PipelineParams | None:
-    """The chain's parameters when ``network`` is exactly the paper's four processes, else None.
+    """The chain when ``network`` is exactly the paper's four processes, else None.
 
     The processes must be of exactly those types with tofnet's own models for ``family``
     (a subclass or a user-registered model runs unfused), connected input.events ->
@@ -115,16 +95,9 @@ def paper_chain(network: Network, family: str, probes=()) -> PipelineParams | No
         return None
     if not set(probes) <= {tot.counts.qualified_name, dep.depth.qualified_name}:
         return None
-    units = unit_settings(tot)
-    return PipelineParams(
-        sensor_size=network.sensor_size, timestep=inp.timestep, t0=inp.t0, refractory=inp.refractory,
-        refractory_per_polarity=inp.refractory_per_polarity, distance=units.distance, counter_bits=units.counter_bits,
-        min_depth=dep.min_depth, max_depth=dep.max_depth, velocity_source=vel.source,
-        velocity_constant=vel.velocity, velocity_samples=vel.samples, velocity_per=vel.per,
-        velocity_patch_size=vel.patch_size, update_every=vel.update_every,
-        intrinsics=tuple(vel.intrinsics) if vel.intrinsics is not None else None,
-        names=(inp.name, tot.name, dep.name, vel.name), distortion_model=vel.distortion_model,
-        distortion=tuple(vel.distortion) if vel.distortion is not None else None)
+    return PipelineParams(sensor_size=network.sensor_size, timestep_us=clock_of(network).timestep_us,
+                          input_filter=filter_settings(inp), units=unit_settings(tot), depth=dep, velocity=vel,
+                          names=(inp.name, tot.name, dep.name, vel.name))
 
 
 def pipeline_of(network: Network) -> PipelineParams:
@@ -167,10 +140,10 @@ class FusedStream:
         self._events_in = 0
         self._last_event_us: int | None = None
         self._held: dict[str, np.ndarray] = {}  # feed_all: records of steps not complete yet
-        p = pipeline
         # velocity updates (``VelocityRows``: ``self._updates.rows``), computed ``VELOCITY_LOOKAHEAD`` ahead
         self._updates = UpdateRows(lambda first, count: velocity_table(
-            self.velocity_source, self.kernel.t0_us, p.timestep_us, p.update_every, count, first), VELOCITY_LOOKAHEAD)
+            self.velocity_source, self.kernel.t0_us, config.timestep_us, config.update_every, count, first),
+            VELOCITY_LOOKAHEAD)
         self._clock = Stopwatch()
         self._closed = False
         #: Called once when the stream closes or is given up (e.g. to stop its backend's workers).

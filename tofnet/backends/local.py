@@ -17,7 +17,6 @@ from tofnet.backends.base import Backend, ProgressCallback, RunResult
 from tofnet.backends.fusion import FusedStream, PipelineParams, paper_chain
 from tofnet.backends.graph import GraphExecutor, canonical, resolve_probes, sinks_of
 from tofnet.backends.runtime import clock_of, start_time_us
-from tofnet.models.binding import camera_of, velocity_source_of
 from tofnet.backends.stream import DEFAULT_PACKET_EVENTS, GraphStream, run_in_packets
 from tofnet.compiler.bands import input_reach, plan_bands
 from tofnet.compiler.compiled import network_of
@@ -27,7 +26,6 @@ from tofnet.events import DEPTH_DTYPE, EVENT_DTYPE, TOT_DTYPE
 from tofnet.io.recording import Intrinsics, Recording, VelocitySource, as_velocity_source
 from tofnet.kernels.bands import row_load
 from tofnet.kernels.compilation import Stopwatch
-from tofnet.kernels.region import KernelConfig
 
 #: Initial size of a fused run's result buffer in estimates (at most one per event); 4M x 28 B
 #: of address space, resident only where written.
@@ -143,11 +141,8 @@ class LocalBackend(Backend):
 
     def _fused_stream(self, network: Network, pipeline: PipelineParams, known: Recording, t0_us: int | None,
                       record_tot: bool) -> FusedStream:
-        intr = camera_of(pipeline.intrinsics, pipeline.distortion_model, pipeline.distortion, known,
-                         pipeline.names[3])
-        source = velocity_source_of(pipeline.velocity_source, pipeline.velocity_constant, pipeline.velocity_samples,
-                                    known, pipeline.names[3])
-        config = KernelConfig.from_pipeline(pipeline, intr, self._format())
+        source = pipeline.velocity_source(known)
+        config = pipeline.kernel_config(known, self._format())
         bands = self._bands(network, known)
         kernel = None
         if len(bands) > 1:

@@ -24,11 +24,9 @@ from tofnet.backends.base import Backend, ProgressCallback, RunResult
 from tofnet.backends.graph import GraphExecutor, resolve_probes, sinks_of
 from tofnet.backends.fusion import FusedStream, paper_chain
 from tofnet.backends.local import binding, payloads_of, run_fused
-from tofnet.models.binding import camera_of, velocity_source_of
 from tofnet.backends.shared_bands import SharedBandKernel, band_rows
 from tofnet.backends.stream import DEFAULT_PACKET_EVENTS
 from tofnet.compiler.bands import input_reach
-from tofnet.kernels.region import KernelConfig
 from tofnet.backends.remote import RemoteModel, plan_workers, placements_for
 from tofnet.backends.runtime import clock_of, start_time_us
 from tofnet.backends.stream import Collected, GraphStream
@@ -300,11 +298,8 @@ class MultiprocSession:
     def _banded_stream(self, compiled, pipeline, plans, known, t0_us, record_tot: bool) -> FusedStream:
         """The paper's chain with each worker's share of the cores as one band (``shared_bands``)."""
         network = compiled.network
-        intr = camera_of(pipeline.intrinsics, pipeline.distortion_model, pipeline.distortion, known,
-                         pipeline.names[3])
-        source = velocity_source_of(pipeline.velocity_source, pipeline.velocity_constant, pipeline.velocity_samples,
-                                    known, pipeline.names[3])
-        config = KernelConfig.from_pipeline(pipeline, intr, self.backend.format)
+        source = pipeline.velocity_source(known)
+        config = pipeline.kernel_config(known, self.backend.format)
         bands = band_rows(compiled, pipeline.names[1], plans)
         kernel = self._guarded(lambda: SharedBandKernel(
             config, bands, input_reach(network), source, lambda m: self._guarded(lambda: self._exchange(m)),

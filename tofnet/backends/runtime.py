@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from tofnet.core.network import Network
 from tofnet.errors import NetworkError
 from tofnet.io.recording import Recording
+from tofnet.kernels.kernel_config import microseconds
 
 #: The network's timestep when no process declares one (seconds).
 DEFAULT_TIMESTEP = 1e-3
@@ -43,7 +44,7 @@ def clock_of(network: Network) -> Clock:
         raise NetworkError(f"{owner or network.name}.timestep: must be a whole number of microseconds, "
                            f"got {timestep!r} s")
     t0, _ = agreed("t0")
-    return Clock(int(round(timestep_us)), None if t0 is None else int(round(t0 * 1e6)))
+    return Clock(microseconds(timestep), None if t0 is None else microseconds(t0))
 
 
 def start_time_us(t0_us: int | None, recording: Recording) -> int:

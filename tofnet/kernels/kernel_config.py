@@ -13,7 +13,7 @@ import numpy as np
 
 from tofnet.errors import BackendError
 from tofnet.kernels.fixed_point import FixedPointFormat
-from tofnet.kernels.lens import SAMPLE_COLUMNS, Lens, lens_of, sample_table
+from tofnet.kernels.lens import SAMPLE_COLUMNS, Lens, sample_table
 
 
 @dataclass(frozen=True)
@@ -54,7 +54,29 @@ def microseconds(seconds: float) -> int:
     return int(round(seconds * 1e6))
 
 
-@dataclass(frozen=True)
+def seconds_of(us: int) -> float:
+    """``us`` microseconds as seconds, ``us / 1e6``: the one conversion back (models, fused path, results)."""
+    return us / 1e6
+
+
+def seconds_per_count(timestep_us: int, distance: int) -> float:
+    """``dt / distance`` (s): the time per pixel one counter step stands for (the depth neurons' scale)."""
+    return seconds_of(timestep_us) / distance
+
+
+# One typed settings object per kernel family, made from a process's parameters (units converted
+# there, once) by the models' ``*_settings`` functions, which the models and the fused path share.
+
+@dataclass(frozen=True, kw_only=True)
+class InputFilterSettings:
+    """What the input filter takes from an ``InputProcess``: ``refractory_us`` (µs; 0: none), kept
+    per pixel or, with ``per_polarity``, per pixel and polarity."""
+
+    refractory_us: int = 0
+    per_polarity: bool = False
+
+
+@dataclass(frozen=True, kw_only=True)
 class UnitSettings:
     """What the time-of-travel units take from a ``TimeOfTravelProcess``: ``distance`` (px) and
     ``counter_bits``, with the counter's largest value derived here."""
@@ -67,81 +89,85 @@ class UnitSettings:
         return counter_max(self.counter_bits)
 
 
-#: The depth-side fields of a configuration whose kernel runs the units alone (``emit_depth``
-#: False): not read, given so that the configuration is complete.
-_UNITS_ALONE = dict(min_depth=0.05, max_depth=20.0, update_every=1, per_pixel=True, patch_size=1,
-                    intrinsics=(1.0, 1.0, 0.0, 0.0), emit_depth=False)
+@dataclass(frozen=True, kw_only=True)
+class DepthSettings:
+    """What the depth neurons take from a ``DepthProcess`` and the ``A t`` (``B ω``) feeding it.
+
+    Depths in metres; ``A t`` per pixel (``per_pixel``) or at the centre of ``patch_size`` px
+    patches, evaluated with ``intrinsics`` (fx, fy, cx, cy) px through ``lens`` (None: a
+    pinhole), one update every ``update_every`` steps. ``min_share`` (dimensionless) makes the
+    neurons compute eq. 7 from angular velocity updates, ``B ω`` evaluated with
+    ``rotation_intrinsics`` (``intrinsics`` when None); None keeps eq. 8.
+    """
+
+    min_depth: float
+    max_depth: float
+    per_pixel: bool
+    patch_size: int
+    intrinsics: tuple[float, float, float, float]
+    lens: Lens | None = None
+    update_every: int = 1
+    min_share: float | None = None
+    rotation_intrinsics: tuple[float, float, float, float] | None = None
+
+
+#: The depth side of a configuration whose kernel runs the units alone: not read, there so that
+#: the kernel's layout is complete.
+UNITS_ALONE = DepthSettings(min_depth=0.05, max_depth=20.0, per_pixel=True, patch_size=1,
+                            intrinsics=(1.0, 1.0, 0.0, 0.0))
 
 
 @dataclass(frozen=True, kw_only=True)
 class KernelConfig:
     """Everything the kernel needs besides spikes and velocities (plain data, picklable).
 
-    ``timestep`` seconds, depths metres, ``intrinsics`` (fx, fy, cx, cy) pixels;
-    ``fixed`` the fixed-point format, or None for float64 arithmetic; the input filter's
-    ``refractory_us`` (µs) and ``refractory_per_polarity`` for ``process_events``;
-    ``emit_depth`` False runs the time-of-travel units alone (no velocity needed);
-    ``min_share`` (dimensionless) makes the depth layer alone (``process_counts``) compute
-    eq. 7 from angular velocity updates, ``B ω`` evaluated with ``rotation_intrinsics``
-    (``intrinsics`` when None); None keeps eq. 8. ``lens`` (model, coefficients): ``A t`` is
-    taken through that lens onto the raw pixels (``tofnet.kernels.lens``); None: a pinhole.
+    ``timestep_us`` (µs) is the network's clock; ``units``, ``depth`` and ``input_filter`` the
+    settings of each family (``depth`` None: the time-of-travel units alone, no velocity
+    needed); ``fixed`` the fixed-point format, or None for float64 arithmetic.
     """
 
     sensor_size: tuple[int, int]
-    timestep: float
-    distance: int
-    counter_bits: int
-    min_depth: float
-    max_depth: float
-    update_every: int
-    per_pixel: bool
-    patch_size: int
-    intrinsics: tuple[float, float, float, float]
+    timestep_us: int
+    units: UnitSettings
+    depth: DepthSettings | None = None
+    input_filter: InputFilterSettings = InputFilterSettings()
     fixed: FixedPointFormat | None = None
-    refractory_us: int = 0
-    refractory_per_polarity: bool = False
-    emit_depth: bool = True
-    min_share: float | None = None
-    rotation_intrinsics: tuple[float, float, float, float] | None = None
-    lens: Lens | None = None
-
-    @classmethod
-    def from_pipeline(cls, pipeline, intrinsics, fixed: FixedPointFormat | None = None) -> "KernelConfig":
-        """From a ``PipelineParams`` and an ``Intrinsics`` (its distortion is the lens)."""
-        units = pipeline.units
-        return cls(sensor_size=tuple(pipeline.sensor_size), timestep=pipeline.timestep, distance=units.distance,
-                   counter_bits=units.counter_bits, min_depth=pipeline.min_depth, max_depth=pipeline.max_depth,
-                   update_every=pipeline.update_every, per_pixel=pipeline.velocity_per == "pixel",
-                   patch_size=pipeline.velocity_patch_size,
-                   intrinsics=(intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy), fixed=fixed,
-                   refractory_us=pipeline.refractory_us, refractory_per_polarity=pipeline.refractory_per_polarity,
-                   lens=lens_of(intrinsics))
-
-    @classmethod
-    def units_alone(cls, sensor_size: tuple[int, int], timestep: float, units: UnitSettings) -> "KernelConfig":
-        """The time-of-travel units without depth neurons (``timestep`` s): what the units' model runs."""
-        return cls(sensor_size=tuple(sensor_size), timestep=timestep, distance=units.distance,
-                   counter_bits=units.counter_bits, **_UNITS_ALONE)
 
     @property
-    def timestep_us(self) -> int:
-        return microseconds(self.timestep)
+    def emit_depth(self) -> bool:
+        return self.depth is not None
+
+    @property
+    def neurons(self) -> DepthSettings:
+        """The depth neurons' settings (``UNITS_ALONE``'s placeholders without depth neurons)."""
+        return UNITS_ALONE if self.depth is None else self.depth
+
+    @property
+    def update_every(self) -> int:
+        """Steps per velocity update (1 without depth neurons)."""
+        return self.neurons.update_every
+
+    @property
+    def timestep(self) -> float:
+        """Seconds (``seconds_of``)."""
+        return seconds_of(self.timestep_us)
 
     @property
     def counter_max(self) -> int:
         """Largest counter value (``counter_max``)."""
-        return counter_max(self.counter_bits)
+        return self.units.counter_max
 
     @property
     def seconds_per_count(self) -> float:
-        """``dt / distance`` seconds, computed as the reference backend does."""
-        return self.timestep / self.distance
+        """``dt / distance`` seconds (``seconds_per_count``)."""
+        return seconds_per_count(self.timestep_us, self.units.distance)
 
     def check(self) -> None:
         """Raise ``BackendError`` when the fixed-point format cannot hold ``max_depth``."""
-        if self.fixed is not None and self.max_depth > self.fixed.max_value:
+        max_depth = self.neurons.max_depth
+        if self.fixed is not None and max_depth > self.fixed.max_value:
             raise BackendError(
-                f"max_depth {self.max_depth:g} m exceeds the fixed-point range {self.fixed.max_value:g} m "
+                f"max_depth {max_depth:g} m exceeds the fixed-point range {self.fixed.max_value:g} m "
                 f"(payload_bits={self.fixed.payload_bits}, frac_bits={self.fixed.frac_bits}); "
                 "lower max_depth or frac_bits, or raise payload_bits")
 
@@ -193,13 +219,14 @@ def _sample_tables(config: KernelConfig, r: Region) -> tuple[np.ndarray, np.ndar
     (one row of ``tofnet.kernels.lens.sample_table`` per sample: where ``A t`` is evaluated, the
     pixel or its patch centre, seen through the lens)."""
     (_, w) = r.shape
-    table = sample_table(config.per_pixel, config.patch_size, tuple(config.sensor_size), tuple(config.intrinsics),
-                         config.lens)
+    depth = config.neurons
+    table = sample_table(depth.per_pixel, depth.patch_size, tuple(config.sensor_size), tuple(depth.intrinsics),
+                         depth.lens)
     ys, xs = np.arange(r.y0, r.y1), np.arange(r.x0, r.x1)
-    if config.per_pixel:
+    if depth.per_pixel:
         rows, cols = (ys - r.y0) * w, xs - r.x0
     else:  # patches tile the sensor from (0, 0); the region overlaps a rectangle of them
-        py, px = ys // config.patch_size, xs // config.patch_size
+        py, px = ys // depth.patch_size, xs // depth.patch_size
         rows, cols = (py - py[0]) * (px[-1] - px[0] + 1), px - px[0]
         # one pixel of each patch, in sample order: the first of the region inside it
         ys = ys[np.r_[0, np.flatnonzero(np.diff(py)) + 1]]

@@ -42,8 +42,8 @@ class TimeOfTravelKernel:
         r, (width, height) = self.region, config.sensor_size
         if not (0 <= r.x0 < r.x1 <= width and 0 <= r.y0 < r.y1 <= height):
             raise BackendError(f"region {r} is not a non-empty part of the {width}x{height} sensor")
-        (h, w), d = r.shape, config.distance
-        stride = tt.WORDS_PER_POLARITY if config.refractory_per_polarity else tt.WORDS
+        (h, w), d, depth, flt = r.shape, config.units.distance, config.neurons, config.input_filter
+        stride = tt.WORDS_PER_POLARITY if flt.per_polarity else tt.WORDS
         rows, cols, points = _sample_tables(config, r)
         n_samples, rec_size = len(points), (h + 4 * d) * (w + 4 * d) * stride
         sizes = {tt.AT_CURSOR: tt.N_CURSOR, tt.AT_COUNTS: tt.N_COUNTS, tt.AT_ROWS: h, tt.AT_COLS: w,
@@ -63,12 +63,12 @@ class TimeOfTravelKernel:
         fmt = config.fixed
         if fmt is not None:
             ip[[tt.FIXED, tt.FRAC_BITS, tt.PAYLOAD_BITS, tt.MIN_RAW, tt.MAX_RAW]] = (
-                1, fmt.frac_bits, fmt.payload_bits, fmt.quantize(config.min_depth), fmt.quantize(config.max_depth))
+                1, fmt.frac_bits, fmt.payload_bits, fmt.quantize(depth.min_depth), fmt.quantize(depth.max_depth))
         ip[[tt.T0, tt.DT, tt.REFRACTORY_US, tt.PER_POLARITY, tt.WIDTH, tt.HEIGHT, tt.STRIDE, tt.ROW]] = (
-            t0_us, config.timestep_us, config.refractory_us, config.refractory_per_polarity, width, height,
+            t0_us, config.timestep_us, flt.refractory_us, flt.per_polarity, width, height,
             stride, w + 4 * d)
-        self._floats = np.concatenate([[*config.intrinsics, config.seconds_per_count, config.min_depth,
-                                        config.max_depth], points.ravel(), np.zeros(2 * n_samples)])
+        self._floats = np.concatenate([[*depth.intrinsics, config.seconds_per_count, depth.min_depth,
+                                        depth.max_depth], points.ravel(), np.zeros(2 * n_samples)])
         (self._ip, self._cursor, self._counts, self._rows, self._cols, cache_j, _, self._pend, self._rec,
          *_) = tt.views(self._ints, self._floats)
         self._rows[:], self._cols[:] = rows, cols
@@ -87,9 +87,9 @@ class TimeOfTravelKernel:
         self._held_velocity = np.zeros(4)
         self._held_omega = np.zeros(3)  # rad/s: no rotation before the first angular velocity update
         # eq. 7: (min_share, min_share_raw, fx, fy, cx, cy of B ω); empty for eq. 8
-        self._rotation = np.zeros(0) if config.min_share is None else np.array(
-            [config.min_share, float(fmt.quantize(config.min_share) if fmt is not None else 0),
-             *(config.rotation_intrinsics or config.intrinsics)])
+        self._rotation = np.zeros(0) if depth.min_share is None else np.array(
+            [depth.min_share, float(fmt.quantize(depth.min_share) if fmt is not None else 0),
+             *(depth.rotation_intrinsics or depth.intrinsics)])
         self._scratch = np.empty((0, ORDER_WORDS), np.uint32)  # the canonical sort's (kernels/order.py)
         self._row_start = np.zeros(config.sensor_size[1] + 1, np.int64)
 
@@ -340,7 +340,7 @@ class TimeOfTravelKernel:
         v_t = np.empty((len(velocity), 3))
         if len(velocity):
             v_t[:, 0], v_t[:, 1], v_t[:, 2] = velocity["tx"], velocity["ty"], velocity["tz"]
-        if (rotation is not None) != (self.config.min_share is not None):
+        if (rotation is not None) != (self.config.neurons.min_share is not None):
             raise BackendError("angular velocity updates need a kernel configured with min_share (eq. 7), "
                                "and such a kernel needs them" if rotation is not None else
                                "this kernel computes eq. 7 (min_share is set): pass the angular velocity updates")
@@ -366,7 +366,7 @@ class TimeOfTravelKernel:
 
         For tests and debugging; facilitations of a step still buffered are not included.
         """
-        d = self.config.distance
+        d = self.config.units.distance
         h, w = self.region.shape
         stamps = self._stamp.reshape(h + 4 * d, w + 4 * d, -1)[2 * d:2 * d + h, 2 * d:2 * d + w, :4]
         stamp = stamps.astype(np.int64)

@@ -18,6 +18,7 @@ from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE
 from tofnet.kernels import time_surface as ts
 from tofnet.kernels.time_surface_fit import N_L
+from tofnet.kernels.kernel_config import microseconds
 from tofnet.kernels.lens import SAMPLE_COLUMNS, Lens, sample_table
 
 #: Per estimate, aligned with the depth records: event time µs, points kept by the fit,
@@ -68,7 +69,7 @@ class TimeSurfaceConfig:
     min_depth: float = 0.05
     max_depth: float = 20.0
     min_denominator: float = 0.1
-    timestep: float = 1e-3
+    timestep_us: int = 1000
     latency_steps: int = 1
     update_every: int = 1
     per_pixel: bool = True
@@ -91,8 +92,8 @@ class TimeSurfaceConfig:
                      "max_hold", "hold_fit_rms_px", "behind_depth", "window_px"):
             if not float(getattr(self, name)) >= 0:
                 problems.append(f"{name}: expected a number >= 0, got {getattr(self, name)!r}")
-        if not self.timestep > 0:
-            problems.append(f"timestep: expected seconds > 0, got {self.timestep!r}")
+        if not int(self.timestep_us) >= 1:
+            problems.append(f"timestep_us: expected whole µs >= 1, got {self.timestep_us!r}")
         if not self.max_depth > self.min_depth:
             problems.append(f"max_depth ({self.max_depth:g} m) must exceed min_depth ({self.min_depth:g} m)")
         for name in ("behind_depth", "window_px"):
@@ -105,14 +106,6 @@ class TimeSurfaceConfig:
 
     def replace(self, **changes) -> "TimeSurfaceConfig":
         return TimeSurfaceConfig(**{**asdict(self), **changes})
-
-    @property
-    def timestep_us(self) -> int:
-        return int(round(self.timestep * 1e6))
-
-
-def _us(seconds: float) -> int:
-    return int(round(seconds * 1e6))
 
 
 class TimeSurfaceEstimator:
@@ -131,7 +124,8 @@ class TimeSurfaceEstimator:
                   ts.I_ITERATIONS, ts.I_REFRACTORY, ts.I_WINDOW, ts.I_CONSISTENCY_WINDOW, ts.I_MAX_HOLD, ts.I_MODEL,
                   ts.I_PER_PIXEL, ts.I_PINHOLE]] = (
             width, height, c.radius, c.timestep_us, c.latency_steps, c.update_every, c.min_points, c.iterations,
-            _us(c.refractory), _us(c.window), _us(c.consistency_window), _us(c.max_hold), ts.MODELS.index(c.model),
+            microseconds(c.refractory), microseconds(c.window), microseconds(c.consistency_window),
+            microseconds(c.max_hold), ts.MODELS.index(c.model),
             c.per_pixel, c.per_pixel and c.lens is None)
         self._fp = np.zeros(ts.N_FP, np.float64)
         self._fp[[ts.F_FX, ts.F_FY, ts.F_CX, ts.F_CY, ts.F_OUTLIER, ts.F_MAX_RMS, ts.F_MIN_SPREAD, ts.F_MIN_DEPTH,

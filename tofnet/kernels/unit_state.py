@@ -15,7 +15,7 @@ from tofnet.kernels.region import TimeOfTravelKernel
 
 def _stamps(kernel: TimeOfTravelKernel) -> np.ndarray:
     """The region's unit stamps, ``[H, W, 4]`` (a view into the kernel's records)."""
-    d = kernel.config.distance
+    d = kernel.config.units.distance
     h, w = kernel.region.shape
     return kernel._stamp.reshape(h + 4 * d, w + 4 * d, -1)[2 * d:2 * d + h, 2 * d:2 * d + w, :4]
 

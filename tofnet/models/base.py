@@ -18,6 +18,7 @@ import numpy as np
 
 from tofnet.core.process import Process
 from tofnet.errors import BackendError
+from tofnet.kernels.kernel_config import seconds_of
 from tofnet.kernels.region import Region
 
 FAMILIES = ("reference", "float", "fixed")
@@ -67,8 +68,8 @@ class ModelContext:
 
     @property
     def timestep_s(self) -> float:
-        """The timestep in seconds, ``timestep_us / 1e6`` (every model computes it this way)."""
-        return self.timestep_us / 1e6
+        """The timestep in seconds (``kernels.kernel_config.seconds_of``, as every model and the fused path)."""
+        return seconds_of(self.timestep_us)
 
 
 class Model:

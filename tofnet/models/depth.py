@@ -9,6 +9,7 @@ from tofnet.core.counters import names_of
 from tofnet.core.ports import Payload
 from tofnet.kernels.depth import (EMITTED, ROTATION_DOMINATED, classify, classify_rotation, float_depth,
                                   float_depth_rotation, signed_axis_count, translational_share)
+from tofnet.kernels.kernel_config import DepthSettings
 from tofnet.kernels.region import KernelConfig, TimeOfTravelKernel
 from tofnet.kernels.time_of_travel import N_REASONS
 from tofnet.models.base import Model, ModelContext, StepModel, records
@@ -41,6 +42,17 @@ def _depth_neurons_rotation(counts, at_x, at_y, bw_x, bw_y, seconds_per_count, m
         z = float_depth_rotation(sx, sy, at_x[i], at_y[i], bw_x[i], bw_y[i], seconds_per_count)
         out_z[i] = z
         out_reason[i] = classify_rotation(sx != 0 or sy != 0, share, z, min_share, min_depth, max_depth)
+
+
+def depth_settings(process: DepthProcess, field, update_every: int = 1, rotation=None) -> DepthSettings:
+    """What the depth neurons take: the process's depth range (m), the sampling of the ``A t`` feeding
+    them (``field``, a ``VelocityField``, one update every ``update_every`` steps) and, with a
+    ``rotation`` field feeding ``b_w`` (eq. 7), ``min_share`` and where ``B ω`` is evaluated (the
+    depth model and the fused chain use this)."""
+    return DepthSettings(min_depth=process.min_depth, max_depth=process.max_depth, per_pixel=field.per_pixel,
+                         patch_size=field.patch_size, intrinsics=field.intrinsics, lens=field.lens,
+                         update_every=update_every, min_share=None if rotation is None else process.min_share,
+                         rotation_intrinsics=None if rotation is None else rotation.intrinsics)
 
 
 def rotating(ctx: ModelContext) -> bool:
@@ -117,17 +129,12 @@ class DepthEventModel(Model):
         field = ctx.input_meta(process, "a_t")
         counts = ctx.input_meta(process, "counts")
         self.rotating = rotating(ctx)
-        # the depth neurons alone: no units (counter_bits is not read) and velocity rows as they come
-        config = KernelConfig(sensor_size=tuple(ctx.sensor_size), timestep=ctx.timestep_s, distance=counts.distance,
-                              counter_bits=1, min_depth=process.min_depth, max_depth=process.max_depth,
-                              update_every=1, per_pixel=field.per_pixel, patch_size=field.patch_size,
-                              intrinsics=field.intrinsics, fixed=ctx.fixed_format,
-                              min_share=process.min_share if self.rotating else None,
-                              rotation_intrinsics=ctx.input_meta(process, "b_w").intrinsics if self.rotating else None,
-                              lens=field.lens)
+        self.rotation = ctx.input_meta(process, "b_w") if self.rotating else None
+        # the depth neurons fed counter spikes (the units are the sender's) and velocity rows as they come
+        config = KernelConfig(sensor_size=tuple(ctx.sensor_size), timestep_us=ctx.timestep_us, units=counts.units,
+                              depth=depth_settings(process, field, rotation=self.rotation), fixed=ctx.fixed_format)
         self.kernel = TimeOfTravelKernel(config, ctx.region, ctx.t0_us)
         self.field = field
-        self.rotation = ctx.input_meta(process, "b_w") if self.rotating else None
 
     def get_var(self, name: str, step: int) -> np.ndarray:
         if name == "a_t":  # the velocity update the neurons hold, as A t at every pixel

@@ -7,7 +7,7 @@ import numpy as np
 from tofnet.core.counters import names_of
 from tofnet.core.ports import Payload
 from tofnet.errors import BackendError
-from tofnet.kernels.kernel_config import microseconds
+from tofnet.kernels.kernel_config import InputFilterSettings, microseconds
 from tofnet.kernels.input_filter import ACCEPTED, NEVER, REFRACTORY, InputFilter, first_out_of_order
 from tofnet.models.base import Model, ModelContext, concat, records
 from tofnet.processes import InputProcess
@@ -15,6 +15,13 @@ from tofnet.processes import InputProcess
 #: Drop reasons in the filter's slot order (``tofnet.kernels.input_filter``), as the process declares them.
 DROP_REASONS = names_of(InputProcess.counters, "dropped")
 assert len(DROP_REASONS) == ACCEPTED and DROP_REASONS[REFRACTORY] == "refractory"
+
+
+def filter_settings(process: InputProcess) -> InputFilterSettings:
+    """What the input filter takes from the process, its refractory period in µs (the input model and the
+    fused chain use this)."""
+    return InputFilterSettings(refractory_us=microseconds(process.refractory),
+                               per_polarity=bool(process.refractory_per_polarity))
 
 
 def input_counts(events_in: int, accepted: int, drops) -> dict[str, int]:
@@ -47,8 +54,9 @@ class InputModel(Model):
 
     def __init__(self, process: InputProcess, ctx: ModelContext):
         super().__init__(process, ctx)
-        self.filter = InputFilter(ctx.sensor_size, ctx.t0_us, ctx.timestep_us, microseconds(process.refractory),
-                                  process.refractory_per_polarity)
+        settings = filter_settings(process)
+        self.filter = InputFilter(ctx.sensor_size, ctx.t0_us, ctx.timestep_us, refractory_us=settings.refractory_us,
+                                  per_polarity=settings.per_polarity)
         self._waiting: list[np.ndarray] = []
         self._latest_us: int | None = None
         self._dtype = Payload.POLARITY.dtype

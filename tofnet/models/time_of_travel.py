@@ -9,7 +9,7 @@ import numpy as np
 from tofnet.core.ports import Payload
 from tofnet.errors import BackendError
 from tofnet.events import DIRECTION_OFFSETS
-from tofnet.kernels.kernel_config import UnitSettings
+from tofnet.kernels.kernel_config import UnitSettings, seconds_per_count
 from tofnet.kernels.region import KernelConfig, TimeOfTravelKernel
 from tofnet.kernels.unit_state import counters, set_counters
 from tofnet.models.base import Model, ModelContext, StepModel, records
@@ -25,14 +25,21 @@ def unit_settings(process: TimeOfTravelProcess) -> UnitSettings:
 class CountsInfo:
     """What receivers of counter spikes need: ``td = count * timestep / distance`` seconds per pixel."""
 
-    distance: int
-    counter_max: int
+    units: UnitSettings
     timestep_us: int
 
     @property
+    def distance(self) -> int:
+        return self.units.distance
+
+    @property
+    def counter_max(self) -> int:
+        return self.units.counter_max
+
+    @property
     def seconds_per_count(self) -> float:
-        """``dt / distance`` (s), computed as every backend does."""
-        return (self.timestep_us / 1e6) / self.distance
+        """``dt / distance`` (s, ``seconds_per_count``: as every backend computes it)."""
+        return seconds_per_count(self.timestep_us, self.units.distance)
 
 
 class _SendsCounts:
@@ -40,8 +47,7 @@ class _SendsCounts:
 
     @classmethod
     def output_meta(cls, process: TimeOfTravelProcess, ctx: ModelContext) -> dict:
-        units = unit_settings(process)
-        return {"counts": CountsInfo(units.distance, units.counter_max, ctx.timestep_us)}
+        return {"counts": CountsInfo(units=unit_settings(process), timestep_us=ctx.timestep_us)}
 
 
 def check_one_spike_per_pixel(process, step: int, xs: np.ndarray, ys: np.ndarray, width: int) -> None:
@@ -130,7 +136,8 @@ class TimeOfTravelEventModel(_SendsCounts, Model):
 
     def __init__(self, process: TimeOfTravelProcess, ctx: ModelContext):
         super().__init__(process, ctx)
-        config = KernelConfig.units_alone(ctx.sensor_size, ctx.timestep_s, unit_settings(process))
+        config = KernelConfig(sensor_size=tuple(ctx.sensor_size), timestep_us=ctx.timestep_us,
+                              units=unit_settings(process))  # no depth neurons
         self.kernel = TimeOfTravelKernel(config, ctx.region, ctx.t0_us)
         self._no_velocity = np.zeros((0, 3))
 

@@ -36,7 +36,7 @@ def config_of(process: TimeSurfaceProcess, ctx: ModelContext) -> TimeSurfaceConf
     rotation = ctx.input_meta(process, "b_w") if ctx.inputs.get("b_w") else None
     return TimeSurfaceConfig(tuple(ctx.sensor_size), tuple(field.intrinsics),
                              **{name: getattr(process, name) for name in CONFIG_PARAMS},
-                             timestep=ctx.timestep_s, latency_steps=LATENCY_STEPS, update_every=1,
+                             timestep_us=ctx.timestep_us, latency_steps=LATENCY_STEPS, update_every=1,
                              per_pixel=field.per_pixel, patch_size=field.patch_size,
                              rotation_intrinsics=None if rotation is None else tuple(rotation.intrinsics),
                              lens=field.lens)

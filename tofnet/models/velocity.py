@@ -8,6 +8,7 @@ import numpy as np
 
 from tofnet.models.binding import UpdateRows, camera_of, velocity_source_of, velocity_table
 from tofnet.core.ports import Payload
+from tofnet.io.recording import VelocitySource
 from tofnet.kernels.lens import Lens, lens_of, sample_table
 from tofnet.kernels.velocity import velocity_term
 from tofnet.models.base import Model, ModelContext, records
@@ -44,13 +45,25 @@ class VelocityField:
         return s[..., 2] * at_x + s[..., 3] * at_y, s[..., 4] * at_x + s[..., 5] * at_y
 
 
+def velocity_field(process: VelocityProcess, sensor_size: tuple[int, int], recording) -> VelocityField:
+    """How ``process``'s updates become ``A t`` on a ``sensor_size`` px sensor, with the camera ``recording``
+    (its metadata) describes (the models and the fused chain use this)."""
+    camera = camera_of(process.intrinsics, process.distortion_model, process.distortion, recording, process.name)
+    return VelocityField(process.per == "pixel", int(process.patch_size), (camera.fx, camera.fy, camera.cx, camera.cy),
+                         tuple(sensor_size), lens_of(camera))
+
+
+def velocity_source(process: VelocityProcess, recording) -> VelocitySource:
+    """The camera velocity ``process`` reads (``recording``: its metadata, for ``groundtruth``)."""
+    return velocity_source_of(process.source, process.velocity, process.samples, recording, process.name)
+
+
 class VelocityModel(Model):
     """Sends update ``j`` in step ``j * update_every``: the camera velocity at the start of that step."""
 
     def __init__(self, process: VelocityProcess, ctx: ModelContext):
         super().__init__(process, ctx)
-        self.source = velocity_source_of(process.source, process.velocity, process.samples, ctx.recording,
-                                         process.name)
+        self.source = velocity_source(process, ctx.recording)
         self.update_every = int(process.update_every)
         self.updates = UpdateRows(lambda first, count: velocity_table(
             self.source, ctx.t0_us, ctx.timestep_us, self.update_every, count, first), LOOKAHEAD)
@@ -59,11 +72,7 @@ class VelocityModel(Model):
 
     @classmethod
     def output_meta(cls, process: VelocityProcess, ctx: ModelContext) -> dict:
-        camera = camera_of(process.intrinsics, process.distortion_model, process.distortion, ctx.recording,
-                           process.name)
-        return {"a_t": VelocityField(process.per == "pixel", int(process.patch_size),
-                                     (camera.fx, camera.fy, camera.cx, camera.cy), tuple(ctx.sensor_size),
-                                     lens_of(camera))}
+        return {"a_t": velocity_field(process, ctx.sensor_size, ctx.recording)}
 
     def run(self, first: int, end: int, inputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         j0, j1 = updates_between(first, end, self.update_every)
