@@ -83,7 +83,8 @@ def test_multiproc_chunk_steps_is_bounded():
 def test_a_plans_camera_key_gets_the_one_camera_check(events_file, tmp_path):
     (tmp_path / "calib.txt").write_text("200 200 12 8\n")
     plan = tmp_path / "plan.yaml"
-    for text, where in (("recordings:\n  - {path: ev.npy, calib: calib.txt, camera: cam1}\n", "2: recordings[0].camera"),
+    for text, where in (("recordings:\n  - {path: ev.npy, calib: calib.txt, camera: cam1}\n",
+                         "2: recordings[0].camera"),
                         ("recordings: [ev.npy]\ncalib: calib.txt\ncamera: cam1\n", "3: camera")):
         plan.write_text(text)
         with pytest.raises(PlanError) as err:
