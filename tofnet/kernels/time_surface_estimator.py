@@ -36,10 +36,10 @@ MAX_VELOCITY_ROWS = 1 << 16
 class TimeSurfaceConfig:
     """Parameters of the estimator (plain data, picklable).
 
-    Times in seconds, lengths in pixels (px), depths in metres; "the time a surface at depth
-    D takes per pixel" is ``D / |A t|`` seconds at the event's pixel. What each field does,
-    its unit, default and what it was chosen on: docs/time_surface.md, section 3 (the rules
-    it enters: section 1). ``sensor_size`` (width, height) px; ``intrinsics`` and
+    Times in seconds (the clock, ``timestep_us``, in whole µs), lengths in pixels (px), depths
+    in metres; "the time a surface at depth D takes per pixel" is ``D / |A t|`` seconds at the
+    event's pixel. What each field does, its unit, default and what it was chosen on:
+    docs/time_surface.md, section 3 (the rules it enters: section 1). ``sensor_size`` (width, height) px; ``intrinsics`` and
     ``rotation_intrinsics`` ``(fx, fy, cx, cy)`` px.
     """
 
