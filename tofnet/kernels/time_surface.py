@@ -38,8 +38,9 @@ REJECT_SLOTS = tuple(range(NO_MOTION, EMITTED))  # a first event whose estimate 
  I_REFRACTORY, I_WINDOW, I_CONSISTENCY_WINDOW, I_MAX_HOLD, I_RECORD_REJECTED, I_MODEL, I_PER_PIXEL, I_PINHOLE,
  N_IP) = range(18)
 (F_FX, F_FY, F_CX, F_CY, F_OUTLIER, F_MAX_RMS, F_MIN_SPREAD, F_MIN_DEPTH, F_MAX_DEPTH, F_MIN_DENOMINATOR,
- F_WINDOW_DEPTH, F_REFRACTORY_DEPTH, F_CONSISTENCY, F_HOLD_PX, F_AHEAD_PX, F_TURN, F_TRIM_PX,
- F_RFX, F_RFY, F_RCX, F_RCY, F_HOLD_RMS, F_BEHIND_DEPTH, F_WINDOW_PX, N_FP) = range(25)  # F_R*: B ω's intrinsics
+ F_WINDOW_DEPTH, F_REFRACTORY_REACH, F_CONSISTENCY, F_HOLD_PX, F_AHEAD_PX, F_TURN, F_TRIM_PX,
+ F_RFX, F_RFY, F_RCX, F_RCY, F_HOLD_RMS, F_BEHIND_REACH, F_WINDOW_PX, N_FP) = range(25)  # F_R*: B ω's intrinsics
+# F_*_REACH: a depth (m) times 1e6 µs/s; over |A t| (px m/s) it is the time (µs) per pixel of a surface that deep.
 # Motion state: the velocity the current epoch started with, its start (µs), the last update seen.
 M_VX, M_VY, M_VZ, M_SINCE, M_UPDATE, N_MOTION = range(6)
 # Fit models (``I_MODEL``): a plane, or lines along the motion with a shared slope.
@@ -158,9 +159,9 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
     fx, fy, cx, cy = fp[F_FX], fp[F_FY], fp[F_CX], fp[F_CY]
     outlier_px, max_rms, min_spread = fp[F_OUTLIER], fp[F_MAX_RMS], fp[F_MIN_SPREAD]
     min_depth, max_depth, min_denominator = fp[F_MIN_DEPTH], fp[F_MAX_DEPTH], fp[F_MIN_DENOMINATOR]
-    window_depth, refractory_depth, consistency = fp[F_WINDOW_DEPTH], fp[F_REFRACTORY_DEPTH], fp[F_CONSISTENCY]
+    window_depth, refractory_reach, consistency = fp[F_WINDOW_DEPTH], fp[F_REFRACTORY_REACH], fp[F_CONSISTENCY]
     hold_px, ahead_px, turn, trim_px = fp[F_HOLD_PX], fp[F_AHEAD_PX], fp[F_TURN], fp[F_TRIM_PX]
-    hold_rms, behind_depth, window_px = fp[F_HOLD_RMS], fp[F_BEHIND_DEPTH], fp[F_WINDOW_PX]
+    hold_rms, behind_reach, window_px = fp[F_HOLD_RMS], fp[F_BEHIND_REACH], fp[F_WINDOW_PX]
     rotation = velocity.shape[1] >= 6
     # a fit this far off its points is rejected (bad_fit) and sets no hold: unless it is recorded, the fit may stop
     give_up_rms = math.inf if record_rejected else max(max_rms, hold_rms) if hold_px > 0.0 else max_rms
@@ -218,10 +219,10 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
                                            cy)
             # age < refractory_depth / |A t| (µs, whole) without a root or a division, which would stand
             # between the hold's load and this unpredictable branch: age + 1 <= D / |A t| squared
-            speed2, held_reach = at_x * at_x + at_y * at_y, refractory_depth * 1e6
+            speed2 = at_x * at_x + at_y * at_y
             after = float(age + 1)
-            burst = age < refractory_us or (refractory_depth > 0.0 and speed2 > 0.0 and (
-                after <= 0.0 or after * after * speed2 <= held_reach * held_reach))
+            burst = age < refractory_us or (refractory_reach > 0.0 and speed2 > 0.0 and (
+                after <= 0.0 or after * after * speed2 <= refractory_reach * refractory_reach))
         else:
             burst = age < held
         if burst:
@@ -242,15 +243,14 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
         # crossing time per pixel ago; in noise they fired at unrelated times. Their ages also
         # give the edge's own time per pixel, which bounds the window (``window_px``).
         supported = True
-        if behind_depth > 0.0 or window_px > 0.0:
+        if behind_reach > 0.0 or window_px > 0.0:
             # round(f) and round(2 f) per axis from A t's squares: no root or division on the way to the
             # unpredictable branch on ``supported``
             du1, du2 = _behind(at_x, speed2)
             dv1, dv2 = _behind(at_y, speed2)
             age1 = t - flat_surface[np.uint64(at_cell - dv1 * row - du1)]
             age2 = t - flat_surface[np.uint64(at_cell - dv2 * row - du2)]
-            if behind_depth > 0.0:  # age <= (behind_depth / |A t|) * d, with d = (du, dv)·A t / |A t| px behind
-                behind_reach = behind_depth * 1e6
+            if behind_reach > 0.0:  # age <= (behind_depth / |A t|) * d, with d = (du, dv)·A t / |A t| px behind
                 supported = (float(age1) * speed2 <= behind_reach * (du1 * at_x + dv1 * at_y)
                              and float(age2) * speed2 <= behind_reach * (du2 * at_x + dv2 * at_y))
         if not supported and not record_rejected:  # nothing to fit, nothing to record

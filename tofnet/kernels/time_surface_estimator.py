@@ -108,6 +108,12 @@ class TimeSurfaceConfig:
         return TimeSurfaceConfig(**{**asdict(self), **changes})
 
 
+def reach(depth_m: float) -> float:
+    """A depth (m) as the kernel takes it (``time_surface.F_*_REACH``): times 1e6 µs/s, so that over
+    ``|A t|`` (px m/s) it is the time in µs a surface that deep takes per pixel."""
+    return depth_m * 1e6
+
+
 class TimeSurfaceEstimator:
     """One sensor's time-surface state; ``feed`` packets of ``EVENT_DTYPE`` events in time order.
 
@@ -129,13 +135,13 @@ class TimeSurfaceEstimator:
             c.per_pixel, c.per_pixel and c.lens is None)
         self._fp = np.zeros(ts.N_FP, np.float64)
         self._fp[[ts.F_FX, ts.F_FY, ts.F_CX, ts.F_CY, ts.F_OUTLIER, ts.F_MAX_RMS, ts.F_MIN_SPREAD, ts.F_MIN_DEPTH,
-                  ts.F_MAX_DEPTH, ts.F_MIN_DENOMINATOR, ts.F_WINDOW_DEPTH, ts.F_REFRACTORY_DEPTH, ts.F_CONSISTENCY,
+                  ts.F_MAX_DEPTH, ts.F_MIN_DENOMINATOR, ts.F_WINDOW_DEPTH, ts.F_REFRACTORY_REACH, ts.F_CONSISTENCY,
                   ts.F_HOLD_PX, ts.F_AHEAD_PX, ts.F_TURN, ts.F_TRIM_PX, ts.F_RFX, ts.F_RFY, ts.F_RCX, ts.F_RCY,
-                  ts.F_HOLD_RMS, ts.F_BEHIND_DEPTH, ts.F_WINDOW_PX]] = (
+                  ts.F_HOLD_RMS, ts.F_BEHIND_REACH, ts.F_WINDOW_PX]] = (
             *c.intrinsics, c.outlier_px, c.max_rms_px, c.min_spread, c.min_depth, c.max_depth, c.min_denominator,
-            c.window_depth, c.refractory_depth, c.consistency, c.hold_px, c.ahead_px, c.turn, c.trim_px,
+            c.window_depth, reach(c.refractory_depth), c.consistency, c.hold_px, c.ahead_px, c.turn, c.trim_px,
             *(c.intrinsics if c.rotation_intrinsics is None else c.rotation_intrinsics), c.hold_fit_rms_px,
-            c.behind_depth, c.window_px)
+            reach(c.behind_depth), c.window_px)
         r, pixels = int(c.radius), width * height
         self._surface = np.full((2, (height + 2 * r) * (width + 2 * r)), ts.NEVER, np.int64)
         self._hold = np.zeros((pixels, 2), np.int32)
