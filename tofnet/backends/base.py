@@ -29,7 +29,8 @@ class RunResult:
     what each process counted (input: ``events_in``, ``accepted`` and a count per drop
     reason; time of travel: ``spikes``; depth: each reject reason and ``emitted``).
     ``latency[output]`` is the steps from an input event to that output (one per connection
-    on the longest path). For the paper's network the properties below read as before:
+    on the longest path, plus what each process declares it adds before the output port on
+    the way: ``Process.port_latency_steps``). For the paper's network the properties below read as before:
     ``depth``, ``events_in == accepted + sum(dropped.values())``, ``rejected``, ``tot``.
     """
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tofnet.backends.base import RunResult
-from tofnet.backends.graph import canonical
+from tofnet.backends.graph import canonical, latencies
 from tofnet.backends.runtime import clock_of
 from tofnet.backends.stream import check_packet
 from tofnet.core.counters import kinds_of
@@ -27,7 +27,7 @@ from tofnet.kernels.compilation import Stopwatch
 from tofnet.kernels.fixed_point import FixedPointFormat
 from tofnet.kernels.kernel_config import InputFilterSettings, UnitSettings
 from tofnet.kernels.region import KernelConfig, KernelOutput, TimeOfTravelKernel, copy_records
-from tofnet.models.base import concat
+from tofnet.models.base import Model, concat
 from tofnet.models.binding import UpdateRows, velocity_table
 from tofnet.models.depth import OUTCOMES, depth_settings
 from tofnet.models.input import filter_settings, input_counts
@@ -53,11 +53,13 @@ class PipelineParams:
     depth: DepthProcess
     velocity: VelocityProcess
     names: tuple[str, str, str, str]  # input, time-of-travel, depth, velocity
+    #: Per output port: steps from an input event to it (``graph.latencies``, from the declarations).
+    latency: dict[str, int]
 
     @property
     def latency_steps(self) -> int:
-        """Steps from an input event to its depth: one per connection (input->ToT->depth)."""
-        return 2
+        """Steps from an input event to its depth (2: one per connection, input -> ToT -> depth)."""
+        return self.latency[f"{self.names[2]}.depth"]
 
     def kernel_config(self, recording: Recording | None, fixed: FixedPointFormat | None) -> KernelConfig:
         """The fused kernel's configuration, the camera from ``recording`` (its metadata) where the
@@ -97,7 +99,8 @@ def paper_chain(network: Network, family: str, probes=()) -> PipelineParams | No
         return None
     return PipelineParams(sensor_size=network.sensor_size, timestep_us=clock_of(network).timestep_us,
                           input_filter=filter_settings(inp), units=unit_settings(tot), depth=dep, velocity=vel,
-                          names=(inp.name, tot.name, dep.name, vel.name))
+                          names=(inp.name, tot.name, dep.name, vel.name),
+                          latency=latencies(network, {inp.name}, {p.name: Model.latency_steps(p) for p in procs}))
 
 
 def pipeline_of(network: Network) -> PipelineParams:
@@ -239,10 +242,6 @@ class FusedStream:
     def _empty(self, name: str) -> np.ndarray:
         return np.empty(0, DEPTH_DTYPE if name == self.depth_name else TOT_DTYPE)
 
-    def _latency(self, name: str) -> int:
-        """Steps from an event to the records it makes on output ``name``."""
-        return 2 if name == self.depth_name else 1
-
     def abort(self) -> None:
         """Give up the stream (after its caller failed)."""
         self._closed = True
@@ -280,7 +279,7 @@ class FusedStream:
         return RunResult(
             self.backend, outputs, counts, last_step + 1 + self.pipeline.latency_steps,
             t0, self.timestep_us,
-            {name: self._latency(name) for name in outputs}, dict(self.payloads),
+            {name: self.pipeline.latency[name] for name in outputs}, dict(self.payloads),
             {name: kinds_of(kind.counters) for name, kind in zip(names, (InputProcess, TimeOfTravelProcess,
                                                                            DepthProcess, VelocityProcess))},
             extra={**({"frac_bits": fmt.frac_bits, "payload_bits": fmt.payload_bits} if fmt else {}),

@@ -117,16 +117,20 @@ def sinks_of(network: Network) -> list[str]:
             if isinstance(port, OutPort) and not port.targets]
 
 
-def latencies(network: Network, readers: set[str], extra: dict[str, int] | None = None) -> dict[str, int]:
-    """Per process: steps from an event to its output, on the longest path from an event-reading
-    process: one per connection, plus the steps a model adds itself (``extra``; 0 if none)."""
-    extra = extra or {}
-    out = {}
+def latencies(network: Network, readers: set[str], added: dict[str, dict[str, int]] | None = None) -> dict[str, int]:
+    """Per output port (``process.port``): steps from an event to what it sends, on the longest path
+    from an event-reading process: one per connection, plus the steps the process adds before
+    that port (``added[process][port]``, ``Model.latency_steps``; 0 if not given)."""
+    added = added or {}
+    out: dict[str, int] = {}
     for name in nx.topological_sort(network.graph):
-        preds = [out[p] + 1 for p in network.graph.predecessors(name) if out[p] >= 0]
-        out[name] = max(preds, default=0 if name in readers else -1)
-        if out[name] >= 0:
-            out[name] += extra.get(name, 0)
+        process = network.process(name)
+        ports = [p for p in process.ports.values() if isinstance(p, OutPort)]
+        arrivals = [out[source.qualified_name] + 1 for port in process.ports.values() if isinstance(port, InPort)
+                    for source in port.sources if out[source.qualified_name] >= 0]
+        ready = max(arrivals, default=0 if name in readers else -1)  # -1: nothing from the events reaches it
+        for port in ports:
+            out[port.qualified_name] = ready + added.get(name, {}).get(port.name, 0) if ready >= 0 else -1
     return {name: max(d, 0) for name, d in out.items()}
 
 
@@ -260,7 +264,7 @@ class GraphExecutor:
         return {p.name: by_name[p.name] for p in self.network.processes}
 
     def output_latency(self, name: str) -> int:
-        return self.latency[name.split(".")[0]]
+        return self.latency[name]
 
     def payload_of(self, name: str) -> str:
         proc_name, _, port = name.partition(".")

@@ -18,7 +18,8 @@ from tofnet.io.files import atomic_path
 INPUT_COLUMNS = ("task", "task_id", "recording", "recording_name", "scenario", "seed", "duration_s", "network",
                  "backend")
 #: Count columns; ``dropped_<reason>`` and ``rejected_<reason>`` follow ``dropped`` and ``depth_out`` with
-#: the reasons the networks' processes declare (``Process.counters``), as the rows name them.
+#: the reasons the networks' processes declare (``Process.counters``), as the rows name them, and
+#: ``latency_<process.port>`` (steps, per output) follow ``latency_steps``.
 COUNT_COLUMNS = ("events_in", "accepted", "dropped", "tot_spikes", "depth_out", "steps", "latency_steps")
 METRIC_COLUMNS = ("matched", "coverage_pct", "mean_abs_m", "median_abs_m", "mean_rel_pct", "median_rel_pct",
                   "bias_rel_pct", *CUTOFF_COLUMNS, *BREAKDOWN_COLUMNS)
@@ -36,7 +37,8 @@ def columns(parameters: Iterable[str], rows: Iterable[dict] = ()) -> list[str]:
     keys = dict.fromkeys(key for row in rows for key in row)
     dropped = [k for k in keys if k.startswith("dropped_")]
     rejected = [k for k in keys if k.startswith("rejected_")]
-    counts = [*COUNT_COLUMNS[:3], *dropped, *COUNT_COLUMNS[3:5], *rejected, *COUNT_COLUMNS[5:]]
+    latency = [k for k in keys if k.startswith("latency_") and k not in COUNT_COLUMNS]
+    counts = [*COUNT_COLUMNS[:3], *dropped, *COUNT_COLUMNS[3:5], *rejected, *COUNT_COLUMNS[5:], *latency]
     return [*INPUT_COLUMNS, *parameters, "status", "error", *counts, *METRIC_COLUMNS, *TIMING_COLUMNS,
             *OUTPUT_COLUMNS]
 

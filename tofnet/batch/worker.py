@@ -129,6 +129,7 @@ def _run(task: Task, recording_path: str, folder: Path) -> dict[str, Any]:
         "tot_spikes": summary["tot_spikes"], "depth_out": summary.get("depth_out"),
         **{f"rejected_{r}": n for r, n in summary.get("rejected", {}).items()},
         "steps": summary["steps"], "latency_steps": summary["latency_steps"],
+        **{f"latency_{output}": steps for output, steps in summary["latency"].items()},  # per output port
         "wall_time_s": summary["wall_time_s"],
         "events_per_s": summary["events_in"] / summary["wall_time_s"] if summary["wall_time_s"] > 0 else None,
     }

@@ -89,8 +89,10 @@ Payload.DEPTH = Payload("depth", doc="depth estimates: z metres, t = end of the 
 
 @dataclass(frozen=True)
 class PortSpec:
-    """Declaration of a port: name, payload, channels per pixel, and for inputs whether it
-    must be connected (``required``) and whether several outputs may feed it (``fan_in``)."""
+    """Declaration of a port: name, payload, channels per pixel; for inputs whether it
+    must be connected (``required``) and whether several outputs may feed it (``fan_in``); for
+    outputs the steps the process adds before sending on it, beyond the one step of each
+    connection (``added_latency_steps``; None: the process's ``added_latency_steps``)."""
 
     name: str
     payload: Payload
@@ -98,6 +100,7 @@ class PortSpec:
     doc: str = ""
     required: bool = True
     fan_in: bool = False
+    added_latency_steps: int | None = None
 
 
 class Port:
@@ -133,6 +136,11 @@ class OutPort(Port):
     def __init__(self, process: "Process", spec: PortSpec):
         super().__init__(process, spec)
         self.targets: list[InPort] = []
+
+    @property
+    def added_latency_steps(self) -> int:
+        """Steps the process adds before sending here (``Process.port_latency_steps``)."""
+        return type(self.process).port_latency_steps(self.spec.name)
 
     def connect(self, target: "InPort") -> None:
         """Connect this output to ``target``; spikes sent in step k arrive in step k+1."""

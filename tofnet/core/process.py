@@ -36,7 +36,8 @@ class Process:
     #: outputs); its models' ``counts()`` return these keys. Results and reports add them up from here.
     counters: ClassVar[tuple[Count, ...]] = ()
     #: Steps the process adds between what it receives (or reads) and what it sends on its output
-    #: ports, beyond the one step of each connection (results give each output's latency from it).
+    #: ports, beyond the one step of each connection: the default of every output port whose
+    #: ``PortSpec.added_latency_steps`` is None (results give each output's latency from them).
     added_latency_steps: ClassVar[int] = 0
     #: ``"core"``: runs on neuromorphic cores; ``"host"``: runs off-chip (input, velocity).
     placement: ClassVar[str] = "core"
@@ -48,6 +49,12 @@ class Process:
         clash = {s.name for s in cls.inports + cls.outports} & {p.name for p in cls.all_params()}
         if clash:
             raise TypeError(f"{cls.__name__}: {', '.join(sorted(clash))} is both a port and a parameter")
+        for inputs, specs in ((True, cls.inports), (False, cls.outports)):
+            for spec in specs:
+                steps = spec.added_latency_steps
+                if steps is not None and (inputs or isinstance(steps, bool) or not isinstance(steps, int) or steps < 0):
+                    raise TypeError(f"{cls.__name__}.{spec.name}: added_latency_steps is declared on output ports, "
+                                    f"as a whole number of steps >= 0 (or None), got {steps!r}")
         Process._registry[cls.__name__] = cls
 
     def __init__(self, name: str | None = None, **values: Any):
@@ -70,6 +77,16 @@ class Process:
             self.ports[spec.name] = InPort(self, spec)
         for spec in self.outports:
             self.ports[spec.name] = OutPort(self, spec)
+
+    @classmethod
+    def port_latency_steps(cls, port: str) -> int:
+        """Steps the process adds before sending on output ``port``: the port's ``added_latency_steps``,
+        else the process's."""
+        for spec in cls.outports:
+            if spec.name == port:
+                return cls.added_latency_steps if spec.added_latency_steps is None else spec.added_latency_steps
+        raise NetworkError(f"{cls.__name__} has no output port {port!r}; outputs: "
+                           f"{', '.join(s.name for s in cls.outports) or 'none'}")
 
     @classmethod
     def all_params(cls) -> tuple[Param, ...]:

@@ -88,11 +88,12 @@ class Model:
         self.ctx = ctx
 
     @classmethod
-    def latency_steps(cls, process: Process) -> int:
-        """Steps the model adds between what it receives (or reads) and what it sends, beyond the
-        one step of each connection: the process's ``added_latency_steps``. It stamps its outputs
-        that much later; the executor adds it to the outputs' latency and runs that much longer."""
-        return type(process).added_latency_steps
+    def latency_steps(cls, process: Process) -> dict[str, int]:
+        """Per output port: the steps the model adds between what it receives (or reads) and what it
+        sends there, beyond the one step of each connection: the declaration
+        (``Process.port_latency_steps``). It stamps that output that much later; the executor adds
+        it to the output's latency and runs that much longer."""
+        return {spec.name: type(process).port_latency_steps(spec.name) for spec in process.outports}
 
     @classmethod
     def output_meta(cls, process: Process, ctx: ModelContext) -> dict[str, Any]:
