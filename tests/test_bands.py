@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from tofnet import Session
+from tofnet.backends import bands as bands_module
 from tofnet.backends.bands import BandedKernel, resolve_workers
 from tofnet.backends.event_driven import FixedBackend, FloatBackend
 from tofnet.backends.registry import get_backend
@@ -117,7 +118,16 @@ def test_a_stream_fed_small_packets_keeps_one_band_and_returns_what_one_worker_r
     assert two.counts == one.counts and two.extra["bands"] == [[0, SENSOR[1]]]
 
 
-def test_a_stream_refuses_a_packet_out_of_order_and_stays_as_it_was():
+@pytest.fixture(params=["serial", "threads"])
+def hand_over(request, monkeypatch):
+    """Bands of a small packet run one after the other in the caller's thread (``serial``); ``threads``
+    hands them to the pool as large packets are (every packet, however small)."""
+    if request.param == "threads":
+        monkeypatch.setattr(bands_module, "SERIAL_BELOW", 0)
+    return request.param
+
+
+def test_a_stream_refuses_a_packet_out_of_order_and_stays_as_it_was(hand_over):
     network = depth_network(SENSOR, velocity=VELOCITY)
     recording = scene()
     events = recording.events
@@ -199,15 +209,28 @@ def test_every_conformance_case_is_byte_identical_on_1_2_3_and_7_workers(backend
     assert results and not failed, failed
 
 
-def test_events_outside_the_sensor_count_once():
+def test_events_outside_the_sensor_count_once(hand_over):
     network = depth_network(SENSOR, velocity=VELOCITY)
     events = np.zeros(5, EVENT_DTYPE)
     events["t"] = [0, 1, 2, 3, 4]
     events["x"] = [1, 30, 2, 500, 3]
-    events["y"] = [1, 2, 40, 3, 15]
+    events["y"] = [1, 2, 40, 3, 15]  # x 30, 500: rows in two bands' halos; y 40: below the sensor
     recording = Recording(events, intrinsics=TEST_INTRINSICS)
     result = with_bands(FixedBackend, [(0, 2), (2, 9), (9, 16)]).run(network, recording)
     assert result.dropped["out_of_bounds"] == 3 and result.accepted == 2 and result.events_in == 5
+
+
+@pytest.mark.parametrize("bands", [[(0, 8), (8, 16)], [(0, 1), (1, 2), (2, 3), (3, 9), (9, 10), (10, 16)]])
+def test_packets_handed_to_threads_equal_one_worker(hand_over, bands):
+    """Every band lists its events of the packet and runs them on the pool's threads; the estimates
+    are merged by shares of the steps, each share on a thread."""
+    network = depth_network(SENSOR, input={"refractory": "2ms"}, time_of_travel={"distance": 2}, velocity=VELOCITY)
+    recording = Recording(edge_events(SENSOR, range(SENSOR[1])), intrinsics=TEST_INTRINSICS)
+    one = FixedBackend().run(network, recording, record_tot=True)
+    for packet in (50, 4096):
+        banded = with_bands(FixedBackend, bands, packet_events=packet).run(network, recording, record_tot=True)
+        assert first_difference(banded, one) == ""
+    assert len(one.depth) > 200
 
 
 def test_tofnet_run_with_workers_writes_the_same_bytes_and_says_how_it_split(tmp_path, capsys):

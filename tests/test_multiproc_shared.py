@@ -7,6 +7,7 @@ import sys
 import textwrap
 import time
 
+import numpy as np
 import pytest
 
 from tofnet.backends.multiproc import MultiprocBackend
@@ -14,6 +15,7 @@ from tofnet.backends.registry import get_backend
 from tofnet.backends.shared_memory import SharedBuffer, attach
 from tofnet.compiler import compile_network
 from tofnet.conformance.workers import first_difference
+from tofnet.errors import BackendError
 from tofnet.io.recording import Recording
 from tofnet.networks import denoised_network, depth_network
 from tofnet.testing import TEST_INTRINSICS, merge_events, moving_pattern, noise_events
@@ -79,6 +81,24 @@ def test_bands_on_worker_processes_equal_the_fixed_backend_and_per_core_mode_too
         assert first_difference(again, fixed) == ""
     per_core = MultiprocBackend(workers=workers, per_core=True).run(compiled, RECORDING, record_tot=True)
     assert "shared_memory" not in per_core.extra and first_difference(per_core, fixed) == ""
+
+
+def test_a_packet_out_of_order_is_refused_by_every_worker_and_nothing_changes():
+    network = depth_network(SENSOR, input={"refractory": "1ms"}, velocity=VELOCITY)
+    events = RECORDING.events
+    fixed = get_backend("fixed").run(network, RECORDING)
+    stream = MultiprocBackend(workers=2).open_stream(network, recording=RECORDING)
+    try:
+        first = stream.feed_all(events[:700])
+        bad = events[700:900].copy()
+        bad["t"][120] = bad["t"][0] - 1
+        with pytest.raises(BackendError, match="not sorted by time"):
+            stream.feed_all(bad)
+        rest = stream.feed_all(events[700:])
+    finally:
+        result = stream.close()
+    got = np.concatenate([first["depth.depth"], rest["depth.depth"], result.outputs["depth.depth"]])
+    assert got.tobytes() == fixed.depth.tobytes() and result.counts == fixed.counts
 
 
 def test_other_graphs_run_per_core():

@@ -1,8 +1,9 @@
 """A multiproc worker's band: the fused kernel over its rows, fed through shared memory (worker side).
 
 The host (``tofnet.backends.shared_bands``) writes each packet's events once into a shared
-buffer; every worker selects its rows (widened by the input reach) from it, runs its
-``TimeOfTravelKernel`` and writes its estimates and time-of-travel spikes into its part of
+buffer; every worker lists the positions of its rows' events (widened by the input reach) and
+runs its ``TimeOfTravelKernel`` on them in place, as a thread's band does
+(``tofnet.backends.bands``), writing its estimates and time-of-travel spikes into its part of
 two shared output buffers; only small messages (counts, sizes) cross the pipe.
 """
 
@@ -10,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from tofnet.backends.band_merge import rows_read
 from tofnet.backends.shared_memory import attach
 from tofnet.events import DEPTH_DTYPE, EVENT_DTYPE, TOT_DTYPE
 
@@ -25,12 +27,12 @@ class BandWorker:
         config = spec["config"]
         width, _ = config.sensor_size
         self.config, self.index = config, spec["index"]
-        self.rows, self.outside = spec["rows"], spec["index"] == 0
+        self.keep = rows_read(spec["band"], spec["reach"], config.sensor_size[1], spec["index"] == 0)
         self.kernel = TimeOfTravelKernel(config, Region(0, width, *spec["band"]), 0)
         source, step, every = spec["velocity_source"], config.timestep_us, config.update_every
         self.updates = UpdateRows(lambda first, count: velocity_table(source, self.kernel.t0_us, step, every, count,
                                                                       first), spec["lookahead"])
-        self._events = np.empty(0, EVENT_DTYPE)
+        self._index = np.empty(0, np.int64)  # the positions of this band's events in a packet
         self.maps: list = []
         self.remap(spec["buffers"])
 
@@ -45,19 +47,26 @@ class BandWorker:
         self.tot = tot[4 * self.index * self.capacity:4 * (self.index + 1) * self.capacity]
 
     def run(self, n: int, t0_us: int, record_tot: bool) -> tuple[int, int]:
-        """Select this band's events of the packet's ``n``, run them; ``(estimates, spikes)`` written."""
+        """Run this band's events of the packet's ``n``; ``(estimates, spikes)`` written, ``(-1, 0)`` when
+        the packet is out of time order (refused by every band: nothing changed)."""
+        from tofnet.errors import BackendError
         from tofnet.kernels.bands import select_rows
+        from tofnet.kernels.region import UNSORTED
 
         if self.kernel.t0_us != t0_us:
             self.kernel.t0_us = t0_us
             self.updates.clear()
-        if len(self._events) <= n:
-            self._events = np.empty(max(n + 1, 2 * len(self._events)), EVENT_DTYPE)
-        width, height = self.config.sensor_size
-        m = select_rows(self.events[:n], self.rows[0], self.rows[1], width, height, self.outside, self._events)
-        if m == 0:
-            return 0, 0
-        end, n_tot = self.kernel.run_events(self._events[:m], self.updates.rows, self.depth, 0, record_tot)
+        if len(self._index) <= n:
+            self._index = np.empty(max(n + 1, 2 * len(self._index)), np.int64)
+        events = self.events[:n]
+        m = select_rows(events, self.keep, self._index)
+        try:
+            end, n_tot = self.kernel.run_events(events, self.updates.rows, self.depth, 0, record_tot, None, True,
+                                                self._index[:m])
+        except BackendError as error:
+            if str(error) == UNSORTED:
+                return -1, 0
+            raise
         if record_tot and n_tot:
             self.tot[:n_tot] = self.kernel.buffers()[2][:n_tot]
         return end, n_tot

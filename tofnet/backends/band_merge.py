@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from tofnet.compiler.bands import Band, halo_rows
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, TOT_DTYPE
 from tofnet.kernels.bands import merge_by_step
-from tofnet.kernels.input_filter import ACCEPTED, NEVER, first_out_of_order
+from tofnet.kernels.input_filter import ACCEPTED, NEVER
 from tofnet.kernels.kernel_config import KernelConfig, KernelOutput
 from tofnet.models.depth import REJECT_REASONS
 
@@ -25,6 +26,18 @@ def words(records: np.ndarray) -> tuple[np.ndarray, int]:
     size = records.dtype.itemsize
     word = np.uint32 if size % 4 == 0 else np.uint8
     return records.view(word).reshape(-1), size // np.dtype(word).itemsize
+
+
+def rows_read(band: Band, reach: int, height: int, outside: bool) -> np.ndarray:
+    """Per row ``y`` (uint8, 65536 entries: every ``y`` an event can have): 1 when band ``band`` reads
+    the row's events (its rows widened by ``reach``), and with ``outside`` (the first band: it counts
+    them) for the rows past the sensor."""
+    keep = np.zeros(1 << 16, np.uint8)
+    lo, hi = halo_rows(band, reach, height)
+    keep[lo:hi] = 1
+    if outside:
+        keep[height:] = 1
+    return keep
 
 
 def merge(source: np.ndarray, parts: np.ndarray, into: np.ndarray, offset: int) -> int:
@@ -108,12 +121,6 @@ class BandsBase:
         if len(into) < offset + n:
             raise BackendError(f"output buffer holds {len(into)} estimates, {offset + n} may be written")
         return into, offset
-
-    def _refuse_out_of_order(self, events: np.ndarray) -> None:
-        """Refuse a packet out of time order before any band changes."""
-        if first_out_of_order(events["t"], self._t_hi) >= 0:
-            raise BackendError("events are not sorted by time (input spikes: by step): each packet must be in "
-                               "time order and follow the previous one; it was refused and the state is unchanged")
 
     def _merged_tot(self, source: np.ndarray, parts: np.ndarray) -> int:
         """The bands' time-of-travel spikes (``source[lo:hi]`` per part) merged into ``buffers()[2]``."""

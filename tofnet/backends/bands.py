@@ -22,16 +22,16 @@ from typing import Callable, Sequence
 import numpy as np
 
 from tofnet.backends._workers import _Worker
-from tofnet.backends.band_merge import BandsBase, merge
+from tofnet.backends.band_merge import BandsBase, merge, rows_read
 from tofnet.backends.remote import Placement, RemoteModel
-from tofnet.compiler.bands import Band, halo_rows
+from tofnet.compiler.bands import Band
 from tofnet.compiler.partition import halo_of, receptive_offsets
 from tofnet.errors import BackendError
-from tofnet.events import DEPTH_DTYPE, EVENT_DTYPE
-from tofnet.kernels.bands import select_rows
+from tofnet.events import DEPTH_DTYPE
+from tofnet.kernels.bands import merge_cuts, select_rows
 from tofnet.kernels.input_filter import NEVER
 from tofnet.kernels.kernel_config import KernelConfig, Region
-from tofnet.kernels.region import TimeOfTravelKernel
+from tofnet.kernels.region import UNSORTED, TimeOfTravelKernel
 
 #: Packets with fewer events run their bands one after the other in the caller's thread: handing
 #: work to another thread costs more than it saves there (docs/performance.md, "Workers").
@@ -105,8 +105,8 @@ class BandedKernel(BandsBase):
         for them bands cost more than they save (docs/performance.md, "Workers")."""
         width, height = self.config.sensor_size
         self.bands = self._planned if packet >= self.one_band_below else [(0, height)]
-        self._rows = [halo_rows(band, self._reach, height) for band in self.bands]  # the events each band reads
-        self._events = [np.empty(0, EVENT_DTYPE) for _ in self.bands]  # each band's events of a packet
+        self._keep = [rows_read(band, self._reach, height, b == 0) for b, band in enumerate(self.bands)]
+        self._index = [np.empty(0, np.int64) for _ in self.bands]  # the positions of each band's events
         self._pool = BandPool(min(self._threads, len(self.bands)))
         # each band's state is built (and its pages touched) by the thread that runs it
         self.kernels = self._pool.run(lambda b: TimeOfTravelKernel(self.config, Region(0, width, *self.bands[b]),
@@ -152,32 +152,44 @@ class BandedKernel(BandsBase):
             self._build(n)
         if len(self.kernels) == 1:  # one band: the one-worker path, nothing to select or merge
             return self.kernels[0].run_events(events, velocity, into, offset, record_tot, span, canonical)
-        self._refuse_out_of_order(events)
-        width, height = self.config.sensor_size
-        if len(self._scratch) < n * len(self.kernels):  # band b writes from b * n: at most one estimate per event
-            self._scratch = np.empty(max(n * len(self.kernels), 2 * len(self._scratch)), DEPTH_DTYPE)
-        scratch = self._scratch
+        bands = len(self.kernels)
+        serial = n < SERIAL_BELOW  # a small packet: no hand-over
+        if len(self._scratch) < n * bands:  # band b writes from b * n: at most one estimate per event
+            self._scratch = np.empty(max(n * bands, 2 * len(self._scratch)), DEPTH_DTYPE)
+        if len(self._index[0]) <= n:
+            self._index = [np.empty(max(n + 1, 2 * len(self._index[0])), np.int64) for _ in range(bands)]
+        scratch, t = self._scratch, events["t"]
+        span = int(t[0]), int(t[-1])
 
         def velocity_locked(first, count):
             with self._lock:
                 return velocity(first, count)
 
         def job(b: int):
-            if len(self._events[b]) <= n:
-                self._events[b] = np.empty(max(n + 1, 2 * len(self._events[b])), EVENT_DTYPE)
-            lo, hi = self._rows[b]
-            m = select_rows(events, lo, hi, width, height, b == 0, self._events[b])
-            if m == 0:
-                return b * n, 0
-            return self.kernels[b].run_events(self._events[b][:m], velocity_locked, scratch, b * n, record_tot)
+            """Band b lists its events and runs them (every band checks the packet's time order);
+            an error is returned, so that every band is done before one propagates."""
+            try:
+                m = select_rows(events, self._keep[b], self._index[b])
+                return self.kernels[b].run_events(events, velocity_locked, scratch, b * n, record_tot, span, True,
+                                                  self._index[b][:m])
+            except BaseException as error:  # noqa: B036 - re-raised below, once all bands are done
+                return error
 
-        try:
-            ends = self._pool.run(job, len(self.kernels), serial=n < SERIAL_BELOW)  # a small packet: no hand-over
-        except BaseException:
-            self._broken = True  # some bands ran the packet, others did not
-            raise
+        ends = self._pool.run(job, bands, serial)
+        errors = [e for e in ends if isinstance(e, BaseException)]
+        if errors:
+            if len(errors) < bands or any(str(e) != UNSORTED for e in errors):
+                self._broken = True  # some bands ran the packet, others did not
+            raise errors[0]  # every band refused it: nothing changed
         self._t_hi = max(self._t_hi, int(events["t"][-1]))
-        end = merge(scratch, [(b * n, e) for b, (e, _) in enumerate(ends)], into, offset)
+        # the estimates merged in the canonical order, each thread a share of the steps
+        parts = np.array([(b * n, e) for b, (e, _) in enumerate(ends)], np.int64)
+        shares = self._pool.threads if int(np.sum(parts[:, 1] - parts[:, 0])) >= SERIAL_BELOW else 1
+        cuts = merge_cuts(scratch["step"], parts, shares)
+        before = np.concatenate([[0], np.cumsum((cuts[1:] - cuts[:-1]).sum(axis=1))])
+        self._pool.run(lambda k: merge(scratch, np.stack([cuts[k], cuts[k + 1]], 1), into, offset + int(before[k])),
+                       shares, shares < 2)
+        end = offset + int(before[-1])
         if not record_tot:
             return end, 0
         tots = [k.buffers()[2][:t] for k, (_, t) in zip(self.kernels, ends)]

@@ -16,10 +16,11 @@ import numpy as np
 
 from tofnet.backends.band_merge import BandsBase, merge
 from tofnet.backends.shared_memory import SharedBuffer
-from tofnet.compiler.bands import Band, halo_rows
+from tofnet.compiler.bands import Band
+from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, EVENT_DTYPE, TOT_DTYPE
 from tofnet.kernels.kernel_config import KernelConfig, Region
-from tofnet.kernels.region import TimeOfTravelKernel
+from tofnet.kernels.region import UNSORTED, TimeOfTravelKernel
 
 
 def band_rows(compiled, layer: str, plans) -> list[Band]:
@@ -57,9 +58,8 @@ class SharedBandKernel(BandsBase):
 
     def _open(self, addresses: dict, reach: int, velocity_source, lookahead: int) -> None:
         """Give each worker its band (``_band_worker.BandWorker``)."""
-        height = self.config.sensor_size[1]
         self._exchange({w: ("band", {"config": self.config, "index": w, "band": band, "lookahead": lookahead,
-                                     "rows": halo_rows(band, reach, height), "velocity_source": velocity_source,
+                                     "reach": reach, "velocity_source": velocity_source,
                                      "buffers": addresses}) for w, band in enumerate(self.bands)})
 
     # -- shared buffers ------------------------------------------------------------------------
@@ -109,7 +109,6 @@ class SharedBandKernel(BandsBase):
         n = len(events)
         if n == 0:
             return offset, 0
-        self._refuse_out_of_order(events)
         workers = range(len(self.bands))
         if n > self.capacity:
             self._map(max(n, 2 * self.capacity))
@@ -121,6 +120,10 @@ class SharedBandKernel(BandsBase):
         except BaseException:
             self._broken = True
             raise
+        refused = sum(replies[w][1] < 0 for w in workers)
+        if refused:  # every band checks the packet's time order: all refuse it, or something is wrong
+            self._broken = refused < len(self.bands)
+            raise BackendError(UNSORTED)
         self._t_hi = max(self._t_hi, int(events["t"][-1]))
         cap = self.capacity
         end = merge(self._depth, [(w * cap, w * cap + replies[w][1]) for w in workers], into, offset)

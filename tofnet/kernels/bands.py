@@ -1,11 +1,11 @@
 """Moving events to bands and their outputs back (numba; the bands themselves: ``tofnet.backends.bands``).
 
-``select_rows`` copies a packet's events of a band's rows (widened by the input reach) in
-their order, so each band's kernel reads only its events (each band selects its own, in its
-thread);
-``merge_by_step`` joins the bands' outputs, each sorted by step, into one array sorted by
-step and, within a step, in band order: the canonical order when each band's part is in
-it, as bands are strips of rows from the top.
+``select_rows`` lists the positions of a packet's events of a band's rows (widened by the
+input reach), so each band's kernel reads only its events (each band selects its own, in its
+thread); ``merge_by_step`` joins the bands' outputs, each sorted by step, into one array
+sorted by step and, within a step, in band order: the canonical order when each band's part
+is in it, as bands are strips of rows from the top; ``merge_cuts`` splits that merge into
+shares that threads run side by side.
 """
 
 from __future__ import annotations
@@ -26,18 +26,15 @@ def row_load(events, height, every):
 
 
 @njit(cache=True, nogil=True)
-def select_rows(events, lo, hi, width, height, outside, out):
-    """Copy the events of rows ``[lo, hi)`` (and, with ``outside``, those outside the sensor) to ``out``
-    (room for ``len(events) + 1``), in order; returns how many. Without branches: a band's events
-    are a coin toss among the packet's, which a branch predictor cannot learn."""
+def select_rows(events, keep, index):
+    """Write to ``index`` (room for ``len(events) + 1``) the positions of the events whose row ``y`` has
+    ``keep[y]`` (uint8, 65536 entries: rows past the sensor too), in order; returns how many. Without
+    branches (a band's events are a coin toss among the packet's, which a branch predictor cannot
+    learn), and positions, not records: the kernel reads the band's events in the packet itself."""
     m = 0
-    keep_outside = np.int64(outside)
     for i in range(events.shape[0]):
-        e = events[i]
-        x, y = np.int64(e.x), np.int64(e.y)
-        out[m] = e
-        inside = np.int64(y >= lo) & np.int64(y < hi) & np.int64(x < width)
-        m += inside | ((np.int64(x >= width) | np.int64(y >= height)) & keep_outside)
+        index[m] = i
+        m += keep[events[i].y]
     return m
 
 
@@ -63,3 +60,35 @@ def merge_by_step(src, steps, parts, dst, at, width):
             dst[at * width + w] = src[lo * width + w]
         at += q - lo
         cursor[best] = q
+
+
+@njit(cache=True, nogil=True)
+def merge_cuts(steps, parts, shares):
+    """Where ``shares`` threads cut the parts (rows ``lo, hi`` of ``parts``, each sorted by ``steps``) to
+    merge them side by side: row ``k`` of the result holds, per part, the first record of share ``k``'s
+    steps (row 0: the parts' starts, row ``shares``: their ends). Shares split the largest part
+    evenly, at step boundaries, and every part at the same steps."""
+    n_parts = parts.shape[0]
+    cuts = np.empty((shares + 1, n_parts), np.int64)
+    cuts[0] = parts[:, 0]
+    cuts[shares] = parts[:, 1]
+    big = 0
+    for b in range(n_parts):
+        if parts[b, 1] - parts[b, 0] > parts[big, 1] - parts[big, 0]:
+            big = b
+    size = parts[big, 1] - parts[big, 0]
+    for k in range(1, shares):
+        if size == 0:
+            cuts[k] = parts[:, 1]
+            continue
+        step = steps[parts[big, 0] + (k * size) // shares]
+        for b in range(n_parts):
+            lo, hi = parts[b, 0], parts[b, 1]
+            while lo < hi:  # the first record of a step >= ``step``
+                mid = (lo + hi) // 2
+                if steps[mid] < step:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            cuts[k, b] = max(lo, cuts[k - 1, b])
+    return cuts

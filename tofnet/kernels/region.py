@@ -27,6 +27,11 @@ def _as_array(values, kept: tuple, dtype) -> np.ndarray:
     return np.ascontiguousarray(values, dtype=dtype)
 
 
+#: The error of a packet out of time order (refused; nothing changed).
+UNSORTED = ("events are not sorted by time (input spikes: by step): each packet must be in time order and follow "
+            "the previous one; it was refused and the state is unchanged")
+
+
 class TimeOfTravelKernel:
     """Units and depth neurons of one region, fed accepted spikes or raw events packet by packet.
 
@@ -83,7 +88,7 @@ class TimeOfTravelKernel:
         # Scalars and empty arrays the per-packet path needs, looked up once.
         self._t0, self._dt, self._u = int(t0_us), config.timestep_us, config.update_every
         self._span_us = (MAX_VELOCITY_ROWS - 2) * config.update_every * config.timestep_us
-        self._no_raw, self._no_velocity = np.empty(0, np.int64), np.zeros((0, 3))
+        self._no_raw, self._no_velocity, self._no_index = np.empty(0, np.int64), np.zeros((0, 3)), np.empty(0, np.int64)
         self._held_velocity = np.zeros(4)
         self._held_omega = np.zeros(3)  # rad/s: no rotation before the first angular velocity update
         # eq. 7: (min_share, min_share_raw, fx, fy, cx, cy of B ω); empty for eq. 8
@@ -136,7 +141,7 @@ class TimeOfTravelKernel:
     def _call(self, ts, xs, ys, ps, filtering: bool, table: np.ndarray, first_update: int,
               out: np.ndarray, raw: np.ndarray, n_out: int, record_tot: bool, n_tot: int) -> tuple[int, int, int]:
         return tt.process(ts, xs, ys, ps, filtering, self._ints, self._floats, table, first_update, out, raw, n_out,
-                          record_tot, self._tot, n_tot)
+                          record_tot, self._tot, n_tot, self._no_index, -1)
 
     def _raise_for(self, status: int, table: np.ndarray, first_update: int) -> None:
         if status == tt.NO_VELOCITY:
@@ -144,8 +149,7 @@ class TimeOfTravelKernel:
             raise BackendError(f"velocity table holds updates [{first_update}, {first_update + len(table)}); "
                                f"these spikes need [{first}, {last + 1})")
         if status == tt.UNSORTED:
-            raise BackendError("events are not sorted by time (input spikes: by step): each packet must be in "
-                               "time order and follow the previous one; it was refused and the state is unchanged")
+            raise BackendError(UNSORTED)
         if status == tt.PENDING_FULL:
             self._broken = True
             raise BackendError("more than one input spike for one pixel in one step "
@@ -196,8 +200,8 @@ class TimeOfTravelKernel:
         The filter's state (refractory period, one event per pixel and step, drop counts:
         ``drops``, ``accepted``) lives in the kernel. A region smaller than the sensor (a band,
         ``tofnet.backends.bands``) filters the events of its halo too but counts only its own
-        pixels' (and every event outside the sensor it is given); events beyond its halo are
-        skipped.
+        pixels' (and those outside the sensor in its rows or past the sensor's last row, which
+        only the first band is given); events beyond its halo are skipped.
         Events the filter may accept must be in time order, also across calls; a packet
         that is not is refused before any state changes. ``velocity`` supplies velocity
         rows (``VelocityRows``). Estimates go to ``into[offset:]`` when given (capacity
@@ -211,14 +215,16 @@ class TimeOfTravelKernel:
 
     def run_events(self, events: np.ndarray, velocity: VelocityRows, into: np.ndarray | None = None,
                    offset: int = 0, record_tot: bool = False, span: tuple[int, int] | None = None,
-                   canonical: bool = True) -> tuple[int, int]:
+                   canonical: bool = True, index: np.ndarray | None = None) -> tuple[int, int]:
         """``process_events`` without the ``KernelOutput`` (the per-packet path of a stream).
 
         Returns the end of the estimates in ``into`` (from ``offset``), or in ``buffers()[0]``
         (from 0) when ``into`` is None, and how many time-of-travel spikes ``buffers()[2]`` holds.
         ``span``: the packet's first and last event times (µs) when the caller has them already.
         ``canonical=False`` leaves the estimates in the order of their trigger events (a live
-        stream's caller who does not need each step in pixel order spares the sort).
+        stream's caller who does not need each step in pixel order spares the sort). ``index``
+        (int64, increasing): only those events run (a band's, ``kernels.bands.select_rows``); the
+        packet's time order is checked over all its events, so every band refuses the same packets.
         """
         if self._broken:
             raise BackendError("kernel state is invalid after an earlier error; start a new one")
@@ -242,15 +248,17 @@ class TimeOfTravelKernel:
             span = int(t[0]), int(t[-1])
         first, last = span
         if last - first < self._span_us:  # one velocity table is enough (the usual case)
-            n_out, n_tot = self._events(events, first, last, velocity, out, raw, offset, record_tot, 0, canonical)
+            n_out, n_tot = self._events(events, first, last, velocity, out, raw, offset, record_tot, 0, canonical,
+                                        index)
             if canonical and len(raw):  # the kernel sorts estimates alone; with their fixed-point values, here
                 self._order(out, raw, offset, n_out)
             return n_out, n_tot
         n_out, n_tot = offset, 0
         for lo, hi in self._pieces(events["t"]):
             piece = events[lo:hi]
+            part = None if index is None else index[np.searchsorted(index, lo):np.searchsorted(index, hi)] - lo
             n_out, n_tot = self._events(piece, int(piece["t"][0]), int(piece["t"][-1]), velocity, out, raw, n_out,
-                                        record_tot, n_tot, False)
+                                        record_tot, n_tot, False, part)
         if canonical:
             self._order(out, raw, offset, n_out)  # a step may run across pieces
         return n_out, n_tot
@@ -300,9 +308,10 @@ class TimeOfTravelKernel:
             lo = hi
 
     def _events(self, events, first_t: int, last_t: int, velocity: VelocityRows, out, raw, n_out: int,
-                record_tot: bool, n_tot: int, canonical: bool) -> tuple[int, int]:
+                record_tot: bool, n_tot: int, canonical: bool, index: np.ndarray | None = None) -> tuple[int, int]:
         """One piece of ``run_events`` (``first_t``, ``last_t``: its first and last event times;
-        ``canonical``: the kernel sorts the piece's estimates)."""
+        ``canonical``: the kernel sorts the piece's estimates; ``index``: the events that run)."""
+        index, n_index = (self._no_index, -1) if index is None else (index, len(index))
         t0 = self._t0
         if last_t >= t0:  # rows for every event from the first to the last (exact when in order)
             table, first = velocity(*self._updates((max(first_t, t0) - t0) // self._dt, (last_t - t0) // self._dt))
@@ -310,14 +319,14 @@ class TimeOfTravelKernel:
             table, first = self._no_velocity, 0
         n_out2, n_tot2, status = tt.process_events(events, self._ints, self._floats, table, first, out, raw, n_out,
                                                    record_tot, self._tot, n_tot, self._scratch, self._row_start,
-                                                   canonical)
+                                                   canonical, index, n_index)
         if status == tt.OK:
             return n_out2, n_tot2
         if status == tt.NO_VELOCITY:  # events out of time order outside the sensor: ask for what is needed
             table, first = velocity(*self._updates(int(self._cursor[tt.NEED_FIRST]), int(self._cursor[tt.NEED_LAST])))
             n_out2, n_tot2, status = tt.process_events(events, self._ints, self._floats, table, first, out, raw,
                                                        n_out, record_tot, self._tot, n_tot, self._scratch,
-                                                       self._row_start, canonical)
+                                                       self._row_start, canonical, index, n_index)
         self._raise_for(status, table, first)
         return n_out2, n_tot2
 
