@@ -88,7 +88,7 @@ class TimeOfTravelKernel:
         # Scalars and empty arrays the per-packet path needs, looked up once.
         self._t0, self._dt, self._u = int(t0_us), config.timestep_us, config.update_every
         self._span_us = (MAX_VELOCITY_ROWS - 2) * config.update_every * config.timestep_us
-        self._no_raw, self._no_velocity, self._no_index = np.empty(0, np.int64), np.zeros((0, 3)), np.empty(0, np.int64)
+        self._no_raw, self._no_velocity = np.empty(0, np.int64), np.zeros((0, 3))
         self._held_velocity = np.zeros(4)
         self._held_omega = np.zeros(3)  # rad/s: no rotation before the first angular velocity update
         # eq. 7: (min_share, min_share_raw, fx, fy, cx, cy of B ω); empty for eq. 8
@@ -141,7 +141,7 @@ class TimeOfTravelKernel:
     def _call(self, ts, xs, ys, ps, filtering: bool, table: np.ndarray, first_update: int,
               out: np.ndarray, raw: np.ndarray, n_out: int, record_tot: bool, n_tot: int) -> tuple[int, int, int]:
         return tt.process(ts, xs, ys, ps, filtering, self._ints, self._floats, table, first_update, out, raw, n_out,
-                          record_tot, self._tot, n_tot, self._no_index, -1)
+                          record_tot, self._tot, n_tot, None)
 
     def _raise_for(self, status: int, table: np.ndarray, first_update: int) -> None:
         if status == tt.NO_VELOCITY:
@@ -311,7 +311,6 @@ class TimeOfTravelKernel:
                 record_tot: bool, n_tot: int, canonical: bool, index: np.ndarray | None = None) -> tuple[int, int]:
         """One piece of ``run_events`` (``first_t``, ``last_t``: its first and last event times;
         ``canonical``: the kernel sorts the piece's estimates; ``index``: the events that run)."""
-        index, n_index = (self._no_index, -1) if index is None else (index, len(index))
         t0 = self._t0
         if last_t >= t0:  # rows for every event from the first to the last (exact when in order)
             table, first = velocity(*self._updates((max(first_t, t0) - t0) // self._dt, (last_t - t0) // self._dt))
@@ -319,14 +318,14 @@ class TimeOfTravelKernel:
             table, first = self._no_velocity, 0
         n_out2, n_tot2, status = tt.process_events(events, self._ints, self._floats, table, first, out, raw, n_out,
                                                    record_tot, self._tot, n_tot, self._scratch, self._row_start,
-                                                   canonical, index, n_index)
+                                                   canonical, index)
         if status == tt.OK:
             return n_out2, n_tot2
         if status == tt.NO_VELOCITY:  # events out of time order outside the sensor: ask for what is needed
             table, first = velocity(*self._updates(int(self._cursor[tt.NEED_FIRST]), int(self._cursor[tt.NEED_LAST])))
             n_out2, n_tot2, status = tt.process_events(events, self._ints, self._floats, table, first, out, raw,
                                                        n_out, record_tot, self._tot, n_tot, self._scratch,
-                                                       self._row_start, canonical, index, n_index)
+                                                       self._row_start, canonical, index)
         self._raise_for(status, table, first)
         return n_out2, n_tot2
 

@@ -246,14 +246,13 @@ def views(ints, floats):
 
 @njit(cache=True, nogil=True)  # bands run in threads (tofnet.backends.bands)
 def process_events(events, ints, floats, velocity, first_update, out, out_raw, n_out, record_tot, tot, n_tot,
-                   scratch, row_start, canonical, index, n_index):
+                   scratch, row_start, canonical, index):
     """Raw events (``EVENT_DTYPE``) through the input filter and the region (``process``); with
     ``canonical`` the estimates in the canonical order (``order.sort_by_pixel``, with ``scratch``
     and ``row_start``) unless their fixed-point values are kept too (``out_raw`` not empty: the
-    caller sorts), else in the order their trigger events came. ``index[:n_index]``: as ``process``."""
+    caller sorts), else in the order their trigger events came. ``index``: as ``process``."""
     n_out2, n_tot2, status = process(events["t"], events["x"], events["y"], events["p"], True, ints, floats,
-                                     velocity, first_update, out, out_raw, n_out, record_tot, tot, n_tot, index,
-                                     n_index)
+                                     velocity, first_update, out, out_raw, n_out, record_tot, tot, n_tot, index)
     if canonical and status == OK and out_raw.shape[0] == 0 and n_out2 - n_out > 1:
         sort_by_pixel(out, n_out, n_out2, ints[HEIGHT], scratch, row_start)
     return n_out2, n_tot2, status
@@ -261,7 +260,7 @@ def process_events(events, ints, floats, velocity, first_update, out, out_raw, n
 
 @njit(cache=True, nogil=True)
 def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out, out_raw, n_out, record_tot, tot,
-            n_tot, index, n_index):
+            n_tot, index):
     """Run a packet through the region; returns ``(n_out, n_tot, status)``.
 
     ``filtering``: ``ts`` are event times (µs) and the input filter runs first (on the
@@ -271,8 +270,8 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
     (from ``n_tot`` on) when ``record_tot``. The sample of pixel (x, y) is
     ``rows[y - y0] + cols[x - x0]``: an index into the points (where ``A t`` is evaluated);
     ``A t`` and ``W`` are cached per sample and velocity update (``cache_j``).
-    ``velocity[j - first_update]`` is the velocity of update ``j``. ``n_index`` >= 0: only the
-    events ``index[:n_index]`` (increasing) run, a band's (``tofnet.backends.bands``); the time order
+    ``velocity[j - first_update]`` is the velocity of update ``j``. ``index`` (None: all events):
+    only the events at these positions (increasing) run, a band's (``tofnet.backends.bands``); the time order
     is checked over all, so every band refuses the same packets.
     """
     ip, cursor, counts, rows, cols, cache_j, cache_w, pend, rec, fp, points, cache_at = views(ints, floats)
@@ -280,7 +279,9 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
     status = _check(ts, xs, ys, filtering, cursor, ip, velocity.shape[0], first_update)
     if status != OK:
         return n_out, n_tot, status
-    n = ts.shape[0] if n_index < 0 else n_index
+    n = ts.shape[0]
+    if index is not None:  # ``is None`` on an argument: numba compiles each case without the other
+        n = index.shape[0]
     x0, y0, x1, y1, d = ip[X0], ip[Y0], ip[X1], ip[Y1], ip[DISTANCE]
     t0, dt, refractory, width, height = ip[T0], ip[DT], ip[REFRACTORY_US], ip[WIDTH], ip[HEIGHT]
     stride, row, update_every = ip[STRIDE], ip[ROW], ip[UPDATE_EVERY]
@@ -299,9 +300,13 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
     key_now = update = stamp_us = np.int64(0)
     tx = ty = tz = 0.0
     for e in range(n):
-        i = e if n_index < 0 else index[e]
+        i = q = e
+        if index is not None:
+            i = index[e]
         if e + PREFETCH < n:
-            q = e + PREFETCH if n_index < 0 else index[e + PREFETCH]
+            q = e + PREFETCH
+            if index is not None:
+                q = index[q]
             xq, yq = np.int64(xs[q]), np.int64(ys[q])
             if hx0 <= xq < hx1 and hy0 <= yq < hy1:
                 prefetch(rec, ((yq + pad_y) * row + xq + pad_x) * stride)
