@@ -77,8 +77,8 @@ class BandWorker:
 
     def handle(self, message: tuple) -> tuple:
         kind = message[0]
-        if kind == "band_run":
-            return ("band_run", *self.run(*message[1:]))
+        if kind == "band_run":  # the counts ride along: the host reads them after every packet
+            return ("band_run", *self.run(*message[1:]), self.counts())
         if kind == "band_promise":
             self.kernel.promise(message[1])
             return ("band_promise",)

@@ -48,6 +48,7 @@ class SharedBandKernel(BandsBase):
         self._buffers: list[SharedBuffer] = []
         self._events = self._depth = self._spikes = None
         self.capacity = 0
+        self._counts: list[tuple] | None = None  # the workers' counts after the latest packet
         self._map(1 << 12)
         try:
             self._open(self._addresses(), reach, velocity_source, lookahead)
@@ -88,8 +89,10 @@ class SharedBandKernel(BandsBase):
 
     # -- what FusedStream reads ----------------------------------------------------------------
     def _band_counts(self) -> list[tuple]:
-        replies = self._exchange({w: ("band_counts",) for w in range(len(self.bands))})
-        return [replies[w][1] for w in range(len(self.bands))]
+        if self._counts is None:  # before the first packet (each packet's replies bring them: no round trip)
+            replies = self._exchange({w: ("band_counts",) for w in range(len(self.bands))})
+            self._counts = [replies[w][1] for w in range(len(self.bands))]
+        return self._counts
 
     def promise(self, until_us: int) -> None:
         self._t_hi = max(self._t_hi, int(until_us))
@@ -120,6 +123,7 @@ class SharedBandKernel(BandsBase):
         except BaseException:
             self._broken = True
             raise
+        self._counts = [replies[w][3] for w in workers]
         refused = sum(replies[w][1] < 0 for w in workers)
         if refused:  # every band checks the packet's time order: all refuse it, or something is wrong
             self._broken = refused < len(self.bands)
