@@ -328,7 +328,11 @@ def test_a_bad_configuration_is_one_error_naming_the_fields():
         TimeSurfaceConfig(SENSOR, INTRINSICS, radius=1)
     with pytest.raises(BackendError, match="window_px: needs radius >= 2"):
         TimeSurfaceConfig(SENSOR, INTRINSICS, radius=1, behind_depth=0.0, window_px=6.0)
-    TimeSurfaceConfig(SENSOR, INTRINSICS, radius=1, behind_depth=0.0, window_px=0.0)
+    with pytest.raises(BackendError, match="coordinates: travel needs radius >= 2"):
+        TimeSurfaceConfig(SENSOR, INTRINSICS, radius=1, behind_depth=0.0, window_px=0.0)
+    with pytest.raises(BackendError, match="coordinates: expected one of"):
+        TimeSurfaceConfig(SENSOR, INTRINSICS, coordinates="space")
+    TimeSurfaceConfig(SENSOR, INTRINSICS, radius=1, behind_depth=0.0, window_px=0.0, coordinates="time")
 
 
 def test_what_is_emitted_does_not_depend_on_recording_the_rejections():
@@ -349,7 +353,7 @@ def test_what_is_emitted_does_not_depend_on_recording_the_rejections():
 def test_the_pixels_behind_are_the_rounded_unit_motion_found_from_squares():
     # the check behind rounds f and 2 f (f = a / |A t|) without a root: the same steps as floor(x + 0.5),
     # on random directions and on the exact ties (|f| = 1/4, 1/2, 3/4 of a power-of-two speed)
-    behind = ts._behind.py_func
+    behind = ts.behind_steps.py_func
     rng = np.random.default_rng(3)
     angles = np.concatenate([rng.uniform(0, 2 * np.pi, 4000), np.arccos([0.25, 0.5, 0.75, -0.25, -0.5, -0.75])])
     for angle in angles:

@@ -107,22 +107,25 @@ def test_a_t_per_patch_follows_the_velocity_process():
     assert len(depth) > 100 and result.depth.tobytes() == depth.tobytes()
 
 
-def test_b_w_makes_it_eq_7_with_the_angular_velocity_records():
+@pytest.mark.parametrize("coordinates", ["time", "travel"])
+def test_b_w_makes_it_eq_7_with_the_angular_velocity_records(coordinates):
     intrinsics = Intrinsics(200.0, 200.0, 13.5, 9.5)
     velocity, omega = (-0.3, 0.1, 0.05), (0.05, -0.2, 0.1)
     flow = camera_flow(intrinsics, 1.0, velocity, omega)
     events = jittered(flowing_pattern(SENSOR, flow, 200_000, seed=6), 7, 300)
     recording = Recording(events, intrinsics=intrinsics, sensor_size=SENSOR)
-    net = improved_network(SENSOR, time_surface={"t0": 0}, velocity={"source": "constant", "velocity": list(velocity)},
+    net = improved_network(SENSOR, time_surface={"t0": 0, "coordinates": coordinates},
+                           velocity={"source": "constant", "velocity": list(velocity)},
                            rotation={"source": "constant", "omega": list(omega), "update_every": 2})
     result, _ = run(recording, net, backend="fixed")
     k = (intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy)
-    config = TimeSurfaceConfig(SENSOR, k)
+    config = TimeSurfaceConfig(SENSOR, k, coordinates=coordinates)
     estimator = TimeSurfaceEstimator(config, t0_us=0)
     depth, _ = estimator.feed(events, constant_velocity(velocity, omega))
     depth = depth[np.lexsort((depth["x"], depth["y"], depth["step"]))]
-    assert len(depth) > 200 and result.depth.tobytes() == depth.tobytes()
-    plain, _ = run(recording, improved_network(SENSOR, time_surface={"t0": 0},
+    # travel: the first 100 ms (the window) are fitted net of the rotation, which leaves less spread along the motion
+    assert len(depth) > (200 if coordinates == "time" else 150) and result.depth.tobytes() == depth.tobytes()
+    plain, _ = run(recording, improved_network(SENSOR, time_surface={"t0": 0, "coordinates": coordinates},
                                                velocity={"source": "constant", "velocity": list(velocity)}))
     # the texture is at 1 m; eq. 8 reads the turn as depth
     assert np.median(np.abs(result.depth["z"] - 1.0)) < 0.5 * np.median(np.abs(plain.depth["z"] - 1.0))
@@ -273,7 +276,8 @@ def test_the_conformance_cases_exercise_what_they_are_named_for():
         scene = get_case(name).build()
         result = ReferenceBackend().run(scene.network, scene.recording)
         counts = result.counts["time_surface"]
-        assert len(result.depth) > 500 and abs(np.median(result.depth["z"]) - 1.0) < 0.03, name
-        assert counts["burst"] > 500 and counts["bad_fit"] > 300, name
+        # (the rotation's first 100 ms are travel fits, a few per cent low: docs/time_surface.md, section 7a)
+        assert len(result.depth) > 500 and abs(np.median(result.depth["z"]) - 1.0) < 0.04, name
+        assert counts["burst"] > 500 and counts["bad_fit"] > 200, name
         assert counts["nothing_behind"] + counts["too_few_points"] > 300, name
     assert counts["rotation_dominated"] > 0 and "angular_velocity" in result.counts  # eq. 7 in the second

@@ -6,8 +6,11 @@ The numba core of the time-surface estimator; the streaming API and the paramete
 first-event rule (a burst's later events are dropped), gather the first events the edge
 has crossed, fit the time along the image motion (``fit_rows`` or ``fit_plane``), check the
 fit, and ``Z = (A t)·∇T`` (``∇T`` s/px, the depth neuron's ``td``), or eq. 7 with a
-rotation. Each step and its parameters: docs/time_surface.md, "1. Method". Every event
-ends in exactly one count slot (``COUNT_NAMES``).
+rotation. With ``I_TRAVEL`` (``coordinates="travel"``, the default) the fit takes the camera's
+travel along the image motion at the points' times instead of the times
+(``tofnet.kernels.time_surface_travel``): straight when the speed changes, its slope the depth.
+Each step and its parameters: docs/time_surface.md, "1. Method". Every event ends in exactly
+one count slot (``COUNT_NAMES``).
 """
 
 from __future__ import annotations
@@ -20,6 +23,9 @@ from numba import njit
 from tofnet.kernels.time_of_travel import prefetch
 from tofnet.kernels.rotation import rotational_flow
 from tofnet.kernels.time_surface_fit import FIT_ILL_CONDITIONED, FIT_OVER_RMS, FIT_TOO_FEW, fit_plane, fit_rows
+from tofnet.kernels.time_surface_gather import behind_steps, gather, time_window, trimmed_plane
+from tofnet.kernels.time_surface_travel import (RING, S_CHANGE, S_FIRST, advance, pace, since_reversal, to_travel,
+                                                travel_at)
 from tofnet.kernels.velocity import sampled_velocity_term, velocity_term
 
 NEVER = -(1 << 62)  # "no first event yet" (µs)
@@ -36,7 +42,7 @@ REJECT_SLOTS = tuple(range(NO_MOTION, EMITTED))  # a first event whose estimate 
 # Integer parameters (``ip``) and float parameters (``fp``), by slot.
 (I_WIDTH, I_HEIGHT, I_RADIUS, I_T0, I_DT, I_LATENCY, I_UPDATE_EVERY, I_MIN_POINTS, I_ITERATIONS,
  I_REFRACTORY, I_WINDOW, I_CONSISTENCY_WINDOW, I_MAX_HOLD, I_RECORD_REJECTED, I_MODEL, I_PER_PIXEL, I_PINHOLE,
- N_IP) = range(18)
+ I_TRAVEL, N_IP) = range(19)
 (F_FX, F_FY, F_CX, F_CY, F_OUTLIER, F_MAX_RMS, F_MIN_SPREAD, F_MIN_DEPTH, F_MAX_DEPTH, F_MIN_DENOMINATOR,
  F_WINDOW_DEPTH, F_REFRACTORY_REACH, F_CONSISTENCY, F_HOLD_PX, F_AHEAD_PX, F_TURN, F_TRIM_PX,
  F_RFX, F_RFY, F_RCX, F_RCY, F_HOLD_RMS, F_BEHIND_REACH, F_WINDOW_PX, N_FP) = range(25)  # F_R*: B ω's intrinsics
@@ -79,69 +85,39 @@ def _velocity_term_at(x, y, pixel, per_pixel, pinhole, sample_of, points, veloci
     return at_x, at_y
 
 
+@njit(cache=True, inline="always")
+def _gains(x, y, pixel, per_pixel, pinhole, sample_of, points, fu, fv, fx, fy, cx, cy):
+    """``g = Aᵀ f`` at pixel (x, y) (px per m/s of each velocity component, along ``f``): ``g·v = (A v)·f``."""
+    if pinhole:
+        return -fx * fu, -fy * fv, (x - cx) * fu + (y - cy) * fv
+    sample = pixel if per_pixel else sample_of[pixel]
+    ax, ay = sampled_velocity_term(1.0, 0.0, 0.0, points[sample], fx, fy, cx, cy)
+    bx, by = sampled_velocity_term(0.0, 1.0, 0.0, points[sample], fx, fy, cx, cy)
+    zx, zy = sampled_velocity_term(0.0, 0.0, 1.0, points[sample], fx, fy, cx, cy)
+    return ax * fu + ay * fv, bx * fu + by * fv, zx * fu + zy * fv
+
+
 
 @njit(cache=True, inline="always")
-def _behind(a: float, speed2: float) -> tuple[int, int]:
-    """``floor(f + 0.5)`` and ``floor(2 f + 0.5)`` of the unit motion's component ``f = a / √speed2``
-    (``|f| <= 1``), from squares and without branches: the steps (px) to the pixels 1 and 2 px
-    behind along one axis (a tie rounds up, as ``floor``)."""
-    a2 = a * a
-    quarter, half, three = 0.0625 * speed2, 0.25 * speed2, 0.5625 * speed2  # |f| = 1/4, 1/2, 3/4
-    up_one, up_two = np.int64(a2 >= half), np.int64(a2 >= quarter) + np.int64(a2 >= three)
-    down_one, down_two = np.int64(a2 > half), np.int64(a2 > quarter) + np.int64(a2 > three)
-    positive = a > 0.0
-    return (up_one if positive else -down_one), (up_two if positive else -down_two)
+def _turn_gains(x, y, fu, fv, rfx, rfy, rcx, rcy):
+    """``h = Bᵀ f`` at pixel (x, y) (px per rad of each rotation component, along ``f``): ``h·ω = (B ω)·f``."""
+    ax, ay = rotational_flow(1.0, 0.0, 0.0, float(x), float(y), rfx, rfy, rcx, rcy)
+    bx, by = rotational_flow(0.0, 1.0, 0.0, float(x), float(y), rfx, rfy, rcx, rcy)
+    zx, zy = rotational_flow(0.0, 0.0, 1.0, float(x), float(y), rfx, rfy, rcx, rcy)
+    return ax * fu + ay * fv, bx * fu + by * fv, zx * fu + zy * fv
 
 
 @njit(cache=True)
-def gather(surface, cell: int, row: int, radius: int, t: int, window: int, fu: float, fv: float, ahead_px: float,
-           middle: int, ps_, pw, pt, pg) -> int:
-    """Step 2: the first events no older than ``window`` µs at the pixels of the square around
-    ``surface[cell]`` (the flat surface, ``cell`` in the event's polarity's plane) that the edge
-    has crossed (at most ``ahead_px`` ahead along the motion ``(fu, fv)``; the event itself
-    always counts), in row order, as points: ``s`` px along the motion, ``w`` px across it,
-    ``t`` µs (before the event: negative) and the index of their line across the motion (the
-    event's: ``middle``). Returns their count.
-
-    Branch-free over the cells: each is written and the count advanced by its age test (on
-    noise that test is a coin toss for a branch predictor). The indices are unsigned, which
-    spares numba's negative-index fix-ups: every cell is inside the bordered plane and every
-    point inside the scratch arrays."""
-    inverse_fu = 1.0 / fu if abs(fu) > 1e-9 else 0.0
-    n = 0
-    for dv in range(-radius, radius + 1):
-        lo, hi = -radius, radius  # the columns with du * fu + dv * fv <= ahead_px
-        limit = ahead_px - dv * fv
-        if fu > 1e-9:
-            hi = min(hi, np.int64(math.floor(limit * inverse_fu)))
-        elif fu < -1e-9:
-            lo = max(lo, np.int64(math.ceil(limit * inverse_fu)))
-        elif limit < 0.0:
-            hi = lo - 1
-        base = cell + dv * row
-        along0, across0 = dv * fv, dv * fu
-        for du in range(lo, hi + 1):
-            age = t - surface[np.uint64(base + du)]
-            across = across0 - du * fv
-            at = np.uint64(n)
-            ps_[at], pw[at], pt[at] = along0 + du * fu, across, -age
-            pg[at] = middle + np.int64(math.floor(across + 0.5))
-            n += np.int64(age <= window)
-        if dv == 0 and not lo <= 0 <= hi:  # the event itself always counts
-            ps_[n], pw[n], pt[n], pg[n] = 0.0, 0.0, 0.0, middle
-            n += 1
-    return n
-
-@njit(cache=True)
-def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, sample_of, points, velocity, first_update,
-            ps_, pw, pt, pg, lines, used, counts, out, quality, n_out, index0, t_hi):
+def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, ring, ring_state, sample_of, points,
+            velocity, first_update, ps_, pw, pt, pg, lines, used, counts, out, quality, n_out, index0, t_hi):
     """Run time-ordered events through the estimator; returns ``(n_out, status, t_hi)``.
 
     ``surface[p, (y + r) * (w + 2r) + x + r]`` is the last first event (µs) of pixel (x, y) and
     polarity p (one plane per polarity, so a fit reads one cache line per row; a border of
     ``r = radius`` pixels stays ``NEVER``); ``hold[y * w + x, p]`` its measured hold (µs, 0 =
     none yet); ``prev[y * w + x]`` the pixel's last estimate (z, t) for the consistency rule;
-    ``last_step[y * w + x]`` the output step of its last estimate (at most one per pixel and step).
+    ``last_step[y * w + x]`` the output step of its last estimate (at most one per pixel and step);
+    ``ring`` the camera's displacement per input step and ``ring_state`` (``time_surface_travel``, with ``I_TRAVEL``).
     ``A t`` of pixel ``(x, y)`` is taken at the pixel (``I_PER_PIXEL``) or at
     ``points[sample_of[y * w + x]]``, computed only for events that need it (a pixel's first
     hold, first events). ``velocity[j - first_update]`` is (tx, ty, tz[, wx, wy, wz]) of update j.
@@ -156,18 +132,24 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
     refractory_us, window_us = ip[I_REFRACTORY], ip[I_WINDOW]
     consistency_us, max_hold, record_rejected = ip[I_CONSISTENCY_WINDOW], ip[I_MAX_HOLD], ip[I_RECORD_REJECTED] != 0
     rows_model, per_pixel, pinhole = ip[I_MODEL] == MODEL_ROWS, ip[I_PER_PIXEL] != 0, ip[I_PINHOLE] != 0
+    rotation = velocity.shape[1] >= 6
+    travel = ip[I_TRAVEL] != 0
+    rfx, rfy, rcx, rcy = fp[F_RFX], fp[F_RFY], fp[F_RCX], fp[F_RCY]
+    span_us = (RING - 2) * dt  # the oldest time the travel ring still covers
+    inverse_dt = 1.0 / dt
     fx, fy, cx, cy = fp[F_FX], fp[F_FY], fp[F_CX], fp[F_CY]
     outlier_px, max_rms, min_spread = fp[F_OUTLIER], fp[F_MAX_RMS], fp[F_MIN_SPREAD]
     min_depth, max_depth, min_denominator = fp[F_MIN_DEPTH], fp[F_MAX_DEPTH], fp[F_MIN_DENOMINATOR]
     window_depth, refractory_reach, consistency = fp[F_WINDOW_DEPTH], fp[F_REFRACTORY_REACH], fp[F_CONSISTENCY]
     hold_px, ahead_px, turn, trim_px = fp[F_HOLD_PX], fp[F_AHEAD_PX], fp[F_TURN], fp[F_TRIM_PX]
     hold_rms, behind_reach, window_px = fp[F_HOLD_RMS], fp[F_BEHIND_REACH], fp[F_WINDOW_PX]
-    rotation = velocity.shape[1] >= 6
+    behind_depth = behind_reach * 1e-6  # m: travel coordinates compare travel (px·m) with it
     # a fit this far off its points is rejected (bad_fit) and sets no hold: unless it is recorded, the fit may stop
     give_up_rms = math.inf if record_rejected else max(max_rms, hold_rms) if hold_px > 0.0 else max_rms
     row = width + 2 * radius
     middle = (lines.shape[0] - 1) // 2
-    step, step_start, step_end, update = np.int64(0), np.int64(1), np.int64(0), np.int64(0)
+    step, step_start, step_end, update, k = np.int64(0), np.int64(1), np.int64(0), np.int64(0), np.int64(0)
+    linear_from = np.int64(0)
     j = 0
     n_events, plane_size = ts.shape[0], surface.shape[1]
     flat_surface, flat_hold = surface.reshape(-1), hold.reshape(-1)
@@ -206,6 +188,9 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
                 return n_out, NO_VELOCITY, t_hi
             if update != motion[M_UPDATE]:
                 follow_motion(motion, velocity[j], update, t0 + update * update_every * dt, turn)
+            if travel:
+                advance(ring, ring_state, k, velocity[j], dt * 1e-6)
+                linear_from = t0 + ring_state[S_CHANGE] * dt  # since then the travel is |A t| times the time
         polarity = 1 if ps[i] != 0 else 0
         pixel = y * width + x
         cell = (y + radius) * row + x + radius
@@ -242,15 +227,35 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
         # An edge crossed the two pixels just behind this one along the motion, each about a
         # crossing time per pixel ago; in noise they fired at unrelated times. Their ages also
         # give the edge's own time per pixel, which bounds the window (``window_px``).
-        supported = True
-        if behind_reach > 0.0 or window_px > 0.0:
+        supported, linear, fitted_z = True, False, math.nan
+        if behind_depth > 0.0 or window_px > 0.0 or travel:
             # round(f) and round(2 f) per axis from A t's squares: no root or division on the way to the
             # unpredictable branch on ``supported``
-            du1, du2 = _behind(at_x, speed2)
-            dv1, dv2 = _behind(at_y, speed2)
+            du1, du2 = behind_steps(at_x, speed2)
+            dv1, dv2 = behind_steps(at_y, speed2)
             age1 = t - flat_surface[np.uint64(at_cell - dv1 * row - du1)]
             age2 = t - flat_surface[np.uint64(at_cell - dv2 * row - du2)]
-            if behind_reach > 0.0:  # age <= (behind_depth / |A t|) * d, with d = (du, dv)·A t / |A t| px behind
+            if travel:  # the same in travel (px·m): a surface at D travels D per pixel, whatever the speed
+                d1, d2 = du1 * fu + dv1 * fv, du2 * fu + dv2 * fv  # their distances behind along the motion, px
+                rate = speed * 1e-6  # px·m per µs while the velocity has not changed
+                h0 = h1 = h2 = turn_rate = 0.0
+                if rotation:  # where the edge was, net of the rotation's image motion (px along f)
+                    h0, h1, h2 = _turn_gains(x, y, fu, fv, rfx, rfy, rcx, rcy)
+                    turn_rate = h0 * velocity[j, 3] + h1 * velocity[j, 4] + h2 * velocity[j, 5]  # px/s
+                if t - max(age1, age2) >= linear_from:  # as in time (eq. 7 holds exactly while nothing changes)
+                    travel1, travel2 = rate * age1, rate * age2
+                else:
+                    g0, g1, g2 = _gains(x, y, pixel, per_pixel, pinhole, sample_of, points, fu, fv, fx, fy, cx, cy)
+                    here, turned = travel_at(ring, t, t0, dt, inverse_dt, g0, g1, g2, h0, h1, h2)
+                    travel1, turned1 = travel_at(ring, t - age1, t0, dt, inverse_dt, g0, g1, g2, h0, h1, h2)
+                    travel2, turned2 = travel_at(ring, t - age2, t0, dt, inverse_dt, g0, g1, g2, h0, h1, h2)
+                    travel1, travel2 = here - travel1, here - travel2
+                    d1, d2 = d1 - (turned - turned1), d2 - (turned - turned2)
+                travel1 = travel1 if age1 <= span_us else math.inf  # older than the ring: no measure
+                travel2 = travel2 if age2 <= span_us else math.inf
+                if behind_depth > 0.0:  # (negative: they fired before the motion along f reversed)
+                    supported = 0.0 <= travel1 <= behind_depth * d1 and 0.0 <= travel2 <= behind_depth * d2
+            elif behind_reach > 0.0:  # age <= (behind_depth / |A t|) * d, with d = (du, dv)·A t / |A t| px behind
                 supported = (float(age1) * speed2 <= behind_reach * (du1 * at_x + dv1 * at_y)
                              and float(age2) * speed2 <= behind_reach * (du2 * at_x + dv2 * at_y))
         if not supported and not record_rejected:  # nothing to fit, nothing to record
@@ -262,41 +267,56 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
         else:
             # 2. Gather the recent first events of the pixels the edge has crossed: at most
             # ``ahead_px`` along the motion (the pixels ahead still hold an older edge's times).
-            window = window_us  # the time a surface at ``window_depth`` takes to move ``radius`` pixels
-            if window_depth > 0.0:
-                window = max(window, np.int64(math.floor(window_depth * radius / speed * 1e6)))
-            if turn > 0.0:  # nothing from before the camera's last turn: another motion made it
-                window = min(window, t - np.int64(motion[M_SINCE]))
-            if window_px > 0.0:  # window_px crossings at the edge's pace (µs), without a branch
-                d1, d2 = du1 * fu + dv1 * fv, du2 * fu + dv2 * fv  # their distances behind along the motion, px
-                local = window_px * max(age1 / d1, age2 / d2)
-                window = np.int64(math.ceil(min(local, float(window))))
-            n = gather(flat_surface, at_cell, row, radius, t, window, fu, fv, ahead_px, middle, ps_, pw, pt, pg)
+            if travel:
+                # the travel a surface at ``window_depth`` makes over ``radius`` px, nor more than ``window_px``
+                # crossings at the edge's pace; in time, back to where the image motion along f reversed
+                reach = window_depth * radius if window_depth > 0.0 else math.inf
+                suggested = max(pace(travel1, d1), pace(travel2, d2))  # the depth the pixels behind suggest
+                if window_px > 0.0:
+                    reach = min(reach, window_px * suggested)
+                linear = reach < rate * (t - linear_from)  # all of it since the last change: time will do
+                if linear:
+                    window = np.int64(math.floor(reach / rate))
+                    n = gather(flat_surface, at_cell, row, radius, t, window, fu, fv, ahead_px, middle, ps_, pw, pt,
+                               pg)
+                else:
+                    g0, g1, g2 = _gains(x, y, pixel, per_pixel, pinhole, sample_of, points, fu, fv, fx, fy, cx, cy)
+                    # with a rotation ``reach`` is the depth times the image motion, z_guess that depth
+                    z_guess = suggested if suggested < math.inf else window_depth
+                    window = since_reversal(ring, k, t, t0, dt, np.int64(ring_state[S_FIRST]), g0, g1, g2,
+                                            z_guess * h0, z_guess * h1, z_guess * h2, reach)
+                    n = gather(flat_surface, at_cell, row, radius, t, window, fu, fv, ahead_px, middle, ps_, pw, pt,
+                               pg)
+                    n = to_travel(ring, ps_, pw, pt, pg, n, t, t0, dt, g0, g1, g2, h0, h1, h2, z_guess, reach)
+            else:
+                window = time_window(window_us, window_depth, radius, speed, turn, t, motion[M_SINCE], window_px,
+                                      du1, dv1, du2, dv2, fu, fv, age1, age2)
+                n = gather(flat_surface, at_cell, row, radius, t, window, fu, fv, ahead_px, middle, ps_, pw, pt, pg)
             if n < min_points and not record_rejected:  # fewer points than a fit keeps: too few, whatever the fit
                 counts[TOO_FEW_POINTS] += 1
                 continue
-            # 3. Fit and check.
+            # 3. Fit and check. Net of a rotation, a point's position is the translation's share of the image
+            # motion: the limits in image pixels are that share of them there
+            share = 1.0
+            if travel and rotation and not linear and speed + z_guess * turn_rate > 0.0:
+                share = speed / (speed + z_guess * turn_rate)
             if rows_model:
-                fit, tau_s, tau_w, c, kept, rms = fit_rows(ps_, pt, pg, n, min_points, min_spread, outlier_px,
-                                                            iterations, lines, used, give_up_rms)
+                fit, tau_s, tau_w, c, kept, rms = fit_rows(ps_, pt, pg, n, min_points, min_spread * share * share,
+                                                            outlier_px * share, iterations, lines, used,
+                                                            give_up_rms * share)
             else:
-                fit, tau_s, tau_w, c, kept, rms = fit_plane(ps_, pw, pt, n, min_points, min_spread, outlier_px,
-                                                            iterations)
-                if trim_px > 0.0 and fit == 0:
-                    # The window cuts on measured times: near its ends only the points that fired
-                    # late (old end) or early (the present) are in, which flattens the plane.
-                    # Cutting on the fitted times is unbiased: drop the points the plane puts
-                    # within ``trim_px`` pixels of either end, and refit.
-                    margin = trim_px * math.sqrt(tau_s * tau_s + tau_w * tau_w)
-                    m = 0
-                    for i2 in range(kept):
-                        fitted = c + tau_s * ps_[i2] + tau_w * pw[i2]
-                        if -window + margin <= fitted <= -margin:
-                            ps_[m], pw[m], pt[m] = ps_[i2], pw[i2], pt[i2]
-                            m += 1
-                    if m < kept:
-                        fit, tau_s, tau_w, c, kept, rms = fit_plane(ps_, pw, pt, m, min_points, min_spread, outlier_px,
-                                                                    iterations)
+                fit, tau_s, tau_w, c, kept, rms = fit_plane(ps_, pw, pt, n, min_points, min_spread * share * share,
+                                                            outlier_px * share, iterations)
+            rms /= share
+            if not rows_model and trim_px > 0.0 and fit == 0:
+                fit, tau_s, tau_w, c, kept, rms = trimmed_plane(ps_, pw, pt, window, trim_px, fit, tau_s, tau_w, c,
+                                                                kept, rms, min_points, min_spread, outlier_px,
+                                                                iterations)
+            if travel and not linear:  # the slope is the depth; to µs per px at the event's image speed
+                fitted_z = tau_s
+                image_rate = speed + tau_s * turn_rate  # px·m/s: Z times the image speed along f
+                scale = 1e6 / image_rate if image_rate > 0.0 else 0.0
+                tau_s, tau_w = tau_s * scale, tau_w * scale
             slot = (TOO_FEW_POINTS if fit == FIT_TOO_FEW else ILL_CONDITIONED if fit == FIT_ILL_CONDITIONED
                     else BAD_FIT if fit == FIT_OVER_RMS else EMITTED)
         a, b = tau_s * fu - tau_w * fv, tau_s * fv + tau_w * fu  # ∇T at the event, µs/px along u and v
@@ -308,7 +328,12 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, samp
             slot = BAD_FIT
         z = 0.0
         gx, gy = a * 1e-6, b * 1e-6  # s/px
-        if slot == EMITTED:
+        if slot == EMITTED and fitted_z == fitted_z:  # a travel fit: its slope is the depth, rotation included
+            z = fitted_z
+            image_rate = speed + z * turn_rate  # the translation's share of it is speed / image_rate
+            if rotation and (image_rate <= 0.0 or speed < min_denominator * image_rate):
+                slot = ROTATION_DOMINATED
+        elif slot == EMITTED:
             z = at_x * gx + at_y * gy
             if rotation:
                 bw_x, bw_y = rotational_flow(velocity[j, 3], velocity[j, 4], velocity[j, 5], float(x), float(y),

@@ -18,6 +18,7 @@ from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE
 from tofnet.kernels import time_surface as ts
 from tofnet.kernels.time_surface_fit import N_L
+from tofnet.kernels.time_surface_travel import N_R, N_S, NOT_YET, RING
 from tofnet.kernels.kernel_config import microseconds
 from tofnet.kernels.lens import SAMPLE_COLUMNS, Lens, sample_table
 
@@ -29,6 +30,8 @@ QUALITY_DTYPE = np.dtype([("t_event", "<i8"), ("points", "<u2"), ("rms_px", "<f4
 #: ``rows(first_update, n_updates) -> (table, table_first)``: camera velocity per update, row ``i``
 #: is update ``table_first + i``; 3 columns (tx, ty, tz m/s) or 6 (+ wx, wy, wz rad/s, camera frame).
 VelocityRows = Callable[[int, int], tuple[np.ndarray, int]]
+#: What the fit's surface is over: the camera's travel at the first events' times, or the times themselves.
+COORDINATES = ("time", "travel")
 MAX_VELOCITY_ROWS = 1 << 16
 
 
@@ -64,6 +67,7 @@ class TimeSurfaceConfig:
     turn: float = 0.2
     trim_px: float = 0.0
     model: str = "rows"
+    coordinates: str = "travel"
     consistency: float = 0.0
     consistency_window: float = 0.25
     min_depth: float = 0.05
@@ -81,6 +85,10 @@ class TimeSurfaceConfig:
         problems = []
         if self.model not in ts.MODELS:
             problems.append(f"model: expected one of {ts.MODELS}, got {self.model!r}")
+        if self.coordinates not in COORDINATES:
+            problems.append(f"coordinates: expected one of {COORDINATES}, got {self.coordinates!r}")
+        if self.coordinates == "travel" and int(self.radius) < 2:
+            problems.append(f"coordinates: travel needs radius >= 2 (two pixels behind), got radius {self.radius!r}")
         for name in ("radius", "min_points", "update_every", "patch_size", "latency_steps"):
             if int(getattr(self, name)) < 1:
                 problems.append(f"{name}: expected an integer >= 1, got {getattr(self, name)!r}")
@@ -128,11 +136,11 @@ class TimeSurfaceEstimator:
         self._ip = np.zeros(ts.N_IP, np.int64)
         self._ip[[ts.I_WIDTH, ts.I_HEIGHT, ts.I_RADIUS, ts.I_DT, ts.I_LATENCY, ts.I_UPDATE_EVERY, ts.I_MIN_POINTS,
                   ts.I_ITERATIONS, ts.I_REFRACTORY, ts.I_WINDOW, ts.I_CONSISTENCY_WINDOW, ts.I_MAX_HOLD, ts.I_MODEL,
-                  ts.I_PER_PIXEL, ts.I_PINHOLE]] = (
+                  ts.I_PER_PIXEL, ts.I_PINHOLE, ts.I_TRAVEL]] = (
             width, height, c.radius, c.timestep_us, c.latency_steps, c.update_every, c.min_points, c.iterations,
             microseconds(c.refractory), microseconds(c.window), microseconds(c.consistency_window),
             microseconds(c.max_hold), ts.MODELS.index(c.model),
-            c.per_pixel, c.per_pixel and c.lens is None)
+            c.per_pixel, c.per_pixel and c.lens is None, c.coordinates == "travel")
         self._fp = np.zeros(ts.N_FP, np.float64)
         self._fp[[ts.F_FX, ts.F_FY, ts.F_CX, ts.F_CY, ts.F_OUTLIER, ts.F_MAX_RMS, ts.F_MIN_SPREAD, ts.F_MIN_DEPTH,
                   ts.F_MAX_DEPTH, ts.F_MIN_DENOMINATOR, ts.F_WINDOW_DEPTH, ts.F_REFRACTORY_REACH, ts.F_CONSISTENCY,
@@ -149,6 +157,8 @@ class TimeSurfaceEstimator:
         self._last_step = np.full(pixels, ts.NEVER, np.int64)
         self._motion = np.zeros(ts.N_MOTION)
         self._motion[ts.M_UPDATE] = -1
+        self._ring = np.zeros((RING if c.coordinates == "travel" else 1, N_R))  # 425 kB
+        self._ring_state = np.full(N_S, NOT_YET, np.int64)
         self._sample_of, self._points = sample_tables(c.per_pixel, c.patch_size, width, height,
                                                       tuple(c.intrinsics), c.lens)
         size = 2 * (2 * r + 1) ** 2
@@ -218,8 +228,8 @@ class TimeSurfaceEstimator:
             table, first = self._table(velocity, int(t[lo]), int(t[hi - 1]))
             n_out, status, self._t_hi = ts.process(
                 t[lo:hi], x[lo:hi], y[lo:hi], p[lo:hi], self._ip, self._fp, self._surface, self._hold,
-                self._prev, self._last_step, self._motion, self._sample_of, self._points, table,
-                first, *self._scratch, self._counts, depth, quality, n_out, self.events_in + lo, self._t_hi)
+                self._prev, self._last_step, self._motion, self._ring, self._ring_state, self._sample_of, self._points,
+                table, first, *self._scratch, self._counts, depth, quality, n_out, self.events_in + lo, self._t_hi)
             if status == ts.UNSORTED:
                 done = lo + int(np.argmax(t[lo:hi] < self._t_hi))
                 self.events_in += done

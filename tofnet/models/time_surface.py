@@ -22,7 +22,7 @@ from tofnet.processes.time_surface import QUALITY, TimeSurfaceProcess
 #: A host process answers in the step after the event (the estimator's ``latency_steps``).
 LATENCY_STEPS = TimeSurfaceProcess.added_latency_steps
 #: Process parameters that are ``TimeSurfaceConfig`` fields of the same name and unit.
-CONFIG_PARAMS = ("model", "radius", "ahead_px", "window", "window_depth", "window_px", "turn", "min_points", "min_spread",
+CONFIG_PARAMS = ("model", "coordinates", "radius", "ahead_px", "window", "window_depth", "window_px", "turn", "min_points", "min_spread",
                  "outlier_px", "iterations", "max_rms_px", "trim_px", "hold_px", "hold_fit_rms_px", "behind_depth",
                  "refractory_depth",
                  "refractory", "max_hold", "consistency", "consistency_window", "min_depth", "max_depth",

@@ -18,6 +18,8 @@ QUALITY = Payload("time_surface_quality", (("t_event", "<i8"), ("points", "<u2")
 
 #: Fit models: lines of pixels along the image motion with their own offsets, or one plane.
 MODELS = ("rows", "plane")
+#: What the fit's surface is over: the camera's travel at the first events' times, or the times themselves.
+COORDINATES = ("travel", "time")
 
 
 class TimeSurfaceProcess(Process):
@@ -59,19 +61,21 @@ class TimeSurfaceProcess(Process):
               doc="start of step 0; the first event's time when omitted"),
         Param("model", "str", "rows", doc="fit lines along the image motion with their own offsets (rows) or one "
               "plane (Benosman et al. 2014)", choices=MODELS),
+        Param("coordinates", "str", "travel", doc="fit the first events' travel (the camera's displacement along the "
+              "image motion at their times: straight when the speed changes) or their times", choices=COORDINATES),
         Param("radius", "int", 3, unit="px", doc="the fit looks at the (2 radius + 1)² square around the event",
               minimum=1),
         Param("ahead_px", "float", -0.5, unit="px", doc="pixels more than this ahead of the event along the image "
               "motion are not used (they still hold an older edge's times)"),
         Param("window", "duration", 0.0, unit="s", doc="a fixed lower bound on the age of the oldest point used",
               minimum=0.0),
-        Param("window_depth", "length", 5.0, unit="m", doc="oldest point used: the time a surface this deep takes "
-              "to move radius px", minimum=0.0),
+        Param("window_depth", "length", 5.0, unit="m", doc="oldest point used: the travel (coordinates travel; "
+              "else the time) a surface this deep takes to move radius px", minimum=0.0),
         Param("window_px", "float", 6.0, unit="px", doc="nor older than the time the edge takes to move this far "
               "at its own pace, as the two pixels behind it measured (an older point is another edge's; 0: off)",
               minimum=0.0),
-        Param("turn", "float", 0.2, doc="a velocity change beyond this fraction of the speed starts a new motion "
-              "epoch; no point from before it is used (0: never)", minimum=0.0),
+        Param("turn", "float", 0.2, doc="coordinates time: a velocity change beyond this fraction of the speed "
+              "starts a new motion epoch; no point from before it is used (0: never)", minimum=0.0),
         Param("min_points", "int", 8, doc="points on lines of two or more a fit needs", minimum=1),
         Param("min_spread", "float", 0.5, unit="px²", doc="variance along the motion within the lines a fit needs",
               minimum=0.0),

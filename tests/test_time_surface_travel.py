@@ -1,0 +1,143 @@
+"""The time-surface fit in travel coordinates: exact depths when the camera's speed changes."""
+
+import numpy as np
+import pytest
+
+from tofnet.events import make_events
+from tofnet.kernels import time_surface_travel as tt
+from tofnet.kernels.time_surface_estimator import TimeSurfaceConfig, TimeSurfaceEstimator
+
+F = 200.0
+SENSOR = (32, 24)
+INTRINSICS = (F, F, 15.5, 11.5)
+DEPTH = 2.0
+
+
+def speeds(n_steps):
+    """Image speed px/s per 1 ms step: changing every step, between 20 and 80 px/s."""
+    k = np.arange(n_steps)
+    return 50.0 + 30.0 * np.sin(0.37 * k) * np.cos(0.11 * k)
+
+
+def varying_edge(direction=(1.0, 0.0), n_steps=2000):
+    """A straight edge sweeping the sensor along ``direction`` at ``speeds`` (px/s per 1 ms step) and the
+    velocity rows (one per step) that move a surface at ``DEPTH`` that way."""
+    du, dv = direction
+    s = speeds(n_steps)
+    reached = np.concatenate([[0.0], np.cumsum(s) * 1e-3])  # px travelled at each step's start
+    ys, xs = np.mgrid[0:SENSOR[1], 0:SENSOR[0]]
+    along = (xs * du + ys * dv).ravel()
+    along = along - along.min() + 0.5
+    k = np.searchsorted(reached, along, side="right") - 1
+    t = np.round((k + (along - reached[k]) / (s[k] * 1e-3)) * 1000.0).astype(np.int64) + 1000  # µs
+    # an OFF event at pixel (0, 0) every step, as a sensor's noise makes: the velocity of a step without events
+    # is taken as the last one's (docs/time_surface.md, section 7)
+    filler = np.arange(1000, int(t.max()) + 1000, 1000)
+    t_all = np.concatenate([t, filler])
+    x_all = np.concatenate([xs.ravel(), np.zeros(len(filler), np.int64)])
+    y_all = np.concatenate([ys.ravel(), np.zeros(len(filler), np.int64)])
+    p_all = np.concatenate([np.ones(len(t), np.int64), np.zeros(len(filler), np.int64)])
+    order = np.argsort(t_all, kind="stable")
+    events = make_events(t_all[order], x_all[order], y_all[order], p_all[order])
+    velocity = np.column_stack([-du * s * DEPTH / F, -dv * s * DEPTH / F, np.zeros(n_steps)])
+    velocity = np.concatenate([velocity[:1], velocity])  # the edge starts in input step 1 (1000 µs), held by update 1
+
+    def rows(first, count):
+        return velocity[np.clip(np.arange(first, first + count), 0, len(velocity) - 1)], first
+
+    return events, rows
+
+
+def run(events, rows, packets=None, **changes):
+    estimator = TimeSurfaceEstimator(TimeSurfaceConfig(SENSOR, INTRINSICS, per_pixel=True, **changes), t0_us=0)
+    cuts = [0, len(events)] if packets is None else packets
+    parts = [estimator.feed(events[lo:hi], rows) for lo, hi in zip(cuts[:-1], cuts[1:])]
+    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]), estimator
+
+
+@pytest.mark.parametrize("direction", [(1.0, 0.0), (0.0, -1.0), (0.6, 0.8)])
+def test_travel_gives_the_depth_exactly_while_the_speed_changes(direction):
+    events, rows = varying_edge(direction)
+    depth, quality, estimator = run(events, rows, coordinates="travel", turn=0.0)
+    assert len(depth) > 100
+    np.testing.assert_allclose(depth["z"], DEPTH, rtol=2e-3)  # times are rounded to 1 µs
+
+
+def test_time_coordinates_are_bent_by_the_same_speed_changes():
+    events, rows = varying_edge()
+    travel, _, _ = run(events, rows, coordinates="travel", turn=0.0)
+    time, _, _ = run(events, rows, coordinates="time", turn=0.0, max_rms_px=10.0)
+    assert np.median(np.abs(time["z"] / DEPTH - 1)) > 20 * np.median(np.abs(travel["z"] / DEPTH - 1))
+
+
+def test_travel_output_does_not_depend_on_the_packets():
+    events, rows = varying_edge()
+    whole, q_whole, est = run(events, rows, coordinates="travel")
+    cuts = [0, 7, 100, 101, 350, len(events) // 2, len(events)]
+    split, q_split, est_split = run(events, rows, packets=cuts, coordinates="travel")
+    assert whole.tobytes() == split.tobytes() and q_whole.tobytes() == q_split.tobytes()
+    assert est.counts == est_split.counts
+
+
+def test_the_ring_holds_the_displacement_and_fills_steps_without_events():
+    ring, state = np.zeros((tt.RING, tt.N_R)), np.full(tt.N_S, tt.NOT_YET, np.int64)
+    tt.advance(ring, state, 5, np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.5]), 1e-3)
+    tt.advance(ring, state, 9, np.array([2.0, 0.0, 0.0, 0.0, 0.0, 0.5]), 1e-3)  # steps 6-8 had no events
+    assert list(state) == [9, 5, 9]
+
+    def at(t):
+        return tt.travel_at(ring, t, 0, 1000, 1e-3, 1.0, 0.0, 0.0, 0.0, 0.0, 2.0)
+
+    assert at(5000) == pytest.approx((0.0, 0.0))
+    assert at(9000) == pytest.approx((4e-3, 4e-3))  # 4 ms at 1 m/s (the last velocity), and 0.5 rad/s
+    assert at(9500) == pytest.approx((5e-3, 4.5e-3))  # then 0.5 ms at 2 m/s
+    tt.advance(ring, state, 10, np.array([2.0, 0.0, 0.0, 0.0, 0.0, 0.5]), 1e-3)
+    assert state[tt.S_CHANGE] == 9  # the same velocity: no change
+    tt.advance(ring, state, 11, np.array([2.0, 0.0, 0.0, 0.0, 0.0, 0.6]), 1e-3)
+    assert state[tt.S_CHANGE] == 11  # the angular velocity changed
+
+
+def turning_edge(n_steps=1500, sub=20):
+    """A vertical edge moved along +u by a constant translation (50 px/s at ``DEPTH``) and a rotation
+    about y whose image speed changes every step (up to ±20 px/s at the centre), integrated in
+    ``sub`` parts per 1 ms step; and its velocity rows (six columns)."""
+    k = np.arange(n_steps)
+    wy = 20.0 / F * np.sin(0.21 * k) * np.sign(np.cos(0.05 * k))  # rad/s: -(F + x²/F) wy px/s along u
+    tx = -50.0 * DEPTH / F
+    cx = INTRINSICS[2]
+    position, crossed = -0.5, {}
+    for step in range(n_steps):
+        for part in range(sub):
+            speed = -F * tx / DEPTH - (F + (position - cx) ** 2 / F) * wy[step]
+            position += speed * 1e-3 / sub
+            column = int(np.floor(position))
+            if 0 <= column < SENSOR[0] and column not in crossed:
+                crossed[column] = 1000 + step * 1000 + (part + 1) * 1000 // sub
+    xs, ts = np.array(list(crossed)), np.array(list(crossed.values()))
+    t = np.repeat(ts, SENSOR[1])
+    x = np.repeat(xs, SENSOR[1])
+    y = np.tile(np.arange(SENSOR[1]), len(xs))
+    filler = np.arange(1000, int(t.max()) + 1000, 1000)  # an OFF event every step, as noise makes
+    t_all = np.concatenate([t, filler])
+    order = np.argsort(t_all, kind="stable")
+    events = make_events(t_all[order], np.concatenate([x, np.zeros(len(filler), np.int64)])[order],
+                         np.concatenate([y, np.zeros(len(filler), np.int64)])[order],
+                         np.concatenate([np.ones(len(t), np.int64), np.zeros(len(filler), np.int64)])[order])
+    velocity = np.column_stack([np.full(n_steps, tx), np.zeros(n_steps), np.zeros(n_steps), np.zeros(n_steps), wy,
+                                np.zeros(n_steps)])
+    velocity = np.concatenate([velocity[:1], velocity])
+
+    def rows(first, count):
+        return velocity[np.clip(np.arange(first, first + count), 0, len(velocity) - 1)], first
+
+    return events, rows
+
+
+def test_travel_takes_the_rotation_out_while_it_changes():
+    events, rows = turning_edge()
+    travel, _, estimator = run(events, rows, coordinates="travel")
+    time, _, _ = run(events, rows, coordinates="time", turn=0.0, max_rms_px=10.0)
+    assert len(travel) > 100
+    error = np.abs(travel["z"] / DEPTH - 1)
+    assert np.median(error) < 2e-3 and np.percentile(error, 90) < 5e-3  # B ω at the event for the whole square
+    assert np.median(np.abs(time["z"] / DEPTH - 1)) > 50 * np.median(error)  # eq. 7 with the present ω only

@@ -1,0 +1,146 @@
+"""Travel coordinates for the time-surface fit (numba; used by ``tofnet.kernels.time_surface``).
+
+A surface at depth ``Z`` moves in the image at ``A t / Z`` px/s (paper eq. 2), so between two
+times its image moves ``(A ∫ t dt) / Z`` px whatever the speed did in between. With the
+camera's displacement ``P(t) = ∫ t dt`` (m, camera frame, from the same velocity rows) and
+``g = Aᵀ f`` (``f`` the unit direction of ``A t`` at the event), the *travel*
+``S(t) = g·P(t)`` (px·m) grows by ``Z`` per pixel the edge moves along ``f``: an edge reaches
+the pixel ``s`` px along the motion when ``S = c + Z s``. Fitting the first events' travel
+instead of their time keeps that line straight when the speed changes, and its slope is the
+depth (docs/time_surface.md, section 7).
+
+The displacement is kept per input step in a ring (``RING`` steps): row ``k & (RING - 1)``
+holds ``P`` at the start of step ``k`` and the velocity the step holds, so ``P`` at any time
+of the last ``RING`` steps is one row read and a multiply-add. A step without events moves
+the camera at the velocity of the last step that had one (the output does not depend on how
+the events are split into packets).
+
+With a rotation (velocity rows of six columns) the image also moves by ``B ∫ ω dt``, whatever the
+depth: with ``h = Bᵀ f`` the edge reaches a point ``s`` px along the motion when
+``S = c + Z (s + h·(Θ(t_event) − Θ))``, ``Θ = ∫ ω dt``, which the ring keeps beside ``P``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+#: Steps of displacement kept (a power of two): the oldest point a travel fit can use.
+RING = 4096
+MASK = RING - 1
+# Ring columns: displacement at the step's start (m), the step's velocity (m/s), the rotation at the step's start
+# (rad, camera frame) and the step's angular velocity (rad/s; zero without one).
+R_PX, R_PY, R_PZ, R_VX, R_VY, R_VZ, R_AX, R_AY, R_AZ, R_WX, R_WY, R_WZ, N_R = range(13)
+# Ring state (``state``): the last step written, the first, the last whose velocity differs from the step's
+# before it (from there on the travel is the speed times the time).
+S_LAST, S_FIRST, S_CHANGE, N_S = range(4)
+NOT_YET = -1
+
+
+@njit(cache=True)
+def advance(ring, state, k: int, row, dt_s: float) -> None:
+    """Write the ring's rows up to step ``k`` after ``state[S_LAST]`` (``NOT_YET``: none); ``row`` is the
+    step's velocity row (tx, ty, tz m/s[, wx, wy, wz rad/s])."""
+    last = state[S_LAST]
+    rotating = row.shape[0] >= 6
+    if last == NOT_YET:
+        r = k & MASK
+        for c in range(N_R):
+            ring[r, c] = 0.0
+        ring[r, R_VX], ring[r, R_VY], ring[r, R_VZ] = row[0], row[1], row[2]
+        if rotating:
+            ring[r, R_WX], ring[r, R_WY], ring[r, R_WZ] = row[3], row[4], row[5]
+        state[S_LAST], state[S_FIRST], state[S_CHANGE] = k, k, k
+        return
+    if k <= last:
+        return
+    p = last & MASK
+    for m in range(max(last + 1, k - RING + 1), k + 1):  # the steps between had no events: the last velocity
+        done = (m - last) * dt_s
+        r = m & MASK
+        for c in (R_PX, R_PY, R_PZ, R_AX, R_AY, R_AZ):  # a position's velocity is 3 columns on
+            ring[r, c] = ring[p, c] + ring[p, c + 3] * done
+        for c in (R_VX, R_VY, R_VZ, R_WX, R_WY, R_WZ):
+            ring[r, c] = ring[p, c]
+    r = k & MASK
+    changed = row[0] != ring[p, R_VX] or row[1] != ring[p, R_VY] or row[2] != ring[p, R_VZ]
+    ring[r, R_VX], ring[r, R_VY], ring[r, R_VZ] = row[0], row[1], row[2]
+    if rotating:
+        changed = changed or row[3] != ring[p, R_WX] or row[4] != ring[p, R_WY] or row[5] != ring[p, R_WZ]
+        ring[r, R_WX], ring[r, R_WY], ring[r, R_WZ] = row[3], row[4], row[5]
+    if changed:
+        state[S_CHANGE] = k
+    state[S_LAST] = k
+
+
+@njit(cache=True, inline="always")
+def travel_at(ring, t: int, t0: int, dt: int, inverse_dt: float, g0: float, g1: float, g2: float, h0: float,
+              h1: float, h2: float) -> tuple[float, float]:
+    """``g·P(t)`` (px·m) and ``h·Θ(t)`` (px) for a time ``t`` µs of the ring's span: one row read and
+    multiply-adds."""
+    since = t - t0
+    k = np.int64(math.floor(since * inverse_dt))  # a rounding off by one lands on the next row: P is continuous
+    r = np.uint64(k & MASK)
+    elapsed = (since - k * dt) * 1e-6
+    travel = (g0 * (ring[r, R_PX] + ring[r, R_VX] * elapsed) + g1 * (ring[r, R_PY] + ring[r, R_VY] * elapsed)
+              + g2 * (ring[r, R_PZ] + ring[r, R_VZ] * elapsed))
+    turned = (h0 * (ring[r, R_AX] + ring[r, R_WX] * elapsed) + h1 * (ring[r, R_AY] + ring[r, R_WY] * elapsed)
+              + h2 * (ring[r, R_AZ] + ring[r, R_WZ] * elapsed))
+    return travel, turned
+
+
+@njit(cache=True)
+def since_reversal(ring, k: int, t: int, t0: int, dt: int, first_step: int, g0: float, g1: float, g2: float,
+                   z0: float, z1: float, z2: float, reach: float) -> int:
+    """The age (µs) of the oldest first event the fit may use: back from time ``t`` (step ``k``) while the
+    image motion along the event's ``f`` keeps its sign (``g·v + z·ω > 0``, ``z`` the rotation's gains
+    times the depth the pixels behind suggest: a pixel behind still holds this pass's edge) and the
+    travel (with ``z·Θ``: the depth times the image motion) stays within ``reach`` px·m; never past the
+    ring or its first step."""
+    start = t0 + k * dt
+    r = k & MASK
+    travelled = (g0 * ring[r, R_VX] + g1 * ring[r, R_VY] + g2 * ring[r, R_VZ] + z0 * ring[r, R_WX]
+                 + z1 * ring[r, R_WY] + z2 * ring[r, R_WZ]) * (t - start) * 1e-6
+    oldest = max(first_step, k - RING + 2)
+    m = k - 1
+    dt_s = dt * 1e-6
+    while travelled < reach and m >= oldest:
+        r = m & MASK
+        along = (g0 * ring[r, R_VX] + g1 * ring[r, R_VY] + g2 * ring[r, R_VZ] + z0 * ring[r, R_WX] + z1 * ring[r, R_WY]
+                 + z2 * ring[r, R_WZ])
+        if along <= 0.0:
+            break
+        travelled += along * dt_s
+        start -= dt
+        m -= 1
+    return t - start
+
+
+@njit(cache=True)
+def to_travel(ring, ps_, pw, pt, pg, n: int, t: int, t0: int, dt: int, g0: float, g1: float, g2: float, h0: float,
+              h1: float, h2: float, z: float, reach: float) -> int:
+    """Turn the gathered points' times (``pt``, µs before ``t``) into travel before the event's
+    (px·m, negative behind) and their positions along the motion (``ps_``) into where the edge
+    was, net of the rotation's image motion since (``h`` = ``(B ω)·f`` per rad/s: ``s + h·(Θ(t) − Θ(t_q))``),
+    and keep those within ``reach`` px·m of it (the travel plus ``z`` m times the rotation's image motion: a
+    depth times the image motion; compacted in place; the event itself always stays).
+    Returns the points kept."""
+    inverse_dt = 1.0 / dt
+    here, turned = travel_at(ring, t, t0, dt, inverse_dt, g0, g1, g2, h0, h1, h2)
+    m = 0
+    for i in range(n):
+        travel, turned_q = travel_at(ring, t + np.int64(pt[i]), t0, dt, inverse_dt, g0, g1, g2, h0, h1, h2)
+        travel -= here
+        shift = turned - turned_q
+        ps_[m], pw[m], pt[m], pg[m] = ps_[i] + shift, pw[i], travel, pg[i]
+        m += np.int64(travel - z * shift >= -reach)
+    return m
+
+
+@njit(cache=True, inline="always")
+def pace(travel: float, distance: float) -> float:
+    """Travel per pixel (px·m, the depth it suggests) of a pixel ``distance`` px behind (net of rotation)
+    that the edge reached ``travel`` px·m ago; infinite when it says nothing (``distance <= 0``)."""
+    return travel / distance if distance > 0.0 else math.inf
