@@ -190,7 +190,8 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, ring
                 follow_motion(motion, velocity[j], update, t0 + update * update_every * dt, turn)
             if travel:
                 advance(ring, ring_state, k, velocity[j], dt * 1e-6)
-                linear_from = t0 + ring_state[S_CHANGE] * dt  # since then the travel is |A t| times the time
+                # since then the travel is |A t| times the time (no change since the first step: always)
+                linear_from = t0 + ring_state[S_CHANGE] * dt if ring_state[S_CHANGE] != ring_state[S_FIRST] else NEVER
         polarity = 1 if ps[i] != 0 else 0
         pixel = y * width + x
         cell = (y + radius) * row + x + radius
@@ -251,10 +252,12 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, ring
                     travel2, turned2 = travel_at(ring, t - age2, t0, dt, inverse_dt, g0, g1, g2, h0, h1, h2)
                     travel1, travel2 = here - travel1, here - travel2
                     d1, d2 = d1 - (turned - turned1), d2 - (turned - turned2)
-                travel1 = travel1 if age1 <= span_us else math.inf  # older than the ring: no measure
-                travel2 = travel2 if age2 <= span_us else math.inf
+                    travel1 = travel1 if age1 <= span_us else math.inf  # older than the ring: no measure
+                    travel2 = travel2 if age2 <= span_us else math.inf
                 if behind_depth > 0.0:  # (negative: they fired before the motion along f reversed)
-                    supported = 0.0 <= travel1 <= behind_depth * d1 and 0.0 <= travel2 <= behind_depth * d2
+                    # one branch on the outcome, not one per comparison (noise makes each a coin toss)
+                    supported = ((travel1 >= 0.0) & (travel1 <= behind_depth * d1) & (travel2 >= 0.0)
+                                 & (travel2 <= behind_depth * d2))
             elif behind_reach > 0.0:  # age <= (behind_depth / |A t|) * d, with d = (du, dv)·A t / |A t| px behind
                 supported = (float(age1) * speed2 <= behind_reach * (du1 * at_x + dv1 * at_y)
                              and float(age2) * speed2 <= behind_reach * (du2 * at_x + dv2 * at_y))
@@ -307,7 +310,8 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, ring
             else:
                 fit, tau_s, tau_w, c, kept, rms = fit_plane(ps_, pw, pt, n, min_points, min_spread * share * share,
                                                             outlier_px * share, iterations)
-            rms /= share
+            if share != 1.0:
+                rms /= share
             if not rows_model and trim_px > 0.0 and fit == 0:
                 fit, tau_s, tau_w, c, kept, rms = trimmed_plane(ps_, pw, pt, window, trim_px, fit, tau_s, tau_w, c,
                                                                 kept, rms, min_points, min_spread, outlier_px,
