@@ -64,7 +64,7 @@ def every_parameter_changed() -> Network:
                                  rotation_cam_imu=[0.0, 0.0, 0.7071067811865476, 0.7071067811865476],
                                  time_shift="-2.5ms", bias=[0.001, 0.002, -0.003], update_every=3,
                                  intrinsics=[200.0, 201.5, 31.5, 23.5])
-    surf = TimeSurfaceProcess(name="ts", sensor_size=(64, 48), timestep="250us", t0=1.5, model="plane", radius=2,
+    surf = TimeSurfaceProcess(name="ts", sensor_size=(64, 48), timestep="250us", t0=1.5, model="plane", radius=2, coordinates="time",
                               ahead_px=0.5, window="30ms", window_depth=4.0, window_px=5.0, turn=0.3, min_points=6, min_spread=0.4,
                               outlier_px=0.3, iterations=4, max_rms_px=0.2, trim_px=0.5, hold_px=2.0,
                               hold_fit_rms_px=0.8, behind_depth="8m", refractory_depth="8m", refractory="1ms", max_hold=0.5,
