@@ -354,11 +354,11 @@ def _rotation_dominated() -> Scene:
 
 
 @case("time-surface-rotation", "the time-surface estimator with B ω (eq. 7): a camera sliding and turning over a "
-      "texture at 1 m; A t per 5x5 patch, ω every 3 steps")
+      "texture at 1 m; A t per 5x5 patch, ω every 3 steps, min_denominator 0.5 (some rotation_dominated)")
 def _time_surface_rotation() -> Scene:
     size, velocity, omega = (28, 20), (-0.3, 0.1, 0.05), (0.05, -0.2, 0.1)
     flow = camera_flow(ROTATION_INTRINSICS, 1.0, velocity, omega)
-    network = improved_network(size, time_surface={"t0": 0},
+    network = improved_network(size, time_surface={"t0": 0, "min_denominator": 0.5},
                                velocity={"source": "constant", "velocity": list(velocity), "per": "patch",
                                          "patch_size": 5},
                                rotation={"source": "constant", "omega": list(omega), "update_every": 3})

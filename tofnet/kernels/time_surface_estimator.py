@@ -50,14 +50,14 @@ class TimeSurfaceConfig:
     intrinsics: tuple[float, float, float, float]
     radius: int = 3
     window: float = 0.0
-    window_depth: float = 5.0
+    window_depth: float = 10.0
     min_points: int = 8
     outlier_px: float = 0.25
     iterations: int = 2
     max_rms_px: float = 0.25
     min_spread: float = 0.5
     refractory: float = 0.0
-    refractory_depth: float = 10.0
+    refractory_depth: float = 5.0
     hold_px: float = 3.0
     hold_fit_rms_px: float = 1.0
     behind_depth: float = 10.0

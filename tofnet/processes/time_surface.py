@@ -69,7 +69,7 @@ class TimeSurfaceProcess(Process):
               "motion are not used (they still hold an older edge's times)"),
         Param("window", "duration", 0.0, unit="s", doc="a fixed lower bound on the age of the oldest point used",
               minimum=0.0),
-        Param("window_depth", "length", 5.0, unit="m", doc="oldest point used: the travel (coordinates travel; "
+        Param("window_depth", "length", 10.0, unit="m", doc="oldest point used: the travel (coordinates travel; "
               "else the time) a surface this deep takes to move radius px", minimum=0.0),
         Param("window_px", "float", 6.0, unit="px", doc="nor older than the time the edge takes to move this far "
               "at its own pace, as the two pixels behind it measured (an older point is another edge's; 0: off)",
@@ -93,7 +93,7 @@ class TimeSurfaceProcess(Process):
         Param("behind_depth", "length", 10.0, unit="m", doc="fit a first event only when the two pixels just "
               "behind it along the motion fired, in either order, within the time a surface this deep takes to move "
               "that far (an edge crossed them; noise did not; 0: off)", minimum=0.0),
-        Param("refractory_depth", "length", 10.0, unit="m", doc="before a pixel has a fit, its hold is the time a "
+        Param("refractory_depth", "length", 5.0, unit="m", doc="before a pixel has a fit, its hold is the time a "
               "surface this deep takes to move one pixel", minimum=0.0),
         Param("refractory", "duration", 0.0, unit="s", doc="a fixed lower bound on that first hold", minimum=0.0),
         Param("max_hold", "duration", 1.0, unit="s", doc="upper bound of any hold", minimum=0.0),
