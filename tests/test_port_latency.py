@@ -105,3 +105,11 @@ def test_the_fused_chain_takes_its_latency_from_the_declarations():
     fused = FixedBackend().run(net, recording, record_tot=True)
     unfused = FixedBackend(fuse=False).run(net, recording, record_tot=True)
     assert fused.latency == unfused.latency == {"depth.depth": 2, "time_of_travel.counts": 1}
+
+
+def test_the_summary_s_seconds_are_the_clock_s_microseconds_converted_once():
+    """A 7 ms step is 0.007 s in the summary (``seconds_of``, as the models and the fused path),
+    not ``7000 * 1e-6`` = 0.006999999999999999."""
+    net = depth_network(SENSOR, input={"timestep": "7ms"}, velocity=CONSTANT)
+    summary = FixedBackend().run(net, texture()).summary()
+    assert (summary["timestep_s"], summary["latency_steps"], summary["latency_s"]) == (0.007, 2, 0.014)

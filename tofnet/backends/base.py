@@ -10,6 +10,7 @@ import numpy as np
 
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE
+from tofnet.kernels.kernel_config import seconds_of
 
 #: Summary keys that depend on how and where a run went, not on what it computed.
 RUN_SPECIFIC = ("backend", "wall_time_s", "compile_time_s", "kernels_compiled", "workers")
@@ -153,7 +154,8 @@ class RunResult:
 
     @property
     def latency_seconds(self) -> float:
-        return self.latency_steps * self.timestep_us * 1e-6
+        """Seconds from an event to the depth output (``latency_steps`` steps of ``timestep_us``)."""
+        return seconds_of(self.latency_steps * self.timestep_us)
 
     def facts(self) -> dict:
         """What the run computed, the same on every backend of one arithmetic: counts, outputs, steps,
@@ -172,7 +174,7 @@ class RunResult:
             "outputs": {name: int(len(records)) for name, records in self.outputs.items()},
             "counts": {name: dict(c) for name, c in self.counts.items()},
             "readers": self.readers, "latency": dict(self.latency),
-            "steps": self.steps, "timestep_s": self.timestep_us * 1e-6, "latency_steps": self.latency_steps,
+            "steps": self.steps, "timestep_s": seconds_of(self.timestep_us), "latency_steps": self.latency_steps,
             "latency_s": self.latency_seconds, "wall_time_s": self.wall_time,
             "compile_time_s": self.compile_time, "kernels_compiled": self.kernels_compiled})
         if "bands" in self.extra:  # how the work was split (workers, bands of rows, what ran whole)
