@@ -48,6 +48,36 @@ def test_allow_import_names_a_module_that_exists(events_file, tmp_path, capsys, 
                  "--allow-import", "xml.etree", *COMMON]) == 0
 
 
+class _EditableFinder:
+    """What an editable install (setuptools >= 64, ``editables``) puts on ``sys.meta_path``: a top-level
+    name mapped to a project folder, which is not on ``sys.path``."""
+
+    def __init__(self, name: str, folder):
+        self.name, self.folder = name, folder
+
+    def find_spec(self, fullname, path=None, target=None):
+        import importlib.util
+        if fullname != self.name:
+            return None
+        package = self.folder / fullname
+        return importlib.util.spec_from_file_location(fullname, package / "__init__.py",
+                                                      submodule_search_locations=[str(package)])
+
+
+def test_allow_import_finds_a_module_of_an_editable_install(events_file, tmp_path, monkeypatch):
+    import sys
+    from tofnet.io.trust import module_findable
+    package = tmp_path / "project" / "tofnet_editable_zz"
+    package.mkdir(parents=True)
+    (package / "__init__.py").write_text("raise SystemExit('imported')\n")  # must not run
+    (package / "procs.py").write_text("")
+    monkeypatch.setattr(sys, "meta_path", [*sys.meta_path, _EditableFinder("tofnet_editable_zz", tmp_path / "project")])
+    assert module_findable("tofnet_editable_zz") and module_findable("tofnet_editable_zz.procs")
+    assert not module_findable("tofnet_editable_zz.nosuch") and "tofnet_editable_zz" not in sys.modules
+    out = str(tmp_path / "d.npz")
+    assert main(["run", str(events_file), "--out", out, "--allow-import", "tofnet_editable_zz.procs", *COMMON]) == 0
+
+
 def test_more_workers_than_cpus_is_said_once(events_file, tmp_path, capsys, caplog):
     many = cpu_count() + 5
     with caplog.at_level(logging.WARNING, logger="tofnet"):

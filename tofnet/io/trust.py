@@ -70,8 +70,8 @@ def check_import(type_name: str, allow: tuple[str, ...], spec_dir: Path | None =
 
 
 def module_findable(module_name: str) -> bool:
-    """Whether ``module_name`` is imported, built in or on the Python path, found by looking at
-    the file system only (nothing is imported, no code runs)."""
+    """Whether ``module_name`` is imported, built in or importable, found by asking the import
+    system's finders where it is (nothing is imported, no code of the module runs)."""
     if module_name in sys.modules or module_name in sys.builtin_module_names or _is_entry_point(module_name):
         return True
     parts = module_name.split(".")
@@ -81,11 +81,23 @@ def module_findable(module_name: str) -> bool:
         if name in sys.modules:
             path = getattr(sys.modules[name], "__path__", None)
             continue
-        found = PathFinder.find_spec(name, path)
+        found = _find_spec(name, path)
         if found is None:
             return False
         path = found.submodule_search_locations
     return True
+
+
+def _find_spec(name: str, path) -> Any:
+    """Where the finders of ``sys.meta_path`` would load ``name`` from (``path``: its package's
+    folders), or None: the file system's finder and those that editable installs add (setuptools,
+    editables: a name mapped to a project folder) only look."""
+    for finder in sys.meta_path:
+        find = getattr(finder, "find_spec", None)
+        found = find(name, path) if find is not None else None
+        if found is not None:
+            return found
+    return None
 
 
 def _is_entry_point(module_name: str) -> bool:
