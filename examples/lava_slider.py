@@ -13,7 +13,9 @@ from pathlib import Path
 import numpy as np
 
 from tofnet import depth_network
+from tofnet.backends.lava_backend import require_lava
 from tofnet.backends.registry import get_backend
+from tofnet.errors import TofnetError
 from tofnet.io import read_recording
 from tofnet.sim.run import simulate
 
@@ -47,4 +49,8 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    try:
+        require_lava()  # before simulating: without Lava here, the one line saying how to get it
+    except TofnetError as err:
+        raise SystemExit(f"lava_slider.py: {err}") from None
     main()
