@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numba import njit
 
@@ -14,6 +16,10 @@ from tofnet.kernels.region import KernelConfig, TimeOfTravelKernel
 from tofnet.kernels.time_of_travel import N_REASONS
 from tofnet.models.base import Model, ModelContext, StepModel, records
 from tofnet.processes import DepthProcess
+
+if TYPE_CHECKING:  # the fields' classes, for the hints only
+    from tofnet.models.angular_velocity import RotationField
+    from tofnet.models.velocity import VelocityField
 
 #: Rejection reasons in the kernels' code order (``tofnet.kernels.depth``), as the process declares them.
 REJECT_REASONS = names_of(DepthProcess.counters, "rejected")
@@ -44,7 +50,8 @@ def _depth_neurons_rotation(counts, at_x, at_y, bw_x, bw_y, seconds_per_count, m
         out_reason[i] = classify_rotation(sx != 0 or sy != 0, share, z, min_share, min_depth, max_depth)
 
 
-def depth_settings(process: DepthProcess, field, update_every: int = 1, rotation=None) -> DepthSettings:
+def depth_settings(process: DepthProcess, field: VelocityField, update_every: int = 1,
+                   rotation: RotationField | None = None) -> DepthSettings:
     """What the depth neurons take: the process's depth range (m), the sampling of the ``A t`` feeding
     them (``field``, a ``VelocityField``, one update every ``update_every`` steps) and, with a
     ``rotation`` field feeding ``b_w`` (eq. 7), ``min_share`` and where ``B ω`` is evaluated (the
