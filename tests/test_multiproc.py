@@ -105,6 +105,18 @@ def test_workers_are_spawned_not_forked(session):
             assert b"multiprocessing.spawn" in f.read()
 
 
+def test_a_row_load_cuts_the_workers_shares_between_rows_of_patches_nearest_equal_load():
+    compiled = compile_network(depth_network((240, 180)), patch=(30, 30))  # 8 x 6 patches per layer
+    load = np.zeros(180)
+    load[120:] = 1.0  # all events in the lowest two rows of patches
+    tot = [c.index for c in compiled.cores_of("time_of_travel")]
+    plans = plan_workers(compiled, 2, load)
+    assert [c for c in plans[0].cores if c in tot] == tot[:40]  # cut at row 150: half of the load each
+    three = plan_workers(compiled, 3, load)  # a row of patches at least each; the busy two apart
+    assert [sum(c in tot for c in p.cores) for p in three] == [8, 32, 8]
+    assert plan_workers(compiled, 2, np.zeros(180)) == plan_workers(compiled, 2)  # no load: equal groups
+
+
 def test_the_paper_mapping_puts_48_cores_on_each_of_two_workers():
     compiled = compile_network(depth_network((240, 180)), patch=(30, 30))  # the paper's 48 + 48 cores
     plans = plan_workers(compiled, 2)

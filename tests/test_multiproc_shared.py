@@ -83,6 +83,19 @@ def test_bands_on_worker_processes_equal_the_fixed_backend_and_per_core_mode_too
     assert "shared_memory" not in per_core.extra and first_difference(per_core, fixed) == ""
 
 
+def test_workers_share_the_cores_by_the_recordings_load_with_the_same_bytes():
+    # events only in the lower rows: equal core counts would cut at row 16, the load at row 24
+    compiled = compile_network(depth_network(SENSOR, input={"refractory": "1ms"}, velocity=VELOCITY), patch=(8, 8))
+    low = Recording(RECORDING.events[RECORDING.events["y"] >= 16], intrinsics=TEST_INTRINSICS)
+    fixed = get_backend("fixed").run(compiled, low, record_tot=True)
+    with MultiprocBackend(workers=2, packet_events=333).session() as session:
+        banded = session.run(low, compiled=compiled, record_tot=True)
+    assert banded.extra["bands"] == [[0, 24], [24, 30]]
+    assert first_difference(banded, fixed) == ""
+    per_core = MultiprocBackend(workers=2, per_core=True).run(compiled, low, record_tot=True)
+    assert first_difference(per_core, fixed) == ""
+
+
 def test_a_packet_out_of_order_is_refused_by_every_worker_and_nothing_changes():
     network = depth_network(SENSOR, input={"refractory": "1ms"}, velocity=VELOCITY)
     events = RECORDING.events

@@ -12,7 +12,7 @@ from typing import Iterable
 
 import numpy as np
 
-from tofnet.backends.bands import BandedKernel, band_placer, resolve_workers, threads_for
+from tofnet.backends.bands import BandedKernel, band_placer, resolve_workers, sampled_row_load, threads_for
 from tofnet.backends.base import Backend, ProgressCallback, RunResult
 from tofnet.backends.fusion import FusedStream, PipelineParams, paper_chain
 from tofnet.backends.graph import GraphExecutor, canonical, resolve_probes, sinks_of
@@ -24,7 +24,6 @@ from tofnet.core.network import Network
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, EVENT_DTYPE, TOT_DTYPE
 from tofnet.io.recording import Intrinsics, Recording, VelocitySource, as_velocity_source
-from tofnet.kernels.bands import row_load
 from tofnet.kernels.compilation import Stopwatch
 
 #: Initial size of a fused run's result buffer in estimates (at most one per event); 4M x 28 B
@@ -156,10 +155,7 @@ class LocalBackend(Backend):
         if self.workers < 2:
             return [(0, network.sensor_size[1])]
         height = network.sensor_size[1]
-        load = None
-        if len(known.events):  # a sample of 65536 events shows where the load is (a million took 10-17 ms)
-            load = row_load(known.events, height, max(1, len(known.events) >> 16))
-        return plan_bands(height, self.workers, load)
+        return plan_bands(height, self.workers, sampled_row_load(known.events, height))
 
     def run(self, compiled, recording: Recording, *, probes: Iterable[str] = (), record_tot: bool = False,
             progress: ProgressCallback | None = None) -> RunResult:

@@ -19,7 +19,7 @@ from typing import Iterable
 import numpy as np
 
 from tofnet.backends._channel import Channel
-from tofnet.backends.bands import resolve_workers
+from tofnet.backends.bands import resolve_workers, sampled_row_load
 from tofnet.backends.base import Backend, ProgressCallback, RunResult
 from tofnet.backends.graph import GraphExecutor, resolve_probes, sinks_of
 from tofnet.backends.fusion import FusedStream, paper_chain
@@ -262,7 +262,8 @@ class MultiprocSession:
         clock = clock_of(network)
         probes = resolve_probes(network, probes, record_tot)
         sinks = sinks_of(network)
-        plans = plan_workers(compiled, len(self._channels))
+        # each worker's share of the cores balanced by the recording's events per row (as the threads' bands)
+        plans = plan_workers(compiled, len(self._channels), sampled_row_load(known.events, network.sensor_size[1]))
         pipeline = None if self.backend.per_core or not fuse else paper_chain(network, "fixed", probes)
         if pipeline is not None:
             t0 = clock.t0_us if t0_us is None else int(t0_us)

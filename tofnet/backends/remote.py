@@ -31,20 +31,48 @@ class WorkerPlan:
     cores: tuple[int, ...]
 
 
-def plan_workers(compiled, workers: int) -> list[WorkerPlan]:
+def plan_workers(compiled, workers: int, row_load: np.ndarray | None = None) -> list[WorkerPlan]:
     """Split every core-placed layer's cores over at most ``workers`` processes.
 
-    Each layer's cores (in patch order, row by row) are dealt out in contiguous, equal-sized
-    groups, so every worker holds a share of every layer and its halos stay between
-    neighbours. Workers that would get nothing are not planned.
+    Each layer's cores (in patch order, row by row) are dealt out in contiguous groups, so every
+    worker holds a share of every layer and its halos stay between neighbours. Without
+    ``row_load`` (events per sensor row) the groups have equal numbers of cores; with it, they
+    are cut between rows of patches where the cumulative load comes nearest equal shares (a
+    worker's band of rows is its cores' rows: ``shared_bands.band_rows``). Workers that would
+    get nothing are not planned.
     """
     n = max(1, min(int(workers), max((layer.cores for layer in compiled.layers), default=1)))
     cores: list[list[int]] = [[] for _ in range(n)]
     for layer in compiled.layers:
-        indices = [core.index for core in compiled.cores_of(layer.name)]
-        for w, group in enumerate(np.array_split(np.array(indices, dtype=np.int64), n)):
+        layer_cores = compiled.cores_of(layer.name)
+        indices = np.array([core.index for core in layer_cores], dtype=np.int64)
+        cuts = _load_cuts(layer_cores, n, row_load)
+        groups = np.split(indices, cuts) if cuts is not None else np.array_split(indices, n)
+        for w, group in enumerate(groups):
             cores[w].extend(int(i) for i in group)
     return [WorkerPlan(w, tuple(c)) for w, c in enumerate(cores)]
+
+
+def _load_cuts(layer_cores, n: int, row_load: np.ndarray | None) -> list[int] | None:
+    """Where to cut ``layer_cores`` (patch order) into ``n`` groups balanced by ``row_load``: only
+    where a row of patches starts, each group non-empty; None (equal groups) without a load or
+    with fewer rows of patches than groups."""
+    if n < 2 or row_load is None or float(np.sum(row_load)) <= 0:
+        return None
+    starts = [i for i in range(1, len(layer_cores)) if layer_cores[i].y0 != layer_cores[i - 1].y0]
+    if len(starts) < n - 1:
+        return None
+    load = np.concatenate([[0.0], np.cumsum(np.asarray(row_load, dtype=np.float64))])
+    last = len(load) - 1
+
+    def before(i: int) -> float:  # the load of the rows above core i's row of patches
+        return load[min(layer_cores[i].y0, last)]
+
+    total, cuts, j = load[-1], [], -1
+    for k in range(1, n):  # the start nearest the k-th share, after the previous cut, leaving one per later cut
+        j = min(range(j + 1, len(starts) - (n - 1 - k)), key=lambda i: abs(before(starts[i]) - total * k / n))
+        cuts.append(starts[j])
+    return cuts
 
 
 def routing_table(compiled, plans: list[WorkerPlan], layer: str) -> np.ndarray:
