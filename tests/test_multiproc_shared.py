@@ -1,6 +1,7 @@
 """multiproc over shared memory: each worker's cores as one band, the same bytes as fixed, nothing left behind."""
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -31,13 +32,15 @@ def shm():
     return sorted(os.listdir("/dev/shm")) if os.path.isdir("/dev/shm") else []
 
 
-def mapped_buffers() -> list[str]:
-    """Processes that still map or hold one of tofnet's shared buffers (memfds named ``tofnet-*``)."""
+def mapped_buffers(creator: int | None = None) -> list[str]:
+    """Processes that still map one of tofnet's shared buffers (memfds named ``tofnet-*-PID``), of
+    those ``creator`` made if given: other programs on the machine may run tofnet meanwhile."""
     found = []
     for pid in filter(str.isdigit, os.listdir("/proc")):
         try:
             with open(f"/proc/{pid}/maps") as f:
-                if "memfd:tofnet" in f.read():
+                maps = f.read()
+                if "memfd:tofnet" in maps if creator is None else re.search(rf"memfd:tofnet-\w+-{creator}\b", maps):
                     found.append(pid)
         except OSError:
             continue
@@ -148,6 +151,7 @@ def test_kill_9_of_the_parent_mid_run_leaves_no_worker_and_nothing_in_dev_shm(tm
         pids = [int(p) for p in parent.stdout.readline().split()]
         assert len(pids) == 2
         time.sleep(3.0)  # well into the runs: the shared buffers are mapped and in use
+        assert str(parent.pid) in mapped_buffers(parent.pid)
         parent.send_signal(signal.SIGKILL)
         parent.wait(30)
         deadline = time.monotonic() + 30
@@ -160,7 +164,7 @@ def test_kill_9_of_the_parent_mid_run_leaves_no_worker_and_nothing_in_dev_shm(tm
     # the buffers were memfds: never in /dev/shm, and gone with the last process mapping them (other
     # programs on the machine may add their own entries to /dev/shm meanwhile: only tofnet's are checked)
     assert not [name for name in set(shm()) - set(before) if "tofnet" in name or name.startswith("memfd")]
-    assert mapped_buffers() == []
+    assert mapped_buffers(parent.pid) == []
 
 
 def test_kill_9_of_a_worker_mid_run_is_reported_and_releases_the_buffers():

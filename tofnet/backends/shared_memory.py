@@ -23,7 +23,8 @@ class SharedBuffer:
         if not hasattr(os, "memfd_create"):
             raise BackendError("multiproc's shared memory needs Linux (memfd_create); use per_core=True elsewhere")
         self.nbytes = max(int(nbytes), 1)
-        self.fd = os.memfd_create(name, os.MFD_CLOEXEC)
+        # the creator's pid in the name: whose buffer a mapping is (/proc/PID/maps: memfd:NAME-PID)
+        self.fd = os.memfd_create(f"{name}-{os.getpid()}", os.MFD_CLOEXEC)
         try:
             os.ftruncate(self.fd, self.nbytes)
             self.map = mmap.mmap(self.fd, self.nbytes)
