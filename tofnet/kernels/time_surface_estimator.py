@@ -57,7 +57,7 @@ class TimeSurfaceConfig:
     max_rms_px: float = 0.25
     min_spread: float = 0.5
     refractory: float = 0.0
-    refractory_depth: float = 5.0
+    refractory_depth: float = 10.0
     hold_px: float = 3.0
     hold_fit_rms_px: float = 1.0
     behind_depth: float = 10.0

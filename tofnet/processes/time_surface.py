@@ -93,7 +93,7 @@ class TimeSurfaceProcess(Process):
         Param("behind_depth", "length", 10.0, unit="m", doc="fit a first event only when the two pixels just "
               "behind it along the motion fired, in either order, within the time a surface this deep takes to move "
               "that far (an edge crossed them; noise did not; 0: off)", minimum=0.0),
-        Param("refractory_depth", "length", 5.0, unit="m", doc="before a pixel has a fit, its hold is the time a "
+        Param("refractory_depth", "length", 10.0, unit="m", doc="before a pixel has a fit, its hold is the time a "
               "surface this deep takes to move one pixel", minimum=0.0),
         Param("refractory", "duration", 0.0, unit="s", doc="a fixed lower bound on that first hold", minimum=0.0),
         Param("max_hold", "duration", 1.0, unit="s", doc="upper bound of any hold", minimum=0.0),
