@@ -212,6 +212,11 @@ def test_a_bad_parameter_is_one_line_naming_it():
         TimeSurfaceProcess(name="time_surface", min_depth=3, max_depth=2)
     with pytest.raises(NetworkError, match="window"):
         TimeSurfaceProcess(name="time_surface", window=0, window_depth=0)
+    with pytest.raises(NetworkError, match=r"time_surface.radius: coordinates: travel, behind_depth, window_px need "
+                                           r"radius >= 2 .*got 1$"):
+        TimeSurfaceProcess(name="time_surface", radius=1)  # when declared, not at the first event
+    assert TimeSurfaceProcess(name="time_surface", radius=1, coordinates="time", behind_depth=0,
+                              window_px=0).values["radius"] == 1
     vel = VelocityProcess(name="velocity", source="constant", velocity=[0.1, 0, 0])
     surface = TimeSurfaceProcess(name="time_surface", sensor_size=SENSOR, t0=0)
     vel.a_t.connect(surface.a_t)

@@ -19,14 +19,14 @@ from tofnet.kernels.time_surface_estimator import TimeSurfaceConfig, TimeSurface
 from tofnet.models.base import Model, ModelContext, concat, records, take
 from tofnet.processes.time_surface import QUALITY, TimeSurfaceProcess
 
-#: A host process answers in the step after the event (the estimator's ``latency_steps``).
-LATENCY_STEPS = TimeSurfaceProcess.added_latency_steps
+#: A host process answers in the step after the event (the estimator's ``latency_steps``): what its
+#: ``depth`` port declares (``quality`` goes with it).
+LATENCY_STEPS = TimeSurfaceProcess.port_latency_steps("depth")
 #: Process parameters that are ``TimeSurfaceConfig`` fields of the same name and unit.
-CONFIG_PARAMS = ("model", "coordinates", "radius", "ahead_px", "window", "window_depth", "window_px", "turn", "min_points", "min_spread",
-                 "outlier_px", "iterations", "max_rms_px", "trim_px", "hold_px", "hold_fit_rms_px", "behind_depth",
-                 "refractory_depth",
-                 "refractory", "max_hold", "consistency", "consistency_window", "min_depth", "max_depth",
-                 "min_denominator")
+CONFIG_PARAMS = ("model", "coordinates", "radius", "ahead_px", "window", "window_depth", "window_px", "turn",
+                 "min_points", "min_spread", "outlier_px", "iterations", "max_rms_px", "trim_px", "hold_px",
+                 "hold_fit_rms_px", "behind_depth", "refractory_depth", "refractory", "max_hold", "consistency",
+                 "consistency_window", "min_depth", "max_depth", "min_denominator")
 
 
 def config_of(process: TimeSurfaceProcess, ctx: ModelContext) -> TimeSurfaceConfig:

@@ -91,8 +91,8 @@ class TimeSurfaceProcess(Process):
         Param("hold_fit_rms_px", "float", 1.0, unit="px", doc="only a fit at most this far (rms) from its points "
               "sets the pixel's hold: a worse one, e.g. in noise, measured no crossing time", minimum=0.0),
         Param("behind_depth", "length", 10.0, unit="m", doc="fit a first event only when the two pixels just "
-              "behind it along the motion fired, in either order, within the time a surface this deep takes to move "
-              "that far (an edge crossed them; noise did not; 0: off)", minimum=0.0),
+              "behind it along the motion fired, in either order, within the travel (coordinates travel; else the "
+              "time) a surface this deep takes to move that far (an edge crossed them; noise did not; 0: off)", minimum=0.0),
         Param("refractory_depth", "length", 10.0, unit="m", doc="before a pixel has a fit, its hold is the time a "
               "surface this deep takes to move one pixel", minimum=0.0),
         Param("refractory", "duration", 0.0, unit="s", doc="a fixed lower bound on that first hold", minimum=0.0),
@@ -122,6 +122,13 @@ class TimeSurfaceProcess(Process):
                                f"max_depth ({values['max_depth']:g} m)")
         if values["window"] <= 0 and values["window_depth"] <= 0:
             raise NetworkError(f"{self.name}: window (s) or window_depth (m) must be above 0: the fit needs a window")
+        if values["radius"] < 2:  # the two pixels behind an event are read by these
+            needs = [name for name, on in (("coordinates: travel", values["coordinates"] == "travel"),
+                                           ("behind_depth", values["behind_depth"] > 0),
+                                           ("window_px", values["window_px"] > 0)) if on]
+            if needs:
+                raise NetworkError(f"{self.name}.radius: {', '.join(needs)} need radius >= 2 (the two pixels "
+                                   f"behind an event), got {values['radius']}")
         if values["min_denominator"] >= 1.0:
             raise NetworkError(f"{self.name}.min_denominator: expected a share below 1, got "
                                f"{values['min_denominator']:g}")
