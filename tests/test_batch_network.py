@@ -1,0 +1,55 @@
+"""A batch task builds the network `tofnet run RECORDING` builds: the recording's rotation (eq. 7 from
+turning poses) and its lens (A t through the distortion) decide the default network in both."""
+
+import json
+
+import numpy as np
+import pytest
+
+from tofnet.batch import expand, load_plan
+from tofnet.batch.worker import run_task
+from tofnet.cli import main
+from tofnet.io import read_depth
+from tofnet.io.ecd import write_ecd
+from tofnet.io.recording import Intrinsics
+from tofnet.testing import camera_flow, flowing_pattern, turning_trajectory
+
+SIZE = (40, 24)
+PINHOLE = Intrinsics(200.0, 200.0, 19.5, 11.5)
+LENS = Intrinsics(200.0, 200.0, 19.5, 11.5, (-0.05, 0.01, 0.0, 0.0, 0.0))  # a mild radtan lens
+VELOCITY = (-0.45, 0.0, 0.0)
+OMEGA = (0.0, -0.25, 0.0)  # turning left: eq. 8 would read the turn as depth
+DURATION_US = 300_000
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    """A camera translating and turning, with its poses and a distorted lens in calib.txt, as an ECD folder."""
+    folder = tmp_path_factory.mktemp("batch-network")
+    events = flowing_pattern(SIZE, camera_flow(PINHOLE, 1.5, VELOCITY, OMEGA), DURATION_US, seed=21)
+    trajectory = turning_trajectory(VELOCITY, OMEGA, DURATION_US * 1e-6 + 0.05)
+    write_ecd(folder / "turning", events, intrinsics=LENS, sensor_size=SIZE, gt_depth=np.full(len(events), 1.5),
+              times=trajectory.times, positions=trajectory.positions, quaternions=trajectory.quaternions)
+    return folder
+
+
+def test_a_task_on_a_turning_recording_through_a_lens_equals_tofnet_run(folder):
+    (folder / "plan.yaml").write_text("name: t\noutput: out\nrecordings: [turning]\n"
+                                      "grid:\n  refractory: [0]\nkeep: [summary, depth]\n")
+    row = run_task(expand(load_plan(folder / "plan.yaml"))[0])
+    assert row["status"] == "ok", row["error"]
+    out, summary_file = folder / "alone.npz", folder / "alone.json"
+    assert main(["run", str(folder / "turning"), "--refractory", "0", "--out", str(out), "--json",
+                 str(summary_file), "--quiet", "--force"]) == 0
+    alone = json.loads(summary_file.read_text())
+    assert alone["rotation"] == "eq. 7, ω from the ground-truth poses -> depth"  # what the batch must build too
+    assert alone["undistortion"]["velocity"] == "velocity"
+    assert (row["events_in"], row["accepted"], row["tot_spikes"], row["depth_out"]) == \
+        (alone["events_in"], alone["accepted"], alone["tot_spikes"], alone["depth_out"])
+    assert {r: row[f"rejected_{r}"] for r in alone["rejected"]} == alone["rejected"]
+    batch_depth, _ = read_depth(row["depth_file"])
+    alone_depth, _ = read_depth(out)
+    assert len(alone_depth) > 200 and batch_depth.tobytes() == alone_depth.tobytes()
+    assert np.median(batch_depth["z"]) == pytest.approx(1.5, rel=0.05)  # the turn compensated, not read as depth
+    summary = json.loads(open(row["summary_file"]).read())
+    assert summary["counts"] == alone["counts"]
