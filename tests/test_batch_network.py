@@ -53,3 +53,23 @@ def test_a_task_on_a_turning_recording_through_a_lens_equals_tofnet_run(folder):
     assert np.median(batch_depth["z"]) == pytest.approx(1.5, rel=0.05)  # the turn compensated, not read as depth
     summary = json.loads(open(row["summary_file"]).read())
     assert summary["counts"] == alone["counts"]
+
+
+def test_a_networks_estimator_is_tofnet_runs_estimator(folder):
+    (folder / "plan.yaml").write_text("name: t\noutput: out\nrecordings: [turning]\n"
+                                      "networks: [paper, {estimator: improved}]\nkeep: [summary, depth]\n")
+    paper, improved = expand(load_plan(folder / "plan.yaml"))
+    assert (paper.network.name, improved.network.name) == ("paper", "improved")
+    assert improved.task_id.startswith("turning.improved-") and improved.task_id != paper.task_id
+    row = run_task(improved)
+    assert row["status"] == "ok", row["error"]
+    out, summary_file = folder / "improved.npz", folder / "improved.json"
+    assert main(["run", str(folder / "turning"), "--estimator", "improved", "--out", str(out), "--json",
+                 str(summary_file), "--quiet", "--force"]) == 0
+    alone = json.loads(summary_file.read_text())
+    assert "time_surface" in alone["counts"] and (row["events_in"], row["depth_out"]) == \
+        (alone["events_in"], alone["depth_out"])
+    batch_depth, _ = read_depth(row["depth_file"])
+    alone_depth, _ = read_depth(out)
+    assert len(alone_depth) > 100 and batch_depth.tobytes() == alone_depth.tobytes()
+    assert json.loads(open(row["summary_file"]).read())["counts"] == alone["counts"]

@@ -65,7 +65,7 @@ def check_grid(self, plan) -> None:
     for network in plan.networks:
         def fresh():
             return load_network(network.spec, sensor_size=None if network.spec else (240, 180),
-                                allow_import=network.allow_import)[0]
+                                estimator=network.estimator, allow_import=network.allow_import)[0]
         for option, values in plan.grid.items():
             for j, value in enumerate(values):
                 try:

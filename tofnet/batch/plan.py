@@ -65,15 +65,18 @@ class RecordingSource:
 
 @dataclass(frozen=True)
 class NetworkChoice:
-    """One network of a plan: a YAML spec (``spec``; ``None``: the paper's network) and a backend.
+    """One network of a plan: a YAML spec (``spec``; ``None``: the built-in network) and a backend.
 
-    ``allow_import``: the modules its spec may import (``tofnet.io.trust``), given to the workers.
+    ``estimator``: the built-in network without a spec (``tofnet.api.ESTIMATORS``, as ``tofnet run
+    --estimator``; ``None``: the paper's). ``allow_import``: the modules its spec may import
+    (``tofnet.io.trust``), given to the workers.
     """
 
     name: str
     spec: str | None = None
     backend: str | None = None
     allow_import: tuple[str, ...] = ()
+    estimator: str | None = None
 
 
 @dataclass
@@ -333,9 +336,6 @@ class _PlanReader:
                                 f"backend: B}}; got {entry!r}")
             else:
                 self.only(entry, NETWORK_KEYS, path, "a network")
-                if "estimator" in entry:
-                    raise self.fail(entry, "estimator", f"{path}.estimator", "not available in this version; "
-                                    "networks are spec files or 'paper'")
                 container, key = entry, "spec"
             spec = entry.get("spec", PAPER)
             if not isinstance(spec, str) or not spec.strip():
@@ -344,16 +344,31 @@ class _PlanReader:
             if spec != PAPER:
                 resolved = self.resolve(spec)
                 self.load_spec(resolved, container, key, f"{path}.spec" if container is entry else path)
+            estimator = self.estimator(entry, resolved, path) if container is entry else None
             name = self.text(entry, "name", f"{path}.name") if container is entry else None
-            name = name or (PAPER if resolved is None else resolved.stem)
+            name = name or estimator or (PAPER if resolved is None else resolved.stem)
             if name in names:
                 raise self.fail(container, key, path, f"network name {name!r} is already used (line {names[name]}); "
                                 "give this one a name:")
             names[name] = _line(container, key)
             backend = self.backend(entry, "backend", f"{path}.backend") if container is entry else None
             out.append(NetworkChoice(name=name, spec=None if resolved is None else str(resolved), backend=backend,
-                                     allow_import=self.allow))
+                                     allow_import=self.allow, estimator=estimator))
         return out
+
+    def estimator(self, entry: Mapping, spec: Path | None, path: str) -> str | None:
+        """A network entry's ``estimator:`` (``tofnet run --estimator``): a built-in network, so no spec file."""
+        from tofnet.api import ESTIMATORS
+        name = self.text(entry, "estimator", f"{path}.estimator")
+        if name is None:
+            return None
+        if name not in ESTIMATORS:
+            raise self.fail(entry, "estimator", f"{path}.estimator", f"expected one of {', '.join(ESTIMATORS)}, "
+                            f"got {name!r}")
+        if spec is not None:
+            raise self.fail(entry, "estimator", f"{path}.estimator", "picks a built-in network, and a spec names "
+                            "its own processes; give one or the other")
+        return name
 
     def load_spec(self, spec: Path, container: Any, key: Any, path: str) -> None:
         from tofnet.io.spec import load_spec

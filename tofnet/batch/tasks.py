@@ -86,6 +86,8 @@ def make_task_id(recording: RecordingSource, network: NetworkChoice, point: dict
                 "params": {k: _plain(v) for k, v in point.items()}}
     if recording.reading:  # only then: the ids of plans without reading keys stay as they were
         identity["reading"] = recording.options
+    if network.estimator:  # likewise
+        identity["estimator"] = network.estimator
     digest = hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()[:10]
     readable = ".".join([recording.name, network.name, *(f"{k}={_plain(v)}" for k, v in point.items())])
     return f"{_UNSAFE.sub('_', readable)[:120]}-{digest}"

@@ -105,12 +105,12 @@ def _run(task: Task, recording_path: str, folder: Path) -> dict[str, Any]:
 
     options = task.recording.options
     recording = read_recording(recording_path, **open_options(options))
-    # The same network `tofnet run RECORDING [--spec S] [--refractory R ...] [--velocity V]` builds:
+    # The same network `tofnet run RECORDING [--spec S | --estimator E] [--refractory R ...] [--velocity V]` builds:
     # the recording decides the default network's rotation (eq. 7 when it turns) and is checked against
     # a spec's lens handling.
     network, compile_options, spec_backend, backend_options = load_network(
         task.network.spec, sensor_size=None if task.network.spec else recording.sensor_size,
-        recording=recording, allow_import=task.network.allow_import)
+        recording=recording, estimator=task.network.estimator, allow_import=task.network.allow_import)
     parameters = {k: v for k, v in task.parameters.items() if k not in BACKEND_KEYS}
     apply_overrides(network, **parameters)
     if options.get("velocity"):
