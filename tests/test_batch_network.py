@@ -73,3 +73,44 @@ def test_a_networks_estimator_is_tofnet_runs_estimator(folder):
     alone_depth, _ = read_depth(out)
     assert len(alone_depth) > 100 and batch_depth.tobytes() == alone_depth.tobytes()
     assert json.loads(open(row["summary_file"]).read())["counts"] == alone["counts"]
+
+
+@pytest.fixture(scope="module")
+def distorted(tmp_path_factory):
+    """A simulated slider through the DAVIS240C's lens (an ECD folder), and a spec that undistorts its spikes."""
+    from tofnet.io.spec import dump_spec
+    from tofnet.networks import depth_network
+    from tofnet.sim import generate, scenario
+    from tofnet.sim.run import write_result
+    size = (60, 45)
+    config = scenario("slider", 0.25).replace(sensor_size=size)
+    k = config.intrinsics
+    config = config.replace(intrinsics=Intrinsics(k.fx, k.fy, k.cx, k.cy, (-0.368, 0.150, -0.0003, -0.0008, 0.0)))
+    folder = tmp_path_factory.mktemp("batch-lens")
+    write_result(generate(config, seed=0), folder / "slider")
+    (folder / "moved.yaml").write_text(dump_spec(depth_network(size, undistort={})))
+    return folder
+
+
+def test_a_task_with_an_undistort_spec_says_so_and_is_scored_at_the_undistorted_pixels(distorted, capsys):
+    (distorted / "plan.yaml").write_text("name: t\noutput: out\nrecordings: [slider]\nnetworks: [moved.yaml]\n"
+                                         "keep: [summary, metrics, depth]\n")
+    row = run_task(expand(load_plan(distorted / "plan.yaml"))[0])
+    assert row["status"] == "ok", row["error"]
+    out, summary_file = distorted / "alone.npz", distorted / "alone.json"
+    assert main(["run", str(distorted / "slider"), "--spec", str(distorted / "moved.yaml"), "--out", str(out),
+                 "--json", str(summary_file), "--quiet", "--force"]) == 0
+    alone = json.loads(summary_file.read_text())
+    summary = json.loads(open(row["summary_file"]).read())
+    assert alone["undistortion"]["counts"]["passed"] > 1000
+    assert (summary["undistortion"], summary["rotation"]) == (alone["undistortion"], alone["rotation"])
+    batch_depth, batch_meta = read_depth(row["depth_file"])
+    alone_depth, alone_meta = read_depth(out)
+    assert batch_depth.tobytes() == alone_depth.tobytes()
+    # `tofnet eval` and `export` read the lens from the depth file: the batch's file records it as tofnet run's does
+    assert batch_meta["summary"]["undistortion"] == alone_meta["summary"]["undistortion"] is not None
+    capsys.readouterr()
+    assert main(["eval", str(distorted / "slider"), str(out), "--json", "-"]) == 0
+    scored = json.loads(capsys.readouterr().out)
+    assert scored["matched"] == len(alone_depth) > 500 and scored["unmatched"] == 0
+    assert (row["matched"], row["median_abs_m"]) == (scored["matched"], pytest.approx(scored["median_abs_m"]))

@@ -124,6 +124,14 @@ def _run(task: Task, recording_path: str, folder: Path) -> dict[str, Any]:
                     compile_options=compile_options)
     summary = result.summary()
     summary["recording"] = recording_path
+    from argparse import Namespace
+
+    from tofnet.cli.run import lens_of_run, rotation_line, undistortion_of
+    as_run = Namespace(recording=recording_path)  # `tofnet run` without --no-rotation or --no-undistort
+    summary["rotation"] = rotation_line(network, recording, as_run)
+    summary["undistortion"] = undistortion_of(network, recording, result, as_run)
+    summary["notes"] = list(recording.notes)
+    lens = lens_of_run(summary["undistortion"])  # the estimates' pixels are undistorted: scored and recorded so
     out: dict[str, Any] = {
         "backend": backend, "events_in": summary["events_in"], "accepted": summary["accepted"],
         "dropped": sum(summary["dropped"].values()),
@@ -138,24 +146,36 @@ def _run(task: Task, recording_path: str, folder: Path) -> dict[str, Any]:
     meta = {"t0_us": result.t0_us, "timestep_us": result.timestep_us, "latency_steps": result.latency_steps}
     if "metrics" in task.keep and recording.gt_depth is not None:
         from tofnet.eval.metrics import evaluate
-        evaluation = evaluate(recording, result.depth, meta)
+        scored = recording if lens is None else _undistorted(recording, lens, recording_path)
+        evaluation = evaluate(scored, result.depth, meta)
         e = evaluation.errors
         out.update(matched=e.n, coverage_pct=_pct(evaluation.coverage), mean_abs_m=_num(e.mean_abs_m),
                    median_abs_m=_num(e.median_abs_m), mean_rel_pct=_num(e.mean_rel_pct),
                    median_rel_pct=_num(e.median_rel_pct), bias_rel_pct=_num(e.bias_rel_pct),
                    **{k: _num(v) for k, v in evaluation.cutoffs.items()})
         from tofnet.eval.breakdown import breakdown_columns
-        out.update(breakdown_columns(result.depth, evaluation.matches, recording))
+        out.update(breakdown_columns(result.depth, evaluation.matches, scored))
         summary["evaluation"] = evaluation.to_dict()
     if "depth" in task.keep:
         from tofnet.io.depth import write_depth
-        write_depth(folder / DEPTH_FILE, result.depth, summary=summary, **meta)  # atomic itself
+        write_depth(folder / DEPTH_FILE, result.depth, summary={**summary, "undistortion": lens}, **meta)  # atomic
         out["depth_file"] = str(folder / DEPTH_FILE)
     if "summary" in task.keep:
         summary["parameters"] = task.parameters
         write_json(folder / SUMMARY_FILE, summary)
         out["summary_file"] = str(folder / SUMMARY_FILE)
     return out
+
+
+def _undistorted(recording, lens: dict, path: str):
+    """``recording`` with its events moved through ``lens`` (``tofnet eval`` of a depth file that records one)."""
+    from tofnet.eval.undistorted import lens_from_summary, undistorted_recording
+    if recording.frame_gt is not None and recording.frame_gt.pixel_map is not None:
+        from tofnet.errors import DataError
+        raise DataError(f"{path}: the estimates are at undistorted pixels, the ground truth is placed through the "
+                        "rectification map from raw pixels; use rectify: true and a network without an undistort "
+                        "process instead")
+    return undistorted_recording(recording, *lens_from_summary(lens))
 
 
 def is_complete(task: Task) -> dict | None:
