@@ -7,7 +7,7 @@ from typing import Any
 
 from tofnet.backends.base import ProgressCallback, RunResult
 from tofnet.core.network import Network
-from tofnet.errors import NetworkError
+from tofnet.errors import NetworkError, TofnetError
 from tofnet.io.recording import Recording
 from tofnet.networks import DEFAULT_SENSOR_SIZE, depth_network, improved_network
 from tofnet.processes import (AngularVelocityProcess, InputProcess, TimeOfTravelProcess, TimeSurfaceProcess,
@@ -63,7 +63,6 @@ def check_lens_once(network: Network, recording: Recording | None, source: str) 
     """Refuse a network that would correct a distorted lens twice: spikes moved to undistorted
     pixels (an ``UndistortProcess``) and a velocity process that also takes the lens into account."""
     from tofnet.models.binding import camera_of
-    from tofnet.errors import TofnetError
 
     moved = network.of_type(UndistortProcess)
     if not moved:
@@ -108,6 +107,58 @@ def _rotation_source_text(process: AngularVelocityProcess) -> str:
     if process.source == "samples":
         return f"samples ({process.samples})"
     return f"a constant ω = {list(process.omega)} rad/s"
+
+
+def rotation_line(network: Network, recording: Recording, no_rotation: bool = False) -> str | None:
+    """Where the depth neurons take the camera's rotation from, or why they do not (None: nothing to say);
+    ``no_rotation``: the user turned it off (``--no-rotation``)."""
+    used = rotation_summary(network)
+    if used is not None:
+        return used
+    found = rotation_source_of(recording)
+    if found is None:
+        return None
+    why = "--no-rotation" if no_rotation else "the spec has no angular velocity process"
+    return (f"not compensated (eq. 8: {why}), although the recording has "
+            f"{'turning poses' if found == 'groundtruth' else 'a gyroscope (imu.txt)'}")
+
+
+def undistortion_of(network: Network, recording: Recording, result, recording_name: str,
+                    no_undistort: bool = False) -> dict | None:
+    """How the network treated the lens: through the velocity term (raw pixels), by moving spikes
+    (an undistort process), or not at all; None when there is no lens to speak of. ``recording_name``
+    names the recording in errors; ``no_undistort``: the user turned it off (``--no-undistort``)."""
+    from tofnet.models.binding import camera_of
+    from tofnet.processes import VelocityProcess
+
+    found = network.of_type(UndistortProcess)
+    if found:
+        lens = found[0].lens(recording.intrinsics, recording_name)
+        return {"ran": True, "process": found[0].name, "model": lens.distortion_model,
+                "coefficients": list(lens.distortion), "intrinsics": [lens.fx, lens.fy, lens.cx, lens.cy],
+                "sensor_size": list(found[0].sensor_size), "counts": dict(result.counts.get(found[0].name, {}))}
+    for process in network.of_type(VelocityProcess):
+        try:
+            camera = camera_of(process.intrinsics, process.distortion_model, process.distortion, recording,
+                               process.name)
+        except TofnetError:
+            continue
+        if any(c != 0 for c in camera.distortion):
+            return {"ran": True, "velocity": process.name, "model": camera.distortion_model,
+                    "coefficients": list(camera.distortion)}
+    if not lens_is_distorted(recording):
+        return None
+    why = "--no-undistort" if no_undistort else "the spec's velocity process ignores it"
+    return {"ran": False, "why": why, "model": recording.intrinsics.distortion_model,
+            "coefficients": list(recording.intrinsics.distortion)}
+
+
+def lens_of_run(undistortion: dict | None) -> dict | None:
+    """What a depth file records of the undistortion (``tofnet export`` and ``eval`` read it): the lens
+    the estimates' pixels were moved with by an undistort process, or None for raw pixels."""
+    if not (undistortion or {}).get("process"):
+        return None
+    return {key: undistortion[key] for key in ("model", "coefficients", "intrinsics", "sensor_size")}
 
 
 def load_network(spec: str | Path | None = None, *, sensor_size: tuple[int, int] | None = None,

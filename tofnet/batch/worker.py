@@ -124,12 +124,11 @@ def _run(task: Task, recording_path: str, folder: Path) -> dict[str, Any]:
                     compile_options=compile_options)
     summary = result.summary()
     summary["recording"] = recording_path
-    from argparse import Namespace
+    from tofnet.api import lens_of_run, rotation_line, undistortion_of
 
-    from tofnet.cli.run import lens_of_run, rotation_line, undistortion_of
-    as_run = Namespace(recording=recording_path)  # `tofnet run` without --no-rotation or --no-undistort
-    summary["rotation"] = rotation_line(network, recording, as_run)
-    summary["undistortion"] = undistortion_of(network, recording, result, as_run)
+    # as `tofnet run` without --no-rotation or --no-undistort
+    summary["rotation"] = rotation_line(network, recording)
+    summary["undistortion"] = undistortion_of(network, recording, result, recording_path)
     summary["notes"] = list(recording.notes)
     lens = lens_of_run(summary["undistortion"])  # the estimates' pixels are undistorted: scored and recorded so
     out: dict[str, Any] = {

@@ -8,7 +8,7 @@ import logging
 import time
 from pathlib import Path
 
-from tofnet.errors import BackendError, TofnetError
+from tofnet.errors import BackendError
 from tofnet.units import format_steps
 
 
@@ -112,7 +112,7 @@ def build_network(args, recording_sensor_size, recording=None):
 
 
 def handle(args) -> int:
-    from tofnet.api import DEFAULT_BACKEND, run, run_source
+    from tofnet.api import DEFAULT_BACKEND, rotation_line, run, run_source, undistortion_of
     from tofnet.cli.inputs import input_options
     from tofnet.cli.outputs import check_more_outputs, check_run_outputs
     from tofnet.cli.progress import Progress
@@ -148,8 +148,9 @@ def handle(args) -> int:
     out = Path(args.out)
     summary = result.summary()
     summary["recording"] = str(args.recording)
-    summary["rotation"] = rotation_line(network, recording, args)
-    summary["undistortion"] = undistortion_of(network, recording, result, args)
+    summary["rotation"] = rotation_line(network, recording, no_rotation=getattr(args, "no_rotation", False))
+    summary["undistortion"] = undistortion_of(network, recording, result, str(args.recording),
+                                              no_undistort=getattr(args, "no_undistort", False))
     summary["notes"] = list(recording.notes)
     summary["total_time_s"] = time.perf_counter() - clock.started
     summary["compile_time_s"], summary["kernels_compiled"] = clock.compile_seconds, clock.compiled
@@ -171,58 +172,6 @@ def compile_line(seconds: float, count: int) -> str:
             "(first run only: numba caches them; 'tofnet warmup' does it ahead)")
 
 
-def rotation_line(network, recording, args) -> str | None:
-    """Where the depth neurons take the camera's rotation from, or why they do not (None: nothing to say)."""
-    from tofnet.api import rotation_source_of, rotation_summary
-
-    used = rotation_summary(network)
-    if used is not None:
-        return used
-    found = rotation_source_of(recording)
-    if found is None:
-        return None
-    why = "--no-rotation" if getattr(args, "no_rotation", False) else "the spec has no angular velocity process"
-    return (f"not compensated (eq. 8: {why}), although the recording has "
-            f"{'turning poses' if found == 'groundtruth' else 'a gyroscope (imu.txt)'}")
-
-
-def undistortion_of(network, recording, result, args) -> dict | None:
-    """How the network treated the lens: through the velocity term (raw pixels), by moving spikes
-    (an undistort process), or not at all; None when there is no lens to speak of."""
-    from tofnet.api import lens_is_distorted
-    from tofnet.models.binding import camera_of
-    from tofnet.processes import UndistortProcess, VelocityProcess
-
-    found = network.of_type(UndistortProcess)
-    if found:
-        lens = found[0].lens(recording.intrinsics, str(args.recording))
-        return {"ran": True, "process": found[0].name, "model": lens.distortion_model,
-                "coefficients": list(lens.distortion), "intrinsics": [lens.fx, lens.fy, lens.cx, lens.cy],
-                "sensor_size": list(found[0].sensor_size), "counts": dict(result.counts.get(found[0].name, {}))}
-    for process in network.of_type(VelocityProcess):
-        try:
-            camera = camera_of(process.intrinsics, process.distortion_model, process.distortion, recording,
-                               process.name)
-        except TofnetError:
-            continue
-        if any(c != 0 for c in camera.distortion):
-            return {"ran": True, "velocity": process.name, "model": camera.distortion_model,
-                    "coefficients": list(camera.distortion)}
-    if not lens_is_distorted(recording):
-        return None
-    why = "--no-undistort" if getattr(args, "no_undistort", False) else "the spec's velocity process ignores it"
-    return {"ran": False, "why": why, "model": recording.intrinsics.distortion_model,
-            "coefficients": list(recording.intrinsics.distortion)}
-
-
-def lens_of_run(undistortion: dict | None) -> dict | None:
-    """What a depth file records of the undistortion (``tofnet export`` and ``eval`` read it): the lens
-    the estimates' pixels were moved with by an undistort process, or None for raw pixels."""
-    if not (undistortion or {}).get("process"):
-        return None
-    return {key: undistortion[key] for key in ("model", "coefficients", "intrinsics", "sensor_size")}
-
-
 def undistortion_line(undistortion: dict) -> str:
     """The summary's line on the lens."""
     lens = f"{undistortion['model']} {' '.join(f'{c:.4g}' for c in undistortion['coefficients'])}"
@@ -240,6 +189,7 @@ def write_outputs(out: Path, result, summary: dict, record_tot: bool, check=None
     probe (``OUT.<process>.<port>.npz``); the time-of-travel spikes of ``--record-tot`` to ``OUT_tot.npz``.
     ``check(paths)``, when given, sees every file name before anything is written.
     Returns output name -> file."""
+    from tofnet.api import lens_of_run
     from tofnet.io.depth import write_depth
     from tofnet.io.npy import write_npz
 
