@@ -289,3 +289,26 @@ def test_ros_bag_windows_stop_at_the_end(tmp_path, recording):
     inside = np.linspace(first + 120_000, first + 149_999, 5) * 1e-6
     whole = read_recording(tmp_path / "r.bag")
     assert np.allclose(read.trajectory.velocity_at(inside), whole.trajectory.velocity_at(inside), rtol=0, atol=0)
+
+
+def test_a_text_window_survives_a_profiler_holding_its_frames(tmp_path, recording, monkeypatch):
+    # Dask's profiler keeps the running task's frames; a finished frame keeps its views of the map,
+    # which then cannot close. The read must still return its events (this failed a batch task).
+    import sys
+
+    import tofnet.io.text_window as text_window
+    from tofnet.io.events import write_events_txt
+
+    write_events_txt(tmp_path / "events.txt", recording.events)
+    held = []
+    search = text_window._window
+
+    def sampled(buf, *args):
+        held.append(sys._getframe())  # as a sampler would: this frame keeps ``buf``
+        return search(buf, *args)
+
+    monkeypatch.setattr(text_window, "_window", sampled)
+    first = int(recording.events["t"][0])
+    read = read_recording(tmp_path / "events.txt", window=parse_window(start="100ms", duration="50ms"))
+    assert len(held) == 1
+    assert np.array_equal(read.events, _expected(recording.events, first + 100_000, first + 150_000))

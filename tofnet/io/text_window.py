@@ -38,14 +38,17 @@ def read_text_window(path: str | Path, window, notes: list[str]) -> tuple[np.nda
         size = handle.seek(0, 2)
         if size == 0:
             return read_events_txt(path, notes), 0, 0  # the reader's message for an empty file
-        with mmap.mmap(handle.fileno(), 0, access=mmap.ACCESS_READ) as mapped:
+        mapped = mmap.mmap(handle.fileno(), 0, access=mmap.ACCESS_READ)
+        try:
             buf = np.frombuffer(mapped, dtype=np.uint8)
             try:
                 return _window(buf, window, notes, path)
             except _Fallback:
                 pass
             finally:
-                del buf  # the map cannot close while a view of it lives
+                del buf
+        finally:
+            _close(mapped)
     events = read_events_txt(path, notes)
     first, last = int(events["t"][0]), int(events["t"][-1])
     start, stop = window.resolve(first)
@@ -53,6 +56,15 @@ def read_text_window(path: str | Path, window, notes: list[str]) -> tuple[np.nda
     lo = int(np.searchsorted(t, start))
     hi = len(t) if stop is None else max(int(np.searchsorted(t, stop)), lo)
     return events[lo:hi], first, last
+
+
+def _close(mapped: mmap.mmap) -> None:
+    """Unmap now, or when the last view of the map dies: a view can outlive the read in a frame
+    someone else holds (Dask's profiler samples the running task's frames, for one)."""
+    try:
+        mapped.close()
+    except BufferError:
+        pass
 
 
 def _window(buf: np.ndarray, window, notes: list[str], path: Path) -> tuple[np.ndarray, int, int]:
