@@ -65,6 +65,10 @@ def test_eval_of_a_csv_needs_the_timing(files, capsys):
     assert main(["eval", str(files / "rec"), str(files / "depth.csv"), "--timestep", "1ms",
                  "--latency-steps", "2", "--json", "-"]) == 0
     assert json.loads(capsys.readouterr().out)["mean_abs_m"] == pytest.approx(1.3 / 3)
+    # the step as given, not as a float product (7 ms once read 0.006999999999999999)
+    assert main(["eval", str(files / "rec"), str(files / "depth.csv"), "--timestep", "7ms",
+                 "--latency-steps", "2", "--json", "-"]) == 0
+    assert json.loads(capsys.readouterr().out)["timestep_s"] == 0.007
 
 
 def test_eval_refuses_options_that_contradict_the_file(files, capsys):

@@ -16,6 +16,16 @@ _LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 _NUMBER_WITH_UNIT = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([a-zµ]*)\s*$")
 
 
+def microseconds(seconds: float) -> int:
+    """``seconds`` as whole microseconds (events are stamped in µs): the one conversion."""
+    return int(round(seconds * 1e6))
+
+
+def seconds_of(us: int) -> float:
+    """``us`` microseconds as seconds, ``us / 1e6``: the one conversion back (models, fused path, results)."""
+    return us / 1e6
+
+
 def _parse(value: object, units: dict[str, float], default_unit: str, what: str) -> float:
     """A finite number in the base unit; NaN, infinities and overflowing values are refused."""
     if isinstance(value, bool):

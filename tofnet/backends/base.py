@@ -10,7 +10,7 @@ import numpy as np
 
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE
-from tofnet.kernels.kernel_config import seconds_of
+from tofnet.units import seconds_of
 
 #: Summary keys that depend on how and where a run went, not on what it computed.
 RUN_SPECIFIC = ("backend", "wall_time_s", "compile_time_s", "kernels_compiled", "workers")

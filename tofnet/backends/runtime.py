@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from tofnet.core.network import Network
 from tofnet.errors import NetworkError
 from tofnet.io.recording import Recording
-from tofnet.kernels.kernel_config import microseconds
+from tofnet.units import microseconds
 
 #: The network's timestep when no process declares one (seconds).
 DEFAULT_TIMESTEP = 1e-3

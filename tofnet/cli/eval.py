@@ -67,7 +67,7 @@ def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = 
     """
     from tofnet.io import read_depth
     from tofnet.io.source import open_recording
-    from tofnet.units import seconds
+    from tofnet.units import microseconds, seconds
 
     with open_recording(recording_path, window=window, allow_external=allow_external, side=side,
                         rectify=rectify) as source:
@@ -78,7 +78,7 @@ def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = 
     given = {}
     from tofnet.processes.input import MAX_PERIOD_S
     if timestep is not None:
-        given["timestep_us"] = int(round(seconds(timestep, "--timestep", limit=MAX_PERIOD_S) * 1e6))
+        given["timestep_us"] = microseconds(seconds(timestep, "--timestep", limit=MAX_PERIOD_S))
         if given["timestep_us"] <= 0:
             raise TofnetError(f"--timestep must be positive, got {quote(timestep)}")
     if latency_steps is not None:

@@ -42,7 +42,7 @@ def handle(args) -> int:
     from tofnet.cli.inputs import camera_options, window_option
     from tofnet.core.params import parse_size
     from tofnet.io.depth import read_depth
-    from tofnet.units import seconds
+    from tofnet.units import microseconds, seconds
 
     if not args.maps and not args.ply:
         raise TofnetError("nothing to do: give --maps DIR and/or --ply FILE")
@@ -69,8 +69,8 @@ def handle(args) -> int:
         (recording.sensor_size or (240, 180))
     if args.maps:
         from tofnet.io.maps import depth_maps, write_depth_maps
-        window_us = int(round(seconds(args.window, "--window") * 1e6))
-        max_age_us = int(round(seconds(args.max_age, "--max-age") * 1e6)) if args.max_age else None
+        window_us = microseconds(seconds(args.window, "--window"))
+        max_age_us = microseconds(seconds(args.max_age, "--max-age")) if args.max_age else None
         done = write_depth_maps(depth_maps(depth, sensor, window_us, t0_us=meta.get("t0_us"),
                                            max_age_us=max_age_us), args.maps, png=not args.no_png)
         print(f"maps           {done['windows']} windows of {args.window} -> {Path(args.maps)}/ (index.csv)")

@@ -17,7 +17,7 @@ import numpy as np
 
 from tofnet.errors import DataError
 from tofnet.eval.match import Matches, input_steps, match_estimates
-from tofnet.units import format_seconds
+from tofnet.units import format_seconds, seconds_of
 
 #: Metadata a depth file must carry to be matched to its input events.
 TIMING_KEYS = ("t0_us", "timestep_us", "latency_steps")
@@ -116,7 +116,7 @@ class Evaluation:
                 "matched": self.matched, "unmatched": self.unmatched, "gt_invalid": self.gt_invalid,
                 "coverage": _number(self.coverage), **self.errors.to_dict(),
                 **{k: _number(v) for k, v in self.cutoffs.items()}, "ground_truth": self.ground_truth,
-                "t0_us": self.t0_us, "timestep_s": self.timestep_us * 1e-6,
+                "t0_us": self.t0_us, "timestep_s": seconds_of(self.timestep_us),
                 "latency_steps": self.latency_steps, "window_s": self.window_s,
                 "windows": [w.to_dict() for w in self.windows]}
 
@@ -125,7 +125,7 @@ class Evaluation:
 
     def table(self, *, windows: bool = True) -> str:
         """A readable text report: totals, the paper's four errors, then one row per window."""
-        dt = self.timestep_us * 1e-6
+        dt = seconds_of(self.timestep_us)
         lines = [f"source        {self.source}",
                  f"ground truth  {self.ground_truth}",
                  f"timing        step {format_seconds(dt)}, latency {self.latency_steps} steps "

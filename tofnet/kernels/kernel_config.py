@@ -14,6 +14,7 @@ import numpy as np
 from tofnet.errors import BackendError
 from tofnet.kernels.fixed_point import FixedPointFormat
 from tofnet.kernels.lens import SAMPLE_COLUMNS, Lens, sample_table
+from tofnet.units import microseconds, seconds_of  # noqa: F401 - microseconds: the kernels' settings import it from here
 
 
 @dataclass(frozen=True)
@@ -47,16 +48,6 @@ class Region:
 def counter_max(counter_bits: int) -> int:
     """Largest counter value before it overflows to 0: ``2**counter_bits - 1`` (steps)."""
     return (1 << int(counter_bits)) - 1
-
-
-def microseconds(seconds: float) -> int:
-    """``seconds`` as whole microseconds (events are stamped in µs): the one conversion."""
-    return int(round(seconds * 1e6))
-
-
-def seconds_of(us: int) -> float:
-    """``us`` microseconds as seconds, ``us / 1e6``: the one conversion back (models, fused path, results)."""
-    return us / 1e6
 
 
 def seconds_per_count(timestep_us: int, distance: int) -> float:

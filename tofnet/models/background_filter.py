@@ -8,11 +8,12 @@ from tofnet.core.ports import Payload
 from tofnet.kernels.background_filter import NEVER_STEP, filter_spikes
 from tofnet.models.base import Model, ModelContext, StepModel
 from tofnet.processes import BackgroundActivityFilterProcess
+from tofnet.units import microseconds
 
 
 def window_steps(process: BackgroundActivityFilterProcess, ctx: ModelContext) -> int:
     """The process's ``window`` in whole steps (rounded half up)."""
-    return int(process.window * 1e6 / ctx.timestep_us + 0.5)
+    return int(microseconds(process.window) / ctx.timestep_us + 0.5)
 
 
 class BackgroundFilterStepModel(StepModel):

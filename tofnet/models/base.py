@@ -18,7 +18,7 @@ import numpy as np
 
 from tofnet.core.process import Process
 from tofnet.errors import BackendError
-from tofnet.kernels.kernel_config import seconds_of
+from tofnet.units import seconds_of
 from tofnet.kernels.region import Region
 
 FAMILIES = ("reference", "float", "fixed")

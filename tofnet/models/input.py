@@ -7,7 +7,8 @@ import numpy as np
 from tofnet.core.counters import names_of
 from tofnet.core.ports import Payload
 from tofnet.errors import BackendError
-from tofnet.kernels.kernel_config import InputFilterSettings, microseconds
+from tofnet.kernels.kernel_config import InputFilterSettings
+from tofnet.units import microseconds
 from tofnet.kernels.input_filter import ACCEPTED, NEVER, REFRACTORY, InputFilter, first_out_of_order
 from tofnet.models.base import Model, ModelContext, concat, records
 from tofnet.processes import InputProcess
