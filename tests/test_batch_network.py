@@ -75,6 +75,28 @@ def test_a_networks_estimator_is_tofnet_runs_estimator(folder):
     assert json.loads(open(row["summary_file"]).read())["counts"] == alone["counts"]
 
 
+def test_rotation_and_undistort_false_are_tofnet_runs_no_rotation_and_no_undistort(folder):
+    (folder / "plan.yaml").write_text("name: t\noutput: out\nrecordings: [turning]\nnetworks:\n  - paper\n"
+                                      "  - {spec: paper, name: plain, rotation: false, undistort: false}\n"
+                                      "grid:\n  refractory: [0]\nkeep: [summary, depth]\n")
+    paper, plain = expand(load_plan(folder / "plan.yaml"))
+    assert plain.task_id != paper.task_id
+    row = run_task(plain)
+    assert row["status"] == "ok", row["error"]
+    out, summary_file = folder / "plain.npz", folder / "plain.json"
+    assert main(["run", str(folder / "turning"), "--refractory", "0", "--no-rotation", "--no-undistort", "--out",
+                 str(out), "--json", str(summary_file), "--quiet", "--force"]) == 0
+    alone = json.loads(summary_file.read_text())
+    summary = json.loads(open(row["summary_file"]).read())
+    assert "--no-rotation" in alone["rotation"] and summary["rotation"] == alone["rotation"]
+    assert summary["undistortion"] == alone["undistortion"] and "--no-undistort" in json.dumps(alone["undistortion"])
+    batch_depth, _ = read_depth(row["depth_file"])
+    alone_depth, _ = read_depth(out)
+    assert len(alone_depth) > 200 and batch_depth.tobytes() == alone_depth.tobytes()
+    with_turn, _ = read_depth(run_task(paper)["depth_file"])
+    assert with_turn.tobytes() != batch_depth.tobytes()  # the switches changed the network
+
+
 @pytest.fixture(scope="module")
 def distorted(tmp_path_factory):
     """A simulated slider through the DAVIS240C's lens (an ECD folder), and a spec that undistorts its spikes."""

@@ -72,6 +72,8 @@ def test_task_ids_survive_an_edit_of_the_plan_and_change_with_what_a_task_comput
     ("recordings: [a.npy]\nnetworks: [{estimator: improved}]\ngrid:\n  refractory: [0]\n", 4,
      "grid.refractory[0]: 0 for network 'improved': --refractory: the network has no InputProcess"),
     ("recordings: [a.npy]\nbackend: quantum\n", 2, "unknown backend 'quantum'"),
+    ("recordings: [a.npy]\nnetworks:\n  - {spec: paper,\n     rotation: 'false'}\n", 4,
+     "networks[0].rotation: expected true or false (false: as tofnet run --no-rotation), got 'false'"),
     ("recordings: [a.npy]\nkeep: [depth, everything]\n", 2, "keep[1]"),
     ("recordings: [a.npy]\ngrid:\n  speed: [1, 2]\n", 3, "grid.speed: unknown option"),
     ("recordings: [a.npy]\ngrid:\n  refractory:\n    - 20ms\n    - fast\n", 5, "grid.refractory[1]: 'fast'"),

@@ -27,7 +27,7 @@ TOP_KEYS = ("name", "description", "output", "cache", "recordings", "networks", 
 PATH_KEYS = ("path", "name", *READ_KEYS)
 GLOB_KEYS = ("glob", *READ_KEYS)
 SCENARIO_KEYS = ("scenario", "name", "duration", "seed", "sensor_size")
-NETWORK_KEYS = ("spec", "name", "backend", "estimator")
+NETWORK_KEYS = ("spec", "name", "backend", "estimator", "rotation", "undistort")
 KEEP = ("summary", "metrics", "depth")
 DEFAULT_KEEP = ("summary", "metrics")
 PAPER = "paper"
@@ -69,7 +69,8 @@ class NetworkChoice:
 
     ``estimator``: the built-in network without a spec (``tofnet.api.ESTIMATORS``, as ``tofnet run
     --estimator``; ``None``: the paper's). ``allow_import``: the modules its spec may import
-    (``tofnet.io.trust``), given to the workers.
+    (``tofnet.io.trust``), given to the workers. ``rotation`` / ``undistort`` False: as ``tofnet run
+    --no-rotation`` / ``--no-undistort``.
     """
 
     name: str
@@ -77,6 +78,8 @@ class NetworkChoice:
     backend: str | None = None
     allow_import: tuple[str, ...] = ()
     estimator: str | None = None
+    rotation: bool = True
+    undistort: bool = True
 
 
 @dataclass
@@ -352,9 +355,19 @@ class _PlanReader:
                                 "give this one a name:")
             names[name] = _line(container, key)
             backend = self.backend(entry, "backend", f"{path}.backend") if container is entry else None
+            switches = {key: self.switch(entry, key, f"{path}.{key}") for key in ("rotation", "undistort")
+                        if container is entry}
             out.append(NetworkChoice(name=name, spec=None if resolved is None else str(resolved), backend=backend,
-                                     allow_import=self.allow, estimator=estimator))
+                                     allow_import=self.allow, estimator=estimator, **switches))
         return out
+
+    def switch(self, entry: Mapping, key: str, path: str) -> bool:
+        """A network entry's ``rotation:`` / ``undistort:`` (true or false; default true)."""
+        value = entry.get(key, True)
+        if not isinstance(value, bool):
+            raise self.fail(entry, key, path, f"expected true or false (false: as tofnet run --no-{key}), "
+                            f"got {value!r}")
+        return value
 
     def estimator(self, entry: Mapping, spec: Path | None, path: str) -> str | None:
         """A network entry's ``estimator:`` (``tofnet run --estimator``): a built-in network, so no spec file."""

@@ -88,6 +88,9 @@ def make_task_id(recording: RecordingSource, network: NetworkChoice, point: dict
         identity["reading"] = recording.options
     if network.estimator:  # likewise
         identity["estimator"] = network.estimator
+    for switch in ("rotation", "undistort"):
+        if not getattr(network, switch):  # likewise: only when turned off
+            identity[switch] = False
     digest = hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()[:10]
     readable = ".".join([recording.name, network.name, *(f"{k}={_plain(v)}" for k, v in point.items())])
     return f"{_UNSAFE.sub('_', readable)[:120]}-{digest}"

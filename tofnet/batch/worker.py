@@ -110,7 +110,8 @@ def _run(task: Task, recording_path: str, folder: Path) -> dict[str, Any]:
     # a spec's lens handling.
     network, compile_options, spec_backend, backend_options = load_network(
         task.network.spec, sensor_size=None if task.network.spec else recording.sensor_size,
-        recording=recording, estimator=task.network.estimator, allow_import=task.network.allow_import)
+        recording=recording, rotation=task.network.rotation, undistort=task.network.undistort,
+        estimator=task.network.estimator, allow_import=task.network.allow_import)
     parameters = {k: v for k, v in task.parameters.items() if k not in BACKEND_KEYS}
     apply_overrides(network, **parameters)
     if options.get("velocity"):
@@ -126,9 +127,9 @@ def _run(task: Task, recording_path: str, folder: Path) -> dict[str, Any]:
     summary["recording"] = recording_path
     from tofnet.api import lens_of_run, rotation_line, undistortion_of
 
-    # as `tofnet run` without --no-rotation or --no-undistort
-    summary["rotation"] = rotation_line(network, recording)
-    summary["undistortion"] = undistortion_of(network, recording, result, recording_path)
+    summary["rotation"] = rotation_line(network, recording, no_rotation=not task.network.rotation)
+    summary["undistortion"] = undistortion_of(network, recording, result, recording_path,
+                                              no_undistort=not task.network.undistort)
     summary["notes"] = list(recording.notes)
     lens = lens_of_run(summary["undistortion"])  # the estimates' pixels are undistorted: scored and recorded so
     out: dict[str, Any] = {
