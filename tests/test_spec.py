@@ -66,7 +66,7 @@ def every_parameter_changed() -> Network:
                                  intrinsics=[200.0, 201.5, 31.5, 23.5])
     surf = TimeSurfaceProcess(name="ts", sensor_size=(64, 48), timestep="250us", t0=1.5, model="plane", radius=2, coordinates="time",
                               ahead_px=0.5, window="30ms", window_depth=4.0, window_px=5.0, turn=0.3, min_points=6, min_spread=0.4,
-                              outlier_px=0.3, iterations=4, max_rms_px=0.2, trim_px=0.5, hold_px=2.0,
+                              outlier_px=0.3, iterations=4, max_rms_px=0.2, trim_px=0.5, hold_px=2.0, burst_ratio=3.0,
                               hold_fit_rms_px=0.8, behind_depth="8m", refractory_depth="8m", refractory="1ms", max_hold=0.5,
                               consistency=0.2, consistency_window="100ms", min_depth="10cm", max_depth=15.0,
                               min_denominator=0.2)

@@ -3,7 +3,7 @@
 The numba core of the time-surface estimator; the streaming API and the parameters are in
 ``tofnet.kernels.time_surface_estimator``. Per pixel and polarity the state holds the time
 (µs) of the last *first event* of an edge: the surface ``T(u, v)``. Per event: the
-first-event rule (a burst's later events are dropped), gather the first events the edge
+first-event rule (``time_surface_first``: a burst's later events are dropped), gather the first events the edge
 has crossed, fit the time along the image motion (``fit_rows`` or ``fit_plane``), check the
 fit, and ``Z = (A t)·∇T`` (``∇T`` s/px, the depth neuron's ``td``), or eq. 7 with a
 rotation. With ``I_TRAVEL`` (``coordinates="travel"``, the default) the fit takes the camera's
@@ -22,13 +22,13 @@ from numba import njit
 
 from tofnet.kernels.time_of_travel import prefetch
 from tofnet.kernels.rotation import rotational_flow
+from tofnet.kernels.time_surface_first import N_B, NEVER, first_event
 from tofnet.kernels.time_surface_fit import FIT_ILL_CONDITIONED, FIT_OVER_RMS, FIT_TOO_FEW, fit_plane, fit_rows
 from tofnet.kernels.time_surface_gather import behind_steps, gather, time_window, trimmed_plane
 from tofnet.kernels.time_surface_travel import (RING, S_CHANGE, S_FIRST, advance, pace, since_reversal, to_travel,
                                                 travel_at)
 from tofnet.kernels.velocity import sampled_velocity_term, velocity_term
 
-NEVER = -(1 << 62)  # "no first event yet" (µs)
 
 #: Count slots: where each event ended. Drops of events, rejections of estimates, emitted.
 (OUT_OF_BOUNDS, BEFORE_T0, BURST, NO_MOTION, NOTHING_BEHIND, TOO_FEW_POINTS, ILL_CONDITIONED, BAD_FIT,
@@ -45,7 +45,8 @@ REJECT_SLOTS = tuple(range(NO_MOTION, EMITTED))  # a first event whose estimate 
  I_TRAVEL, N_IP) = range(19)
 (F_FX, F_FY, F_CX, F_CY, F_OUTLIER, F_MAX_RMS, F_MIN_SPREAD, F_MIN_DEPTH, F_MAX_DEPTH, F_MIN_DENOMINATOR,
  F_WINDOW_DEPTH, F_REFRACTORY_REACH, F_CONSISTENCY, F_HOLD_PX, F_AHEAD_PX, F_TURN, F_TRIM_PX,
- F_RFX, F_RFY, F_RCX, F_RCY, F_HOLD_RMS, F_BEHIND_REACH, F_WINDOW_PX, N_FP) = range(25)  # F_R*: B ω's intrinsics
+ F_RFX, F_RFY, F_RCX, F_RCY, F_HOLD_RMS, F_BEHIND_REACH, F_WINDOW_PX, F_BURST_RATIO,
+ N_FP) = range(26)  # F_R*: B ω's intrinsics
 # F_*_REACH: a depth (m) times 1e6 µs/s; over |A t| (px m/s) it is the time (µs) per pixel of a surface that deep.
 # Motion state: the velocity the current epoch started with, its start (µs), the last update seen.
 M_VX, M_VY, M_VZ, M_SINCE, M_UPDATE, N_MOTION = range(6)
@@ -108,14 +109,15 @@ def _turn_gains(x, y, fu, fv, rfx, rfy, rcx, rcy):
 
 
 @njit(cache=True)
-def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, ring, ring_state, sample_of, points,
-            velocity, first_update, ps_, pw, pt, pg, lines, used, counts, out, quality, n_out, index0, t_hi):
+def process(ts, xs, ys, ps, ip, fp, surface, hold, bursts, prev, last_step, motion, ring, ring_state, sample_of,
+            points, velocity, first_update, ps_, pw, pt, pg, lines, used, counts, out, quality, n_out, index0, t_hi):
     """Run time-ordered events through the estimator; returns ``(n_out, status, t_hi)``.
 
     ``surface[p, (y + r) * (w + 2r) + x + r]`` is the last first event (µs) of pixel (x, y) and
     polarity p (one plane per polarity, so a fit reads one cache line per row; a border of
     ``r = radius`` pixels stays ``NEVER``); ``hold[y * w + x, p]`` its measured hold (µs, 0 =
-    none yet); ``prev[y * w + x]`` the pixel's last estimate (z, t) for the consistency rule;
+    none yet); ``bursts[y * w + x, p]`` the first-event rule's state (``time_surface_first``);
+    ``prev[y * w + x]`` the pixel's last estimate (z, t) for the consistency rule;
     ``last_step[y * w + x]`` the output step of its last estimate (at most one per pixel and step);
     ``ring`` the camera's displacement per input step and ``ring_state`` (``time_surface_travel``, with ``I_TRAVEL``).
     ``A t`` of pixel ``(x, y)`` is taken at the pixel (``I_PER_PIXEL``) or at
@@ -143,6 +145,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, ring
     window_depth, refractory_reach, consistency = fp[F_WINDOW_DEPTH], fp[F_REFRACTORY_REACH], fp[F_CONSISTENCY]
     hold_px, ahead_px, turn, trim_px = fp[F_HOLD_PX], fp[F_AHEAD_PX], fp[F_TURN], fp[F_TRIM_PX]
     hold_rms, behind_reach, window_px = fp[F_HOLD_RMS], fp[F_BEHIND_REACH], fp[F_WINDOW_PX]
+    burst_ratio = fp[F_BURST_RATIO]
     behind_depth = behind_reach * 1e-6  # m: travel coordinates compare travel (px·m) with it
     # a fit this far off its points is rejected (bad_fit) and sets no hold: unless it is recorded, the fit may stop
     give_up_rms = math.inf if record_rejected else max(max_rms, hold_rms) if hold_px > 0.0 else max_rms
@@ -154,12 +157,14 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, ring
     n_events, plane_size = ts.shape[0], surface.shape[1]
     flat_surface, flat_hold = surface.reshape(-1), hold.reshape(-1)
     flat_points, points_columns = points.reshape(-1), points.shape[1]
+    flat_bursts = bursts.reshape(-1)
     for i in range(n_events):
         if i + PREFETCH < n_events:  # what a first event would read: the rows of its square, its A t's sample
             xq, yq = np.int64(xs[i + PREFETCH]), np.int64(ys[i + PREFETCH])
             if xq < width and yq < height:
                 pq = 1 if ps[i + PREFETCH] != 0 else 0
                 prefetch(flat_hold, 2 * (yq * width + xq) + pq)
+                prefetch(flat_bursts, N_B * (2 * (yq * width + xq) + pq))
                 cq = pq * plane_size + (yq + radius) * row + xq + radius
                 for dq in range(-radius, radius + 1):
                     prefetch(flat_surface, cq + dq * row)
@@ -195,36 +200,25 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, prev, last_step, motion, ring
         polarity = 1 if ps[i] != 0 else 0
         pixel = y * width + x
         cell = (y + radius) * row + x + radius
-        # 1. First-event rule: a hold measured by the last fit here, else the refractory period:
-        # the time a surface at ``refractory_depth`` takes per pixel.
-        up, ucell, upol = np.uint64(pixel), np.uint64(cell), np.uint64(polarity)  # unsigned: no negative-index fix-ups
-        held = np.int64(hold[up, upol])
-        age = t - surface[upol, ucell]
-        if held == 0:
-            at_x, at_y = _velocity_term_at(x, y, pixel, per_pixel, pinhole, sample_of, points, velocity, j, fx, fy, cx,
-                                           cy)
-            # age < refractory_depth / |A t| (µs, whole) without a root or a division, which would stand
-            # between the hold's load and this unpredictable branch: age + 1 <= D / |A t| squared
-            speed2 = at_x * at_x + at_y * at_y
-            after = float(age + 1)
-            burst = age < refractory_us or (refractory_reach > 0.0 and speed2 > 0.0 and (
-                after <= 0.0 or after * after * speed2 <= refractory_reach * refractory_reach))
-        else:
-            burst = age < held
-        if burst:
+        # 1. First-event rule (``time_surface_first``): the surface takes the events that start an edge, from
+        # the pixel's own events and A t alone; an event is fitted once the pixel's hold has passed (within a
+        # burst, with its edge's start as its own point).
+        up, upol = np.uint64(pixel), np.uint64(polarity)  # unsigned: no negative-index fix-ups
+        at_x, at_y = _velocity_term_at(x, y, pixel, per_pixel, pinhole, sample_of, points, velocity, j, fx, fy, cx, cy)
+        speed2 = at_x * at_x + at_y * at_y
+        at_cell = polarity * plane_size + cell  # in the flat surface: no view of the plane (a refcount per event)
+        state = np.int64(N_B) * (2 * pixel + polarity)
+        edge, fitted = first_event(flat_bursts, state, t, np.int64(hold[up, upol]), burst_ratio, refractory_us,
+                                   refractory_reach, speed2)
+        flat_surface[np.uint64(at_cell)] = t if edge else flat_surface[np.uint64(at_cell)]
+        if not fitted:
             counts[BURST] += 1
             continue
-        surface[upol, ucell] = t
-        if held != 0:
-            at_x, at_y = _velocity_term_at(x, y, pixel, per_pixel, pinhole, sample_of, points, velocity, j, fx, fy, cx,
-                                           cy)
-            speed2 = at_x * at_x + at_y * at_y
         speed = math.sqrt(speed2)
         if speed <= 0.0:
             counts[NO_MOTION] += 1
             continue
         fu, fv = at_x / speed, at_y / speed
-        at_cell = polarity * plane_size + cell  # in the flat surface: no view of the plane (a refcount per event)
         # An edge crossed the two pixels just behind this one along the motion, each about a
         # crossing time per pixel ago; in noise they fired at unrelated times. Their ages also
         # give the edge's own time per pixel, which bounds the window (``window_px``).

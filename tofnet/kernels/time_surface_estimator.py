@@ -17,6 +17,7 @@ import numpy as np
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE
 from tofnet.kernels import time_surface as ts
+from tofnet.kernels.time_surface_first import B_FITTED, B_LAST, N_B
 from tofnet.kernels.time_surface_fit import N_L
 from tofnet.kernels.time_surface_travel import N_R, N_S, NOT_YET, RING
 from tofnet.kernels.kernel_config import microseconds
@@ -59,6 +60,7 @@ class TimeSurfaceConfig:
     refractory: float = 0.0
     refractory_depth: float = 10.0
     hold_px: float = 3.0
+    burst_ratio: float = 4.0
     hold_fit_rms_px: float = 1.0
     behind_depth: float = 10.0
     window_px: float = 6.0
@@ -100,6 +102,8 @@ class TimeSurfaceConfig:
                      "max_hold", "hold_fit_rms_px", "behind_depth", "window_px"):
             if not float(getattr(self, name)) >= 0:
                 problems.append(f"{name}: expected a number >= 0, got {getattr(self, name)!r}")
+        if not float(self.burst_ratio) >= 1:
+            problems.append(f"burst_ratio: expected a number >= 1, got {self.burst_ratio!r}")
         if not int(self.timestep_us) >= 1:
             problems.append(f"timestep_us: expected whole µs >= 1, got {self.timestep_us!r}")
         if not self.max_depth > self.min_depth:
@@ -126,7 +130,7 @@ class TimeSurfaceEstimator:
     """One sensor's time-surface state; ``feed`` packets of ``EVENT_DTYPE`` events in time order.
 
     ``t0_us`` is the start of input step 0 (µs); None takes the first event's time.
-    Memory is fixed by the sensor (about 48 B per pixel) plus output buffers as large as
+    Memory is fixed by the sensor (about 96 B per pixel) plus output buffers as large as
     the largest packet.
     """
 
@@ -145,14 +149,16 @@ class TimeSurfaceEstimator:
         self._fp[[ts.F_FX, ts.F_FY, ts.F_CX, ts.F_CY, ts.F_OUTLIER, ts.F_MAX_RMS, ts.F_MIN_SPREAD, ts.F_MIN_DEPTH,
                   ts.F_MAX_DEPTH, ts.F_MIN_DENOMINATOR, ts.F_WINDOW_DEPTH, ts.F_REFRACTORY_REACH, ts.F_CONSISTENCY,
                   ts.F_HOLD_PX, ts.F_AHEAD_PX, ts.F_TURN, ts.F_TRIM_PX, ts.F_RFX, ts.F_RFY, ts.F_RCX, ts.F_RCY,
-                  ts.F_HOLD_RMS, ts.F_BEHIND_REACH, ts.F_WINDOW_PX]] = (
+                  ts.F_HOLD_RMS, ts.F_BEHIND_REACH, ts.F_WINDOW_PX, ts.F_BURST_RATIO]] = (
             *c.intrinsics, c.outlier_px, c.max_rms_px, c.min_spread, c.min_depth, c.max_depth, c.min_denominator,
             c.window_depth, reach(c.refractory_depth), c.consistency, c.hold_px, c.ahead_px, c.turn, c.trim_px,
             *(c.intrinsics if c.rotation_intrinsics is None else c.rotation_intrinsics), c.hold_fit_rms_px,
-            reach(c.behind_depth), c.window_px)
+            reach(c.behind_depth), c.window_px, c.burst_ratio)
         r, pixels = int(c.radius), width * height
         self._surface = np.full((2, (height + 2 * r) * (width + 2 * r)), ts.NEVER, np.int64)
         self._hold = np.zeros((pixels, 2), np.int32)
+        self._bursts = np.zeros((pixels, 2, N_B), np.int64)
+        self._bursts[:, :, [B_LAST, B_FITTED]] = ts.NEVER
         self._prev = np.zeros((pixels if c.consistency > 0 else 1, 2), np.float64)
         self._last_step = np.full(pixels, ts.NEVER, np.int64)
         self._motion = np.zeros(ts.N_MOTION)
@@ -227,7 +233,7 @@ class TimeSurfaceEstimator:
             hi = self._piece_end(t, lo)
             table, first = self._table(velocity, int(t[lo]), int(t[hi - 1]))
             n_out, status, self._t_hi = ts.process(
-                t[lo:hi], x[lo:hi], y[lo:hi], p[lo:hi], self._ip, self._fp, self._surface, self._hold,
+                t[lo:hi], x[lo:hi], y[lo:hi], p[lo:hi], self._ip, self._fp, self._surface, self._hold, self._bursts,
                 self._prev, self._last_step, self._motion, self._ring, self._ring_state, self._sample_of, self._points,
                 table, first, *self._scratch, self._counts, depth, quality, n_out, self.events_in + lo, self._t_hi)
             if status == ts.UNSORTED:

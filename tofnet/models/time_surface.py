@@ -25,8 +25,8 @@ LATENCY_STEPS = TimeSurfaceProcess.port_latency_steps("depth")
 #: Process parameters that are ``TimeSurfaceConfig`` fields of the same name and unit.
 CONFIG_PARAMS = ("model", "coordinates", "radius", "ahead_px", "window", "window_depth", "window_px", "turn",
                  "min_points", "min_spread", "outlier_px", "iterations", "max_rms_px", "trim_px", "hold_px",
-                 "hold_fit_rms_px", "behind_depth", "refractory_depth", "refractory", "max_hold", "consistency",
-                 "consistency_window", "min_depth", "max_depth", "min_denominator")
+                 "hold_fit_rms_px", "burst_ratio", "behind_depth", "refractory_depth", "refractory", "max_hold",
+                 "consistency", "consistency_window", "min_depth", "max_depth", "min_denominator")
 
 
 def config_of(process: TimeSurfaceProcess, ctx: ModelContext) -> TimeSurfaceConfig:

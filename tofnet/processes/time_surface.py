@@ -27,12 +27,14 @@ class TimeSurfaceProcess(Process):
 
     ``td = ∇T`` (s/px) is the time of travel, so ``Z = (A t)·∇T`` (paper eq. 8), or
     ``(A t)·∇T / (1 − (B ω)·∇T)`` (eq. 7) with ``b_w`` connected. Per event, in time order
-    and with microsecond times (no 1 ms quantisation): an event whose pixel and polarity
-    had a first event less than its hold ago is part of that edge's burst (dropped); else
-    the recent first events of the same polarity within ``radius`` px that the edge has
-    crossed are fitted (lines along the image motion, or a plane), outliers dropped, and
-    the fit checked (points, spread, rms). A host process (off-chip): it reads the events
-    itself, like the input process, and answers in the step after each event (latency 1).
+    and with microsecond times (no 1 ms quantisation): an event that ends a silence of its
+    pixel and polarity (``burst_ratio``, ``refractory_depth``: the pixel's own events only)
+    starts an edge and the surface takes its time; any other event, or one less than the
+    pixel's hold after its last fitted one, is part of a burst (dropped); else the recent
+    first events of the same polarity within ``radius`` px that the edge has crossed are
+    fitted (lines along the image motion, or a plane), outliers dropped, and the fit checked
+    (points, spread, rms). A host process (off-chip): it reads the events itself, like the
+    input process, and answers in the step after each event (latency 1).
     ``A t`` comes from ``a_t`` as the sender samples it (per pixel or per patch); the
     defaults were chosen by sweeps over every built-in scenario (docs/time_surface.md).
     Every event ends in one count: ``events_in = accepted + out_of_bounds + before_t0 +
@@ -88,13 +90,17 @@ class TimeSurfaceProcess(Process):
               "ends and refit (0: off)", minimum=0.0),
         Param("hold_px", "float", 3.0, unit="px", doc="a pixel's burst hold: this many times the time per pixel "
               "its last fit measured", minimum=0.0),
+        Param("burst_ratio", "float", 4.0, doc="an event starts an edge at its pixel when the silence before it "
+              "is this many times the gap before the event ahead (or, after an edge's first event, at least the "
+              "silence before that over this), or at least the refractory period; from the pixel's own events only",
+              minimum=1.0),
         Param("hold_fit_rms_px", "float", 1.0, unit="px", doc="only a fit at most this far (rms) from its points "
               "sets the pixel's hold: a worse one, e.g. in noise, measured no crossing time", minimum=0.0),
         Param("behind_depth", "length", 10.0, unit="m", doc="fit a first event only when the two pixels just "
               "behind it along the motion fired, in either order, within the travel (coordinates travel; else the "
               "time) a surface this deep takes to move that far (an edge crossed them; noise did not; 0: off)", minimum=0.0),
         Param("refractory_depth", "length", 10.0, unit="m", doc="before a pixel has a fit, its hold is the time a "
-              "surface this deep takes to move one pixel", minimum=0.0),
+              "surface this deep takes to move one pixel; a silence that long always starts an edge", minimum=0.0),
         Param("refractory", "duration", 0.0, unit="s", doc="a fixed lower bound on that first hold", minimum=0.0),
         Param("max_hold", "duration", 1.0, unit="s", doc="upper bound of any hold", minimum=0.0),
         Param("consistency", "float", 0.0, doc="emit only when the pixel's previous estimate agrees within this "
@@ -106,8 +112,8 @@ class TimeSurfaceProcess(Process):
         Param("min_denominator", "float", 0.1, doc="with b_w: estimates whose translational share 1 - (B ω)·∇T is "
               "below are rejected (rotation_dominated)", minimum=0.0),
     )
-    vars = (Var("last_first_event", "channels", "int64", "µs", "time of the pixel's last first event of an edge, "
-                "per polarity (channel 0 OFF, 1 ON): the time surface; -2**62 before the first",
+    vars = (Var("last_first_event", "channels", "int64", "µs", "time of the pixel's last event that started an edge "
+                "(the first-event rule), per polarity (channel 0 OFF, 1 ON): the time surface; -2**62 before the first",
                 channels=2, settable=True, low=-(1 << 62), high=(1 << 61) - 1),
             Var("hold", "channels", "int64", "µs", "the burst hold the pixel's last fit measured, per polarity "
                 "(0: none yet, the refractory_depth hold applies)", channels=2, settable=True,

@@ -1,0 +1,59 @@
+"""The time-surface estimator's first-event rule (numba; used by ``tofnet.kernels.time_surface``).
+
+A real pixel fires a burst of events per edge (up to 7 over one or two pixel crossings); only
+the first says when the edge arrived. Two decisions per event (docs/time_surface.md, section 1):
+
+- **Does it start an edge?** From the pixel's own events and ``A t`` only: the silence before
+  it is at least ``ratio`` times the gap before the event ahead of it (a burst's events come
+  at a steady pace, an edge after a pause), or, when the event ahead started an edge itself,
+  at least ``1 / ratio`` of the silence before that one (edges at a steady pace, one event
+  each), or at least the refractory period (the time a surface at ``refractory_depth`` takes
+  per pixel). Then the surface takes its time. Nothing a fit measured enters this decision,
+  so the surface of a pixel depends on its own events alone, and a band of rows plus the
+  fit's ``radius`` computes every surface its fits read exactly (docs/performance.md, "Workers").
+- **Is it fitted?** At least the pixel's hold (from its last fit) after the last fitted
+  one, or before any hold the refractory period.
+
+State per pixel and polarity: a row of ``bursts`` (``B_*``), int64 µs.
+"""
+
+from __future__ import annotations
+
+from numba import njit
+
+#: "No event yet" (µs), as the surface's ``time_surface.NEVER``.
+NEVER = -(1 << 62)
+
+#: ``bursts[y * w + x, p]``: the pixel's last event, the silence before it (negative when it
+#: continued a burst), its last fitted event (µs).
+B_LAST, B_GAP, B_FITTED, N_B = range(4)
+
+
+@njit(cache=True, inline="always")
+def first_event(flat_bursts, at: int, t: int, held: int, ratio: float, refractory_us: int, refractory_reach: float,
+                speed2: float) -> tuple[bool, bool]:
+    """``(starts an edge, is fitted)`` for an event at ``t`` µs at a pixel whose state is
+    ``flat_bursts[at:at + N_B]`` (updated) and hold ``held`` µs (0: none yet, the refractory period
+    then); ``speed2`` is ``|A t|²`` there. The refractory period is ``refractory_us`` and, with
+    ``refractory_reach`` (the refractory depth, m, times 1e6) and motion, the time per pixel at
+    that depth. Without branches but the caller's one: each test is a coin toss on noise."""
+    gap = t - flat_bursts[at + B_LAST]  # the pixel's first event's: since ``NEVER``, so its second event
+    before = flat_bursts[at + B_GAP]  # starts an edge only after the refractory period (a burst's does not)
+    age = t - flat_bursts[at + B_FITTED]
+    reach2 = refractory_reach * refractory_reach
+    moving = (refractory_reach > 0.0) & (speed2 > 0.0)
+    # a silence after an edge's first event (``before`` > 0) at least 1 / ratio of the one before it,
+    # after a burst's event at least ratio times its gap, or at least the refractory period
+    paced = ((before > 0) & (float(gap) * ratio >= float(before))) | ((before <= 0) & (float(gap) >= -ratio
+                                                                                          * float(before)))
+    after = float(gap + 1)  # gap >= D / |A t| without a root or a division: (gap + 1)² |A t|² > D²
+    refractory = (gap >= refractory_us) & ((refractory_us > 0) | moving) & (
+        (~moving) | (after * after * speed2 > reach2))
+    edge = paced | refractory
+    after = float(age + 1)
+    early = (age < refractory_us) | (moving & ((after <= 0.0) | (after * after * speed2 <= reach2)))
+    fitted = edge & ((held == 0) & ~early | (held != 0) & (age >= held))
+    flat_bursts[at + B_LAST] = t
+    flat_bursts[at + B_GAP] = gap if edge else -gap
+    flat_bursts[at + B_FITTED] = t if fitted else flat_bursts[at + B_FITTED]
+    return edge, fitted
