@@ -6,7 +6,9 @@ packet's events of its rows widened by the network's input reach (its halo), fil
 all, and triggers, counts and emits for its own pixels only, so every count and estimate is
 the one-kernel run's. Any other graph runs model by model, each core-placed process as one
 instance per band fed the spikes of its halo (``local_placements``: the ``multiproc`` stand-in,
-run in threads); host processes run whole. Threads, not processes: the kernels release the
+run in threads), and each event-reading model that runs in bands (the time surface) as one
+instance per band fed every event (``BandedReader``); other host processes run whole (the
+summary names them). Threads, not processes: the kernels release the
 GIL (numba ``nogil``) and share the packet without copies (docs/performance.md, "Workers").
 """
 
@@ -32,6 +34,7 @@ from tofnet.kernels.bands import merge_cuts, row_load, select_rows
 from tofnet.kernels.input_filter import NEVER
 from tofnet.kernels.kernel_config import KernelConfig, Region
 from tofnet.kernels.region import UNSORTED, TimeOfTravelKernel
+from tofnet.models.base import Model
 
 #: Packets with fewer events run their bands one after the other in the caller's thread: handing
 #: work to another thread costs more than it saves there (docs/performance.md, "Workers").
@@ -205,10 +208,67 @@ class BandedKernel(BandsBase):
         return end, self._merged_tot(np.concatenate(tots), np.stack([bounds[:-1], bounds[1:]], 1))
 
 
+class BandedReader(Model):
+    """An event-reading model (``Model.runs_in_bands``) run as one instance per band of rows: each is fed
+    every event and counts and answers for its rows, the bands run a range of steps in ``pool``'s threads,
+    and their records (each sorted by step) are merged by step in band order: the canonical order."""
+
+    reads_events = True
+
+    def __init__(self, process, model_class, bands: Sequence[Band], ctx, pool: BandPool):
+        super().__init__(process, ctx)
+        width = ctx.sensor_size[0]
+        self.pool = pool
+        # each band's state is built (and its pages touched) by the thread that runs it
+        self.models = pool.run(lambda b: model_class(process, replace(ctx, region=Region(0, width, *bands[b]))),
+                               len(bands))
+        self._fed = 0  # events fed since the last run: a few run in the caller's thread
+
+    def feed(self, events: np.ndarray) -> None:
+        for model in self.models:
+            model.feed(events)
+        self._fed += len(events)
+
+    def complete_until(self) -> int | None:
+        return self.models[0].complete_until()  # every band was fed the same events
+
+    def run(self, first: int, end: int, inputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        answers = self.pool.run(lambda b: self.models[b].run(first, end, inputs), len(self.models),
+                                self._fed < SERIAL_BELOW)
+        self._fed = 0
+        out = {}
+        for port in answers[0]:
+            parts = [a[port] for a in answers]
+            source = np.concatenate(parts)
+            bounds = np.cumsum([0] + [len(p) for p in parts])
+            out[port] = np.empty(len(source), source.dtype)
+            merge(source, np.stack([bounds[:-1], bounds[1:]], 1), out[port], 0)
+        return out
+
+    def counts(self) -> dict[str, int]:
+        total: dict[str, int] = {}
+        for model in self.models:
+            for name, value in model.counts().items():
+                total[name] = total.get(name, 0) + int(value)
+        return total
+
+    def get_var(self, name: str, step: int) -> np.ndarray:
+        return np.concatenate([model.get_var(name, step) for model in self.models], axis=-2)  # bands of rows
+
+    def set_var(self, name: str, value: np.ndarray, step: int) -> None:
+        for model in self.models:
+            model.set_var(name, value, step)
+
+    def set_param(self, name: str, value) -> None:
+        for model in self.models:
+            model.set_param(name, value)
+
+
 def band_placer(bands: Sequence[Band], threads: int):
     """``(place, pool, facts)`` for a ``GraphExecutor`` running ``bands``: each core-placed process whose
     model can hold a region becomes one instance per band behind a ``RemoteModel`` whose exchange
-    runs the bands in ``pool``'s threads; any other process runs whole. ``facts`` (updated as the
+    runs the bands in ``pool``'s threads, and each event-reading one that runs in bands one instance
+    per band behind a ``BandedReader``; any other process runs whole. ``facts`` (updated as the
     executor places processes) names both kinds, for ``RunResult.extra``."""
     pool = BandPool(min(threads, len(bands)))
     workers = [_Worker(b) for b in range(len(bands))]
@@ -216,6 +276,10 @@ def band_placer(bands: Sequence[Band], threads: int):
     facts = {"workers": pool.threads, "bands": [list(b) for b in bands], "banded": [], "whole": []}
 
     def place(process, model_class, ctx):
+        if getattr(model_class, "reads_events", False) and getattr(model_class, "runs_in_bands", False):
+            if process.name not in facts["banded"]:
+                facts["banded"].append(process.name)
+            return BandedReader(process, model_class, bands, ctx, pool)
         if process.placement != "core" or not getattr(model_class, "supports_regions", False):
             if process.name not in facts["whole"]:
                 facts["whole"].append(process.name)

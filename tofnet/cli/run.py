@@ -58,7 +58,7 @@ def workers_option(text: str) -> int | str:
 
 
 def workers_line(workers: dict) -> str:
-    """How a run was split: ``2 (2 bands of rows; run whole: time_surface)``."""
+    """How a run was split: ``2 (2 bands of rows; run whole: velocity)``."""
     whole = f"; run whole: {', '.join(workers['whole'])}" if workers["whole"] else ""
     return f"{workers['threads']} ({workers['bands']} bands of rows{whole})"
 

@@ -18,7 +18,7 @@ from tofnet.core.network import Network
 from tofnet.events import EVENT_DTYPE, make_events
 from tofnet.io.recording import Intrinsics, Recording
 from tofnet.networks import denoised_network, depth_network, improved_network, multi_distance_network
-from tofnet.processes import DepthProcess, InputProcess, TimeOfTravelProcess, VelocityProcess
+from tofnet.processes import DepthProcess, InputProcess, TimeOfTravelProcess, TimeSurfaceProcess, VelocityProcess
 from tofnet.testing import (TEST_INTRINSICS, LinearVelocity, camera_flow, directed_edge, flowing_pattern,
                             merge_events, moving_edge, moving_pattern, noise_events, turning_trajectory)
 
@@ -296,6 +296,18 @@ def _time_surface_texture() -> Scene:
     events = jittered(merge_events(moving_pattern(size, flow, 220_000, seed=15, sample_us=50, start_us=1_000),
                                    noise_events(size, 10.0, 220_000, seed=16)), 600, 17)
     return Scene(network, rec(events))
+
+
+@case("graph-paper-and-time-surface", "the paper's network and the time-surface estimator side by side, both "
+      "reading the events, on one velocity process; the texture of time-surface-texture")
+def _paper_and_time_surface() -> Scene:
+    size, flow = (28, 20), (250.0, -120.0)
+    paper = depth_network(size, input={"refractory": "1ms", "t0": 0}, velocity=_constant(camera_for(flow)))
+    surface = TimeSurfaceProcess(name="time_surface", sensor_size=size, t0=0)
+    paper.process("velocity").a_t.connect(surface.a_t)
+    events = jittered(merge_events(moving_pattern(size, flow, 160_000, seed=15, sample_us=50, start_us=1_000),
+                                   noise_events(size, 10.0, 160_000, seed=16)), 600, 17)
+    return Scene(Network([*paper.processes, surface], name="paper_and_time_surface"), rec(events))
 
 
 # -- a turning camera (paper eq. 7) ----------------------------------------------------------

@@ -42,7 +42,7 @@ REJECT_SLOTS = tuple(range(NO_MOTION, EMITTED))  # a first event whose estimate 
 # Integer parameters (``ip``) and float parameters (``fp``), by slot.
 (I_WIDTH, I_HEIGHT, I_RADIUS, I_T0, I_DT, I_LATENCY, I_UPDATE_EVERY, I_MIN_POINTS, I_ITERATIONS,
  I_REFRACTORY, I_WINDOW, I_CONSISTENCY_WINDOW, I_MAX_HOLD, I_RECORD_REJECTED, I_MODEL, I_PER_PIXEL, I_PINHOLE,
- I_TRAVEL, N_IP) = range(19)
+ I_TRAVEL, I_ROW0, I_ROWS, I_OWN0, I_OWN1, N_IP) = range(23)
 (F_FX, F_FY, F_CX, F_CY, F_OUTLIER, F_MAX_RMS, F_MIN_SPREAD, F_MIN_DEPTH, F_MAX_DEPTH, F_MIN_DENOMINATOR,
  F_WINDOW_DEPTH, F_REFRACTORY_REACH, F_CONSISTENCY, F_HOLD_PX, F_AHEAD_PX, F_TURN, F_TRIM_PX,
  F_RFX, F_RFY, F_RCX, F_RCY, F_HOLD_RMS, F_BEHIND_REACH, F_WINDOW_PX, F_BURST_RATIO,
@@ -123,12 +123,17 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, bursts, prev, last_step, moti
     ``A t`` of pixel ``(x, y)`` is taken at the pixel (``I_PER_PIXEL``) or at
     ``points[sample_of[y * w + x]]``, computed only for events that need it (a pixel's first
     hold, first events). ``velocity[j - first_update]`` is (tx, ty, tz[, wx, wy, wz]) of update j.
-    ``ps_``, ``pw``, ``pt``, ``pg``, ``lines``, ``used`` are the fits' scratch. Estimates go to
+    ``ps_``, ``pw``, ``pt``, ``pg``, ``lines``, ``used`` are the fits' scratch. The state holds the
+    rows ``ip[I_ROW0] ..`` (``ip[I_ROWS]`` of them; ``y`` above is counted from the first): the
+    sensor, or a band of rows plus ``radius`` either side; events of other rows only move the clock,
+    and only those of rows ``ip[I_OWN0] .. ip[I_OWN1]`` are counted and fitted (a halo row's make
+    its surface). Estimates go to
     ``out[n_out:]`` (``DEPTH_DTYPE``) and ``quality[n_out:]``. ``t_hi`` is the latest time seen
     before; an earlier event stops the call with ``UNSORTED`` before it changes any state
     (``n_out`` and ``counts`` cover the events before it).
     """
     width, height, radius = ip[I_WIDTH], ip[I_HEIGHT], ip[I_RADIUS]
+    row0, rows, own0, own1 = ip[I_ROW0], np.uint64(ip[I_ROWS]), ip[I_OWN0], ip[I_OWN1]
     t0, dt, latency, update_every = ip[I_T0], ip[I_DT], ip[I_LATENCY], ip[I_UPDATE_EVERY]
     min_points, iterations = ip[I_MIN_POINTS], ip[I_ITERATIONS]
     refractory_us, window_us = ip[I_REFRACTORY], ip[I_WINDOW]
@@ -161,11 +166,11 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, bursts, prev, last_step, moti
     for i in range(n_events):
         if i + PREFETCH < n_events:  # what a first event would read: the rows of its square, its A t's sample
             xq, yq = np.int64(xs[i + PREFETCH]), np.int64(ys[i + PREFETCH])
-            if xq < width and yq < height:
+            if xq < width and np.uint64(yq - row0) < rows:
                 pq = 1 if ps[i + PREFETCH] != 0 else 0
-                prefetch(flat_hold, 2 * (yq * width + xq) + pq)
-                prefetch(flat_bursts, N_B * (2 * (yq * width + xq) + pq))
-                cq = pq * plane_size + (yq + radius) * row + xq + radius
+                prefetch(flat_hold, 2 * ((yq - row0) * width + xq) + pq)
+                prefetch(flat_bursts, N_B * (2 * ((yq - row0) * width + xq) + pq))
+                cq = pq * plane_size + (yq - row0 + radius) * row + xq + radius
                 for dq in range(-radius, radius + 1):
                     prefetch(flat_surface, cq + dq * row)
                 if not pinhole:
@@ -177,11 +182,12 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, bursts, prev, last_step, moti
             return n_out, UNSORTED, t_hi
         t_hi = t
         x, y = np.int64(xs[i]), np.int64(ys[i])
+        mine = own0 <= y < own1  # a band counts and fits the events of its own rows (past the sensor: the last)
         if x >= width or y >= height:
-            counts[OUT_OF_BOUNDS] += 1
+            counts[OUT_OF_BOUNDS] += mine
             continue
         if t < t0:
-            counts[BEFORE_T0] += 1
+            counts[BEFORE_T0] += mine
             continue
         if t >= step_end or t < step_start:  # divisions only when the step changes
             k = (t - t0) // dt
@@ -197,20 +203,26 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, bursts, prev, last_step, moti
                 advance(ring, ring_state, k, velocity[j], dt * 1e-6)
                 # since then the travel is |A t| times the time (no change since the first step: always)
                 linear_from = t0 + ring_state[S_CHANGE] * dt if ring_state[S_CHANGE] != ring_state[S_FIRST] else NEVER
+        if np.uint64(y - row0) >= rows:  # another band's row (its steps still move the travel ring, above)
+            continue
         polarity = 1 if ps[i] != 0 else 0
-        pixel = y * width + x
-        cell = (y + radius) * row + x + radius
+        sample = y * width + x  # in the sensor's tables; the state holds rows row0 .. row0 + rows
+        pixel = (y - row0) * width + x
+        cell = (y - row0 + radius) * row + x + radius
         # 1. First-event rule (``time_surface_first``): the surface takes the events that start an edge, from
         # the pixel's own events and A t alone; an event is fitted once the pixel's hold has passed (within a
         # burst, with its edge's start as its own point).
         up, upol = np.uint64(pixel), np.uint64(polarity)  # unsigned: no negative-index fix-ups
-        at_x, at_y = _velocity_term_at(x, y, pixel, per_pixel, pinhole, sample_of, points, velocity, j, fx, fy, cx, cy)
+        at_x, at_y = _velocity_term_at(x, y, sample, per_pixel, pinhole, sample_of, points, velocity, j, fx, fy, cx,
+                                       cy)
         speed2 = at_x * at_x + at_y * at_y
         at_cell = polarity * plane_size + cell  # in the flat surface: no view of the plane (a refcount per event)
         state = np.int64(N_B) * (2 * pixel + polarity)
         edge, fitted = first_event(flat_bursts, state, t, np.int64(hold[up, upol]), burst_ratio, refractory_us,
                                    refractory_reach, speed2)
         flat_surface[np.uint64(at_cell)] = t if edge else flat_surface[np.uint64(at_cell)]
+        if not mine:  # a halo row: its surface only, for the band's fits
+            continue
         if not fitted:
             counts[BURST] += 1
             continue
@@ -240,7 +252,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, bursts, prev, last_step, moti
                 if t - max(age1, age2) >= linear_from:  # as in time (eq. 7 holds exactly while nothing changes)
                     travel1, travel2 = rate * age1, rate * age2
                 else:
-                    g0, g1, g2 = _gains(x, y, pixel, per_pixel, pinhole, sample_of, points, fu, fv, fx, fy, cx, cy)
+                    g0, g1, g2 = _gains(x, y, sample, per_pixel, pinhole, sample_of, points, fu, fv, fx, fy, cx, cy)
                     here, turned = travel_at(ring, t, t0, dt, inverse_dt, g0, g1, g2, h0, h1, h2)
                     travel1, turned1 = travel_at(ring, t - age1, t0, dt, inverse_dt, g0, g1, g2, h0, h1, h2)
                     travel2, turned2 = travel_at(ring, t - age2, t0, dt, inverse_dt, g0, g1, g2, h0, h1, h2)
@@ -277,7 +289,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, bursts, prev, last_step, moti
                     n = gather(flat_surface, at_cell, row, radius, t, window, fu, fv, ahead_px, middle, ps_, pw, pt,
                                pg)
                 else:
-                    g0, g1, g2 = _gains(x, y, pixel, per_pixel, pinhole, sample_of, points, fu, fv, fx, fy, cx, cy)
+                    g0, g1, g2 = _gains(x, y, sample, per_pixel, pinhole, sample_of, points, fu, fv, fx, fy, cx, cy)
                     # with a rotation ``reach`` is the depth times the image motion, z_guess that depth
                     z_guess = suggested if suggested < math.inf else window_depth
                     window = since_reversal(ring, k, t, t0, dt, np.int64(ring_state[S_FIRST]), g0, g1, g2,

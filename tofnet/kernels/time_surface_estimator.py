@@ -130,13 +130,21 @@ class TimeSurfaceEstimator:
     """One sensor's time-surface state; ``feed`` packets of ``EVENT_DTYPE`` events in time order.
 
     ``t0_us`` is the start of input step 0 (µs); None takes the first event's time.
-    Memory is fixed by the sensor (about 96 B per pixel) plus output buffers as large as
+    ``rows`` ``(y0, y1)``: a band of rows (``tofnet.backends.bands``) whose events this
+    estimator counts and answers, holding the state of ``radius`` rows more either side, whose
+    events build the surface its fits read (the first-event rule reads a pixel's own events
+    only, so the band's output is the whole sensor's for its rows); it is fed every event.
+    Memory is fixed by the rows held (about 96 B per pixel) plus output buffers as large as
     the largest packet.
     """
 
-    def __init__(self, config: TimeSurfaceConfig, t0_us: int | None = None):
+    def __init__(self, config: TimeSurfaceConfig, t0_us: int | None = None, rows: tuple[int, int] | None = None):
         self.config = c = config
-        width, height = (int(s) for s in c.sensor_size)
+        width, sensor_height = (int(s) for s in c.sensor_size)
+        own0, own1 = (0, sensor_height) if rows is None else (int(rows[0]), int(rows[1]))
+        #: The rows whose state is held: the band's, widened by the fit's reach.
+        self.held = max(own0 - int(c.radius), 0), min(own1 + int(c.radius), sensor_height)
+        height = self.held[1] - self.held[0]
         self._ip = np.zeros(ts.N_IP, np.int64)
         self._ip[[ts.I_WIDTH, ts.I_HEIGHT, ts.I_RADIUS, ts.I_DT, ts.I_LATENCY, ts.I_UPDATE_EVERY, ts.I_MIN_POINTS,
                   ts.I_ITERATIONS, ts.I_REFRACTORY, ts.I_WINDOW, ts.I_CONSISTENCY_WINDOW, ts.I_MAX_HOLD, ts.I_MODEL,
@@ -145,6 +153,8 @@ class TimeSurfaceEstimator:
             microseconds(c.refractory), microseconds(c.window), microseconds(c.consistency_window),
             microseconds(c.max_hold), ts.MODELS.index(c.model),
             c.per_pixel, c.per_pixel and c.lens is None, c.coordinates == "travel")
+        self._ip[[ts.I_HEIGHT, ts.I_ROW0, ts.I_ROWS, ts.I_OWN0, ts.I_OWN1]] = (
+            sensor_height, self.held[0], height, own0, own1 if own1 < sensor_height else 1 << 16)
         self._fp = np.zeros(ts.N_FP, np.float64)
         self._fp[[ts.F_FX, ts.F_FY, ts.F_CX, ts.F_CY, ts.F_OUTLIER, ts.F_MAX_RMS, ts.F_MIN_SPREAD, ts.F_MIN_DEPTH,
                   ts.F_MAX_DEPTH, ts.F_MIN_DENOMINATOR, ts.F_WINDOW_DEPTH, ts.F_REFRACTORY_REACH, ts.F_CONSISTENCY,
@@ -165,7 +175,7 @@ class TimeSurfaceEstimator:
         self._motion[ts.M_UPDATE] = -1
         self._ring = np.zeros((RING if c.coordinates == "travel" else 1, N_R))  # 425 kB
         self._ring_state = np.full(N_S, NOT_YET, np.int64)
-        self._sample_of, self._points = sample_tables(c.per_pixel, c.patch_size, width, height,
+        self._sample_of, self._points = sample_tables(c.per_pixel, c.patch_size, width, sensor_height,
                                                       tuple(c.intrinsics), c.lens)
         size = 2 * (2 * r + 1) ** 2
         lines = 4 * r + 3  # lines across the motion within the square (|w| <= r * sqrt(2)), centred

@@ -79,6 +79,10 @@ class Model:
     reads_events: ClassVar[bool] = False
     #: True when one instance may hold a region of the sensor (``multiproc`` cores).
     supports_regions: ClassVar[bool] = False
+    #: True for an event-reading model whose instance may hold a band of whole rows (``ctx.region``): fed
+    #: every event, it keeps the state its rows need (its own halo) and counts and answers for its rows
+    #: only, so workers run one instance per band (``tofnet.backends.bands``).
+    runs_in_bands: ClassVar[bool] = False
     #: Why the model can only run on a host computer beside a neuromorphic chip, never as a process
     #: of one (empty: it can); a backend that builds chip processes (``lava``) refuses it with this.
     host_only: ClassVar[str] = ""

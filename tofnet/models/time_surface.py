@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from tofnet.core.ports import Payload
+from tofnet.errors import BackendError
 from tofnet.kernels.order import pixel_order
 from tofnet.kernels.time_surface_estimator import TimeSurfaceConfig, TimeSurfaceEstimator, event_columns
 from tofnet.models.base import Model, ModelContext, concat, records, take
@@ -73,12 +74,16 @@ class TimeSurfaceModel(Model):
     """Buffers the camera's events and runs them through ``TimeSurfaceEstimator`` when their answer's step runs."""
 
     reads_events = True
+    runs_in_bands = True
     host_only = "is a float64 estimator that reads the camera's events itself (host-side, no chip arithmetic)"
 
     def __init__(self, process: TimeSurfaceProcess, ctx: ModelContext):
         super().__init__(process, ctx)
         self.config = config_of(process, ctx)
-        self.estimator = TimeSurfaceEstimator(self.config, ctx.t0_us)
+        x0, x1, y0, y1 = ctx.bounds
+        if (x0, x1) != (0, ctx.sensor_size[0]):
+            raise BackendError(f"{process.name}: TimeSurfaceModel holds whole rows, not columns {x0}-{x1}")
+        self.estimator = TimeSurfaceEstimator(self.config, ctx.t0_us, None if ctx.region is None else (y0, y1))
         self.rotating = bool(ctx.inputs.get("b_w"))
         self.velocity = HeldUpdates(("tx", "ty", "tz"))
         self.rotation = HeldUpdates(("wx", "wy", "wz"))
@@ -147,31 +152,39 @@ class TimeSurfaceModel(Model):
 
     def counts(self) -> dict[str, int]:
         counts = self.estimator.counts
-        return {"events_in": self.estimator.events_in, "accepted": self.estimator.first_events, **counts}
+        # every event it counted (a band is fed every event and counts those of its rows)
+        return {"events_in": sum(counts.values()), "accepted": self.estimator.first_events, **counts}
 
     # -- state between runs -------------------------------------------------------------------
     def _surface(self) -> np.ndarray:
-        """A view of the surface ``[2, H, W]`` (µs) inside the kernel's border."""
-        width, height = self.ctx.sensor_size
-        r = self.config.radius
+        """A view of the surface ``[2, rows held, W]`` (µs) inside the kernel's border."""
+        width, r = self.ctx.sensor_size[0], self.config.radius
+        height = self.estimator.held[1] - self.estimator.held[0]
         return self.estimator._surface.reshape(2, height + 2 * r, width + 2 * r)[:, r:r + height, r:r + width]
 
     def _hold(self) -> np.ndarray:
-        width, height = self.ctx.sensor_size
-        return self.estimator._hold.reshape(height, width, 2)
+        """A view of the holds ``[2, rows held, W]`` (µs)."""
+        width = self.ctx.sensor_size[0]
+        return np.moveaxis(self.estimator._hold.reshape(-1, width, 2), 2, 0)
+
+    def _own(self, held: np.ndarray) -> np.ndarray:
+        """The rows of the region (the sensor's, or a band's) of an array over the rows held."""
+        _, _, y0, y1 = self.ctx.bounds
+        return held[:, y0 - self.estimator.held[0]:y1 - self.estimator.held[0]]
 
     def get_var(self, name: str, step: int) -> np.ndarray:
         if name == "last_first_event":
-            return self._surface().copy()
+            return self._own(self._surface()).copy()
         if name == "hold":
-            return np.moveaxis(self._hold(), 2, 0).astype(np.int64)
+            return self._own(self._hold()).astype(np.int64)
         return super().get_var(name, step)
 
     def set_var(self, name: str, value: np.ndarray, step: int) -> None:
+        lo, hi = self.estimator.held  # a band takes its halo rows too: its fits read their surface
         if name == "last_first_event":
-            self._surface()[...] = value
+            self._surface()[...] = value[:, lo:hi]
             return
         if name == "hold":
-            self._hold()[...] = np.moveaxis(np.clip(value, 0, np.iinfo(np.int32).max), 0, 2)
+            self._hold()[...] = np.clip(value[:, lo:hi], 0, np.iinfo(np.int32).max)
             return
         super().set_var(name, value, step)
