@@ -60,6 +60,8 @@ class BandWorker:
             self._index = np.empty(max(n + 1, 2 * len(self._index)), np.int64)
         events = self.events[:n]
         m = select_rows(events, self.keep, self._index)
+        if m < 0:
+            return -1, 0
         try:
             end, n_tot = self.kernel.run_events(events, self.updates.rows, self.depth, 0, record_tot, None, True,
                                                 self._index[:m])

@@ -181,6 +181,8 @@ class BandedKernel(BandsBase):
             an error is returned, so that every band is done before one propagates."""
             try:
                 m = select_rows(events, self._keep[b], self._index[b])
+                if m < 0:
+                    raise BackendError(UNSORTED)
                 return self.kernels[b].run_events(events, velocity_locked, scratch, b * n, record_tot, span, True,
                                                   self._index[b][:m])
             except BaseException as error:  # noqa: B036 - re-raised below, once all bands are done

@@ -2,7 +2,7 @@
 
 ``select_rows`` lists the positions of a packet's events of a band's rows (widened by the
 input reach), so each band's kernel reads only its events (each band selects its own, in its
-thread); ``merge_by_step`` joins the bands' outputs, each sorted by step, into one array
+thread), and checks the packet's time order on the way; ``merge_by_step`` joins the bands' outputs, each sorted by step, into one array
 sorted by step and, within a step, in band order: the canonical order when each band's part
 is in it, as bands are strips of rows from the top; ``merge_cuts`` splits that merge into
 shares that threads run side by side.
@@ -28,14 +28,23 @@ def row_load(events, height, every):
 @njit(cache=True, nogil=True)
 def select_rows(events, keep, index):
     """Write to ``index`` (room for ``len(events) + 1``) the positions of the events whose row ``y`` has
-    ``keep[y]`` (uint8, 65536 entries: rows past the sensor too), in order; returns how many. Without
-    branches (a band's events are a coin toss among the packet's, which a branch predictor cannot
-    learn), and positions, not records: the kernel reads the band's events in the packet itself."""
+    ``keep[y]`` (uint8, 65536 entries: rows past the sensor too), in order; returns how many, or -1
+    when the packet is not in time order (checked over all its events, so every band gives the same
+    answer, and the kernel run on ``index`` skips its own pass over the packet: one read of the
+    packet per band instead of two). Without branches (a band's events are a coin toss among the
+    packet's, which a branch predictor cannot learn), and positions, not records: the kernel reads
+    the band's events in the packet itself."""
     m = 0
-    for i in range(events.shape[0]):
+    n = events.shape[0]
+    back = False
+    previous = events[0].t if n else 0
+    for i in range(n):
+        t = events[i].t
+        back |= t < previous
+        previous = t
         index[m] = i
         m += keep[events[i].y]
-    return m
+    return -1 if back else m
 
 
 @njit(cache=True, nogil=True)

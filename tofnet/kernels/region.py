@@ -223,8 +223,8 @@ class TimeOfTravelKernel:
         ``span``: the packet's first and last event times (µs) when the caller has them already.
         ``canonical=False`` leaves the estimates in the order of their trigger events (a live
         stream's caller who does not need each step in pixel order spares the sort). ``index``
-        (int64, increasing): only those events run (a band's, ``kernels.bands.select_rows``); the
-        packet's time order is checked over all its events, so every band refuses the same packets.
+        (int64, increasing): only those events run (a band's, ``kernels.bands.select_rows``, which has
+        checked the packet's time order over all its events: every band refuses the same packets).
         """
         if self._broken:
             raise BackendError("kernel state is invalid after an earlier error; start a new one")

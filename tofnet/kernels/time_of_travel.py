@@ -189,8 +189,10 @@ def _rebase(stamp, stride, base, new_base, counter_max):
 
 
 @njit(cache=True)
-def _check(ts, xs, ys, filtering, cursor, ip, n_rows, first_update):
-    """Refuse input out of order or beyond the velocity table before any state changes; returns a status."""
+def _check(ts, xs, ys, filtering, cursor, ip, n_rows, first_update, ordered):
+    """Refuse input out of order or beyond the velocity table before any state changes; returns a status.
+    ``ordered``: the caller has checked that the events are in time order among themselves (a band's
+    ``select_rows``); only the first is compared with the latest time fed."""
     n = ts.shape[0]
     found = False
     lo = hi = np.int64(0)
@@ -199,8 +201,9 @@ def _check(ts, xs, ys, filtering, cursor, ip, n_rows, first_update):
         if n == 0:
             return OK
         back = ts[0] < cursor[T_HI]
-        for i in range(1, n):  # no early exit: a branch-free loop is several times faster
-            back |= ts[i] < ts[i - 1]
+        if not ordered:
+            for i in range(1, n):  # no early exit: a branch-free loop is several times faster
+                back |= ts[i] < ts[i - 1]
         if back:
             return UNSORTED
         first = last = -1  # the first and the last event the filter may accept (scans stop early)
@@ -271,12 +274,13 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
     ``rows[y - y0] + cols[x - x0]``: an index into the points (where ``A t`` is evaluated);
     ``A t`` and ``W`` are cached per sample and velocity update (``cache_j``).
     ``velocity[j - first_update]`` is the velocity of update ``j``. ``index`` (None: all events):
-    only the events at these positions (increasing) run, a band's (``tofnet.backends.bands``); the time order
-    is checked over all, so every band refuses the same packets.
+    only the events at these positions (increasing) run, a band's (``tofnet.backends.bands``); the caller
+    has checked the events' time order among themselves over all of them (``kernels.bands.select_rows``,
+    so every band refuses the same packets); the first is still compared with the latest time fed.
     """
     ip, cursor, counts, rows, cols, cache_j, cache_w, pend, rec, fp, points, cache_at = views(ints, floats)
     stamp = rec.view(np.int32)
-    status = _check(ts, xs, ys, filtering, cursor, ip, velocity.shape[0], first_update)
+    status = _check(ts, xs, ys, filtering, cursor, ip, velocity.shape[0], first_update, index is not None)
     if status != OK:
         return n_out, n_tot, status
     n = ts.shape[0]
