@@ -167,6 +167,8 @@ def main() -> None:
     parser.add_argument("--slider", type=float, default=0.5, help="seconds of the slider scene (repeated 10x)")
     parser.add_argument("--figure", help="write the figure here (PNG)")
     parser.add_argument("--figure-only", action="store_true", help="only the figure's measurements")
+    parser.add_argument("--networks", default="paper,time surface",
+                        help="which networks' rows (comma-separated; the latency and state tables need 'paper')")
     args = parser.parse_args()
     print(f"# {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at the start", flush=True)
     sensor = (1280, 720)
@@ -192,6 +194,8 @@ def main() -> None:
             head = Recording(recording.events[:200_000], intrinsics=recording.intrinsics,
                              trajectory=recording.trajectory, sensor_size=recording.sensor_size)
             for kind, network in networks(recording.sensor_size, recording).items():
+                if kind not in args.networks.split(","):
+                    continue
                 for make in configs.values():
                     make().run(network, head)
                 if kind == "paper":
@@ -199,6 +203,8 @@ def main() -> None:
         for r in range(args.rounds):
             for name, recording in inputs.items():
                 for kind, network in networks(recording.sensor_size, recording).items():
+                    if kind not in args.networks.split(","):
+                        continue
                     compiled = compile_network(network)
                     one, cpu_one = timed(lambda: configs["1"]().run(compiled, recording))
                     two, cpu_two, free_two = free_cores(lambda: configs["2"]().run(compiled, recording))
@@ -223,6 +229,8 @@ def main() -> None:
         print(f"| {name} | {kind} | {fmt(values)} | {fmt(free_ratio[(name, kind)])} | {fmt(cpu_ratio[(name, kind)])} "
               f"| {mp} |")
 
+    if "paper" not in args.networks.split(","):
+        return
     print("\n| workers | 1 ms packet, bands as chosen (µs, median) | bands forced (µs) |")
     print("| --- | --- | --- |")
     latency = {}

@@ -227,8 +227,8 @@ class BandedReader(Model):
         self._fed = 0  # events fed since the last run: a few run in the caller's thread
 
     def feed(self, events: np.ndarray) -> None:
-        for model in self.models:
-            model.feed(events)
+        # each band keeps its own copy of the packet's columns, made in its thread
+        self.pool.run(lambda b: self.models[b].feed(events), len(self.models), len(events) < SERIAL_BELOW)
         self._fed += len(events)
 
     def complete_until(self) -> int | None:
