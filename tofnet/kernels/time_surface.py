@@ -165,18 +165,20 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, bursts, prev, last_step, moti
     flat_bursts = bursts.reshape(-1)
     for i in range(n_events):
         if i + PREFETCH < n_events:  # what a first event would read: the rows of its square, its A t's sample
-            xq, yq = np.int64(xs[i + PREFETCH]), np.int64(ys[i + PREFETCH])
-            if xq < width and np.uint64(yq - row0) < rows:
-                pq = 1 if ps[i + PREFETCH] != 0 else 0
-                prefetch(flat_hold, 2 * ((yq - row0) * width + xq) + pq)
-                prefetch(flat_bursts, N_B * (2 * ((yq - row0) * width + xq) + pq))
-                cq = pq * plane_size + (yq - row0 + radius) * row + xq + radius
-                for dq in range(-radius, radius + 1):
-                    prefetch(flat_surface, cq + dq * row)
-                if not pinhole:
-                    sq = yq * width + xq if per_pixel else sample_of[yq * width + xq]
-                    prefetch(flat_points, sq * points_columns)
-                    prefetch(flat_points, sq * points_columns + points_columns - 1)
+            # clamped into the rows held, not tested: in a band, whether an event is its own is a coin toss
+            xq = min(np.int64(xs[i + PREFETCH]), width - 1)
+            yq = min(max(np.int64(ys[i + PREFETCH]) - row0, 0), np.int64(rows) - 1)
+            pq = 1 if ps[i + PREFETCH] != 0 else 0
+            prefetch(flat_hold, 2 * (yq * width + xq) + pq)
+            prefetch(flat_bursts, N_B * (2 * (yq * width + xq) + pq))
+            cq = pq * plane_size + (yq + radius) * row + xq + radius
+            for dq in range(-radius, radius + 1):
+                prefetch(flat_surface, cq + dq * row)
+            if not pinhole:
+                sq = (yq + row0) * width + xq
+                sq = sq if per_pixel else sample_of[sq]
+                prefetch(flat_points, sq * points_columns)
+                prefetch(flat_points, sq * points_columns + points_columns - 1)
         t = ts[i]
         if t < t_hi:
             return n_out, UNSORTED, t_hi
