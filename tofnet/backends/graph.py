@@ -18,6 +18,7 @@ import networkx as nx
 import numpy as np
 from numba import njit
 
+import tofnet.numba_cache  # noqa: F401 - before any cached kernel: numba picks its cache key at decoration
 from tofnet.core.network import Network
 from tofnet.core.ports import InPort, OutPort
 from tofnet.core.process import Process

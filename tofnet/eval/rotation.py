@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+import tofnet.numba_cache  # noqa: F401 - before any cached kernel: numba picks its cache key at decoration
 from tofnet.events import DEPTH_DTYPE
 from tofnet.kernels.depth import float_depth_rotation, signed_axis_count, translational_share
 from tofnet.kernels.rotation import rotational_flow

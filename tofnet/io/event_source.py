@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
+import tofnet.numba_cache  # noqa: F401 - before any cached kernel: numba picks its cache key at decoration
 from tofnet.errors import DataError, located, reason
 from tofnet.events import EVENT_DTYPE, sensor_size_problem
 from tofnet.io.checks import check_metadata, check_packet, is_decode_error

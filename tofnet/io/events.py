@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
+import tofnet.numba_cache  # noqa: F401 - before any cached kernel: numba picks its cache key at decoration
 from tofnet.errors import DataError, located, quote
 from tofnet.events import EVENT_DTYPE, MAX_TIME_US
 from tofnet.io.arrays import COLUMNS as _COLUMNS, MAX_COORD as _MAX_COORD, check_writable

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
+import tofnet.numba_cache  # noqa: F401 - before any cached kernel: numba picks its cache key at decoration
 from tofnet.events import EVENT_DTYPE
 
 #: Words decoded per block (about 4 ms of decoding, which a live replay waits for): at most 12 events a

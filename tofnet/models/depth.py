@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+import tofnet.numba_cache  # noqa: F401 - before any cached kernel: numba picks its cache key at decoration
 from tofnet.core.counters import names_of
 from tofnet.core.ports import Payload
 from tofnet.kernels.depth import (EMITTED, ROTATION_DOMINATED, classify, classify_rotation, float_depth,

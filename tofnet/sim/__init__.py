@@ -9,6 +9,7 @@ contrast thresholds (ESIM's method). See ``docs/simulator.md``.
 >>> summary = simulate("slider", "out/slider", duration=0.2)  # doctest: +SKIP
 """
 
+import tofnet.numba_cache  # noqa: F401 - before the simulator's cached kernels are defined
 from tofnet.sim.camera import DEFAULT_INTRINSICS, DEFAULT_SENSOR_SIZE, Segment, Trajectory, constant
 from tofnet.sim.config import SimConfig
 from tofnet.sim.engine import generate
