@@ -61,7 +61,7 @@ class TimeSurfaceConfig:
     refractory_depth: float = 10.0
     hold_px: float = 3.0
     burst_ratio: float = 4.0
-    hold_fit_rms_px: float = 1.0
+    hold_fit_rms_px: float = 0.5
     behind_depth: float = 10.0
     window_px: float = 6.0
     max_hold: float = 1.0

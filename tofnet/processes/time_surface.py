@@ -94,7 +94,7 @@ class TimeSurfaceProcess(Process):
               "is this many times the gap before the event ahead (or, after an edge's first event, at least the "
               "silence before that over this), or at least the refractory period; from the pixel's own events only",
               minimum=1.0),
-        Param("hold_fit_rms_px", "float", 1.0, unit="px", doc="only a fit at most this far (rms) from its points "
+        Param("hold_fit_rms_px", "float", 0.5, unit="px", doc="only a fit at most this far (rms) from its points "
               "sets the pixel's hold: a worse one, e.g. in noise, measured no crossing time", minimum=0.0),
         Param("behind_depth", "length", 10.0, unit="m", doc="fit a first event only when the two pixels just "
               "behind it along the motion fired, in either order, within the travel (coordinates travel; else the "
