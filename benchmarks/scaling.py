@@ -274,7 +274,7 @@ def figure(args, recording: Recording, latency: dict) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, (a, b) = plt.subplots(1, 2, figsize=(9, 3.4))
-    a.plot(list(speedups), list(speedups.values()), "o-", label="measured wall time (2 CPUs, loaded)")
+    a.plot(list(speedups), list(speedups.values()), "o-", label="measured wall time (this machine)")
     a.plot(list(bound), list(bound.values()), "s--", label="N x CPU(1) / CPU(N): a free core per thread")
     a.plot([1, 4], [1, 4], ":", color="grey", label="ideal")
     a.set(xlabel="workers", ylabel="speed-up vs 1 worker", title="paper network, edges 1280x720 20M")
