@@ -97,3 +97,10 @@ def test_sessions_gather_and_scatter_the_surface_across_bands():
         assert np.array_equal(three.get("time_surface.last_first_event"), surface)
         a, b = one.finish(), three.finish()
     assert first_difference(b, a) == ""
+
+
+def test_the_kernels_bands_run_in_threads_release_the_gil():
+    # Bands are threads: a kernel that holds the GIL runs them one at a time (the time surface's did).
+    from tofnet.kernels import time_of_travel, time_surface
+    for kernel in (time_surface.process, time_of_travel.process_events):
+        assert kernel.targetoptions.get("nogil") is True, kernel.__name__
