@@ -25,7 +25,7 @@ import numpy as np
 
 from tofnet.backends._workers import _Worker
 from tofnet.backends.band_merge import BandsBase, merge, rows_read
-from tofnet.backends.remote import Placement, RemoteModel
+from tofnet.backends.remote import Placement, RemoteModel, summed_counts
 from tofnet.compiler.bands import Band
 from tofnet.compiler.partition import halo_of, receptive_offsets
 from tofnet.errors import BackendError
@@ -248,11 +248,7 @@ class BandedReader(Model):
         return out
 
     def counts(self) -> dict[str, int]:
-        total: dict[str, int] = {}
-        for model in self.models:
-            for name, value in model.counts().items():
-                total[name] = total.get(name, 0) + int(value)
-        return total
+        return summed_counts(model.counts() for model in self.models)
 
     def get_var(self, name: str, step: int) -> np.ndarray:
         return np.concatenate([model.get_var(name, step) for model in self.models], axis=-2)  # bands of rows

@@ -185,12 +185,16 @@ class RemoteModel:
         keys = [p.key for p in self.placements]
         replies = self.exchange({w: ("counts", [k for p, k in zip(self.placements, keys) if p.worker == w])
                                  for w in workers})
-        total: dict[str, int] = {}
-        for worker in workers:
-            for counts in replies[worker][1]:
-                for name, value in counts.items():
-                    total[name] = total.get(name, 0) + int(value)
-        return total
+        return summed_counts(counts for worker in workers for counts in replies[worker][1])
+
+
+def summed_counts(parts) -> dict[str, int]:
+    """The counts of a process's instances (bands, cores), name by name: the process's own."""
+    total: dict[str, int] = {}
+    for counts in parts:
+        for name, value in counts.items():
+            total[name] = total.get(name, 0) + int(value)
+    return total
 
 
 def placements_for(compiled, process: Process, model_class: type, plans: list[WorkerPlan],
