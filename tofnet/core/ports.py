@@ -3,15 +3,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, ClassVar
+from typing import ClassVar, Protocol
 
 import numpy as np
 
 from tofnet.errors import NetworkError
 from tofnet.events import DEPTH_DTYPE, TOT_DTYPE
-
-if TYPE_CHECKING:
-    from tofnet.core.process import Process
 
 #: Fields every record of a port carries: the step it was sent in, and for spikes its pixel.
 STEP_FIELD = ("step", "<i8")
@@ -103,10 +100,23 @@ class PortSpec:
     added_latency_steps: int | None = None
 
 
+class PortOwner(Protocol):
+    """What a port reads of the process it belongs to (a ``tofnet.core.process.Process``, which
+    imports this module: the protocol keeps the import one way)."""
+
+    name: str
+
+    @property
+    def sensor_size(self) -> tuple[int, int] | None: ...
+
+    @classmethod
+    def port_latency_steps(cls, port: str) -> int: ...
+
+
 class Port:
     """A port of one process instance; its shape is ``(channels, height, width)``."""
 
-    def __init__(self, process: "Process", spec: PortSpec):
+    def __init__(self, process: PortOwner, spec: PortSpec):
         self.process = process
         self.spec = spec
 
@@ -133,7 +143,7 @@ class Port:
 class OutPort(Port):
     """Sends spikes; may fan out to any number of input ports."""
 
-    def __init__(self, process: "Process", spec: PortSpec):
+    def __init__(self, process: PortOwner, spec: PortSpec):
         super().__init__(process, spec)
         self.targets: list[InPort] = []
 
@@ -164,7 +174,7 @@ class OutPort(Port):
 class InPort(Port):
     """Receives spikes from one output port (several when its spec allows ``fan_in``)."""
 
-    def __init__(self, process: "Process", spec: PortSpec):
+    def __init__(self, process: PortOwner, spec: PortSpec):
         super().__init__(process, spec)
         self.sources: list[OutPort] = []
 

@@ -1,7 +1,7 @@
 """YAML network specs: a network, how to compile it and which backend runs it.
 
-``load_spec`` reads a spec (a file or YAML text) into a ``Spec``; ``dump_spec``
-(``tofnet.io.spec_writer``) writes one back. Every process type, parameter and connection
+``load_spec`` reads a spec (a file or YAML text) into a ``Spec`` (``tofnet.io.spec_data``);
+``dump_spec`` (``tofnet.io.spec_writer``) writes one back. Every process type, parameter and connection
 of the Python API can be written; errors name the file, the line and the key. The format
 is in docs/spec.md. YAML is read by the bounded safe loader of ``tofnet.io.safe_yaml``.
 """
@@ -10,13 +10,12 @@ from __future__ import annotations
 
 import importlib
 import re
-from dataclasses import dataclass, field
 from importlib.metadata import entry_points
 from importlib.resources import files
 from pathlib import Path
 from typing import Any, Mapping
 
-from tofnet.compiler.budget import LOIHI2, Budget
+from tofnet.compiler.budget import Budget
 from tofnet.compiler.partition import parse_patch_size, patch_per_layer
 from tofnet.core.network import Network
 from tofnet.core.ports import InPort, OutPort
@@ -24,37 +23,13 @@ from tofnet.core.process import Process
 from tofnet.errors import SpecError, TofnetError, located, quote, reason
 from tofnet.io.safe_yaml import (MAX_SPEC_BYTES, _Map, _Seq, _line, _parse_yaml, _read_spec_file,  # noqa: F401
                                  read_yaml_file, yaml_source)
+from tofnet.io.spec_data import Spec
 from tofnet.io.trust import ENTRY_POINTS, allowed_imports, check_import
 from tofnet.io.spec_writer import (dump_spec, network_signature, network_to_dict, networks_equal,  # noqa: F401
                                    patch_to_data, spec_to_dict, type_name_of)
 TOP_KEYS = ("name", "description", "processes", "connections", "compile", "backend")
 COMPILE_KEYS = ("patch", "budget")
 _CONNECTION = re.compile(r"^\s*(\w+)\.(\w+)\s*->\s*(\w+)\.(\w+)\s*$")
-
-
-@dataclass
-class Spec:
-    """A loaded spec: the network, compile options, backend and where it came from.
-
-    ``compile`` holds the keys the spec gave, as ``compile_network`` takes them:
-    ``budget`` (a ``Budget``) and ``patch`` (``"auto"``, ``(w, h)`` px or per process).
-    """
-
-    network: Network
-    compile: dict[str, Any] = field(default_factory=dict)
-    backend: str | None = None
-    backend_options: dict[str, Any] = field(default_factory=dict)
-    description: str | None = None
-    source: str = "<string>"
-
-    @property
-    def budget(self) -> Budget:
-        return self.compile.get("budget", LOIHI2)
-
-    def compile_network(self, **overrides: Any):
-        """``compile_network(network, **compile)``, with ``overrides`` (budget, patch) applied."""
-        from tofnet.compiler import compile_network
-        return compile_network(self.network, **{**self.compile, **overrides})
 
 
 class _Reader:

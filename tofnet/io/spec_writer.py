@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import Any, Mapping
 
 import yaml
 
@@ -11,10 +11,8 @@ from tofnet.core.network import Network
 from tofnet.core.ports import InPort, OutPort
 from tofnet.core.process import Process
 from tofnet.errors import TofnetError
+from tofnet.io.spec_data import Spec
 from tofnet.units import seconds
-
-if TYPE_CHECKING:
-    from tofnet.io.spec import Spec
 
 
 def type_name_of(process: Process) -> str:
