@@ -39,9 +39,17 @@ def two_readers() -> Network:
     return Network([*paper.processes, surface, velocity, gate], name="two_readers")
 
 
+ROTATION = {"source": "constant", "omega": [0.0, 0.0, 0.2]}  # rad/s: what tofnet run adds for a turning recording
+LENS = {"model": "radtan", "coefficients": [-0.05, 0.01, 0.0, 0.0], "intrinsics": [200.0, 200.0, 12.0, 9.0]}
+
+#: Every built-in network (tofnet.networks, and the variants tofnet run builds from them), and a
+#: user's network with two readers.
 NETWORKS = {
     "paper": lambda: depth_network(SENSOR, velocity=CONSTANT),
+    "paper, rotation": lambda: depth_network(SENSOR, velocity=CONSTANT, rotation=ROTATION),
+    "paper, undistorted": lambda: depth_network(SENSOR, velocity=CONSTANT, undistort=LENS),
     "improved": lambda: improved_network(SENSOR, velocity=CONSTANT),
+    "improved, rotation": lambda: improved_network(SENSOR, velocity=CONSTANT, rotation=ROTATION),
     "distances": lambda: multi_distance_network(SENSOR, velocity=CONSTANT),
     "denoised": lambda: denoised_network(SENSOR, velocity=CONSTANT),
     "two readers": two_readers,
@@ -54,6 +62,16 @@ def test_every_built_in_process_declares_the_counts_its_models_keep():
             assert count.kind in KINDS and count.name
     with pytest.raises(TypeError, match="kind"):
         Count("x", "lost")
+
+
+def test_networks_covers_every_built_in_network():
+    import tofnet.networks
+    from tofnet.api import ESTIMATORS
+
+    built_in = {name for name, value in vars(tofnet.networks).items() if name.endswith("_network") and callable(value)}
+    assert built_in == {"depth_network", "improved_network", "multi_distance_network", "denoised_network"}, \
+        "a new built-in network: add it (and its variants) to NETWORKS"
+    assert set(ESTIMATORS.values()) == {depth_network, improved_network}  # what tofnet run --estimator builds
 
 
 @pytest.mark.parametrize("name", list(NETWORKS))
