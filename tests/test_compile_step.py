@@ -78,3 +78,35 @@ def test_run_summary_keeps_compile_time_apart_and_out_of_the_depth_file_facts():
     assert summary["compile_time_s"] == result.compile_time >= 0
     assert summary["kernels_compiled"] == result.kernels_compiled
     assert not {"compile_time_s", "kernels_compiled", "wall_time_s"} & set(result.facts())
+
+
+@pytest.mark.slow
+def test_a_first_run_on_a_fresh_install_says_it_compiles_and_reports_the_networks_speed(tmp_path):
+    """``tofnet run`` with an empty numba cache (a fresh install), its output piped: the compile is
+    announced on stderr as it starts, and the summary gives it apart, with the rate over the network's
+    time only."""
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from tofnet.io.ecd import write_ecd
+    from tofnet.testing import TEST_INTRINSICS, moving_edge
+
+    write_ecd(tmp_path / "rec", moving_edge((16, 12), -50.0, "u"), intrinsics=TEST_INTRINSICS)
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": str(root), "NUMBA_CACHE_DIR": str(tmp_path / "fresh-cache")}
+    done = subprocess.run([sys.executable, "-m", "tofnet", "run", "rec", "--velocity=-0.1,0,0", "--json", "summary.json"],
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "tofnet run: compiling kernels, first run only" in done.stderr.splitlines()[0]
+    assert "compiling kernels" not in done.stdout
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["kernels_compiled"] > 0 and summary["compile_time_s"] > 1.0
+    assert summary["wall_time_s"] + summary["compile_time_s"] <= summary["total_time_s"]
+    compile_line = next(line for line in done.stdout.splitlines() if line.startswith("compile "))
+    assert f"{summary['kernels_compiled']} kernels compiled, not counted in the network's time" in compile_line
+    wall = next(line for line in done.stdout.splitlines() if line.startswith("wall time"))
+    rate = summary["events_in"] / summary["wall_time_s"] / 1e6  # events over the network's time only
+    assert f"{summary['wall_time_s']:.3f} s network ({rate:.2f} M events/s)" in wall
