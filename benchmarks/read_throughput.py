@@ -1,8 +1,8 @@
 """Reading throughput per format (events/s, one core) and memory while reading long files in chunks.
 
-    python benchmarks/read_throughput.py [--real ../shared/real] [--repeat 3] [--long 16]
+    python benchmarks/read_throughput.py --real FOLDER [--repeat 3] [--long 16]
 
-Part 1 reads each real sample (``../shared/real/``: AEDAT4, EVT3, DAT, EVT2) and the
+Part 1 reads each real sample (in ``--real``, not distributed with tofnet: AEDAT4, EVT3, DAT, EVT2) and the
 EVT3 recording's 1.22 M events rewritten as AEDAT4 without frames (the DAVIS sample is
 mostly APS frames, so its events/s measures frame decoding), HDF5 (DSEC layout), ROS1
 bag, ``.npz`` and ``events.txt``. Each file is read whole through
@@ -158,8 +158,7 @@ def memory(real: Path, longest: int, scratch: Path) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    here = Path(__file__).resolve().parents[1]
-    parser.add_argument("--real", type=Path, default=here.parent / "shared" / "real")
+    parser.add_argument("--real", type=Path, required=True, help="folder of the real samples (not distributed)")
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--long", type=int, default=16, help="copies of the EVT3 recording in the longest file")
     parser.add_argument("--measure", help=argparse.SUPPRESS)
@@ -168,7 +167,7 @@ def main() -> None:
         _measure_child(args.measure)
         return
     if not args.real.is_dir():
-        sys.exit(f"no real recordings at {args.real} (see ../shared/real/README.md)")
+        sys.exit(f"no real recordings at {args.real}")
     started = time.perf_counter()
     with tempfile.TemporaryDirectory() as scratch:
         throughput(args.real, args.repeat, Path(scratch))

@@ -1,10 +1,10 @@
 """The time-surface estimator on real sensor recordings: where the events end, and CPU per event (run by hand).
 
-    python benchmarks/time_surface_real.py                                 # ../shared/real, behind_depth 10 and 0
-    python benchmarks/time_surface_real.py --real /work/shared/real --velocity 0.5,0,0 --configs 'behind_depth=10;behind_depth=0'
+    python benchmarks/time_surface_real.py --real FOLDER                   # behind_depth 10 and 0
+    python benchmarks/time_surface_real.py --real FOLDER --velocity 0.5,0,0 --configs 'behind_depth=10;behind_depth=0'
 
-The samples in ``--real`` (``davis346.aedat4``, ``evt2.raw``, ``evt3.raw``, ``gen4.dat``; see
-their README; a file that is absent is skipped) come from static cameras: there is no
+The samples in ``--real`` (``davis346.aedat4``, ``evt2.raw``, ``evt3.raw``, ``gen4.dat``;
+not distributed with tofnet; a file that is absent is skipped) come from static cameras: there is no
 ground truth and the depths mean nothing, but the noise, hot pixels and bursts are a real
 sensor's. Each is read with ``tofnet.io.read_recording`` and fed, as one packet, to
 ``TimeSurfaceEstimator`` with a constant made-up camera velocity (``--velocity`` m/s,
@@ -67,8 +67,7 @@ def run(events, config: TimeSurfaceConfig, velocity, repeat: int) -> tuple[dict,
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--real", default=str(Path(__file__).resolve().parents[2] / "shared" / "real"),
-                        help="folder of the real samples (default: ../shared/real beside the repository)")
+    parser.add_argument("--real", required=True, help="folder of the real samples (not distributed with tofnet)")
     parser.add_argument("--files", default=",".join(FILES))
     parser.add_argument("--velocity", default="0.5,0,0", help="constant camera velocity tx,ty,tz m/s")
     parser.add_argument("--configs", default="behind_depth=10;behind_depth=0",

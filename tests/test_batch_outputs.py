@@ -16,6 +16,7 @@ from tofnet.errors import TofnetError
 from tofnet.events import make_events
 from tofnet.io.guard import MANIFEST
 
+from optional import optional
 from test_reliability_full_disk import tmpfs
 from test_reliability_outputs import one_line_error
 
@@ -35,7 +36,7 @@ def plan(folder, output="out", extra=""):
 @pytest.fixture
 def no_cluster(monkeypatch):
     """Fails the test if a cluster is started: the outputs must be refused before."""
-    pytest.importorskip("distributed")
+    optional("distributed")
     from tofnet.batch import runner
 
     def refuse(*args, **kwargs):

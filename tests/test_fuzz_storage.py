@@ -8,7 +8,9 @@ from pathlib import Path
 
 import pytest
 
-hypothesis = pytest.importorskip("hypothesis")
+from optional import optional
+
+hypothesis = optional("hypothesis")
 from hypothesis import HealthCheck, given, settings, strategies as st  # noqa: E402
 
 from tofnet.fuzzing import TARGETS, outcome  # noqa: E402

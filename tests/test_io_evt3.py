@@ -8,6 +8,7 @@ a TIME_LOW of 800, with no event between, so the events after it are at 800 µs,
 import numpy as np
 import pytest
 
+from optional import optional
 from tofnet.io.evt3 import clamped_of, decode_words, new_state
 
 HIGH, LOW, Y, X, BASE, VECT12, VECT8 = 0x8000, 0x6000, 0x0000, 0x2000, 0x3000, 0x4000, 0x5000
@@ -67,7 +68,7 @@ def _file(tmp_path, words):
 
 
 def test_the_reader_gives_the_specifications_time_and_notes_the_clamped_event(tmp_path):
-    faery = pytest.importorskip("faery")
+    faery = optional("faery")
     from tofnet.io.source import open_recording
 
     path = _file(tmp_path, WORDS)

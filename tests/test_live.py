@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from formats_helpers import pattern_recording
+from optional import optional
 from tofnet.api import run as run_recording
 from tofnet.cli import main
 from tofnet.errors import TofnetError
@@ -110,7 +111,7 @@ class _FakeCamera:
 
 
 def test_camera_packets_are_whole_steps_in_order():
-    pytest.importorskip("faery")
+    optional("faery")
     events = pattern_recording(50_000).events
     camera = CameraSource(opener=lambda: _FakeCamera(events))
     assert camera.metadata().sensor_size == (64, 48)
@@ -127,7 +128,7 @@ def test_camera_packets_are_whole_steps_in_order():
 
 
 def test_no_camera_is_one_line(capsys):
-    pytest.importorskip("faery")
+    optional("faery")
     import importlib.util
     if importlib.util.find_spec("neuromorphic_drivers") or importlib.util.find_spec("event_camera_drivers"):
         pytest.skip("camera drivers installed: a camera may be present")
@@ -152,9 +153,10 @@ def test_cli_replay_writes_png_frames_atomically(recording_file, tmp_path, capsy
     assert "did not write" in capsys.readouterr().err and (out / "notes.txt").read_text() == "mine"
 
 
-@pytest.mark.skipif(not (REAL / "evt3.raw").is_file(), reason="no ../shared/real/evt3.raw (real recordings)")
+@pytest.mark.skipif(not (REAL / "evt3.raw").is_file(),
+                    reason="needs the real EVT3 recording, not distributed with tofnet (shared/real/ beside the checkout)")
 def test_real_evt3_window_replays_in_step_with_its_clock():
-    pytest.importorskip("faery")
+    optional("faery")
     from tofnet.io.calibration import parse_intrinsics
     from tofnet.io.window import parse_window
 
