@@ -234,6 +234,31 @@ def test_packets_handed_to_threads_equal_one_worker(hand_over, bands):
     assert len(one.depth) > 200
 
 
+def test_a_packet_in_threads_is_one_hand_over_and_every_thread_touches_fresh_output(monkeypatch):
+    """Bands and merge in one hand-over per packet (a barrier between them); the first touch of the
+    output's fresh pages is shared by the threads, by huge-page blocks."""
+    monkeypatch.setattr(bands_module, "SERIAL_BELOW", 0)
+    network = depth_network(SENSOR, velocity=VELOCITY)
+    stream = get_backend("fixed", workers=2).open_stream(network, recording=scene())
+    stream.kernel.one_band_below = 0
+    stream.feed_all(scene().events[:300])  # builds the bands
+    calls, touched = [], []
+    run, touch = bands_module.BandPool.run, bands_module.touch
+    monkeypatch.setattr(bands_module.BandPool, "run", lambda pool, *a: calls.append(a[1]) or run(pool, *a))
+    monkeypatch.setattr(bands_module, "touch", lambda *a: touched.append(a[4:6]) or touch(*a))
+    into = np.empty(1 << 18, stream.kernel.buffers()[0].dtype)  # fresh: 7 MB
+    stream.kernel.run_events(scene().events[300:2000], stream._updates.rows, into, 0)
+    assert calls == [2] and sorted(touched) == [(0, 2), (1, 2)]
+
+    raw = np.ones(5 << 21, np.uint8)
+    address = raw.ctypes.data
+    for part in (0, 1):
+        bands_module.touch(raw, address, 100, len(raw) - 100, part, 2, 1 << 21)
+    pages = np.flatnonzero(raw == 0)
+    assert np.all((address + pages) % 4096 == 0) and len(pages) == np.sum((address + np.arange(100, len(raw) - 100))
+                                                                          % 4096 == 0)
+
+
 def test_tofnet_run_with_workers_writes_the_same_bytes_and_says_how_it_split(tmp_path, capsys):
     np.save(tmp_path / "ev.npy", scene((60, 40)).events)
     common = ["--velocity", "0.5,0,0", "--intrinsics", "200,200,30,20", "--quiet"]

@@ -30,7 +30,7 @@ from tofnet.compiler.bands import Band
 from tofnet.compiler.partition import halo_of, receptive_offsets
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE
-from tofnet.kernels.bands import merge_cuts, row_load, select_rows
+from tofnet.kernels.bands import merge_cuts, row_load, select_rows, touch
 from tofnet.kernels.input_filter import NEVER
 from tofnet.kernels.kernel_config import KernelConfig, Region
 from tofnet.kernels.region import UNSORTED, TimeOfTravelKernel
@@ -39,6 +39,9 @@ from tofnet.models.base import Model
 #: Packets with fewer events run their bands one after the other in the caller's thread: handing
 #: work to another thread costs more than it saves there (docs/performance.md, "Workers").
 SERIAL_BELOW = 8192
+#: The block by which ``touch`` shares fresh pages between threads: a transparent huge page (numpy
+#: asks for them on large arrays), whose first touch is one fault, paid by one thread.
+HUGE_PAGE = 1 << 21
 
 
 def resolve_workers(value, who: str = "workers") -> int:
@@ -106,6 +109,8 @@ class BandedKernel(BandsBase):
         self._pool: BandPool | None = None
         self._lock = threading.Lock()
         self._scratch = np.empty(0, DEPTH_DTYPE)
+        self._touched = (0, 0, 0)  # an output buffer's address and length, and the bytes touched in it
+        self._estimates = 0  # of the latest packet
         self.facts = {"workers": 1, "bands": []}
         #: A first packet of fewer events keeps one band (``_build``); ``run`` sets 0: its packets are large.
         self.one_band_below = SERIAL_BELOW
@@ -117,8 +122,9 @@ class BandedKernel(BandsBase):
         width, height = self.config.sensor_size
         self.bands = self._planned if packet >= self.one_band_below else [(0, height)]
         self._keep = [rows_read(band, self._reach, height, b == 0) for b, band in enumerate(self.bands)]
-        self._index = [np.empty(0, np.int64) for _ in self.bands]  # the positions of each band's events
+        self._index = np.empty((len(self.bands), 0), np.int64)  # per band, the positions of its events
         self._pool = BandPool(min(self._threads, len(self.bands)))
+        self._barrier = threading.Barrier(self._pool.threads)
         # each band's state is built (and its pages touched) by the thread that runs it
         self.kernels = self._pool.run(lambda b: TimeOfTravelKernel(self.config, Region(0, width, *self.bands[b]),
                                                                    self._t0), len(self.bands))
@@ -154,60 +160,106 @@ class BandedKernel(BandsBase):
     def run_events(self, events: np.ndarray, velocity, into: np.ndarray | None = None, offset: int = 0,
                    record_tot: bool = False, span: tuple[int, int] | None = None,
                    canonical: bool = True) -> tuple[int, int]:
-        """As ``TimeOfTravelKernel.run_events``; with several bands the estimates are in the canonical order."""
+        """As ``TimeOfTravelKernel.run_events``; with several bands the estimates are in the canonical order.
+
+        One hand-over per packet: each thread touches its share of the output's fresh pages, lists
+        and runs its bands (each band lists its events of the whole packet, ``select_rows``), waits
+        for the others and merges its share of the steps."""
         into, offset = self._output(events, into, offset)
         n = len(events)
         if n == 0:
             return offset, 0
         if not self.kernels:
             self._build(n)
-        if len(self.kernels) == 1:  # one band: the one-worker path, nothing to select or merge
+        if len(self.kernels) == 1:  # one band: the one-worker path, nothing to list or merge
             return self.kernels[0].run_events(events, velocity, into, offset, record_tot, span, canonical)
         bands = len(self.kernels)
-        serial = n < SERIAL_BELOW  # a small packet: no hand-over
+        threads = self._pool.threads if n >= SERIAL_BELOW else 1  # a small packet: no hand-over
         if len(self._scratch) < n * bands:  # band b writes from b * n: at most one estimate per event
             self._scratch = np.empty(max(n * bands, 2 * len(self._scratch)), DEPTH_DTYPE)
-        if len(self._index[0]) <= n:
-            self._index = [np.empty(max(n + 1, 2 * len(self._index[0])), np.int64) for _ in range(bands)]
-        scratch, t = self._scratch, events["t"]
+        if self._index.shape[1] <= n:
+            self._index = np.empty((bands, max(n + 1, 2 * self._index.shape[1])), np.int64)
+        scratch, index, t = self._scratch, self._index, events["t"]
         span = int(t[0]), int(t[-1])
+        results: list = [None] * (bands + threads)  # per band its ends or its error, then per thread its merge's end
+        share = np.array_split(np.arange(bands), threads)
+        fresh = self._fresh(into, offset, n, threads)
 
         def velocity_locked(first, count):
             with self._lock:
                 return velocity(first, count)
 
-        def job(b: int):
-            """Band b lists its events and runs them (every band checks the packet's time order);
-            an error is returned, so that every band is done before one propagates."""
+        def job(k: int) -> None:
+            """Thread k's bands listed and run, then (every band run) share k of the merge; errors are
+            kept in ``results`` (every band checks the packet's time order), and every thread waits."""
             try:
-                m = select_rows(events, self._keep[b], self._index[b])
-                if m < 0:
-                    raise BackendError(UNSORTED)
-                return self.kernels[b].run_events(events, velocity_locked, scratch, b * n, record_tot, span, True,
-                                                  self._index[b][:m])
-            except BaseException as error:  # noqa: B036 - re-raised below, once all bands are done
-                return error
+                if fresh is not None:
+                    touch(*fresh, k, threads, HUGE_PAGE)
+                for b in share[k]:
+                    try:
+                        m = select_rows(events, self._keep[b], index[b])
+                        if m < 0:
+                            raise BackendError(UNSORTED)
+                        results[b] = self.kernels[b].run_events(events, velocity_locked, scratch, b * n, record_tot,
+                                                                span, True, index[b, :m])
+                    except BaseException as error:  # noqa: B036 - re-raised by the caller, once all are done
+                        results[b] = error
+            except BaseException as error:  # noqa: B036 - as above
+                results[bands + k] = error
+            self._wait(threads)
+            if any(isinstance(r, BaseException) for r in results):
+                return
+            parts = np.array([(b * n, e) for b, (e, _) in enumerate(results[:bands])], np.int64)
+            cuts = merge_cuts(scratch["step"], parts, threads)  # every thread cuts the same
+            before = int((cuts[k] - cuts[0]).sum())
+            results[bands + k] = merge(scratch, np.stack([cuts[k], cuts[k + 1]], 1), into, offset + before)
 
-        ends = self._pool.run(job, bands, serial)
-        errors = [e for e in ends if isinstance(e, BaseException)]
+        self._pool.run(job, threads, threads < 2)
+        errors = [e for e in results if isinstance(e, BaseException)]
         if errors:
-            if len(errors) < bands or any(str(e) != UNSORTED for e in errors):
+            if len(errors) != bands or any(str(e) != UNSORTED for e in errors):
                 self._broken = True  # some bands ran the packet, others did not
             raise errors[0]  # every band refused it: nothing changed
-        self._t_hi = max(self._t_hi, int(events["t"][-1]))
-        # the estimates merged in the canonical order, each thread a share of the steps
-        parts = np.array([(b * n, e) for b, (e, _) in enumerate(ends)], np.int64)
-        shares = self._pool.threads if int(np.sum(parts[:, 1] - parts[:, 0])) >= SERIAL_BELOW else 1
-        cuts = merge_cuts(scratch["step"], parts, shares)
-        before = np.concatenate([[0], np.cumsum((cuts[1:] - cuts[:-1]).sum(axis=1))])
-        self._pool.run(lambda k: merge(scratch, np.stack([cuts[k], cuts[k + 1]], 1), into, offset + int(before[k])),
-                       shares, shares < 2)
-        end = offset + int(before[-1])
+        self._t_hi = max(self._t_hi, span[1])
+        end = max(results[bands:])
+        self._estimates = end - offset
         if not record_tot:
             return end, 0
-        tots = [k.buffers()[2][:t] for k, (_, t) in zip(self.kernels, ends)]
+        tots = [k.buffers()[2][:t] for k, (_, t) in zip(self.kernels, results[:bands])]
         bounds = np.cumsum([0] + [len(t) for t in tots])
         return end, self._merged_tot(np.concatenate(tots), np.stack([bounds[:-1], bounds[1:]], 1))
+
+    def _wait(self, threads: int) -> None:
+        """Wait for every thread of the packet (none when one runs it); an interrupted wait breaks the
+        barrier, so that no thread waits for ever, and the kernels' state with it."""
+        if threads < 2:
+            return
+        try:
+            self._barrier.wait()
+        except BaseException:
+            self._broken = True
+            self._barrier.abort()
+            raise
+
+    def _fresh(self, into: np.ndarray, offset: int, n: int, parts: int) -> tuple | None:
+        """``(bytes, address, lo, hi)``: the bytes of ``into`` this packet's merge may be first to touch
+        (past what earlier packets touched, at least ``parts`` huge pages at a time, within the
+        packet's room), for ``touch``; None when there are none. On this kind of machine the first
+        touch of fresh memory is the dearest part of the merge, and one thread would pay it alone
+        (the one writing the furthest): docs/performance.md, "Workers"."""
+        if parts < 2 or not into.flags.c_contiguous:
+            return None
+        size, address = into.dtype.itemsize, into.ctypes.data
+        if self._touched[:2] != (address, len(into)):
+            self._touched = (address, len(into), 0)
+        room = (offset + n) * size
+        lo = max(self._touched[2], offset * size)
+        want = min(room, (offset + 2 * self._estimates + 4096) * size)
+        if want <= lo:
+            return None
+        hi = min(room, max(want, lo + parts * HUGE_PAGE))
+        self._touched = (address, len(into), hi)
+        return into.view(np.uint8), address, lo, hi
 
 
 class BandedReader(Model):

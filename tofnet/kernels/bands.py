@@ -2,7 +2,8 @@
 
 ``select_rows`` lists the positions of a packet's events of a band's rows (widened by the
 input reach), so each band's kernel reads only its events (each band selects its own, in its
-thread), and checks the packet's time order on the way; ``merge_by_step`` joins the bands' outputs, each sorted by step, into one array
+thread), and checks the packet's time order on the way; ``touch`` writes the first byte of fresh
+pages, so that threads share the first touch of an output buffer; ``merge_by_step`` joins the bands' outputs, each sorted by step, into one array
 sorted by step and, within a step, in band order: the canonical order when each band's part
 is in it, as bands are strips of rows from the top; ``merge_cuts`` splits that merge into
 shares that threads run side by side.
@@ -45,6 +46,20 @@ def select_rows(events, keep, index):
         index[m] = i
         m += keep[events[i].y]
     return -1 if back else m
+
+
+@njit(cache=True, nogil=True)
+def touch(raw, address, lo, hi, part, parts, block):
+    """Write 0 to the first byte of every 4 KB page that starts in ``raw[lo:hi]`` (bytes; ``address``:
+    where ``raw`` starts in memory) and lies in a ``block``-byte block numbered ``part`` modulo
+    ``parts``: the first touch of fresh pages (by far their dearest use on a virtual machine), shared
+    between ``parts`` threads."""
+    page = 4096
+    i = lo + (-(address + lo)) % page
+    while i < hi:
+        if ((address + i) // block) % parts == part:
+            raw[i] = 0
+        i += page
 
 
 @njit(cache=True, nogil=True)
