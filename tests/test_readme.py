@@ -4,7 +4,9 @@ and then its Python blocks, one after the other in one interpreter, on the files
 Installing tofnet and running the test suite are left out (this test is part of that suite and
 runs on the tree itself): ``tofnet`` is this tree's (``python -m tofnet`` with the tree on
 ``PYTHONPATH`` when no console script is installed), and ``examples/`` is the repository's, as
-in a clone. Every command must succeed without a traceback; the files they write are checked.
+in a clone, with an empty numba cache (a fresh install): the first command, ``tofnet warmup``, must
+say it compiles the kernels, and no later one compile any. Every command must succeed without a
+traceback; the files they write are checked.
 """
 
 from __future__ import annotations
@@ -67,8 +69,9 @@ def test_readme_blocks_are_found_and_name_real_subcommands():
 def test_every_readme_command_runs_in_order_in_a_fresh_folder(tmp_path):
     lines = command_lines((ROOT / "README.md").read_text(encoding="utf-8"))
     (tmp_path / "examples").symlink_to(ROOT / "examples")  # a clone has them
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep))
-    printed = {}
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep),
+               NUMBA_CACHE_DIR=str(tmp_path / "numba-cache"))  # a fresh install: no kernel compiled yet
+    printed, announced = {}, []
     for line in lines:
         for argv in commands(line):
             done = subprocess.run(tofnet_command() + argv[1:], cwd=tmp_path, env=env, capture_output=True, text=True,
@@ -76,6 +79,11 @@ def test_every_readme_command_runs_in_order_in_a_fresh_folder(tmp_path):
             assert done.returncode == 0, f"{' '.join(argv)} exited {done.returncode}:\n{done.stderr[-2000:]}"
             assert "Traceback" not in done.stderr, f"{' '.join(argv)}:\n{done.stderr[-2000:]}"
             printed[" ".join(argv)] = done.stdout
+            if "compiling kernels, first run only" in done.stderr:
+                announced.append(" ".join(argv))
+    # the README's first command compiles every kernel, and says so; no later one waits for a compile
+    assert announced == ["tofnet warmup"], announced
+    assert "kernels compiled in" in printed["tofnet warmup"]
     from tofnet.io.depth import read_depth
 
     depth, _ = read_depth(tmp_path / "depth.npz")
@@ -95,7 +103,8 @@ def test_every_readme_command_runs_in_order_in_a_fresh_folder(tmp_path):
     assert "done in" in printed["tofnet warmup"]
 
     script = "\n".join(python_blocks((ROOT / "README.md").read_text(encoding="utf-8")))
-    done = subprocess.run([sys.executable, "-c", script + "\nprint('estimates', len(result.outputs['depth2.depth']))"], cwd=tmp_path,
-                          env=env, capture_output=True, text=True, timeout=600)
+    script += "\nprint('estimates', len(result.outputs['depth2.depth']))"
+    done = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=600)
     assert done.returncode == 0, f"the README's Python blocks:\n{done.stderr[-2000:]}"
     assert int(done.stdout.split()[-1]) > 1000

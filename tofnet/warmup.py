@@ -5,9 +5,9 @@ machine code on disk (``tofnet.kernels.compilation``). A warmer is a function th
 kernels on tiny inputs through the code paths real runs take, so that numba compiles exactly
 the signatures they need; ``register_warmer`` adds one (a new area of tofnet, or a user's
 package with kernels of its own). The built-in warmers are generic: every conformance case
-(which covers every built-in process and graph) on each in-process backend family, and every
-built-in simulator scenario for a few milliseconds through the pipeline of ``tofnet demo``
-(simulate, write, read, run each built-in estimator, score).
+(which covers every built-in process and graph) on each backend family, the multiproc backend's
+worker processes included, and every built-in simulator scenario for a few milliseconds through
+the pipeline of ``tofnet demo`` (simulate, write, read, run each built-in estimator, score).
 """
 
 from __future__ import annotations
@@ -71,18 +71,26 @@ def warm_up(names: Iterable[str] | None = None, report: Callable[[Warmed], None]
 
 def _families_warmer(backends: tuple[str, ...]) -> Callable[[], str]:
     def warm() -> str:
+        import contextlib
+
         from tofnet.backends.registry import get_backend
         from tofnet.compiler import compile_network
         from tofnet.conformance import CASES
+        from tofnet.conformance.runner import BackendRunner
+        from tofnet.errors import UnsupportedError
 
         scenes = {}
         for case in CASES:  # one case per code path: many differ only in numbers (speeds, sizes)
             scene = case.build()
             scenes.setdefault(_code_path(scene), scene)
         for backend in backends:
-            runner = get_backend(backend)
-            for scene in scenes.values():
-                runner.run(compile_network(scene.network, patch=scene.patch), scene.recording, record_tot=True)
+            with contextlib.ExitStack() as stack:  # as the conformance suite runs it (multiproc: one session)
+                runner = BackendRunner(get_backend(backend), stack)
+                for scene in scenes.values():
+                    try:
+                        runner.run(compile_network(scene.network, patch=scene.patch), scene.recording)
+                    except UnsupportedError:
+                        continue  # a graph this backend does not hold: nothing of it to compile
         return (f"{len(scenes)} of the {len(CASES)} conformance cases (every built-in process and graph) "
                 f"on {', '.join(backends)}")
     return warm
@@ -147,6 +155,11 @@ def _workers() -> str:
     return "the bands' kernels (fixed with 2 workers, fused and model by model)"
 
 
-register_warmer("backends", _families_warmer(("float", "fixed")))
+def _multiproc() -> str:
+    return _families_warmer(("multiproc",))() + " (its workers compile in their own processes, not counted here)"
+
+
+register_warmer("backends", _families_warmer(("reference", "float", "fixed")))
 register_warmer("pipeline", _pipeline)
 register_warmer("workers", _workers)
+register_warmer("multiproc", _multiproc)

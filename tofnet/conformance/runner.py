@@ -53,14 +53,14 @@ class BackendRunner:
 
     def session_or_backend(self):
         """What a ``Session`` should run on: the open multiproc session (its workers), else the backend."""
-        if callable(getattr(self.backend, "session", None)):
+        if "workers" in self.backend.capabilities:
             if self.session is None:
                 self.session = self.stack.enter_context(self.backend.session())
             return self.session
         return self.backend
 
     def run(self, compiled, recording, *, record_tot: bool = True, probes=()):
-        if not callable(getattr(self.backend, "session", None)):
+        if "workers" not in self.backend.capabilities:
             return self.backend.run(compiled, recording, record_tot=record_tot, probes=probes)
         if self.session is None:
             self.session = self.stack.enter_context(self.backend.session())
