@@ -17,7 +17,7 @@ from tofnet.events import DEPTH_DTYPE, TOT_DTYPE
 from tofnet.kernels.bands import merge_by_step
 from tofnet.kernels.input_filter import ACCEPTED, NEVER
 from tofnet.kernels.kernel_config import KernelConfig, KernelOutput
-from tofnet.models.depth import REJECT_REASONS
+from tofnet.kernels.time_of_travel import N_REASONS
 
 
 def words(records: np.ndarray) -> tuple[np.ndarray, int]:
@@ -89,7 +89,7 @@ class BandsBase:
     @property
     def outcomes(self) -> np.ndarray:
         counts = self._band_counts()
-        return np.sum([c[3] for c in counts], axis=0) if counts else np.zeros(len(REJECT_REASONS) + 1, np.int64)
+        return np.sum([c[3] for c in counts], axis=0) if counts else np.zeros(N_REASONS + 1, np.int64)
 
     def buffers(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self._out, np.empty(0, np.int64), self._tot
