@@ -88,6 +88,7 @@ class TimeOfTravelKernel:
         # Scalars and empty arrays the per-packet path needs, looked up once.
         self._t0, self._dt, self._u = int(t0_us), config.timestep_us, config.update_every
         self._span_us = (MAX_VELOCITY_ROWS - 2) * config.update_every * config.timestep_us
+        self._band = None if self.region == Region.full(config.sensor_size) else tt.BAND  # ``tt.process``' band
         self._no_raw, self._no_velocity = np.empty(0, np.int64), np.zeros((0, 3))
         self._held_velocity = np.zeros(4)
         self._held_omega = np.zeros(3)  # rad/s: no rotation before the first angular velocity update
@@ -141,7 +142,7 @@ class TimeOfTravelKernel:
     def _call(self, ts, xs, ys, ps, filtering: bool, table: np.ndarray, first_update: int,
               out: np.ndarray, raw: np.ndarray, n_out: int, record_tot: bool, n_tot: int) -> tuple[int, int, int]:
         return tt.process(ts, xs, ys, ps, filtering, self._ints, self._floats, table, first_update, out, raw, n_out,
-                          record_tot, self._tot, n_tot, None)
+                          record_tot, self._tot, n_tot, None, self._band)
 
     def _raise_for(self, status: int, table: np.ndarray, first_update: int) -> None:
         if status == tt.NO_VELOCITY:
@@ -318,14 +319,14 @@ class TimeOfTravelKernel:
             table, first = self._no_velocity, 0
         n_out2, n_tot2, status = tt.process_events(events, self._ints, self._floats, table, first, out, raw, n_out,
                                                    record_tot, self._tot, n_tot, self._scratch, self._row_start,
-                                                   canonical, index)
+                                                   canonical, index, self._band)
         if status == tt.OK:
             return n_out2, n_tot2
         if status == tt.NO_VELOCITY:  # events out of time order outside the sensor: ask for what is needed
             table, first = velocity(*self._updates(int(self._cursor[tt.NEED_FIRST]), int(self._cursor[tt.NEED_LAST])))
             n_out2, n_tot2, status = tt.process_events(events, self._ints, self._floats, table, first, out, raw,
                                                        n_out, record_tot, self._tot, n_tot, self._scratch,
-                                                       self._row_start, canonical, index)
+                                                       self._row_start, canonical, index, self._band)
         self._raise_for(status, table, first)
         return n_out2, n_tot2
 

@@ -51,6 +51,9 @@ N_REASONS = 4
 REJECTED = 5
 EMITTED = REJECTED + N_REASONS
 INACTIVE, TOT_SPIKES, HALO, N_COUNTS = EMITTED + 1, EMITTED + 2, EMITTED + 3, EMITTED + 4
+#: ``process``' ``band`` for a region smaller than the sensor (None: the whole sensor); its type
+#: (int64 array, as a band's ``index``) selects the compiled loop with the region and halo checks.
+BAND = np.zeros(0, np.int64)
 # The state travels in two arrays (each array argument costs ~0.1 µs per call): ``ints``
 # holds the integer parameters ``ip`` (these slots), then at the offsets they give the
 # cursor, the counts, the sample tables, the caches, the facilitation buffer and the
@@ -249,13 +252,13 @@ def views(ints, floats):
 
 @njit(cache=True, nogil=True)  # bands run in threads (tofnet.backends.bands)
 def process_events(events, ints, floats, velocity, first_update, out, out_raw, n_out, record_tot, tot, n_tot,
-                   scratch, row_start, canonical, index):
+                   scratch, row_start, canonical, index, band):
     """Raw events (``EVENT_DTYPE``) through the input filter and the region (``process``); with
     ``canonical`` the estimates in the canonical order (``order.sort_by_pixel``, with ``scratch``
     and ``row_start``) unless their fixed-point values are kept too (``out_raw`` not empty: the
-    caller sorts), else in the order their trigger events came. ``index``: as ``process``."""
+    caller sorts), else in the order their trigger events came. ``index``, ``band``: as ``process``."""
     n_out2, n_tot2, status = process(events["t"], events["x"], events["y"], events["p"], True, ints, floats,
-                                     velocity, first_update, out, out_raw, n_out, record_tot, tot, n_tot, index)
+                                     velocity, first_update, out, out_raw, n_out, record_tot, tot, n_tot, index, band)
     if canonical and status == OK and out_raw.shape[0] == 0 and n_out2 - n_out > 1:
         sort_by_pixel(out, n_out, n_out2, ints[HEIGHT], scratch, row_start)
     return n_out2, n_tot2, status
@@ -263,7 +266,7 @@ def process_events(events, ints, floats, velocity, first_update, out, out_raw, n
 
 @njit(cache=True, nogil=True)
 def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out, out_raw, n_out, record_tot, tot,
-            n_tot, index):
+            n_tot, index, band):
     """Run a packet through the region; returns ``(n_out, n_tot, status)``.
 
     ``filtering``: ``ts`` are event times (µs) and the input filter runs first (on the
@@ -277,6 +280,9 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
     only the events at these positions (increasing) run, a band's (``tofnet.backends.bands``); the caller
     has checked the events' time order among themselves over all of them (``kernels.bands.select_rows``,
     so every band refuses the same packets); the first is still compared with the latest time fed.
+    ``band`` None: the region is the whole sensor, every event on it is the region's own; else
+    ``BAND`` (the region is a part of the sensor: a band's, a core's). Only its type matters:
+    numba compiles the whole sensor's loop without a band's per-event region and halo checks.
     """
     ip, cursor, counts, rows, cols, cache_j, cache_w, pend, rec, fp, points, cache_at = views(ints, floats)
     stamp = rec.view(np.int32)
@@ -295,9 +301,6 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
     max_diff = 2 * ip[COUNTER_MAX]
     latest = FILTER_WORD + 2 if per_polarity else FILTER_WORD
     hx0, hy0, hx1, hy1 = x0 - d, y0 - d, x1 + d, y1 + d
-    # the whole sensor (one band, one core): every event inside it is the region's own, so the
-    # per-event region and halo checks of a band are skipped (one predictable branch each)
-    whole = x0 == 0 and y0 == 0 and x1 == width and y1 == height
     pad_x, pad_y = 2 * d - x0, 2 * d - y0
     su, sv = np.uint64(2 * stride * d), np.uint64(2 * stride * row * d)  # stamp offsets of the neighbours
     emit_depth = ip[EMIT_DEPTH] != 0
@@ -320,7 +323,9 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
         x, y = np.int64(xs[i]), np.int64(ys[i])
         polarity = 1 if ps[i] != 0 else 0
         r = ((y + pad_y) * row + x + pad_x) * stride  # the pixel's record (valid inside the halo)
-        own = whole or (x0 <= x < x1 and y0 <= y < y1)  # the region's own pixel: it triggers, and its events count
+        # the region's own pixel: it triggers, and its events count (``band is None``: a constant, the
+        # whole sensor's loop has no region or halo checks)
+        own = band is None or (x0 <= x < x1 and y0 <= y < y1)
         if filtering:
             t = ts[i]
             if x >= width or y >= height:
