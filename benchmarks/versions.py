@@ -107,9 +107,10 @@ def count_instructions(tree: Path, script: Path, path: str, runs: int, cache: Pa
     """Callgrind's ``Collected`` counts of ``runs`` fused runs (or packet streams) plus the process's
     start: instructions, and with ``cache_sim`` also Dr Dw I1mr D1mr D1mw ILmr DLmr DLmw."""
     import re
-    # one BLAS thread: idle BLAS threads spin, and their instructions would depend on timing
+    # one BLAS thread: idle BLAS threads spin, and their instructions would depend on timing; one string
+    # hash seed: a random one moves the start-up's dict probes by millions of instructions per process
     env = {**os.environ, "PYTHONPATH": str(tree), "NUMBA_CPU_NAME": "generic", "NUMBA_CACHE_DIR": str(cache),
-           "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+           "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "PYTHONHASHSEED": "0"}
     subprocess.run([sys.executable, str(script), path, "1", how], env=env, check=True, capture_output=True, cwd=tree)
     done = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null",
                            *(["--cache-sim=yes"] if cache_sim else []), sys.executable,
