@@ -28,9 +28,11 @@ def band_rows(compiled, layer: str, plans) -> list[Band]:
     order): the worker's band starts at its first core's row; the first starts at 0, the last ends at
     the sensor's last row. Workers whose shares start on the same row are merged into one band."""
     height = compiled.network.process(layer).sensor_size[1]
+    cores = compiled.cores_of(layer)  # once: 1280x720 has ~1000 cores per layer
     starts = []
     for plan in plans:
-        rows = [core.y0 for core in compiled.cores_of(layer) if core.index in plan.cores]
+        dealt = set(plan.cores)
+        rows = [core.y0 for core in cores if core.index in dealt]
         if rows:
             starts.append(min(rows))
     starts = sorted(set([0] + starts[1:]))
