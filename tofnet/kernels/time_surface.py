@@ -22,7 +22,7 @@ from numba import njit
 
 from tofnet.kernels.time_of_travel import prefetch
 from tofnet.kernels.rotation import rotational_flow
-from tofnet.kernels.time_surface_first import N_B, NEVER, first_event
+from tofnet.kernels.time_surface_first import B_HOLD, N_B, NEVER, first_event
 from tofnet.kernels.time_surface_fit import FIT_ILL_CONDITIONED, FIT_OVER_RMS, FIT_TOO_FEW, fit_plane, fit_rows
 from tofnet.kernels.time_surface_gather import behind_steps, gather, time_window, trimmed_plane
 from tofnet.kernels.time_surface_travel import (RING, S_CHANGE, S_FIRST, advance, pace, since_reversal, to_travel,
@@ -55,7 +55,7 @@ MODEL_PLANE, MODEL_ROWS = range(2)
 MODELS = ("plane", "rows")
 # Status of a call.
 OK, UNSORTED, NO_VELOCITY = range(3)
-#: Events between a prefetch of a pixel's hold and surface rows and their use.
+#: Events between a prefetch of a pixel's state and surface rows and their use.
 PREFETCH = 8
 
 
@@ -109,14 +109,14 @@ def _turn_gains(x, y, fu, fv, rfx, rfy, rcx, rcy):
 
 
 @njit(cache=True, nogil=True)  # bands run in threads (tofnet.backends.bands)
-def process(ts, xs, ys, ps, ip, fp, surface, hold, bursts, prev, last_step, motion, ring, ring_state, sample_of,
+def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ring, ring_state, sample_of,
             points, velocity, first_update, ps_, pw, pt, pg, lines, used, counts, out, quality, n_out, index0, t_hi):
     """Run time-ordered events through the estimator; returns ``(n_out, status, t_hi)``.
 
     ``surface[p, (y + r) * (w + 2r) + x + r]`` is the last first event (µs) of pixel (x, y) and
     polarity p (one plane per polarity, so a fit reads one cache line per row; a border of
-    ``r = radius`` pixels stays ``NEVER``); ``hold[y * w + x, p]`` its measured hold (µs, 0 =
-    none yet); ``bursts[y * w + x, p]`` the first-event rule's state (``time_surface_first``);
+    ``r = radius`` pixels stays ``NEVER``); ``bursts[y * w + x, p]`` the first-event rule's state
+    (``time_surface_first``), with the measured hold (``B_HOLD`` µs, 0 = none yet) in the same row;
     ``prev[y * w + x]`` the pixel's last estimate (z, t) for the consistency rule;
     ``last_step[y * w + x]`` the output step of its last estimate (at most one per pixel and step);
     ``ring`` the camera's displacement per input step and ``ring_state`` (``time_surface_travel``, with ``I_TRAVEL``).
@@ -160,7 +160,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, bursts, prev, last_step, moti
     linear_from = np.int64(0)
     j = 0
     n_events, plane_size = ts.shape[0], surface.shape[1]
-    flat_surface, flat_hold = surface.reshape(-1), hold.reshape(-1)
+    flat_surface = surface.reshape(-1)
     flat_points, points_columns = points.reshape(-1), points.shape[1]
     flat_bursts = bursts.reshape(-1)
     for i in range(n_events):
@@ -169,7 +169,6 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, bursts, prev, last_step, moti
             xq = min(np.int64(xs[i + PREFETCH]), width - 1)
             yq = min(max(np.int64(ys[i + PREFETCH]) - row0, 0), np.int64(rows) - 1)
             pq = 1 if ps[i + PREFETCH] != 0 else 0
-            prefetch(flat_hold, 2 * (yq * width + xq) + pq)
             prefetch(flat_bursts, N_B * (2 * (yq * width + xq) + pq))
             cq = pq * plane_size + (yq + radius) * row + xq + radius
             for dq in range(-radius, radius + 1):
@@ -214,14 +213,13 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, bursts, prev, last_step, moti
         # 1. First-event rule (``time_surface_first``): the surface takes the events that start an edge, from
         # the pixel's own events and A t alone; an event is fitted once the pixel's hold has passed (within a
         # burst, with its edge's start as its own point).
-        up, upol = np.uint64(pixel), np.uint64(polarity)  # unsigned: no negative-index fix-ups
+        up = np.uint64(pixel)  # unsigned: no negative-index fix-ups
         at_x, at_y = _velocity_term_at(x, y, sample, per_pixel, pinhole, sample_of, points, velocity, j, fx, fy, cx,
                                        cy)
         speed2 = at_x * at_x + at_y * at_y
         at_cell = polarity * plane_size + cell  # in the flat surface: no view of the plane (a refcount per event)
         state = np.int64(N_B) * (2 * pixel + polarity)
-        edge, fitted = first_event(flat_bursts, state, t, np.int64(hold[up, upol]), burst_ratio, refractory_us,
-                                   refractory_reach, speed2)
+        edge, fitted = first_event(flat_bursts, state, t, burst_ratio, refractory_us, refractory_reach, speed2)
         flat_surface[np.uint64(at_cell)] = t if edge else flat_surface[np.uint64(at_cell)]
         if not mine:  # a halo row: its surface only, for the band's fits
             continue
@@ -335,7 +333,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, hold, bursts, prev, last_step, moti
         if slot == EMITTED and hold_px > 0.0 and rms <= hold_rms:
             # this edge's burst lasts about its ramp's width: hold_px pixels (a fit far off the
             # points, e.g. in noise, measured no crossing time: it leaves the hold as it was)
-            hold[up, upol] = min(max_hold, np.int64(hold_px * math.sqrt(a * a + b * b)) + 1)
+            flat_bursts[state + B_HOLD] = min(max_hold, np.int64(hold_px * math.sqrt(a * a + b * b)) + 1)
         if slot == EMITTED and rms > max_rms:
             slot = BAD_FIT
         z = 0.0

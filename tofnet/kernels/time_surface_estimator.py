@@ -17,7 +17,7 @@ import numpy as np
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE
 from tofnet.kernels import time_surface as ts
-from tofnet.kernels.time_surface_first import B_FITTED, B_LAST, N_B
+from tofnet.kernels.time_surface_first import B_FITTED, B_HOLD, B_LAST, N_B
 from tofnet.kernels.time_surface_fit import N_L
 from tofnet.kernels.time_surface_travel import N_R, N_S, NOT_YET, RING
 from tofnet.kernels.kernel_config import microseconds
@@ -166,8 +166,7 @@ class TimeSurfaceEstimator:
             reach(c.behind_depth), c.window_px, c.burst_ratio)
         r, pixels = int(c.radius), width * height
         self._surface = np.full((2, (height + 2 * r) * (width + 2 * r)), ts.NEVER, np.int64)
-        self._hold = np.zeros((pixels, 2), np.int32)
-        self._bursts = np.zeros((pixels, 2, N_B), np.int64)
+        self._bursts = np.zeros((pixels, 2, N_B), np.int64)  # the holds in it: 0, none yet
         self._bursts[:, :, [B_LAST, B_FITTED]] = ts.NEVER
         self._prev = np.zeros((pixels if c.consistency > 0 else 1, 2), np.float64)
         self._last_step = np.full(pixels, ts.NEVER, np.int64)
@@ -186,6 +185,11 @@ class TimeSurfaceEstimator:
         self._ip[ts.I_T0] = 0 if t0_us is None else int(t0_us)
         self._t_hi = ts.NEVER
         self.events_in = 0
+
+    @property
+    def _hold(self) -> np.ndarray:
+        """The holds ``[pixels held, 2]`` (µs, 0: none yet): a view into the first-event rule's state."""
+        return self._bursts[:, :, B_HOLD]
 
     @property
     def t0_us(self) -> int | None:
@@ -243,7 +247,7 @@ class TimeSurfaceEstimator:
             hi = self._piece_end(t, lo)
             table, first = self._table(velocity, int(t[lo]), int(t[hi - 1]))
             n_out, status, self._t_hi = ts.process(
-                t[lo:hi], x[lo:hi], y[lo:hi], p[lo:hi], self._ip, self._fp, self._surface, self._hold, self._bursts,
+                t[lo:hi], x[lo:hi], y[lo:hi], p[lo:hi], self._ip, self._fp, self._surface, self._bursts,
                 self._prev, self._last_step, self._motion, self._ring, self._ring_state, self._sample_of, self._points,
                 table, first, *self._scratch, self._counts, depth, quality, n_out, self.events_in + lo, self._t_hi)
             if status == ts.UNSORTED:

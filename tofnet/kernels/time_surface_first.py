@@ -14,7 +14,8 @@ the first says when the edge arrived. Two decisions per event (docs/time_surface
 - **Is it fitted?** At least the pixel's hold (from its last fit) after the last fitted
   one, or before any hold the refractory period.
 
-State per pixel and polarity: a row of ``bursts`` (``B_*``), int64 µs.
+State per pixel and polarity: a row of ``bursts`` (``B_*``), int64 µs, with the pixel's hold beside it
+(one 32-byte row per pixel and polarity: an event reads and writes one cache line of state).
 """
 
 from __future__ import annotations
@@ -25,21 +26,22 @@ from numba import njit
 NEVER = -(1 << 62)
 
 #: ``bursts[y * w + x, p]``: the pixel's last event, the silence before it (negative when it
-#: continued a burst), its last fitted event (µs).
-B_LAST, B_GAP, B_FITTED, N_B = range(4)
+#: continued a burst), its last fitted event, its hold (µs; 0: none yet, set by ``time_surface``'s fits).
+B_LAST, B_GAP, B_FITTED, B_HOLD, N_B = range(5)
 
 
 @njit(cache=True, inline="always")
-def first_event(flat_bursts, at: int, t: int, held: int, ratio: float, refractory_us: int, refractory_reach: float,
+def first_event(flat_bursts, at: int, t: int, ratio: float, refractory_us: int, refractory_reach: float,
                 speed2: float) -> tuple[bool, bool]:
     """``(starts an edge, is fitted)`` for an event at ``t`` µs at a pixel whose state is
-    ``flat_bursts[at:at + N_B]`` (updated) and hold ``held`` µs (0: none yet, the refractory period
+    ``flat_bursts[at:at + N_B]`` (updated; its hold ``B_HOLD`` µs, 0: none yet, the refractory period
     then); ``speed2`` is ``|A t|²`` there. The refractory period is ``refractory_us`` and, with
     ``refractory_reach`` (the refractory depth, m, times 1e6) and motion, the time per pixel at
     that depth. Without branches but the caller's one: each test is a coin toss on noise."""
     gap = t - flat_bursts[at + B_LAST]  # the pixel's first event's: since ``NEVER``, so its second event
     before = flat_bursts[at + B_GAP]  # starts an edge only after the refractory period (a burst's does not)
     age = t - flat_bursts[at + B_FITTED]
+    held = flat_bursts[at + B_HOLD]
     reach2 = refractory_reach * refractory_reach
     moving = (refractory_reach > 0.0) & (speed2 > 0.0)
     # a silence after an edge's first event (``before`` > 0) at least 1 / ratio of the one before it,

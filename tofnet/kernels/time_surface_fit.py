@@ -113,7 +113,7 @@ def _rms(sq, kept, slope):
     return math.sqrt(sq / kept) / slope if slope > 0.0 else math.inf
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)  # no reference counts of its arrays (two atomic operations each per fit)
 def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, lines, used, give_up_rms=math.inf):
     """Time per pixel along the image motion from lines of pixels parallel to it, robustly.
 
