@@ -1,23 +1,11 @@
 """Travel coordinates for the time-surface fit (numba; used by ``tofnet.kernels.time_surface``).
 
-A surface at depth ``Z`` moves in the image at ``A t / Z`` px/s (paper eq. 2), so between two
-times its image moves ``(A ∫ t dt) / Z`` px whatever the speed did in between. With the
-camera's displacement ``P(t) = ∫ t dt`` (m, camera frame, from the same velocity rows) and
-``g = Aᵀ f`` (``f`` the unit direction of ``A t`` at the event), the *travel*
-``S(t) = g·P(t)`` (px·m) grows by ``Z`` per pixel the edge moves along ``f``: an edge reaches
-the pixel ``s`` px along the motion when ``S = c + Z s``. Fitting the first events' travel
-instead of their time keeps that line straight when the speed changes, and its slope is the
-depth (docs/time_surface.md, section 7).
-
-The displacement is kept per input step in a ring (``RING`` steps): row ``k & (RING - 1)``
-holds ``P`` at the start of step ``k`` and the velocity the step holds, so ``P`` at any time
-of the last ``RING`` steps is one row read and a multiply-add. A step without events moves
-the camera at the velocity of the last step that had one (the output does not depend on how
-the events are split into packets).
-
-With a rotation (velocity rows of six columns) the image also moves by ``B ∫ ω dt``, whatever the
-depth: with ``h = Bᵀ f`` the edge reaches a point ``s`` px along the motion when
-``S = c + Z (s + h·(Θ(t_event) − Θ))``, ``Θ = ∫ ω dt``, which the ring keeps beside ``P``.
+An edge at depth ``Z`` reaches the pixel ``s`` px along the image motion when the camera's
+*travel* ``S = Aᵀf · ∫ t dt`` (px·m) is ``c + Z s``, whatever the speed did in between, so fitting
+travel instead of time keeps the line straight when the speed changes and its slope is the depth.
+The displacement (and, with a rotation, ``∫ ω dt``) is kept per input step in a ring of ``RING``
+steps, so a point's travel is one row read and a multiply-add. Derivation, the rotation's term
+and the packet-independence rule: docs/time_surface.md, section 7a.
 """
 
 from __future__ import annotations
