@@ -170,9 +170,13 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
             yq = min(max(np.int64(ys[i + PREFETCH]) - row0, 0), np.int64(rows) - 1)
             pq = 1 if ps[i + PREFETCH] != 0 else 0
             prefetch(flat_bursts, N_B * (2 * (yq * width + xq) + pq))
-            cq = pq * plane_size + (yq + radius) * row + xq + radius
-            for dq in range(-radius, radius + 1):
-                prefetch(flat_surface, cq + dq * row)
+            top = pq * plane_size + yq * row + xq + radius  # the square's first row
+            if radius == 3:  # the default, unrolled: a counter and a branch per row were most of this block
+                for dq in range(7):
+                    prefetch(flat_surface, top + dq * row)
+            else:
+                for dq in range(2 * radius + 1):
+                    prefetch(flat_surface, top + dq * row)
             if not pinhole:
                 sq = (yq + row0) * width + xq
                 sq = sq if per_pixel else sample_of[sq]

@@ -27,7 +27,7 @@ def behind_steps(a: float, speed2: float) -> tuple[int, int]:
     return (up_one if positive else -down_one), (up_two if positive else -down_two)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def gather(surface, cell: int, row: int, radius: int, t: int, window: int, fu: float, fv: float, ahead_px: float,
            middle: int, ps_, pw, pt, pg) -> int:
     """Step 2: the first events no older than ``window`` µs at the pixels of the square around
