@@ -66,6 +66,9 @@ BAND = np.zeros(0, np.int64)
 FX, FY, CX, CY, SECONDS_PER_COUNT, MIN_DEPTH, MAX_DEPTH, N_FP = range(8)
 
 _BIG = 1 << 40  # above any counter value
+#: A band's event positions (``index``) masked with this are known non-negative: numba then omits the
+#: negative-index wrap of every array read at that position (the whole loop's ``range`` index has none).
+_POSITION = (1 << 63) - 1
 
 
 @intrinsic
@@ -301,6 +304,9 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
     max_diff = 2 * ip[COUNTER_MAX]
     latest = FILTER_WORD + 2 if per_polarity else FILTER_WORD
     hx0, hy0, hx1, hy1 = x0 - d, y0 - d, x1 + d, y1 + d
+    # a band's region and halo tests as one unsigned comparison per axis (x - x0 < x1 - x0 also refuses x < x0)
+    own_w, own_h = np.uint64(x1 - x0), np.uint64(y1 - y0)
+    halo_w, halo_h = np.uint64(hx1 - hx0), np.uint64(hy1 - hy0)
     pad_x, pad_y = 2 * d - x0, 2 * d - y0
     su, sv = np.uint64(2 * stride * d), np.uint64(2 * stride * row * d)  # stamp offsets of the neighbours
     emit_depth = ip[EMIT_DEPTH] != 0
@@ -312,11 +318,11 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
     for e in range(n):
         i = q = e
         if index is not None:
-            i = index[e]
+            i = index[e] & _POSITION
         if e + PREFETCH < n:
             q = e + PREFETCH
             if index is not None:
-                q = index[q]
+                q = index[q] & _POSITION
             xq, yq = np.int64(xs[q]), np.int64(ys[q])
             if hx0 <= xq < hx1 and hy0 <= yq < hy1:
                 prefetch(rec, ((yq + pad_y) * row + xq + pad_x) * stride)
@@ -325,13 +331,15 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
         r = ((y + pad_y) * row + x + pad_x) * stride  # the pixel's record (valid inside the halo)
         # the region's own pixel: it triggers, and its events count (``band is None``: a constant, the
         # whole sensor's loop has no region or halo checks)
-        own = band is None or (x0 <= x < x1 and y0 <= y < y1)
+        own = band is None or (np.uint64(x - x0) < own_w) & (np.uint64(y - y0) < own_h)
+        # in the region's halo (its record exists): a band's events of the halo rows filter and facilitate
+        halo = own or (np.uint64(x - hx0) < halo_w) & (np.uint64(y - hy0) < halo_h)
         if filtering:
             t = ts[i]
             if x >= width or y >= height:
                 counts[OUT_OF_BOUNDS if y >= height or y0 <= y < y1 else HALO] += 1  # once over bands
                 continue
-            if not own and not (hx0 <= x < hx1 and hy0 <= y < hy1):
+            if not halo:
                 continue  # a band's kernel is given its halo's events only; others have no record here
             if t < t0:
                 counts[BEFORE_T0 if own else HALO] += 1
@@ -365,7 +373,7 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
                 j = update - first_update
                 tx, ty, tz = velocity[j, 0], velocity[j, 1], velocity[j, 2]
                 stamp_us = t0 + (k + 3) * dt  # end of depth step k+2
-        if not own and not (hx0 <= x < hx1 and hy0 <= y < hy1):
+        if not filtering and not halo:  # (filtering: refused above)
             continue  # neither triggers nor facilitates here
         u = np.uint64(2 * r)  # stamp of unit 0
         if own:
