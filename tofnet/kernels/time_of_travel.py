@@ -51,9 +51,10 @@ N_REASONS = 4
 REJECTED = 5
 EMITTED = REJECTED + N_REASONS
 INACTIVE, TOT_SPIKES, HALO, N_COUNTS = EMITTED + 1, EMITTED + 2, EMITTED + 3, EMITTED + 4
-#: ``process``' ``band`` for a region smaller than the sensor (None: the whole sensor); its type
-#: (int64 array, as a band's ``index``) selects the compiled loop with the region and halo checks.
-BAND = np.zeros(0, np.int64)
+#: ``process``' ``band`` for a region smaller than the sensor (None: the whole sensor) is its ``band_table``:
+#: per row ``y`` (``band[y]``) and column ``x`` (``band[COLUMNS + x]``), every uint16, 2 | 1 when in the
+#: region, 1 in its halo only, else 0; a pixel's kind is the AND of its row's and its column's.
+COLUMNS = 1 << 16
 # The state travels in two arrays (each array argument costs ~0.1 µs per call): ``ints``
 # holds the integer parameters ``ip`` (these slots), then at the offsets they give the
 # cursor, the counts, the sample tables, the caches, the facilitation buffer and the
@@ -69,6 +70,15 @@ _BIG = 1 << 40  # above any counter value
 #: A band's event positions (``index``) masked with this are known non-negative: numba then omits the
 #: negative-index wrap of every array read at that position (the whole loop's ``range`` index has none).
 _POSITION = (1 << 63) - 1
+
+
+def band_table(x0: int, y0: int, x1: int, y1: int, d: int) -> np.ndarray:
+    """``process``' ``band`` for region ``[x0, x1) x [y0, y1)`` with a halo of ``d`` px (see ``COLUMNS``)."""
+    table = np.zeros(2 * COLUMNS, np.uint8)
+    for at, lo, hi in ((0, y0, y1), (COLUMNS, x0, x1)):
+        table[at + max(lo - d, 0):at + hi + d] = 1
+        table[at + lo:at + hi] = 3
+    return table
 
 
 @intrinsic
@@ -284,8 +294,8 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
     has checked the events' time order among themselves over all of them (``kernels.bands.select_rows``,
     so every band refuses the same packets); the first is still compared with the latest time fed.
     ``band`` None: the region is the whole sensor, every event on it is the region's own; else
-    ``BAND`` (the region is a part of the sensor: a band's, a core's). Only its type matters:
-    numba compiles the whole sensor's loop without a band's per-event region and halo checks.
+    the region's ``band_table`` (a part of the sensor: a band's, a core's). None compiles the whole
+    sensor's loop without a band's per-event region and halo checks.
     """
     ip, cursor, counts, rows, cols, cache_j, cache_w, pend, rec, fp, points, cache_at = views(ints, floats)
     stamp = rec.view(np.int32)
@@ -304,9 +314,6 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
     max_diff = 2 * ip[COUNTER_MAX]
     latest = FILTER_WORD + 2 if per_polarity else FILTER_WORD
     hx0, hy0, hx1, hy1 = x0 - d, y0 - d, x1 + d, y1 + d
-    # a band's region and halo tests as one unsigned comparison per axis (x - x0 < x1 - x0 also refuses x < x0)
-    own_w, own_h = np.uint64(x1 - x0), np.uint64(y1 - y0)
-    halo_w, halo_h = np.uint64(hx1 - hx0), np.uint64(hy1 - hy0)
     pad_x, pad_y = 2 * d - x0, 2 * d - y0
     su, sv = np.uint64(2 * stride * d), np.uint64(2 * stride * row * d)  # stamp offsets of the neighbours
     emit_depth = ip[EMIT_DEPTH] != 0
@@ -331,9 +338,15 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
         r = ((y + pad_y) * row + x + pad_x) * stride  # the pixel's record (valid inside the halo)
         # the region's own pixel: it triggers, and its events count (``band is None``: a constant, the
         # whole sensor's loop has no region or halo checks)
-        own = band is None or (np.uint64(x - x0) < own_w) & (np.uint64(y - y0) < own_h)
-        # in the region's halo (its record exists): a band's events of the halo rows filter and facilitate
-        halo = own or (np.uint64(x - hx0) < halo_w) & (np.uint64(y - hy0) < halo_h)
+        kind = 3
+        if band is not None:  # two loads instead of eight comparisons; events' pixels are uint16
+            if filtering:
+                kind = band[y] & band[COLUMNS + x]
+            else:  # input spikes may carry any int64 pixel: past the table is outside the halo
+                kind = band[min(np.uint64(y), np.uint64(COLUMNS - 1))] & band[
+                    COLUMNS + min(np.uint64(x), np.uint64(COLUMNS - 1))]
+        own = band is None or kind > 1
+        halo = band is None or kind != 0  # in the region's halo (its record exists)
         if filtering:
             t = ts[i]
             if x >= width or y >= height:
