@@ -290,3 +290,15 @@ def test_a_batch_grid_of_workers_runs_each_task_with_them_and_the_same_counts(tm
     (tmp_path / "plan.yaml").write_text("recordings: [ev.npy]\ngrid:\n  workers: [1, lots]\n")
     with pytest.raises(PlanError, match=r"grid.workers\[1\]: 'lots'.*whole number of workers"):
         load_plan(tmp_path / "plan.yaml")
+
+
+def test_a_regions_table_of_kinds_marks_its_pixels_and_its_halo_and_nothing_else():
+    from tofnet.kernels.time_of_travel import COLUMNS, band_table
+
+    x0, y0, x1, y1, d = 3, 0, 24, 7, 2
+    table = band_table(x0, y0, x1, y1, d)
+    xs, ys = np.meshgrid(np.arange(40), np.concatenate([np.arange(12), [65535]]))
+    kind = table[ys] & table[COLUMNS + xs]
+    own = (x0 <= xs) & (xs < x1) & (y0 <= ys) & (ys < y1)
+    halo = (x0 - d <= xs) & (xs < x1 + d) & (y0 - d <= ys) & (ys < y1 + d)
+    assert np.array_equal(kind > 1, own) and np.array_equal(kind != 0, halo)

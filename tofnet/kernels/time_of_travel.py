@@ -331,7 +331,10 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
             if index is not None:
                 q = index[q] & _POSITION
             xq, yq = np.int64(xs[q]), np.int64(ys[q])
-            if hx0 <= xq < hx1 and hy0 <= yq < hy1:
+            if band is not None and filtering:  # a band's events' pixels are uint16: its table says
+                if band[yq] & band[COLUMNS + xq]:
+                    prefetch(rec, ((yq + pad_y) * row + xq + pad_x) * stride)
+            elif hx0 <= xq < hx1 and hy0 <= yq < hy1:
                 prefetch(rec, ((yq + pad_y) * row + xq + pad_x) * stride)
         x, y = np.int64(xs[i]), np.int64(ys[i])
         polarity = 1 if ps[i] != 0 else 0
