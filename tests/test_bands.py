@@ -293,10 +293,10 @@ def test_a_batch_grid_of_workers_runs_each_task_with_them_and_the_same_counts(tm
 
 
 def test_a_regions_table_of_kinds_marks_its_pixels_and_its_halo_and_nothing_else():
-    from tofnet.kernels.time_of_travel import COLUMNS, band_table
+    from tofnet.kernels.kernel_config import COLUMNS, Region
 
     x0, y0, x1, y1, d = 3, 0, 24, 7, 2
-    table = band_table(x0, y0, x1, y1, d)
+    table = Region(x0, x1, y0, y1).kinds(d)
     xs, ys = np.meshgrid(np.arange(40), np.concatenate([np.arange(12), [65535]]))
     kind = table[ys] & table[COLUMNS + xs]
     own = (x0 <= xs) & (xs < x1) & (y0 <= ys) & (ys < y1)

@@ -17,6 +17,10 @@ from tofnet.kernels.lens import SAMPLE_COLUMNS, Lens, sample_table
 from tofnet.units import microseconds, seconds_of  # noqa: F401 - microseconds: the kernels' settings import it from here
 
 
+#: ``Region.kinds``: where a pixel's column's kind is (its row's is at ``y``).
+COLUMNS = 1 << 16
+
+
 @dataclass(frozen=True)
 class Region:
     """The pixels ``[x0, x1) x [y0, y1)`` whose units and depth neurons one kernel state holds."""
@@ -43,6 +47,16 @@ class Region:
         near_x = (xs >= self.x0 - distance) & (xs < self.x1 + distance)
         near_y = (ys >= self.y0 - distance) & (ys < self.y1 + distance)
         return (in_y & near_x) | (in_x & near_y)
+
+    def kinds(self, distance: int) -> np.ndarray:
+        """Per row ``y`` (at ``y``) and column ``x`` (at ``COLUMNS + x``) of the uint16 range: 3 in the
+        region, 1 within ``distance`` px of it only, else 0 (uint8); a pixel's kind is the AND of its
+        row's and column's: the fused kernel's region and halo tests (``time_of_travel.process``' band)."""
+        table = np.zeros(2 * COLUMNS, np.uint8)
+        for at, lo, hi in ((0, self.y0, self.y1), (COLUMNS, self.x0, self.x1)):
+            table[at + max(lo - distance, 0):at + hi + distance] = 1
+            table[at + lo:at + hi] = 3
+        return table
 
 
 def counter_max(counter_bits: int) -> int:

@@ -88,8 +88,7 @@ class TimeOfTravelKernel:
         # Scalars and empty arrays the per-packet path needs, looked up once.
         self._t0, self._dt, self._u = int(t0_us), config.timestep_us, config.update_every
         self._span_us = (MAX_VELOCITY_ROWS - 2) * config.update_every * config.timestep_us
-        self._band = None if self.region == Region.full(config.sensor_size) else tt.band_table(
-            r.x0, r.y0, r.x1, r.y1, d)  # ``tt.process``' band
+        self._band = None if self.region == Region.full(config.sensor_size) else r.kinds(d)  # ``tt.process``' band
         self._no_raw, self._no_velocity = np.empty(0, np.int64), np.zeros((0, 3))
         self._held_velocity = np.zeros(4)
         self._held_omega = np.zeros(3)  # rad/s: no rotation before the first angular velocity update

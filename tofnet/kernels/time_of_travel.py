@@ -23,6 +23,7 @@ from numba.extending import intrinsic
 from tofnet.kernels.depth import float_depth
 from tofnet.kernels.fixed_point import fixed_depth, quantize
 from tofnet.kernels.input_filter import ACCEPTED, BEFORE_T0, OUT_OF_BOUNDS, admit
+from tofnet.kernels.kernel_config import COLUMNS
 from tofnet.kernels.lens import SAMPLE_COLUMNS
 from tofnet.kernels.order import sort_by_pixel
 from tofnet.kernels.velocity import sampled_velocity_term
@@ -51,10 +52,6 @@ N_REASONS = 4
 REJECTED = 5
 EMITTED = REJECTED + N_REASONS
 INACTIVE, TOT_SPIKES, HALO, N_COUNTS = EMITTED + 1, EMITTED + 2, EMITTED + 3, EMITTED + 4
-#: ``process``' ``band`` for a region smaller than the sensor (None: the whole sensor) is its ``band_table``:
-#: per row ``y`` (``band[y]``) and column ``x`` (``band[COLUMNS + x]``), every uint16, 2 | 1 when in the
-#: region, 1 in its halo only, else 0; a pixel's kind is the AND of its row's and its column's.
-COLUMNS = 1 << 16
 # The state travels in two arrays (each array argument costs ~0.1 µs per call): ``ints``
 # holds the integer parameters ``ip`` (these slots), then at the offsets they give the
 # cursor, the counts, the sample tables, the caches, the facilitation buffer and the
@@ -70,15 +67,6 @@ _BIG = 1 << 40  # above any counter value
 #: A band's event positions (``index``) masked with this are known non-negative: numba then omits the
 #: negative-index wrap of every array read at that position (the whole loop's ``range`` index has none).
 _POSITION = (1 << 63) - 1
-
-
-def band_table(x0: int, y0: int, x1: int, y1: int, d: int) -> np.ndarray:
-    """``process``' ``band`` for region ``[x0, x1) x [y0, y1)`` with a halo of ``d`` px (see ``COLUMNS``)."""
-    table = np.zeros(2 * COLUMNS, np.uint8)
-    for at, lo, hi in ((0, y0, y1), (COLUMNS, x0, x1)):
-        table[at + max(lo - d, 0):at + hi + d] = 1
-        table[at + lo:at + hi] = 3
-    return table
 
 
 @intrinsic
@@ -294,7 +282,7 @@ def process(ts, xs, ys, ps, filtering, ints, floats, velocity, first_update, out
     has checked the events' time order among themselves over all of them (``kernels.bands.select_rows``,
     so every band refuses the same packets); the first is still compared with the latest time fed.
     ``band`` None: the region is the whole sensor, every event on it is the region's own; else
-    the region's ``band_table`` (a part of the sensor: a band's, a core's). None compiles the whole
+    the region's ``Region.kinds`` (a part of the sensor: a band's, a core's). None compiles the whole
     sensor's loop without a band's per-event region and halo checks.
     """
     ip, cursor, counts, rows, cols, cache_j, cache_w, pend, rec, fp, points, cache_at = views(ints, floats)
