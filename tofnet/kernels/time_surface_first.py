@@ -1,21 +1,12 @@
 """The time-surface estimator's first-event rule (numba; used by ``tofnet.kernels.time_surface``).
 
-A real pixel fires a burst of events per edge (up to 7 over one or two pixel crossings); only
-the first says when the edge arrived. Two decisions per event (docs/time_surface.md, section 1):
-
-- **Does it start an edge?** From the pixel's own events and ``A t`` only: the silence before
-  it is at least ``ratio`` times the gap before the event ahead of it (a burst's events come
-  at a steady pace, an edge after a pause), or, when the event ahead started an edge itself,
-  at least ``1 / ratio`` of the silence before that one (edges at a steady pace, one event
-  each), or at least the refractory period (the time a surface at ``refractory_depth`` takes
-  per pixel). Then the surface takes its time. Nothing a fit measured enters this decision,
-  so the surface of a pixel depends on its own events alone, and a band of rows plus the
-  fit's ``radius`` computes every surface its fits read exactly (docs/performance.md, "Workers").
-- **Is it fitted?** At least the pixel's hold (from its last fit) after the last fitted
-  one, or before any hold the refractory period.
-
-State per pixel and polarity: a row of ``bursts`` (``B_*``), int64 µs, with the pixel's hold beside it
-(one 32-byte row per pixel and polarity: an event reads and writes one cache line of state).
+A pixel fires a burst of events per edge; only the first says when the edge arrived. An event
+starts an edge when, from the pixel's own events and ``A t`` only, the silence before it is long
+against the pace of the events before (``ratio``) or at least the refractory period; it is
+fitted when the pixel's hold (from its last fit) has passed. Reading nothing from other pixels
+keeps a band of rows plus the fit's ``radius`` exact. The rule and why: docs/time_surface.md,
+section 1a. State per pixel and polarity: one 32-byte row of ``bursts`` (``B_*``, int64 µs,
+the hold beside them), so an event touches one cache line of state.
 """
 
 from __future__ import annotations
