@@ -150,8 +150,11 @@ def test_kill_9_of_the_parent_mid_run_leaves_no_worker_and_nothing_in_dev_shm(tm
     try:
         pids = [int(p) for p in parent.stdout.readline().split()]
         assert len(pids) == 2
-        time.sleep(3.0)  # well into the runs: the shared buffers are mapped and in use
-        assert str(parent.pid) in mapped_buffers(parent.pid)
+        time.sleep(1.0)  # into the runs; the parent maps its buffers during a run, not between two
+        deadline = time.monotonic() + 30
+        while str(parent.pid) not in mapped_buffers(parent.pid):
+            assert time.monotonic() < deadline, "the parent never mapped a shared buffer"
+            time.sleep(0.02)
         parent.send_signal(signal.SIGKILL)
         parent.wait(30)
         deadline = time.monotonic() + 30
