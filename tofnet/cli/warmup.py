@@ -10,7 +10,7 @@ def register(subparsers) -> None:
 
     p = subparsers.add_parser("warmup", help="compile every kernel ahead (once per install; later runs start at once)",
                               description="Compile the numba kernels of every backend family and of the simulator "
-                                          "(20-60 s on a fresh install; numba caches them, so this runs once). Runs "
+                                          "(1-2 min on a fresh install; numba caches them, so this runs once). Runs "
                                           "compile what they need themselves; this only moves the wait ahead.")
     p.add_argument("only", nargs="*", metavar="WARMER", help=f"warm only these ({', '.join(WARMERS)}; default: all)")
     p.set_defaults(handler=handle)
