@@ -15,11 +15,9 @@ the measurements behind them: docs/performance.md, "How the kernel is built".
 from __future__ import annotations
 
 import numpy as np
-from llvmlite import ir
-from numba import njit, types
-from numba.core import cgutils
-from numba.extending import intrinsic
+from numba import njit
 
+from tofnet.kernels.cache_hints import prefetch
 from tofnet.kernels.depth import float_depth
 from tofnet.kernels.fixed_point import fixed_depth, quantize
 from tofnet.kernels.input_filter import ACCEPTED, BEFORE_T0, OUT_OF_BOUNDS, admit
@@ -67,27 +65,6 @@ _BIG = 1 << 40  # above any counter value
 #: A band's event positions (``index``) masked with this are known non-negative: numba then omits the
 #: negative-index wrap of every array read at that position (the whole loop's ``range`` index has none).
 _POSITION = (1 << 63) - 1
-
-
-@intrinsic
-def prefetch(typingctx, array, index):
-    """Hint the CPU to fetch ``array[index]`` for writing (``llvm.prefetch``; no bounds check)."""
-    if not isinstance(array, types.Array):
-        return None
-
-    def codegen(context, builder, signature, args):
-        array_type = signature.args[0]
-        view = context.make_array(array_type)(context, builder, args[0])
-        pointer = cgutils.get_item_pointer(context, builder, array_type, view, [args[1]], wraparound=False)
-        byte_pointer = ir.IntType(8).as_pointer()
-        i32 = ir.IntType(32)
-        fn = cgutils.get_or_insert_function(
-            builder.module, ir.FunctionType(ir.VoidType(), [byte_pointer, i32, i32, i32]), "llvm.prefetch.p0i8")
-        # write, keep in all cache levels, data
-        builder.call(fn, [builder.bitcast(pointer, byte_pointer), i32(1), i32(3), i32(1)])
-        return context.get_dummy_value()
-
-    return types.void(array, index), codegen
 
 
 @njit(cache=True, inline="always")

@@ -20,7 +20,7 @@ import math
 import numpy as np
 from numba import njit
 
-from tofnet.kernels.time_of_travel import prefetch
+from tofnet.kernels.cache_hints import prefetch
 from tofnet.kernels.rotation import rotational_flow
 from tofnet.kernels.time_surface_first import B_HOLD, N_B, NEVER, first_event
 from tofnet.kernels.time_surface_fit import FIT_ILL_CONDITIONED, FIT_OVER_RMS, FIT_TOO_FEW, fit_plane, fit_rows
