@@ -104,3 +104,20 @@ def test_the_kernels_bands_run_in_threads_release_the_gil():
     from tofnet.kernels import time_of_travel, time_surface
     for kernel in (time_surface.process, time_of_travel.process_events):
         assert kernel.targetoptions.get("nogil") is True, kernel.__name__
+
+
+def test_a_band_without_events_while_the_velocity_changes_keeps_the_clock(tmp_path):
+    # A band is fed its rows' events and each step's first event: its travel ring and motion epochs
+    # must move at the steps where one whole kernel's move, also while its own rows are silent.
+    samples = tmp_path / "velocity.txt"
+    samples.write_text("".join(f"{k * 0.01:.3f} {-0.5 + 0.3 * (k % 3)} {0.2 - 0.1 * (k % 2)} {0.05 * (k % 4)}\n"
+                               for k in range(14)))
+    velocity = {"source": "samples", "samples": str(samples), "per": "pixel"}
+    events = texture().events
+    quiet = (events["y"] >= 8) & (((events["t"] > 15_000) & (events["t"] < 65_000)) | (events["t"] > 95_000))
+    recording = Recording(events[~quiet], intrinsics=TEST_INTRINSICS)
+    network = improved_network(SENSOR, time_surface={"t0": 0}, velocity=velocity)
+    one = FixedBackend().run(network, recording)
+    banded = with_bands(FixedBackend, [(0, 8), (8, 16)]).run(network, recording)
+    assert one.counts["time_surface"]["emitted"] > 20
+    assert first_difference(banded, one) == ""

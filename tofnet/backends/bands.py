@@ -7,7 +7,7 @@ all, and triggers, counts and emits for its own pixels only, so every count and 
 the one-kernel run's. Any other graph runs model by model, each core-placed process as one
 instance per band fed the spikes of its halo (``local_placements``: the ``multiproc`` stand-in,
 run in threads), and each event-reading model that runs in bands (the time surface) as one
-instance per band fed every event (``BandedReader``); other host processes run whole (the
+instance per band fed its rows' events (``BandedReader``); other host processes run whole (the
 summary names them). Threads, not processes: the kernels release the
 GIL (numba ``nogil``) and share the packet without copies (docs/performance.md, "Workers").
 """
@@ -264,7 +264,8 @@ class BandedKernel(BandsBase):
 
 class BandedReader(Model):
     """An event-reading model (``Model.runs_in_bands``) run as one instance per band of rows: each is fed
-    every event and counts and answers for its rows, the bands run a range of steps in ``pool``'s threads,
+    every event (and keeps what its rows need: the time surface's, ``TimeSurfaceModel._columns``) and
+    counts and answers for its rows, the bands run a range of steps in ``pool``'s threads,
     and their records (each sorted by step) are merged by step in band order: the canonical order."""
 
     reads_events = True
@@ -279,7 +280,7 @@ class BandedReader(Model):
         self._fed = 0  # events fed since the last run: a few run in the caller's thread
 
     def feed(self, events: np.ndarray) -> None:
-        # each band keeps its own copy of the packet's columns, made in its thread
+        # each band keeps its own copy of the columns of the packet's events it runs, made in its thread
         self.pool.run(lambda b: self.models[b].feed(events), len(self.models), len(events) < SERIAL_BELOW)
         self._fed += len(events)
 

@@ -2,7 +2,8 @@
 
 ``select_rows`` lists the positions of a packet's events of a band's rows (widened by the
 input reach), so each band's kernel reads only its events (each band selects its own, in its
-thread), and checks the packet's time order on the way; ``touch`` writes the first byte of fresh
+thread), and checks the packet's time order on the way (``clocked_columns``: the columns of its
+events and each step's first event, for kernels that keep a clock); ``touch`` writes the first byte of fresh
 pages, so that threads share the first touch of an output buffer; ``merge_by_step`` joins the bands' outputs, each sorted by step, into one array
 sorted by step and, within a step, in band order: the canonical order when each band's part
 is in it, as bands are strips of rows from the top; ``merge_cuts`` splits that merge into
@@ -46,6 +47,37 @@ def select_rows(events, keep, index):
         index[m] = i
         m += keep[events[i].y]
     return -1 if back else m
+
+
+@njit(cache=True, nogil=True)
+def clocked_columns(events, keep, t0, dt, width, height):
+    """``(m, t, x, y, p)``: the columns (``EVENT_DTYPE``'s types, room for every event) whose first ``m``
+    entries are the events whose row has ``keep[y]`` (as ``select_rows``) and the first event of
+    every step (``dt`` µs from ``t0``) that a per-event clock reads: within the sensor (``x < width``,
+    ``y < height``), not before ``t0``; ``m`` -1 when the packet is not in time order. A band whose
+    kernel keeps a clock of the steps (the time surface's travel ring and motion epochs) then moves
+    it at the events the whole sensor's kernel does. One pass writing every event's fields at the
+    cursor, which moves on the kept ones (no branch on the row: a coin toss); the clock's branch is
+    taken once per step. 3.0 ns per event against 2.5 + 1.5 for positions then a gather (slider)."""
+    n = events.shape[0]
+    t, x, y, p = np.empty(n, np.int64), np.empty(n, np.uint16), np.empty(n, np.uint16), np.empty(n, np.uint8)
+    m = 0
+    back = False
+    previous = events[0].t if n else 0
+    step_end = np.int64(t0)  # the first event at or after t0 starts a step
+    for i in range(n):
+        e = events[i]
+        ti, yi = e.t, e.y
+        back |= ti < previous
+        previous = ti
+        add = keep[yi]
+        if ti >= step_end:
+            if np.int64(e.x) < width and np.int64(yi) < height:
+                add = 1
+                step_end = t0 + ((ti - t0) // dt + 1) * dt
+        t[m], x[m], y[m], p[m] = ti, e.x, yi, e.p
+        m += add
+    return (-1 if back else m), t, x, y, p
 
 
 @njit(cache=True, nogil=True)

@@ -125,9 +125,9 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
     hold, first events). ``velocity[j - first_update]`` is (tx, ty, tz[, wx, wy, wz]) of update j.
     ``ps_``, ``pw``, ``pt``, ``pg``, ``lines``, ``used`` are the fits' scratch. The state holds the
     rows ``ip[I_ROW0] ..`` (``ip[I_ROWS]`` of them; ``y`` above is counted from the first): the
-    sensor, or a band of rows plus ``radius`` either side; events of other rows only move the clock,
-    and only those of rows ``ip[I_OWN0] .. ip[I_OWN1]`` are counted and fitted (a halo row's make
-    its surface). Estimates go to
+    sensor, or a band of rows plus ``radius`` either side; events of other rows only move the clock
+    (a band is fed only each step's first of them: ``kernels.bands.clocked_columns``), and only
+    those of rows ``ip[I_OWN0] .. ip[I_OWN1]`` are counted and fitted (a halo row's make its surface). Estimates go to
     ``out[n_out:]`` (``DEPTH_DTYPE``) and ``quality[n_out:]``. ``t_hi`` is the latest time seen
     before; an earlier event stops the call with ``UNSORTED`` before it changes any state
     (``n_out`` and ``counts`` cover the events before it).

@@ -133,7 +133,10 @@ class TimeSurfaceEstimator:
     ``rows`` ``(y0, y1)``: a band of rows (``tofnet.backends.bands``) whose events this
     estimator counts and answers, holding the state of ``radius`` rows more either side, whose
     events build the surface its fits read (the first-event rule reads a pixel's own events
-    only, so the band's output is the whole sensor's for its rows); it is fed every event.
+    only, so the band's output is the whole sensor's for its rows); it is fed its rows' events and at
+    least the first event of every step within the sensor (they move its clock: the travel ring and
+    the motion epochs; ``tofnet.kernels.bands.clocked_columns``), or every event (quality's ``index``
+    counts the events it was fed).
     Memory is fixed by the rows held (about 96 B per pixel) plus output buffers as large as
     the largest packet.
     """

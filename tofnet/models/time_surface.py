@@ -15,6 +15,8 @@ import numpy as np
 
 from tofnet.core.ports import Payload
 from tofnet.errors import BackendError
+from tofnet.events import EVENT_DTYPE
+from tofnet.kernels.bands import clocked_columns
 from tofnet.kernels.order import pixel_order
 from tofnet.kernels.time_surface_estimator import TimeSurfaceConfig, TimeSurfaceEstimator, event_columns
 from tofnet.models.base import Model, ModelContext, concat, records, take
@@ -84,6 +86,7 @@ class TimeSurfaceModel(Model):
         if (x0, x1) != (0, ctx.sensor_size[0]):
             raise BackendError(f"{process.name}: TimeSurfaceModel holds whole rows, not columns {x0}-{x1}")
         self.estimator = TimeSurfaceEstimator(self.config, ctx.t0_us, None if ctx.region is None else (y0, y1))
+        self._keep = None if ctx.region is None else self._rows_read(y1)
         self.rotating = bool(ctx.inputs.get("b_w"))
         self.velocity = HeldUpdates(("tx", "ty", "tz"))
         self.rotation = HeldUpdates(("wx", "wy", "wz"))
@@ -92,11 +95,34 @@ class TimeSurfaceModel(Model):
         self._depth, self._quality = Payload.DEPTH.dtype, QUALITY.dtype
 
     # -- events -------------------------------------------------------------------------------
+    def _rows_read(self, own_end: int) -> np.ndarray:
+        """A band's rows whose events it reads (uint8 per ``y``, 65536 entries): the rows it holds, and
+        for the last band (it counts them) the rows past the sensor."""
+        keep = np.zeros(1 << 16, np.uint8)
+        lo, hi = self.estimator.held
+        keep[lo:hi] = 1
+        if own_end >= self.ctx.sensor_size[1]:
+            keep[self.ctx.sensor_size[1]:] = 1
+        return keep
+
+    def _columns(self, events: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The columns of the events this model runs (copies: the caller may reuse its buffer). A band's:
+        the events of its rows and each step's first event, which moves the kernel's clock (travel ring,
+        motion epochs) where the whole sensor's moves it; the kernel skips the rest of another band's
+        events, so its output and counts are the same as when fed every event, for a fraction of the walk."""
+        if self._keep is None or events.dtype != EVENT_DTYPE:
+            return event_columns(events)
+        width, height = self.ctx.sensor_size
+        m, *columns = clocked_columns(events, self._keep, self.ctx.t0_us, self.ctx.timestep_us, width, height)
+        if m < 0:  # out of time order: every event, so the kernel refuses it where one whole kernel would
+            return event_columns(events)
+        return tuple(c[:m] for c in columns)
+
     def feed(self, events: np.ndarray) -> None:
         if len(events) == 0:
             return
         # no time-order check here: the stream, the only feeder, refused such a packet, and the kernel checks too
-        self._waiting.append(event_columns(events))  # copies: the caller may reuse its buffer
+        self._waiting.append(self._columns(events))
         self._latest_us = int(events["t"][-1])
 
     def complete_until(self) -> int | None:
@@ -152,7 +178,7 @@ class TimeSurfaceModel(Model):
 
     def counts(self) -> dict[str, int]:
         counts = self.estimator.counts
-        # every event it counted (a band is fed every event and counts those of its rows)
+        # every event it counted (a band counts those of its rows)
         return {"events_in": sum(counts.values()), "accepted": self.estimator.first_events, **counts}
 
     # -- state between runs -------------------------------------------------------------------
