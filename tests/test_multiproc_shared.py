@@ -1,5 +1,6 @@
 """multiproc over shared memory: each worker's cores as one band, the same bytes as fixed, nothing left behind."""
 
+import gc
 import os
 import re
 import signal
@@ -84,6 +85,21 @@ def test_bands_on_worker_processes_equal_the_fixed_backend_and_per_core_mode_too
         assert first_difference(again, fixed) == ""
     per_core = MultiprocBackend(workers=workers, per_core=True).run(compiled, RECORDING, record_tot=True)
     assert "shared_memory" not in per_core.extra and first_difference(per_core, fixed) == ""
+
+
+def test_the_workers_merge_into_the_runs_shared_result_which_grows_and_goes_with_its_array(monkeypatch):
+    from tofnet.backends import local
+    compiled = compile_network(depth_network(SENSOR, velocity=VELOCITY), patch=(8, 8))
+    fixed = get_backend("fixed").run(compiled, RECORDING)
+    monkeypatch.setattr(local, "RESULT_CAPACITY", 700)  # the result grows several times, as a long run's does
+    with MultiprocBackend(workers=3, packet_events=500).session() as session:
+        banded = session.run(RECORDING, compiled=compiled)
+        assert first_difference(banded, fixed) == ""
+        with open("/proc/self/maps") as f:  # the estimates are where the workers merged them
+            assert f"memfd:tofnet-result-{os.getpid()}" in f.read()
+    del banded
+    gc.collect()
+    assert str(os.getpid()) not in mapped_buffers()
 
 
 def test_workers_share_the_cores_by_the_recordings_load_with_the_same_bytes():

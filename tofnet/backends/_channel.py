@@ -49,7 +49,7 @@ class Channel:
     def send(self, message: tuple) -> None:
         """Queue ``message`` for the worker (never blocks)."""
         if self._send_error is not None:
-            raise self._failure("could not be sent to", f"({self._send_error})")
+            raise self.failure("could not be sent to", f"({self._send_error})")
         self._outbox.put(message)
 
     def _send_loop(self) -> None:
@@ -73,9 +73,9 @@ class Channel:
             try:
                 message = self.conn.recv()
             except (EOFError, OSError):
-                raise self._failure("died", f"while {doing}") from None
+                raise self.failure("died", f"while {doing}") from None
         elif ready:
-            raise self._failure("died", f"while {doing}")
+            raise self.failure("died", f"while {doing}")
         else:
             raise BackendError(f"multiproc worker {self.index} (pid {self.process.pid}) did not answer within "
                                f"{timeout if limit is None else limit:g} s while {doing}; all workers were stopped (raise the backend's "
@@ -86,7 +86,7 @@ class Channel:
             raise BackendError(f"multiproc worker {self.index} sent {message[0]!r} while {doing}, expected {kind!r}")
         return message
 
-    def _failure(self, what: str, doing: str) -> BackendError:
+    def failure(self, what: str, doing: str) -> BackendError:
         self.process.join(0.5)  # let the exit code arrive
         code = self.process.exitcode
         if code is None:

@@ -135,6 +135,7 @@ class _Worker:
             return ("param", [self.models[key].set_param(name, value) for key in keys])
         if kind == "band":
             from tofnet.backends._band_worker import BandWorker
+            self._drop_band()
             self.band = BandWorker(message[1])
             return ("band",)
         if kind.startswith("band_"):
@@ -143,7 +144,7 @@ class _Worker:
             return self.band.handle(message)
         if kind == "finish":
             self.models = {}
-            self.band = None
+            self._drop_band()
             return ("finished",)
         if kind == "fault":
             if message[1] not in _FAULTS:
@@ -151,6 +152,11 @@ class _Worker:
             self.fault = message[1]
             return None
         raise ValueError(f"unknown message {kind!r}")
+
+    def _drop_band(self) -> None:
+        if self.band is not None:
+            self.band.close()
+            self.band = None
 
     def _fire_fault(self) -> None:
         fault, self.fault = self.fault, None

@@ -14,7 +14,7 @@ import numpy as np
 from tofnet.compiler.bands import Band, halo_rows
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, TOT_DTYPE
-from tofnet.kernels.bands import merge_by_step
+from tofnet.kernels.bands import merge_by_step, merge_cuts
 from tofnet.kernels.input_filter import ACCEPTED, NEVER
 from tofnet.kernels.kernel_config import KernelConfig, KernelOutput
 from tofnet.kernels.time_of_travel import N_REASONS
@@ -46,6 +46,16 @@ def merge(source: np.ndarray, parts: np.ndarray, into: np.ndarray, offset: int) 
     flat, width = words(source)
     return merge_by_step(flat, source["step"], np.asarray(parts, np.int64).reshape(-1, 2), words(into)[0], offset,
                          width)
+
+
+def merge_share(source: np.ndarray, parts: np.ndarray, into: np.ndarray, offset: int, share: int, shares: int) -> int:
+    """Share ``share`` of ``shares`` of ``merge(source, parts, into, offset)``: the records of its steps
+    (``merge_cuts``: every share cuts the same) to their place in ``into``; returns the share's end.
+    The shares run side by side (threads or processes), each writing its own part of ``into``."""
+    parts = np.asarray(parts, np.int64).reshape(-1, 2)
+    cuts = merge_cuts(source["step"], parts, shares)
+    before = int((cuts[share] - cuts[0]).sum())
+    return merge(source, np.stack([cuts[share], cuts[share + 1]], 1), into, offset + before)
 
 
 class BandsBase:

@@ -24,13 +24,13 @@ from typing import Callable, Sequence
 import numpy as np
 
 from tofnet.backends._workers import _Worker
-from tofnet.backends.band_merge import BandsBase, merge, rows_read
+from tofnet.backends.band_merge import BandsBase, merge, merge_share, rows_read
 from tofnet.backends.remote import Placement, RemoteModel, summed_counts
 from tofnet.compiler.bands import Band
 from tofnet.compiler.partition import halo_of, receptive_offsets
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE
-from tofnet.kernels.bands import merge_cuts, row_load, select_rows, touch
+from tofnet.kernels.bands import row_load, select_rows, touch
 from tofnet.kernels.input_filter import NEVER
 from tofnet.kernels.kernel_config import KernelConfig, Region
 from tofnet.kernels.region import UNSORTED, TimeOfTravelKernel
@@ -209,10 +209,8 @@ class BandedKernel(BandsBase):
             self._wait(threads)
             if any(isinstance(r, BaseException) for r in results):
                 return
-            parts = np.array([(b * n, e) for b, (e, _) in enumerate(results[:bands])], np.int64)
-            cuts = merge_cuts(scratch["step"], parts, threads)  # every thread cuts the same
-            before = int((cuts[k] - cuts[0]).sum())
-            results[bands + k] = merge(scratch, np.stack([cuts[k], cuts[k + 1]], 1), into, offset + before)
+            parts = [(b * n, e) for b, (e, _) in enumerate(results[:bands])]
+            results[bands + k] = merge_share(scratch, parts, into, offset, k, threads)
 
         self._pool.run(job, threads, threads < 2)
         errors = [e for e in results if isinstance(e, BaseException)]

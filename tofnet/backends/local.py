@@ -174,7 +174,8 @@ def run_fused(stream: FusedStream, events: np.ndarray, packet_events: int,
     """Feed ``events`` to a fused stream in packets, the kernel writing the estimates in place."""
     clock = Stopwatch()
     total = len(events)
-    depth = _Collector(DEPTH_DTYPE, min(total, RESULT_CAPACITY))
+    # a kernel whose bands run in other processes has them write the estimates to memory it shares
+    depth = _Collector(DEPTH_DTYPE, min(total, RESULT_CAPACITY), getattr(stream.kernel, "allocate", None))
     tot = _Collector(TOT_DTYPE, 0)
     seams = []  # where one packet's estimates end: a step may go on in the next packet's
     for lo in range(0, total, packet_events):
@@ -196,17 +197,19 @@ def run_fused(stream: FusedStream, events: np.ndarray, packet_events: int,
 
 
 class _Collector:
-    """Appends record arrays into one buffer that grows geometrically (one copy per record)."""
+    """Appends record arrays into one buffer that grows geometrically (one copy per record);
+    ``allocate(count, dtype)`` makes each buffer (default ``np.empty``)."""
 
-    def __init__(self, dtype: np.dtype, capacity: int):
-        self._buffer = np.empty(capacity, dtype)
+    def __init__(self, dtype: np.dtype, capacity: int, allocate=None):
+        self._allocate = allocate or np.empty
+        self._buffer = self._allocate(capacity, dtype)
         self._size = 0
 
     def reserve(self, n: int) -> tuple[np.ndarray, int]:
         """``(buffer, offset)`` with room for ``n`` records at ``offset``; ``commit`` how many were written."""
         end = self._size + n
         if end > len(self._buffer):
-            grown = np.empty(max(end, 2 * len(self._buffer)), self._buffer.dtype)
+            grown = self._allocate(max(end, 2 * len(self._buffer)), self._buffer.dtype)
             raw = np.dtype((np.void, grown.dtype.itemsize))
             grown[:self._size].view(raw)[:] = self._buffer[:self._size].view(raw)
             self._buffer = grown

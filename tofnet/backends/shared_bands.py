@@ -2,10 +2,12 @@
 
 For the paper's chain, a worker holds the rows of the compiled cores it was dealt
 (``band_rows``) as one fused kernel (``_band_worker``). Per packet the host writes the events
-once into shared memory (``shared_memory``: memfds, never in ``/dev/shm``), sends each worker a
-few numbers, and merges the estimates the workers wrote into shared memory in the canonical
-order — the same bytes as ``fixed`` (docs/backends.md, "The multiproc backend").
-``SharedBandKernel`` offers ``TimeOfTravelKernel``'s streaming API, so ``FusedStream`` runs it.
+once into shared memory (``shared_memory``: memfds, never in ``/dev/shm``) and sends each
+worker a few numbers; the workers run their bands, wait for each other, and each merges its
+share of the steps into the result in shared memory, in the canonical order — the same bytes as
+``fixed`` (docs/backends.md, "The multiproc backend"). A ``run`` collects its estimates in
+buffers the workers write (``allocate``); other callers' arrays are copied into from a shared
+buffer. ``SharedBandKernel`` offers ``TimeOfTravelKernel``'s streaming API, so ``FusedStream`` runs it.
 """
 
 from __future__ import annotations
@@ -14,8 +16,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from tofnet.backends.band_merge import BandsBase, merge
-from tofnet.backends.shared_memory import SharedBuffer
+from tofnet.backends.band_merge import BandsBase
+from tofnet.backends.shared_memory import Rendezvous, SharedBuffer
 from tofnet.compiler.bands import Band
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, EVENT_DTYPE, TOT_DTYPE
@@ -48,9 +50,13 @@ class SharedBandKernel(BandsBase):
         self.bands = list(bands)
         self._exchange = exchange
         self._buffers: list[SharedBuffer] = []
-        self._events = self._depth = self._spikes = None
+        self._events = self._depth = self._spikes = self._merged = self._arrived = None
         self.capacity = 0
         self._counts: list[tuple] | None = None  # the workers' counts after the latest packet
+        #: The latest buffer ``allocate`` made (the workers merge into it), its array, and how many were made.
+        self._result: tuple[SharedBuffer, np.ndarray] | None = None
+        self._results = 0
+        self._packets = 0  # packets run (the workers write the latest they ran into ``_arrived``)
         self._map(1 << 12)
         try:
             self._open(self._addresses(), reach, velocity_source, lookahead)
@@ -60,10 +66,17 @@ class SharedBandKernel(BandsBase):
         self.facts = {"workers": len(self.bands), "bands": [list(b) for b in self.bands], "shared_memory": True}
 
     def _open(self, addresses: dict, reach: int, velocity_source, lookahead: int) -> None:
-        """Give each worker its band (``_band_worker.BandWorker``)."""
-        self._exchange({w: ("band", {"config": self.config, "index": w, "band": band, "lookahead": lookahead,
-                                     "reach": reach, "velocity_source": velocity_source,
-                                     "buffers": addresses}) for w, band in enumerate(self.bands)})
+        """Give each worker its band (``_band_worker.BandWorker``) and its ends of the pipes by which the
+        workers wait for each other (closed here once each has opened its own)."""
+        rendezvous = Rendezvous(len(self.bands)) if len(self.bands) > 1 else None
+        try:
+            self._exchange({w: ("band", {"config": self.config, "index": w, "band": band, "lookahead": lookahead,
+                                         "reach": reach, "velocity_source": velocity_source, "buffers": addresses,
+                                         "gate": rendezvous and rendezvous.address(w)})
+                            for w, band in enumerate(self.bands)})
+        finally:
+            if rendezvous is not None:
+                rendezvous.close()
 
     # -- shared buffers ------------------------------------------------------------------------
     def _map(self, capacity: int) -> None:
@@ -72,22 +85,47 @@ class SharedBandKernel(BandsBase):
         n = len(self.bands)
         self._buffers = [SharedBuffer(capacity * EVENT_DTYPE.itemsize, "tofnet-events"),
                          SharedBuffer(n * capacity * DEPTH_DTYPE.itemsize, "tofnet-depth"),
-                         SharedBuffer(4 * n * capacity * TOT_DTYPE.itemsize, "tofnet-tot")]
+                         SharedBuffer(4 * n * capacity * TOT_DTYPE.itemsize, "tofnet-tot"),
+                         SharedBuffer(capacity * DEPTH_DTYPE.itemsize, "tofnet-merged"),
+                         SharedBuffer(n * 8, "tofnet-gate")]
         self.capacity = capacity
         self._events = self._buffers[0].array(EVENT_DTYPE, capacity)
         self._depth = self._buffers[1].array(DEPTH_DTYPE, n * capacity)
         self._spikes = self._buffers[2].array(TOT_DTYPE, 4 * n * capacity)
+        self._merged = self._buffers[3].array(DEPTH_DTYPE, capacity)
+        self._arrived = self._buffers[4].array(np.int64, n)  # per worker, the latest packet it ran and waits on
 
     def _addresses(self) -> dict:
-        events, depth, tot = (b.address for b in self._buffers)
-        return {"events": events, "depth": depth, "tot": tot, "capacity": self.capacity}
+        events, depth, tot, merged, gate = (b.address for b in self._buffers)
+        return {"events": events, "depth": depth, "tot": tot, "merged": merged, "gate": gate,
+                "capacity": self.capacity}
+
+    def allocate(self, count: int, dtype) -> np.ndarray:
+        """An array of ``count`` records for a run's estimates, in memory the workers map: they merge
+        into it in place (no copy, and its fresh pages first touched by the workers, each its share).
+        It stays valid after ``close`` (its memory goes with the last array on it); other records:
+        ``np.empty``."""
+        if np.dtype(dtype) != DEPTH_DTYPE:
+            return np.empty(count, dtype)
+        self._let_go_result()
+        buffer = SharedBuffer(max(count, 1) * DEPTH_DTYPE.itemsize, "tofnet-result")
+        self._results += 1
+        self._result = (buffer, buffer.array(DEPTH_DTYPE, count))
+        return self._result[1]
+
+    def _let_go_result(self) -> None:
+        """Close the latest result buffer's file (its mapping stays while an array uses it)."""
+        if self._result is not None:
+            self._result[0].close()
+            self._result = None
 
     def close(self) -> None:
         """Release the shared buffers (idempotent): the views first, so that each map can close."""
-        self._events = self._depth = self._spikes = None
+        self._events = self._depth = self._spikes = self._merged = self._arrived = None
         for buffer in self._buffers:
             buffer.close()
         self._buffers = []
+        self._let_go_result()
 
     # -- what FusedStream reads ----------------------------------------------------------------
     def _band_counts(self) -> list[tuple]:
@@ -120,19 +158,28 @@ class SharedBandKernel(BandsBase):
             self._exchange({w: ("band_map", self._addresses()) for w in workers})
         raw = np.dtype((np.void, EVENT_DTYPE.itemsize))
         self._events[:n].view(raw)[:] = np.ascontiguousarray(events).view(raw)
+        result = self._result
+        shared = result is not None and into.ctypes.data == result[1].ctypes.data and len(into) == len(result[1])
+        target = (self._results, result[0].address, offset) if shared else None
         try:
-            replies = self._exchange({w: ("band_run", n, self._t0, bool(record_tot)) for w in workers})
+            self._packets += 1
+            replies = self._exchange({w: ("band_run", n, self._t0, bool(record_tot), target, self._packets)
+                                      for w in workers}, lambda: np.flatnonzero(self._arrived != self._packets))
         except BaseException:
             self._broken = True
             raise
-        self._counts = [replies[w][3] for w in workers]
+        self._counts = [replies[w][4] for w in workers]
         refused = sum(replies[w][1] < 0 for w in workers)
         if refused:  # every band checks the packet's time order: all refuse it, or something is wrong
             self._broken = refused < len(self.bands)
             raise BackendError(UNSORTED)
         self._t_hi = max(self._t_hi, int(events["t"][-1]))
-        cap = self.capacity
-        end = merge(self._depth, [(w * cap, w * cap + replies[w][1]) for w in workers], into, offset)
+        end = max(replies[w][3] for w in workers)  # each worker merged its share of the steps
+        if not shared:  # into the caller's array
+            raw = np.dtype((np.void, DEPTH_DTYPE.itemsize))
+            into[offset:offset + end].view(raw)[:] = self._merged[:end].view(raw)
+            end += offset
         if not record_tot:
             return end, 0
+        cap = self.capacity
         return end, self._merged_tot(self._spikes, [(4 * w * cap, 4 * w * cap + replies[w][2]) for w in workers])
