@@ -1,0 +1,137 @@
+"""What two bands cost beyond one worker: `fixed`, its 2 bands run one after the other in one thread.
+
+    python benchmarks/band_cost.py [--rounds 5] [--streams slider,edges20] [--networks "paper,time surface"]
+
+On a machine shared with other jobs the wall time of 2 threads says little, and CPU time of
+threads running side by side mixes in what the other jobs do to them; run one after the other,
+the bands' CPU time is their own work. Per stream and network: process CPU ms of one worker and
+of 2 bands (median over the rounds, with their range), and the CPU ms (median) of each part of
+the run, timed in the thread that runs it, net of the parts it calls:
+
+- paper network: the bands' listings (``select_rows``), their kernels (``TimeOfTravelKernel.run_events``,
+  all bands), the merge (``merge`` and ``merge_cuts``) and the rest of ``BandedKernel.run_events``
+  (its Python);
+- time surface: the bands' ``feed`` (each keeps its rows' events: ``TimeSurfaceModel._columns``),
+  their estimators (``TimeSurfaceEstimator.feed_columns``), the rest of each model's ``run`` (its
+  events taken, its records sorted), the merge of their records and the rest of ``BandedReader.run``.
+
+Streams: ``slider`` (the simulated scene, 0.5 s repeated 10 times, 240x180), ``edges20`` and
+``edges50`` (1280x720 at 20 / 50 M ev/s, ``--duration`` s). docs/performance.md, "Workers".
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import threading
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import streams  # noqa: E402
+from scaling import networks, repeated  # noqa: E402
+
+import tofnet.backends.bands as bands  # noqa: E402
+import tofnet.backends.local as local  # noqa: E402
+from tofnet.backends.registry import get_backend  # noqa: E402
+from tofnet.compiler import compile_network  # noqa: E402
+from tofnet.kernels.region import TimeOfTravelKernel  # noqa: E402
+from tofnet.kernels.time_surface_estimator import TimeSurfaceEstimator  # noqa: E402
+from tofnet.models.time_surface import TimeSurfaceModel  # noqa: E402
+
+#: (owner, attribute, part): what is timed, in the thread that runs it.
+PARTS = ((bands, "select_rows", "listing"), (TimeOfTravelKernel, "run_events", "kernels"), (bands, "merge", "merge"),
+         (bands, "merge_cuts", "merge"), (bands.BandedKernel, "run_events", "bands' run"),
+         (bands.BandedReader, "feed", "feed"), (TimeSurfaceEstimator, "feed_columns", "kernels"),
+         (bands.BandedReader, "run", "bands' run"), (TimeSurfaceModel, "run", "models' run"))
+
+
+class Parts:
+    """While active, the thread CPU time spent in each of ``PARTS`` (s, summed over calls), each net of
+    the parts it calls (the rest of ``BandedKernel.run_events`` is its Python and hand-overs)."""
+
+    def __init__(self):
+        self.spent: dict[str, float] = {}
+        self._saved = []
+        self._local = threading.local()
+
+    def __enter__(self):
+        for owner, name, part in PARTS:
+            original = getattr(owner, name)
+            self._saved.append((owner, name, original))
+            setattr(owner, name, self._timed(original, part))
+        return self
+
+    def _timed(self, fn, part):
+        spent, local = self.spent, self._local
+
+        def timed(*args, **kwargs):
+            stack = local.__dict__.setdefault("stack", [])
+            stack.append(0.0)  # time of the parts it calls
+            start = time.thread_time()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                total = time.thread_time() - start
+                inner = stack.pop()
+                spent[part] = spent.get(part, 0.0) + total - inner
+                if stack:
+                    stack[-1] += total
+        return timed
+
+    def __exit__(self, *exc):
+        for owner, name, original in reversed(self._saved):
+            setattr(owner, name, original)
+
+
+def recordings(names: list[str], duration: float) -> dict:
+    out = {}
+    for name in names:
+        if name == "slider":
+            out["slider x10"] = repeated(streams.scenario("slider", 0.5, print), 10)
+        elif name in ("edges20", "edges50"):
+            out[f"edges 1280x720 {name[5:]}M"] = streams.edges((1280, 720), float(name[5:]) * 1e6, duration)
+        else:
+            raise SystemExit(f"band_cost: unknown stream {name!r} (slider, edges20, edges50)")
+    return out
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--streams", default="slider")
+    parser.add_argument("--networks", default="paper,time surface")
+    parser.add_argument("--duration", type=float, default=0.25, help="seconds of each edges stream")
+    args = parser.parse_args()
+    local.threads_for = lambda count: 1  # every band in the caller's thread, one after the other
+    print("| stream | network | one worker (CPU ms): its parts | 2 bands (CPU ms): their parts | 2 vs 1 |")
+    print("| --- | --- | --- | --- | --- |")
+    for name, recording in recordings(args.streams.split(","), args.duration).items():
+        for kind, network in networks(recording.sensor_size, recording).items():
+            if kind not in args.networks.split(","):
+                continue
+            compiled = compile_network(network)
+            for workers in (1, 2):
+                get_backend("fixed", workers=workers).run(compiled, recording)  # compile or load the kernels
+            cpu: dict[int, list[float]] = {1: [], 2: []}
+            parts: dict[int, dict[str, list[float]]] = {1: {}, 2: {}}
+            for _ in range(args.rounds):
+                for workers in (1, 2):
+                    with Parts() as timed:
+                        start = time.process_time()
+                        get_backend("fixed", workers=workers).run(compiled, recording)
+                        cpu[workers].append(time.process_time() - start)
+                    for part, spent in timed.spent.items():
+                        parts[workers].setdefault(part, []).append(spent)
+            one, two = (statistics.median(cpu[w]) for w in (1, 2))
+            text = {w: ", ".join(f"{part} {1e3 * statistics.median(v):.0f}" for part, v in parts[w].items())
+                    for w in (1, 2)}
+            print(f"| {name} | {kind} | {1e3 * one:.0f} ({1e3 * min(cpu[1]):.0f}-{1e3 * max(cpu[1]):.0f}): {text[1]} | "
+                  f"{1e3 * two:.0f} ({1e3 * min(cpu[2]):.0f}-{1e3 * max(cpu[2]):.0f}): {text[2]} | {two / one:.2f}x |",
+                  flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
