@@ -1,6 +1,7 @@
 """What two bands cost beyond one worker: `fixed`, its 2 bands run one after the other in one thread.
 
     python benchmarks/band_cost.py [--rounds 5] [--streams slider,edges20] [--networks "paper,time surface"]
+    python benchmarks/band_cost.py --instructions 1000000 [--streams ...]    # callgrind, a few minutes
 
 On a machine shared with other jobs the wall time of 2 threads says little, and CPU time of
 threads running side by side mixes in what the other jobs do to them; run one after the other,
@@ -15,6 +16,11 @@ the run, timed in the thread that runs it, net of the parts it calls:
   their estimators (``TimeSurfaceEstimator.feed_columns``), the rest of each model's ``run`` (its
   events taken, its records sorted), the merge of their records and the rest of ``BandedReader.run``.
 
+``--instructions N``: instead, the instructions of one run of the first ``N`` events of each
+stream, one worker and 2 bands, counted by valgrind's callgrind around ``run`` alone (in a process
+that ran it once before, natively compiled into numba's cache for generic x86-64 first), as
+``benchmarks/time_surface_instructions.py`` does: a figure this shared machine cannot disturb.
+
 Streams: ``slider`` (the simulated scene, 0.5 s repeated 10 times, 240x180), ``edges20`` and
 ``edges50`` (1280x720 at 20 / 50 M ev/s, ``--duration`` s). docs/performance.md, "Workers".
 """
@@ -22,8 +28,12 @@ Streams: ``slider`` (the simulated scene, 0.5 s repeated 10 times, 240x180), ``e
 from __future__ import annotations
 
 import argparse
+import os
+import shutil
 import statistics
+import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -31,6 +41,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import streams  # noqa: E402
 from scaling import networks, repeated  # noqa: E402
+
+from tofnet.io.recording import Recording  # noqa: E402
 
 import tofnet.backends.bands as bands  # noqa: E402
 import tofnet.backends.local as local  # noqa: E402
@@ -89,12 +101,54 @@ def recordings(names: list[str], duration: float) -> dict:
     out = {}
     for name in names:
         if name == "slider":
-            out["slider x10"] = repeated(streams.scenario("slider", 0.5, print), 10)
+            out["slider x10"] = repeated(streams.scenario("slider", 0.5, lambda *a: None), 10)
         elif name in ("edges20", "edges50"):
             out[f"edges 1280x720 {name[5:]}M"] = streams.edges((1280, 720), float(name[5:]) * 1e6, duration)
         else:
             raise SystemExit(f"band_cost: unknown stream {name!r} (slider, edges20, edges50)")
     return out
+
+
+def counted(stream: str, kind: str, workers: int, events: int) -> float:
+    """Instructions (callgrind) of one ``run`` of the first ``events`` of ``stream``, bands one after the other."""
+    inner = [str(Path(__file__).resolve()), "--inner", f"{stream}:{kind}:{workers}:{events}"]
+    env = {**os.environ, "NUMBA_CPU_NAME": "generic"}
+    subprocess.run([sys.executable, *inner, "--no-toggle"], check=True, env=env)  # compile into numba's cache
+    with tempfile.TemporaryDirectory() as folder:
+        out = Path(folder) / "callgrind.out"
+        subprocess.run(["valgrind", "--tool=callgrind", "--instr-atstart=no", f"--callgrind-out-file={out}",
+                        sys.executable, *inner], check=True, capture_output=True, env=env)
+        totals = next(line for line in out.read_text().splitlines() if line.startswith("totals:"))
+    return float(totals.split()[1])
+
+
+def run_inner(spec: str, toggle: bool) -> None:
+    """One run of ``stream:network:workers:events`` after a first one, counted alone when ``toggle``."""
+    stream, kind, workers, events = spec.split(":")
+    recording = next(iter(recordings([stream], 0.25).values()))
+    recording = Recording(recording.events[:int(events)].copy(), intrinsics=recording.intrinsics,
+                          trajectory=recording.trajectory, sensor_size=recording.sensor_size)
+    compiled = compile_network(networks(recording.sensor_size, recording)[kind])
+    get_backend("fixed", workers=int(workers)).run(compiled, recording)  # loads the kernels outside the count
+    switch = ["callgrind_control", "-i"]
+    if toggle:
+        subprocess.run([*switch, "on", str(os.getpid())], check=True, capture_output=True)
+    get_backend("fixed", workers=int(workers)).run(compiled, recording)
+    if toggle:
+        subprocess.run([*switch, "off", str(os.getpid())], check=True, capture_output=True)
+
+
+def instructions(args) -> int:
+    if shutil.which("valgrind") is None or shutil.which("callgrind_control") is None:
+        print("band_cost: valgrind (with callgrind_control) not found", file=sys.stderr)
+        return 2
+    print(f"| stream (first {args.instructions:,} events) | network | one worker (M instructions) | 2 bands | 2 vs 1 |")
+    print("| --- | --- | --- | --- | --- |")
+    for stream in args.streams.split(","):
+        for kind in args.networks.split(","):
+            one, two = (counted(stream, kind, w, args.instructions) / 1e6 for w in (1, 2))
+            print(f"| {stream} | {kind} | {one:.1f} | {two:.1f} | {two / one:.3f}x |", flush=True)
+    return 0
 
 
 def main() -> int:
@@ -103,8 +157,16 @@ def main() -> int:
     parser.add_argument("--streams", default="slider")
     parser.add_argument("--networks", default="paper,time surface")
     parser.add_argument("--duration", type=float, default=0.25, help="seconds of each edges stream")
+    parser.add_argument("--instructions", type=int, default=0, help="count instructions of the first N events")
+    parser.add_argument("--inner", default="", help=argparse.SUPPRESS)
+    parser.add_argument("--no-toggle", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     local.threads_for = lambda count: 1  # every band in the caller's thread, one after the other
+    if args.inner:
+        run_inner(args.inner, not args.no_toggle)
+        return 0
+    if args.instructions:
+        return instructions(args)
     print("| stream | network | one worker (CPU ms): its parts | 2 bands (CPU ms): their parts | 2 vs 1 |")
     print("| --- | --- | --- | --- | --- |")
     for name, recording in recordings(args.streams.split(","), args.duration).items():
