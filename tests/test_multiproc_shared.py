@@ -14,6 +14,7 @@ import pytest
 
 from tofnet.backends.multiproc import MultiprocBackend
 from tofnet.backends.registry import get_backend
+from tofnet.backends.shared_bands import SharedBandKernel
 from tofnet.backends.shared_memory import SharedBuffer, attach
 from tofnet.compiler import compile_network
 from tofnet.conformance.workers import first_difference
@@ -92,9 +93,14 @@ def test_the_workers_merge_into_the_runs_shared_result_which_grows_and_goes_with
     compiled = compile_network(depth_network(SENSOR, velocity=VELOCITY), patch=(8, 8))
     fixed = get_backend("fixed").run(compiled, RECORDING)
     monkeypatch.setattr(local, "RESULT_CAPACITY", 700)  # the result grows several times, as a long run's does
+    targets = []
+    target = SharedBandKernel._target
+    monkeypatch.setattr(SharedBandKernel, "_target", lambda *a: targets.append(target(*a)) or targets[-1])
     with MultiprocBackend(workers=3, packet_events=500).session() as session:
         banded = session.run(RECORDING, compiled=compiled)
         assert first_difference(banded, fixed) == ""
+        # every packet merged in place by the workers, in 3 buffers (the first, then grown twice)
+        assert len(targets) == 45 and None not in targets and len({t[0] for t in targets}) == 3
         with open("/proc/self/maps") as f:  # the estimates are where the workers merged them
             assert f"memfd:tofnet-result-{os.getpid()}" in f.read()
     del banded

@@ -45,7 +45,7 @@ class BandWorker:
         packet (``(pid, fd, bytes)`` each)."""
         self.maps = [attach(buffers[name]) for name in ("events", "depth", "tot", "merged", "gate")]
         self.capacity = buffers["capacity"]
-        self.events = np.frombuffer(self.maps[0], EVENT_DTYPE, self.capacity)
+        self.events = np.frombuffer(self.maps[0], EVENT_DTYPE, 2 * self.capacity)  # two packets' room
         self.parts = np.frombuffer(self.maps[1], DEPTH_DTYPE)  # every band's estimates, ``capacity`` apart
         tot = np.frombuffer(self.maps[2], TOT_DTYPE)
         self.merged = np.frombuffer(self.maps[3], DEPTH_DTYPE)
@@ -64,8 +64,8 @@ class BandWorker:
             self._result = (ident, np.frombuffer(attach(address), DEPTH_DTYPE))
         return self._result[1], offset
 
-    def run(self, n: int, t0_us: int, record_tot: bool, target, packet: int) -> tuple[int, int, int]:
-        """Run this band's events of the packet's ``n``, then (every band run) merge this worker's share of
+    def run(self, first: int, n: int, t0_us: int, record_tot: bool, target, packet: int) -> tuple[int, int, int]:
+        """Run this band's events of the packet's ``n`` (from ``first`` in the events buffer), then (every band run) merge this worker's share of
         the bands' estimates into ``target`` (``_target``; ``packet``: the host's count of packets, written
         to ``arrived`` on the way); ``(estimates, spikes, end of the share)``;
         estimates -1 when the packet is out of time order (refused by every band: nothing changed), end
@@ -79,7 +79,7 @@ class BandWorker:
             self.updates.clear()
         if len(self._index) <= n:
             self._index = np.empty(max(n + 1, 2 * len(self._index)), np.int64)
-        events = self.events[:n]
+        events = self.events[first:first + n]
         end, n_tot, failure = -1, 0, None
         try:
             m = select_rows(events, self.keep, self._index)

@@ -3,8 +3,11 @@
 Every wait is bounded and also watches the process itself (its ``sentinel``), so a
 worker that dies is reported at once with its exit code or signal instead of leaving
 the host blocked on a pipe that will never deliver (the failure Lava's users hit).
-Sends go through a small thread because a large message blocks in ``send`` until the
-worker reads it; the host then only ever blocks in ``expect``, which has a timeout.
+A large message goes through a small thread because it blocks in ``send`` until the worker
+reads it; the host then only ever blocks in ``expect``, which has a timeout. A small one (every
+message of a banded run's packet) is written at once when nothing is queued: every message but
+a test's fault hook is answered before the next is sent, so the worker has read what came
+before, and the hand-over to the thread would cost more than the write (docs/performance.md).
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ import queue
 import signal
 import threading
 from multiprocessing.connection import wait
+from multiprocessing.reduction import ForkingPickler
 
 from tofnet.errors import BackendError
 
@@ -20,6 +24,8 @@ from tofnet.errors import BackendError
 STOP_WAIT = 5.0
 #: Seconds to wait after SIGTERM (then SIGKILL) before giving up on a worker.
 KILL_WAIT = 5.0
+#: Pickled messages up to this many bytes are written by the caller (one write, far below the pipe's room).
+DIRECT_BYTES = 4000
 
 
 class Channel:
@@ -41,6 +47,8 @@ class Channel:
             child.close()  # only the worker holds its end now: its death closes the pipe
         self.conn = parent
         self._outbox: queue.SimpleQueue = queue.SimpleQueue()
+        self._lock = threading.Lock()
+        self._queued = 0  # messages handed to the sending thread and not sent yet
         self._send_error: BaseException | None = None
         self._sender = threading.Thread(target=self._send_loop, name=f"tofnet-multiproc-send-{index}", daemon=True)
         self._sender.start()
@@ -50,25 +58,42 @@ class Channel:
         """Queue ``message`` for the worker (never blocks)."""
         if self._send_error is not None:
             raise self.failure("could not be sent to", f"({self._send_error})")
-        self._outbox.put(message)
+        data = bytes(ForkingPickler.dumps(message))  # what ``conn.send`` writes
+        with self._lock:
+            direct = not self._queued and len(data) <= DIRECT_BYTES
+            if not direct:
+                self._queued += 1
+        if not direct:
+            self._outbox.put(data)
+            return
+        try:
+            self.conn.send_bytes(data)
+        except (OSError, ValueError) as err:  # the worker died or the pipe was closed
+            self._send_error = err
+            raise self.failure("could not be sent to", f"({err})") from None
 
     def _send_loop(self) -> None:
         while True:
-            message = self._outbox.get()
-            if message is None:
+            data = self._outbox.get()
+            if data is None:
                 return
             try:
-                self.conn.send(message)
+                self.conn.send_bytes(data)
             except (OSError, ValueError) as err:  # the worker died or the pipe was closed
                 self._send_error = err
                 return
+            finally:
+                with self._lock:
+                    self._queued -= 1
 
     def expect(self, kind: str, timeout: float, doing: str, timeout_name: str = "timeout",
-               limit: float | None = None) -> tuple:
+               limit: float | None = None, ready: list | None = None) -> tuple:
         """The worker's next message, which must be ``kind``; ``BackendError`` on an error reply,
         death of the worker, or no answer within ``timeout`` seconds (``limit``: the configured
-        value to name in the error, when ``timeout`` is what remains of it)."""
-        ready = wait([self.conn, self.process.sentinel], timeout)
+        value to name in the error, when ``timeout`` is what remains of it). ``ready``: what a
+        ``wait`` just returned that holds this worker's pipe or process (no second wait)."""
+        if ready is None:
+            ready = wait([self.conn, self.process.sentinel], timeout)
         if self.conn in ready:  # read first: a worker may report an error and then exit
             try:
                 message = self.conn.recv()
@@ -110,7 +135,9 @@ class Channel:
         """Ask the worker to exit (``graceful``) or terminate it; kill it if it lingers."""
         process = self.process
         if graceful and process.is_alive() and self._send_error is None:
-            self._outbox.put(("stop",))
+            with self._lock:
+                self._queued += 1
+            self._outbox.put(bytes(ForkingPickler.dumps(("stop",))))
             process.join(STOP_WAIT)
         if process.is_alive():
             process.terminate()

@@ -178,8 +178,11 @@ def run_fused(stream: FusedStream, events: np.ndarray, packet_events: int,
     depth = _Collector(DEPTH_DTYPE, min(total, RESULT_CAPACITY), getattr(stream.kernel, "allocate", None))
     tot = _Collector(TOT_DTYPE, 0)
     seams = []  # where one packet's estimates end: a step may go on in the next packet's
+    ahead = getattr(stream.kernel, "next_packet", None)  # a kernel that copies the next packet meanwhile
     for lo in range(0, total, packet_events):
         packet = events[lo:lo + packet_events]
+        if ahead is not None:
+            ahead(events[lo + packet_events:lo + 2 * packet_events])
         buffer, offset = depth.reserve(len(packet))
         out = stream.feed_into(packet, buffer, offset)  # the kernel writes the estimates in place
         if out is not None:

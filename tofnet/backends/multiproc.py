@@ -213,14 +213,16 @@ class MultiprocSession:
         self._channels[worker].send(("fault", kind))
 
     # -- talking ----------------------------------------------------------------------------
-    def _exchange(self, messages: dict[int, tuple], stuck=None) -> dict[int, tuple]:
-        """Send each worker its message, then take the answers as they come (all within ``timeout``):
-        a worker's error is reported at once, even while another waits for it (their bands wait for
-        each other in a packet). ``stuck()``: the workers to name first when none answers in time
-        (e.g. those not waiting for the others)."""
+    def _exchange(self, messages: dict[int, tuple], stuck=None, meanwhile=None) -> dict[int, tuple]:
+        """Send each worker its message, call ``meanwhile()``, then take the answers as they come (all
+        within ``timeout``): a worker's error is reported at once, even while another waits for it
+        (their bands wait for each other in a packet). ``stuck()``: the workers to name first when
+        none answers in time (e.g. those not waiting for the others)."""
         self._seq += 1
         for worker, message in messages.items():
             self._channels[worker].send(message)
+        if meanwhile is not None:
+            meanwhile()
         replies, pending = {}, dict(messages)
         deadline = time.monotonic() + self.backend.timeout
         while pending:
@@ -230,14 +232,15 @@ class MultiprocSession:
             # those with something to say; none within the timeout: the first one stuck
             answering = [w for w, c in channels.items() if c.conn in ready or c.process.sentinel in ready]
             if not answering:
-                answering = [next((w for w in (stuck() if stuck else ()) if w in pending), next(iter(pending)))]
+                answering, ready = [next((w for w in (stuck() if stuck else ()) if w in pending),
+                                         next(iter(pending)))], None
             for worker in answering:
                 message = pending.pop(worker)
                 doing = f"running chunk {self._seq}" if message[0] in ("run", "band_run") else \
                     f"answering {message[0]!r}"
                 try:
                     replies[worker] = channels[worker].expect(_REPLY[message[0]], max(0.0, deadline - time.monotonic()),
-                                                              doing, limit=self.backend.timeout)
+                                                              doing, limit=self.backend.timeout, ready=ready)
                 except BackendError:
                     # a worker that died makes the others fail (their bands wait for each other): name the cause
                     for other in messages:
@@ -325,7 +328,7 @@ class MultiprocSession:
         config = pipeline.kernel_config(known, self.backend.format)
         bands = band_rows(compiled, pipeline.names[1], plans)
         kernel = self._guarded(lambda: SharedBandKernel(
-            config, bands, input_reach(network), source, lambda m, stuck=None: self._guarded(lambda: self._exchange(m, stuck)),
+            config, bands, input_reach(network), source, lambda m, *more: self._guarded(lambda: self._exchange(m, *more)),
             t0_us or 0))
         kernel.facts["startup_s"] = self.startup_seconds
         return FusedStream(self.backend.name, config, pipeline, source, t0_us, record_tot,

@@ -42,10 +42,11 @@ def band_rows(compiled, layer: str, plans) -> list[Band]:
 
 
 class SharedBandKernel(BandsBase):
-    """The fused kernel over worker processes, one band each; ``exchange({worker: message})`` talks to them."""
+    """The fused kernel over worker processes, one band each; ``exchange({worker: message}, stuck, meanwhile)``
+    talks to them (``MultiprocSession._exchange``)."""
 
     def __init__(self, config: KernelConfig, bands: Sequence[Band], reach: int, velocity_source,
-                 exchange: Callable[[dict[int, tuple]], dict[int, tuple]], t0_us: int = 0, lookahead: int = 1024):
+                 exchange: Callable[..., dict[int, tuple]], t0_us: int = 0, lookahead: int = 1024):
         super().__init__(config, t0_us)
         self.bands = list(bands)
         self._exchange = exchange
@@ -57,6 +58,8 @@ class SharedBandKernel(BandsBase):
         self._result: tuple[SharedBuffer, np.ndarray] | None = None
         self._results = 0
         self._packets = 0  # packets run (the workers write the latest they ran into ``_arrived``)
+        self._ahead: np.ndarray | None = None  # the next packet (``next_packet``)
+        self._staged: tuple | None = None  # ``(address, events, where)`` of a packet copied ahead
         self._map(1 << 12)
         try:
             self._open(self._addresses(), reach, velocity_source, lookahead)
@@ -81,15 +84,16 @@ class SharedBandKernel(BandsBase):
     # -- shared buffers ------------------------------------------------------------------------
     def _map(self, capacity: int) -> None:
         """Buffers for packets of up to ``capacity`` events (the old ones are released)."""
-        self.close()
+        self._release_buffers()
         n = len(self.bands)
-        self._buffers = [SharedBuffer(capacity * EVENT_DTYPE.itemsize, "tofnet-events"),
+        self._staged = None  # the buffers' contents go
+        self._buffers = [SharedBuffer(2 * capacity * EVENT_DTYPE.itemsize, "tofnet-events"),
                          SharedBuffer(n * capacity * DEPTH_DTYPE.itemsize, "tofnet-depth"),
                          SharedBuffer(4 * n * capacity * TOT_DTYPE.itemsize, "tofnet-tot"),
                          SharedBuffer(capacity * DEPTH_DTYPE.itemsize, "tofnet-merged"),
                          SharedBuffer(n * 8, "tofnet-gate")]
         self.capacity = capacity
-        self._events = self._buffers[0].array(EVENT_DTYPE, capacity)
+        self._events = self._buffers[0].array(EVENT_DTYPE, 2 * capacity)  # two packets: one runs, one is copied
         self._depth = self._buffers[1].array(DEPTH_DTYPE, n * capacity)
         self._spikes = self._buffers[2].array(TOT_DTYPE, 4 * n * capacity)
         self._merged = self._buffers[3].array(DEPTH_DTYPE, capacity)
@@ -119,12 +123,16 @@ class SharedBandKernel(BandsBase):
             self._result[0].close()
             self._result = None
 
-    def close(self) -> None:
-        """Release the shared buffers (idempotent): the views first, so that each map can close."""
+    def _release_buffers(self) -> None:
+        """Release the packets' buffers: the views first, so that each map can close."""
         self._events = self._depth = self._spikes = self._merged = self._arrived = None
         for buffer in self._buffers:
             buffer.close()
         self._buffers = []
+
+    def close(self) -> None:
+        """Release the shared buffers and the result's file (idempotent)."""
+        self._release_buffers()
         self._let_go_result()
 
     # -- what FusedStream reads ----------------------------------------------------------------
@@ -144,6 +152,23 @@ class SharedBandKernel(BandsBase):
         return self._join_kernel.join_packets(depth, seams)
 
     # -- running -------------------------------------------------------------------------------
+    def _target(self, into: np.ndarray, offset: int) -> tuple | None:
+        """Where the workers merge a packet's estimates: ``(result id, its address, offset)`` when ``into``
+        is the latest ``allocate``'s array, else None (their shared buffer, then copied into ``into``)."""
+        result = self._result
+        if result is None or into.ctypes.data != result[1].ctypes.data or len(into) != len(result[1]):
+            return None
+        return self._results, result[0].address, offset
+
+    def next_packet(self, events: np.ndarray) -> None:
+        """The packet the next ``run_events`` will be given, unchanged (a caller that knows, as ``run``
+        does): it is copied into shared memory while this one runs, off the host's serial part."""
+        self._ahead = events if len(events) and events.flags.c_contiguous else None
+
+    def _copy(self, events: np.ndarray, at: int) -> None:
+        raw = np.dtype((np.void, EVENT_DTYPE.itemsize))
+        self._events[at:at + len(events)].view(raw)[:] = np.ascontiguousarray(events).view(raw)
+
     def run_events(self, events: np.ndarray, velocity, into: np.ndarray | None = None, offset: int = 0,
                    record_tot: bool = False, span=None, canonical: bool = True) -> tuple[int, int]:
         """As ``TimeOfTravelKernel.run_events`` (``velocity`` unused: each worker computes its rows);
@@ -156,17 +181,28 @@ class SharedBandKernel(BandsBase):
         if n > self.capacity:
             self._map(max(n, 2 * self.capacity))
             self._exchange({w: ("band_map", self._addresses()) for w in workers})
-        raw = np.dtype((np.void, EVENT_DTYPE.itemsize))
-        self._events[:n].view(raw)[:] = np.ascontiguousarray(events).view(raw)
-        result = self._result
-        shared = result is not None and into.ctypes.data == result[1].ctypes.data and len(into) == len(result[1])
-        target = (self._results, result[0].address, offset) if shared else None
+        staged, self._staged = self._staged, None
+        ahead, self._ahead = self._ahead, None
+        if staged is not None and staged[:2] == (events.ctypes.data, n) and events.flags.c_contiguous:
+            first = staged[2]  # copied while the previous packet ran
+        else:
+            first = 0
+            self._copy(events, first)
+
+        def meanwhile() -> None:  # while the workers run this packet, the next one goes to the other half
+            if ahead is not None and len(ahead) <= self.capacity:
+                self._copy(ahead, self.capacity - first)
+                self._staged = (ahead.ctypes.data, len(ahead), self.capacity - first)
+
+        target = self._target(into, offset)
         try:
             self._packets += 1
-            replies = self._exchange({w: ("band_run", n, self._t0, bool(record_tot), target, self._packets)
-                                      for w in workers}, lambda: np.flatnonzero(self._arrived != self._packets))
+            replies = self._exchange({w: ("band_run", first, n, self._t0, bool(record_tot), target, self._packets)
+                                      for w in workers}, lambda: np.flatnonzero(self._arrived != self._packets),
+                                     meanwhile)
         except BaseException:
             self._broken = True
+            self._staged = None
             raise
         self._counts = [replies[w][4] for w in workers]
         refused = sum(replies[w][1] < 0 for w in workers)
@@ -175,7 +211,7 @@ class SharedBandKernel(BandsBase):
             raise BackendError(UNSORTED)
         self._t_hi = max(self._t_hi, int(events["t"][-1]))
         end = max(replies[w][3] for w in workers)  # each worker merged its share of the steps
-        if not shared:  # into the caller's array
+        if target is None:  # into the caller's array
             raw = np.dtype((np.void, DEPTH_DTYPE.itemsize))
             into[offset:offset + end].view(raw)[:] = self._merged[:end].view(raw)
             end += offset
