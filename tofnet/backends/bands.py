@@ -264,7 +264,8 @@ class BandedReader(Model):
     """An event-reading model (``Model.runs_in_bands``) run as one instance per band of rows: each is fed
     every event (and keeps what its rows need: the time surface's, ``TimeSurfaceModel._columns``) and
     counts and answers for its rows, the bands run a range of steps in ``pool``'s threads,
-    and their records (each sorted by step) are merged by step in band order: the canonical order."""
+    and their records (each sorted by step) are merged by step in band order, the canonical order (a
+    port per thread)."""
 
     reads_events = True
 
@@ -289,14 +290,19 @@ class BandedReader(Model):
         answers = self.pool.run(lambda b: self.models[b].run(first, end, inputs), len(self.models),
                                 self._fed < SERIAL_BELOW)
         self._fed = 0
-        out = {}
-        for port in answers[0]:
-            parts = [a[port] for a in answers]
+        ports = list(answers[0])
+
+        def merged(i: int) -> np.ndarray:
+            parts = [a[ports[i]] for a in answers]
             source = np.concatenate(parts)
             bounds = np.cumsum([0] + [len(p) for p in parts])
-            out[port] = np.empty(len(source), source.dtype)
-            merge(source, np.stack([bounds[:-1], bounds[1:]], 1), out[port], 0)
-        return out
+            out = np.empty(len(source), source.dtype)
+            merge(source, np.stack([bounds[:-1], bounds[1:]], 1), out, 0)
+            return out
+
+        # a port per thread (the copies and the merge release the GIL), unless there is too little to hand over
+        records = sum(len(a[port]) for a in answers for port in ports)
+        return dict(zip(ports, self.pool.run(merged, len(ports), records < SERIAL_BELOW)))
 
     def counts(self) -> dict[str, int]:
         return summed_counts(model.counts() for model in self.models)
