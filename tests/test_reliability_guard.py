@@ -7,6 +7,7 @@ a symlink, and an export over an earlier one.
 """
 
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -215,6 +216,19 @@ def test_the_outputs_fuzz_target_sees_what_the_guard_prevents(tmp_path, monkeypa
     assert off["convert rec mine --force --quiet"] == "invalid"
     assert off["run rec --spec spec.yaml --out out.npz --json vel.txt --force --quiet"] == "invalid"
     assert off["export d.npz --ply rec/groundtruth.txt --force"] == "invalid"
+
+
+def test_the_outputs_fuzz_target_writes_nothing_outside_its_fixture(tmp_path, monkeypatch):
+    """A word the mutation left relative (``-1`` taken as the output) once landed in the caller's folder."""
+    from tofnet.fuzzing_outputs import run_case
+
+    caller = tmp_path / "caller"
+    caller.mkdir()
+    monkeypatch.chdir(caller)
+    run_case(["convert", "rec", "-1", "--force", "--quiet"], tmp_path / "scratch")
+    assert list(caller.iterdir()) == []
+    assert (tmp_path / "scratch" / "outputs-case" / "-1" / "events.txt").is_file()
+    assert Path.cwd() == caller
 
 
 def test_an_output_name_too_long_is_one_line(folder, tmp_path, capsys):

@@ -112,10 +112,13 @@ def run_case(words: list[str], folder: Path) -> dict:
         raise TofnetError("argparse refused the options (usage and one error line, exit 2)") from None
     protected = _protected(root, args)
     before = _state(protected)
+    caller = os.getcwd()
+    os.chdir(root)  # a word kept relative (``-1``, ``--force`` taken as a path) lands in the fixture, not the caller's folder
     try:
         with reading(), contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
             args.handler(args)
     finally:
+        os.chdir(caller)
         after = _state([p for p in protected if os.path.lexists(p)])
         if after != before:
             changed = sorted(set(before) ^ set(after) | {k for k in before if before[k] != after.get(k)})
