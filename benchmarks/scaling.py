@@ -13,8 +13,9 @@ shared machine spoils a round, not a configuration), wall time of ``run``:
   apart) against ``fixed`` with 1;
 - what 2 workers would take with a free core each (``CriticalPath``: per hand-over the slowest
   thread's CPU time, plus the serial CPU time), against 1 worker's CPU time: on a machine shared
-  with other jobs the wall time cannot show it; for ``multiproc``, the host's CPU time plus the
-  busiest worker's (``/proc``), against ``fixed`` with 1;
+  with other jobs the wall time cannot show it; for ``multiproc``, the host's serial CPU time (all
+  but the next packet's copy, made while the workers run) plus the busiest worker's (``/proc``),
+  against ``fixed`` with 1, and the host's serial CPU time itself;
 - the cost of bands: CPU time of 2 bands against 1 (all threads), and per 1 ms packet at 1 M ev/s
   on 240x180, wall time of ``feed`` with 1, 2 and 4 workers (bands forced, and as chosen);
 - the state each configuration holds (bytes of the kernels' arrays).
@@ -114,14 +115,28 @@ def process_cpu(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def free_cores_multiproc(session, fn) -> tuple[float, float]:
-    """(wall s, estimated wall s on free cores) of ``fn()`` on ``session``'s workers: the host's CPU time
-    plus the busiest worker's (the host copies and merges while the workers wait, and the other way
-    round)."""
+def free_cores_multiproc(session, fn) -> tuple[float, float, float]:
+    """(wall s, estimated wall s on free cores, the host's serial CPU s) of ``fn()`` on ``session``'s
+    workers: the host's CPU time outside what it does while the workers run (``_exchange``'s
+    ``meanwhile``: copying the next packet) plus the busiest worker's (the host waits for the workers
+    and the workers for the host the rest of the time)."""
+    exchange, overlapped = session._exchange, [0.0]
+
+    def timed_exchange(messages, stuck=None, meanwhile=None):
+        def measured():
+            start = time.thread_time()
+            meanwhile()
+            overlapped[0] += time.thread_time() - start
+        return exchange(messages, stuck, measured if meanwhile is not None else None)
+
     before = [process_cpu(pid) for pid in session.pids]
-    wall, host = timed(fn)
+    session._exchange = timed_exchange
+    try:
+        wall, host = timed(fn)
+    finally:
+        del session._exchange
     busiest = max(process_cpu(pid) - b for pid, b in zip(session.pids, before))
-    return wall, host + busiest
+    return wall, host - overlapped[0] + busiest, host - overlapped[0]
 
 
 def networks(sensor, recording: Recording) -> dict:
@@ -188,6 +203,7 @@ def main() -> None:
     free_ratio: dict[tuple[str, str], list[float]] = {}
     mp_ratio: dict[str, list[float]] = {}
     mp_free: dict[str, list[float]] = {}
+    mp_serial: dict[str, list[float]] = {}  # the multiproc host's serial CPU ms
     with get_backend("multiproc", workers=2).session() as session:
         startup = session.startup_seconds
         for recording in inputs.values():  # compile (or load) every kernel before timing anything
@@ -212,20 +228,25 @@ def main() -> None:
                     cpu_ratio.setdefault((name, kind), []).append(cpu_two / cpu_one)
                     free_ratio.setdefault((name, kind), []).append(cpu_one / free_two)
                     if kind == "paper":
-                        mp, mp_cpu = free_cores_multiproc(session, lambda: session.run(recording, compiled=compiled))
+                        mp, mp_cpu, serial = free_cores_multiproc(
+                            session, lambda: session.run(recording, compiled=compiled))
                         mp_ratio.setdefault(name, []).append(one / mp)
                         mp_free.setdefault(name, []).append(cpu_one / mp_cpu)
+                        mp_serial.setdefault(name, []).append(serial * 1e3)
                     print(f"round {r} {name} {kind}: 1 worker {one:.2f} s, 2 workers {two:.2f} s", flush=True)
     print(f"\n# load average {os.getloadavg()[0]:.1f} at the end; multiproc start-up {startup:.2f} s (excluded)\n")
 
     def fmt(values):
         return f"{statistics.median(values):.2f}x ({min(values):.2f}-{max(values):.2f})"
 
+    def ms(values):
+        return f"{statistics.median(values):.0f} ({min(values):.0f}-{max(values):.0f})"
+
     print("| stream | network | 2 workers vs 1 (wall) | on free cores (CPU) | CPU time 2 vs 1 | multiproc 2 vs fixed 1 "
-          "(wall) | multiproc on free cores (CPU) |")
-    print("| --- | --- | --- | --- | --- | --- | --- |")
+          "(wall) | multiproc on free cores (CPU) | multiproc host's serial CPU ms |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
     for (name, kind), values in ratios.items():
-        mp = f"{fmt(mp_ratio[name])} | {fmt(mp_free[name])}" if kind == "paper" else "- | -"
+        mp = f"{fmt(mp_ratio[name])} | {fmt(mp_free[name])} | {ms(mp_serial[name])}" if kind == "paper" else "- | - | -"
         print(f"| {name} | {kind} | {fmt(values)} | {fmt(free_ratio[(name, kind)])} | {fmt(cpu_ratio[(name, kind)])} "
               f"| {mp} |")
 

@@ -65,11 +65,11 @@ class BandWorker:
         return self._result[1], offset
 
     def run(self, first: int, n: int, t0_us: int, record_tot: bool, target, packet: int) -> tuple[int, int, int]:
-        """Run this band's events of the packet's ``n`` (from ``first`` in the events buffer), then (every band run) merge this worker's share of
-        the bands' estimates into ``target`` (``_target``; ``packet``: the host's count of packets, written
-        to ``arrived`` on the way); ``(estimates, spikes, end of the share)``;
-        estimates -1 when the packet is out of time order (refused by every band: nothing changed), end
-        -1 when nothing was merged."""
+        """Run this band's events of the packet's ``n`` (from ``first`` in the events buffer), then (every
+        band run) merge this worker's share of the bands' estimates into ``target`` (``_target``;
+        ``packet``: the host's count of packets, written to ``arrived`` on the way). Returns
+        ``(estimates, spikes, end of the share)``: estimates -1 when the packet is out of time order
+        (refused by every band: nothing changed), end -1 when nothing was merged."""
         from tofnet.errors import BackendError
         from tofnet.kernels.bands import select_rows
         from tofnet.kernels.region import UNSORTED

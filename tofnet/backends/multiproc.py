@@ -327,9 +327,9 @@ class MultiprocSession:
         source = pipeline.velocity_source(known)
         config = pipeline.kernel_config(known, self.backend.format)
         bands = band_rows(compiled, pipeline.names[1], plans)
-        kernel = self._guarded(lambda: SharedBandKernel(
-            config, bands, input_reach(network), source, lambda m, *more: self._guarded(lambda: self._exchange(m, *more)),
-            t0_us or 0))
+        exchange = lambda m, *more: self._guarded(lambda: self._exchange(m, *more))  # noqa: E731
+        kernel = self._guarded(lambda: SharedBandKernel(config, bands, input_reach(network), source, exchange,
+                                                        t0_us or 0))
         kernel.facts["startup_s"] = self.startup_seconds
         return FusedStream(self.backend.name, config, pipeline, source, t0_us, record_tot,
                            order=[p.name for p in network.processes], kernel=kernel)
