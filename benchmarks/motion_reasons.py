@@ -2,6 +2,7 @@
 
     python benchmarks/motion_reasons.py                           # tuning variants 0-7, 1 s each
     python benchmarks/motion_reasons.py --noise 0                 # the same scenes without background activity
+    python benchmarks/motion_reasons.py --noise 0 --sim contrast_sigma=0   # ... and without threshold mismatch
     python benchmarks/motion_reasons.py --set max_rms_px=0.3 --motions reversing
 
 For every motion class of ``tofnet.sim.motion`` and every variant (cached as ``accuracy.py``
@@ -11,7 +12,8 @@ with the count it ended in (``time_surface.COUNT_NAMES``). Per class, pooled ove
 and per true-depth band of the event (``tofnet.eval.breakdown.DEPTH_BANDS``): the events, the
 first events, the share of the first events per reason, and the coverage and median relative
 error of the estimates (docs/time_surface.md, section 7d). ``--noise`` replaces the scenes'
-background activity (events per pixel per second; 0: none). Only the time surface runs (the
+background activity (events per pixel per second; 0: none), ``--sim`` other ``SimConfig`` fields
+(``contrast_sigma=0``: equal thresholds). Only the time surface runs (the
 paper network: ``motion_sweep.py``). Markdown to stdout, progress to stderr.
 """
 
@@ -57,9 +59,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--set", default="", help="time-surface parameters, e.g. window_px=8,min_points=5")
     parser.add_argument("--noise", type=float, default=None, help="background activity, events/px/s (default: "
                         "each scene's own)")
+    parser.add_argument("--sim", default="", help="SimConfig fields, e.g. contrast_sigma=0,max_step_px=0.1")
     parser.add_argument("--cache", default=str(default_cache()), help="simulation cache folder ('' = none)")
     args = parser.parse_args(argv)
     settings = parse_settings(args.set)
+    sim = parse_settings(args.sim)
     cache = Path(args.cache) if args.cache else None
     rows = []
     for motion in filter(None, args.motions.split(",")):
@@ -70,6 +74,7 @@ def main(argv: list[str] | None = None) -> int:
             config = scenario(f"random_{motion}:{variant}", args.duration)
             if args.noise is not None:
                 config = dataclasses.replace(config, noise_rate=args.noise)
+            config = dataclasses.replace(config, **sim)
             rec = recording_for(config, variant, cache, quiet=True)
             rotation = motion == "shake"
             if rotation:
@@ -109,6 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     header = ["motion", "band", "events", "first events"] + [f"{name.replace('_', ' ')} %" for name in SHOWN] + \
         ["coverage %", "median %"]
     noise = "" if args.noise is None else f", noise {args.noise:g} Hz/px"
+    noise += f", {args.sim}" if args.sim else ""
     print(f"Random scenes, variants {args.variants}, {args.duration:g} s each{noise}, time surface "
           f"{settings or 'defaults'}; first events per reason (% of the band's first events), pooled per class")
     print()
