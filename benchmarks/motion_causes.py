@@ -97,9 +97,10 @@ def replay(est: TimeSurfaceEstimator, ev: np.ndarray, i: int, rows) -> dict:
     for m in range(n):  # the pixel of each point, and its time
         du, dv = ps_[m] * fu - pw[m] * fv, ps_[m] * fv + pw[m] * fu
         pu, pv = x + int(round(du)), y + int(round(dv))
-        points.append((ps_[m], pt[m], int(pg[m]), pu, pv, int(flat[p * surface.shape[1] + (pv + r) * row + pu + r])))
+        points.append((ps_[m], pt[m], int(pg[m]), pu, pv, int(flat[p * surface.shape[1] + (pv + r) * row + pu + r]),
+                       pw[m]))
     out["points"] = points
-    out["fit"] = fit_rows(ps_.copy(), pt.copy(), pg.copy(), n, c.min_points, c.min_spread, c.outlier_px, c.iterations,
+    out["fit"] = fit_rows(ps_.copy(), pw.copy(), pt.copy(), pg.copy(), n, c.min_points, c.min_spread, c.outlier_px, c.iterations,
                           np.zeros((4 * r + 3, 10)), np.zeros(4 * r + 3, np.int64))
     return out
 
@@ -135,7 +136,7 @@ def point_kinds(sample: dict, z: float, depth_of) -> list[int]:
     for members in lines.values():
         offset = float(np.median([sample["points"][m][1] - z * sample["points"][m][0] for m in members]))
         for m in members:
-            s, travel, _, pu, pv, when = sample["points"][m]
+            s, travel, _, pu, pv, when, _ = sample["points"][m]
             off = (travel - z * s - offset) / z if len(members) > 1 else 0.0
             other = not abs(depth_of(pu, pv, sample["p"], when) - z) <= OTHER_SURFACE * z
             kinds[m] = 1 if other else 2 if off > OFF_PX else 3 if off < -OFF_PX else 0
@@ -146,11 +147,11 @@ def oracle(sample: dict, kinds: list[int], drop: tuple[int, ...], c) -> tuple[fl
     """The slope of the fit of the points whose kind is not in ``drop`` (NaN: it still fails) and its code."""
     kept = [q for q, kind in zip(sample["points"], kinds) if kind not in drop]
     n = len(kept)
-    ps_, pt, pg = np.zeros(n + 1), np.zeros(n + 1), np.zeros(n + 1, np.int64)
+    ps_, pw, pt, pg = np.zeros(n + 1), np.zeros(n + 1), np.zeros(n + 1), np.zeros(n + 1, np.int64)
     for m, q in enumerate(kept):
-        ps_[m], pt[m], pg[m] = q[0], q[1], q[2]
+        ps_[m], pw[m], pt[m], pg[m] = q[0], q[6], q[1], q[2]
     r = int(c.radius)
-    code, tau, _, _, _, rms = fit_rows(ps_, pt, pg, n, c.min_points, c.min_spread, c.outlier_px, c.iterations,
+    code, tau, _, _, _, rms = fit_rows(ps_, pw, pt, pg, n, c.min_points, c.min_spread, c.outlier_px, c.iterations,
                                        np.zeros((4 * r + 3, 10)), np.zeros(4 * r + 3, np.int64))
     if code == FIT_OK and rms > c.max_rms_px:
         code = FIT_OVER_RMS

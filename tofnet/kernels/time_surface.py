@@ -314,9 +314,9 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
             if travel and rotation and not linear and speed + z_guess * turn_rate > 0.0:
                 share = speed / (speed + z_guess * turn_rate)
             if rows_model:
-                fit, tau_s, tau_w, c, kept, rms = fit_rows(ps_, pt, pg, n, min_points, min_spread * share * share,
+                fit, tau_s, tau_w, c, kept, rms = fit_rows(ps_, pw, pt, pg, n, min_points, min_spread * share * share,
                                                             outlier_px * share, iterations, lines, used,
-                                                            give_up_rms * share)
+                                                            give_up_rms * share, linear or not travel)
             else:
                 fit, tau_s, tau_w, c, kept, rms = fit_plane(ps_, pw, pt, n, min_points, min_spread * share * share,
                                                             outlier_px * share, iterations)

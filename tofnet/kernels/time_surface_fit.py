@@ -16,8 +16,9 @@ import numpy as np
 from numba import njit
 
 FIT_OK, FIT_TOO_FEW, FIT_ILL_CONDITIONED, FIT_OVER_RMS = range(4)
-# Per line of a ``fit_rows`` fit: raw sums (count, s, t, s², s t), means of s and t, centred sums.
-L_M, L_S, L_T, L_SS, L_ST, L_MEAN_S, L_MEAN_T, L_CSS, L_CST, N_L = range(10)
+# Per line of a ``fit_rows`` fit: raw sums (count, s, t, s², s t, w, w², s w, w t), means of s, t and w, centred sums.
+(L_M, L_S, L_T, L_SS, L_ST, L_W, L_WW, L_SW, L_WT, L_MEAN_S, L_MEAN_T, L_MEAN_W, L_CSS, L_CST, L_CWW, L_CSW, L_CWT,
+ N_L) = range(18)
 
 
 @njit(cache=True)
@@ -101,10 +102,15 @@ def _line_stats(lines, g):
     m = lines[g, L_M]
     many = m >= 2.0
     inv = 1.0 / (m if many else 1.0)
-    mean_s, mean_t = lines[g, L_S] * inv, lines[g, L_T] * inv
+    mean_s, mean_t, mean_w = lines[g, L_S] * inv, lines[g, L_T] * inv, lines[g, L_W] * inv
     css, cst = lines[g, L_SS] - lines[g, L_S] * mean_s, lines[g, L_ST] - lines[g, L_S] * mean_t
+    cww, csw, cwt = (lines[g, L_WW] - lines[g, L_W] * mean_w, lines[g, L_SW] - lines[g, L_S] * mean_w,
+                     lines[g, L_WT] - lines[g, L_W] * mean_t)
     lines[g, L_MEAN_S], lines[g, L_MEAN_T] = (mean_s if many else math.nan), (mean_t if many else math.nan)
+    lines[g, L_MEAN_W] = mean_w
     lines[g, L_CSS], lines[g, L_CST] = (css if many else 0.0), (cst if many else 0.0)
+    lines[g, L_CWW], lines[g, L_CSW], lines[g, L_CWT] = (cww if many else 0.0), (csw if many else 0.0), (
+        cwt if many else 0.0)
 
 
 @njit(cache=True, inline="always")
@@ -114,13 +120,18 @@ def _rms(sq, kept, slope):
 
 
 @njit(cache=True, _nrt=False)  # no reference counts of its arrays (two atomic operations each per fit)
-def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, lines, used, give_up_rms=math.inf):
+def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, lines, used, give_up_rms=math.inf,
+             across=True):
     """Time per pixel along the image motion from lines of pixels parallel to it, robustly.
 
-    Fits ``t = c_line + τ_s s``: each line (``pg``: index of the point's line across the
-    motion, the event's is ``middle``) gets its own offset and only the slope along ``ps``
-    is shared, since pixels on one line see the same signal delayed while different lines
-    fire at unrelated phases (docs/time_surface.md, "1. Method", step 3). Outliers go one at
+    Fits ``t = c_line + τ_s s + β w``: each line (``pg``: index of the point's line across the
+    motion, the event's is ``middle``) gets its own offset and the slopes are shared, since
+    pixels on one line see the same signal delayed while different lines fire at unrelated
+    phases (docs/time_surface.md, "1. Method", step 3). A line is the pixels whose ``w`` (``pw``,
+    px across the motion) rounds to it: unless the motion is along an axis they lie up to half a
+    pixel either side of it, and an edge oblique to the motion reaches them earlier or later by
+    that much times its slant: ``β`` (µs per px across, within the lines) takes it out where the
+    lines' ``w`` leave ``s`` a spread of at least ``min_spread`` (section 7d). Outliers go one at
     a time as in ``fit_plane``. ``lines`` (``N_L`` columns, zero on entry and on return; its
     line 0 must be one no point is on, as with the estimator's ``4 radius + 3`` lines),
     ``used`` and ``pg`` past the points kept are scratch. Returns ``(code, τ_s, τ_w, c, kept,
@@ -136,7 +147,7 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
     # Line indices are read as unsigned: numba fixes up every signed index for negative values.
     for i in range(n):
         g = np.uint64(pg[i])
-        s, t = ps[i], pt[i]
+        s, w, t = ps[i], pw[i], pt[i]
         used[n_used] = g
         n_used += np.int64(lines[g, L_M] == 0.0)  # lines in the order of their first point
         lines[g, L_M] += 1.0
@@ -144,13 +155,20 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
         lines[g, L_T] += t
         lines[g, L_SS] += s * s
         lines[g, L_ST] += s * t
-    sxx = sxy = 0.0
+        lines[g, L_W] += w
+        lines[g, L_WW] += w * w
+        lines[g, L_SW] += s * w
+        lines[g, L_WT] += w * t
+    sxx = sxy = sww = ssw = swy = 0.0
     kept = 0
     for j in range(n_used):
         g = np.uint64(used[j])
         _line_stats(lines, g)
         sxx += lines[g, L_CSS]
         sxy += lines[g, L_CST]
+        sww += lines[g, L_CWW]
+        ssw += lines[g, L_CSW]
+        swy += lines[g, L_CWT]
         kept += np.int64(lines[g, L_M]) if lines[g, L_M] >= 2.0 else 0
     k = n
     # Line 0 is never used (|w| <= radius √2 < middle): with a NaN mean it makes a point at index k that
@@ -168,13 +186,19 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
         if sxx < min_spread * kept:
             code = FIT_ILL_CONDITIONED
             break
-        tau_s = sxy / sxx
+        # β where s keeps a spread net of w (det / sww >= min_spread kept), else the slope along s alone
+        det = sxx * sww - ssw * ssw
+        slant = across & (det > min_spread * kept * sww)
+        inverse = 1.0 / (det if slant else sxx)
+        tau_s = ((sxy * sww - swy * ssw) if slant else sxy) * inverse
+        beta = (swy * sxx - sxy * ssw) * inverse if slant else 0.0
         sq = 0.0
         worst, worst_r = 0, 0.0
         pg[k] = 0  # the padding point (its residual is NaN: not the worst, not summed)
         for i in range(k + (k & 1)):
             g = np.uint64(pg[i])
-            r = abs(pt[i] - lines[g, L_MEAN_T] - tau_s * (ps[i] - lines[g, L_MEAN_S]))
+            r = abs(pt[i] - lines[g, L_MEAN_T] - tau_s * (ps[i] - lines[g, L_MEAN_S])
+                    - beta * (pw[i] - lines[g, L_MEAN_W]))
             if r > worst_r:  # False for NaN: a line of one point carries no slope
                 worst, worst_r = i, r
             sq += r * r if r == r else 0.0  # a select, not a branch, on the sum's dependency chain
@@ -184,22 +208,32 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
         if iteration == iterations and _rms(pass_sq, pass_kept, slope) > give_up_rms:
             code = FIT_OVER_RMS  # its last removal and offsets would go unused
             break
-        s, t, g = ps[worst], pt[worst], np.uint64(pg[worst])
+        s, w, t, g = ps[worst], pw[worst], pt[worst], np.uint64(pg[worst])
         sxx -= lines[g, L_CSS]
         sxy -= lines[g, L_CST]
+        sww -= lines[g, L_CWW]
+        ssw -= lines[g, L_CSW]
+        swy -= lines[g, L_CWT]
         kept -= np.int64(lines[g, L_M]) if lines[g, L_M] >= 2.0 else 0
         lines[g, L_M] -= 1.0
         lines[g, L_S] -= s
         lines[g, L_T] -= t
         lines[g, L_SS] -= s * s
         lines[g, L_ST] -= s * t
+        lines[g, L_W] -= w
+        lines[g, L_WW] -= w * w
+        lines[g, L_SW] -= s * w
+        lines[g, L_WT] -= w * t
         _line_stats(lines, g)
         sxx += lines[g, L_CSS]
         sxy += lines[g, L_CST]
+        sww += lines[g, L_CWW]
+        ssw += lines[g, L_CSW]
+        swy += lines[g, L_CWT]
         kept += np.int64(lines[g, L_M]) if lines[g, L_M] >= 2.0 else 0
         k -= 1
-        ps[worst], pt[worst], pg[worst] = ps[k], pt[k], pg[k]
-        ps[k], pt[k], pg[k] = s, t, np.int64(g)
+        ps[worst], pw[worst], pt[worst], pg[worst] = ps[k], pw[k], pt[k], pg[k]
+        ps[k], pw[k], pt[k], pg[k] = s, w, t, np.int64(g)
     if code == FIT_OK:
         # The lines' offsets against their position across the motion: τ_w (weighted by points).
         sw = so = sww = swo = total = 0.0
@@ -222,5 +256,6 @@ def fit_rows(ps, pt, pg, n, min_points, min_spread, outlier_px, iterations, line
     for j in range(n_used):  # leave the table empty for the next fit
         g = np.uint64(used[j])
         lines[g, L_M] = lines[g, L_S] = lines[g, L_T] = lines[g, L_SS] = lines[g, L_ST] = 0.0
+        lines[g, L_W] = lines[g, L_WW] = lines[g, L_SW] = lines[g, L_WT] = 0.0
     lines[0, L_MEAN_T] = 0.0
     return code, tau_s, tau_w, c, kept, _rms(pass_sq, pass_kept, slope) if slope >= 0.0 else 0.0
