@@ -300,7 +300,13 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
                                             z_guess * h0, z_guess * h1, z_guess * h2, reach)
                     n = gather(flat_surface, at_cell, row, radius, t, window, fu, fv, ahead_px, middle, ps_, pw, pt,
                                pg)
-                    n = to_travel(ring, ps_, pw, pt, pg, n, t, t0, dt, g0, g1, g2, h0, h1, h2, z_guess, reach)
+                    # the gains across f (f⊥ = (-fv, fu)): where the velocity turned, points move across too
+                    q0, q1, q2 = _gains(x, y, sample, per_pixel, pinhole, sample_of, points, -fv, fu, fx, fy, cx, cy)
+                    k0 = k1 = k2 = 0.0
+                    if rotation:
+                        k0, k1, k2 = _turn_gains(x, y, -fv, fu, rfx, rfy, rcx, rcy)
+                    n = to_travel(ring, ps_, pw, pt, pg, n, t, t0, dt, g0, g1, g2, h0, h1, h2, z_guess, reach, q0, q1,
+                                  q2, k0, k1, k2)
             else:
                 window = time_window(window_us, window_depth, radius, speed, turn, t, motion[M_SINCE], window_px,
                                       du1, dv1, du2, dv2, fu, fv, age1, age2)
@@ -316,7 +322,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
             if rows_model:
                 fit, tau_s, tau_w, c, kept, rms = fit_rows(ps_, pw, pt, pg, n, min_points, min_spread * share * share,
                                                             outlier_px * share, iterations, lines, used,
-                                                            give_up_rms * share, linear or not travel)
+                                                            give_up_rms * share, True)
             else:
                 fit, tau_s, tau_w, c, kept, rms = fit_plane(ps_, pw, pt, n, min_points, min_spread * share * share,
                                                             outlier_px * share, iterations)
