@@ -121,7 +121,7 @@ def to_travel(ring, ps_, pw, pt, pg, n: int, t: int, t0: int, dt: int, g0: float
     inverse_dt = 1.0 / dt
     here, turned = travel_at(ring, t, t0, dt, inverse_dt, g0, g1, g2, h0, h1, h2)
     across, across_turned = travel_at(ring, t, t0, dt, inverse_dt, q0, q1, q2, k0, k1, k2)
-    inverse_z = 1.0 / z
+    inverse_z = 1.0 / z if z > 0.0 else 0.0  # no depth suggested (the pixels behind fired with no travel): no shift
     m = 0
     for i in range(n):
         t_q = t + np.int64(pt[i])
