@@ -280,11 +280,16 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
         else:
             # 2. Gather the recent first events of the pixels the edge has crossed: at most
             # ``ahead_px`` along the motion (the pixels ahead still hold an older edge's times).
+            # the rows fit's slope across the motion within its lines (``fit_rows``); not with a rotation: where its
+            # image motion runs across f the lines along f are not the edges' tracks (pan: docs/time_surface.md 7d)
+            slanted = not rotation
             if travel:
                 # the travel a surface at ``window_depth`` makes over ``radius`` px, nor more than ``window_px``
                 # crossings at the edge's pace; in time, back to where the image motion along f reversed
                 reach = window_depth * radius if window_depth > 0.0 else math.inf
                 suggested = max(pace(travel1, d1), pace(travel2, d2))  # the depth the pixels behind suggest
+                # with a rotation ``reach`` is the depth times the image motion, z_guess that depth
+                z_guess = suggested if suggested < math.inf else window_depth
                 if window_px > 0.0:
                     reach = min(reach, window_px * suggested)
                 linear = reach < rate * (t - linear_from)  # all of it since the last change: time will do
@@ -294,19 +299,16 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
                                pg)
                 else:
                     g0, g1, g2 = _gains(x, y, sample, per_pixel, pinhole, sample_of, points, fu, fv, fx, fy, cx, cy)
-                    # with a rotation ``reach`` is the depth times the image motion, z_guess that depth
-                    z_guess = suggested if suggested < math.inf else window_depth
                     window = since_reversal(ring, k, t, t0, dt, np.int64(ring_state[S_FIRST]), g0, g1, g2,
                                             z_guess * h0, z_guess * h1, z_guess * h2, reach)
                     n = gather(flat_surface, at_cell, row, radius, t, window, fu, fv, ahead_px, middle, ps_, pw, pt,
                                pg)
-                    # the gains across f (f⊥ = (-fv, fu)): where the velocity turned, points move across too
-                    q0, q1, q2 = _gains(x, y, sample, per_pixel, pinhole, sample_of, points, -fv, fu, fx, fy, cx, cy)
-                    k0 = k1 = k2 = 0.0
-                    if rotation:
-                        k0, k1, k2 = _turn_gains(x, y, -fv, fu, rfx, rfy, rcx, rcy)
+                    q0 = q1 = q2 = 0.0
+                    if slanted:  # Aᵀf⊥ (f⊥ = (-fv, fu)): where the velocity turned, the points moved across f too
+                        q0, q1, q2 = _gains(x, y, sample, per_pixel, pinhole, sample_of, points, -fv, fu, fx, fy, cx,
+                                            cy)
                     n = to_travel(ring, ps_, pw, pt, pg, n, t, t0, dt, g0, g1, g2, h0, h1, h2, z_guess, reach, q0, q1,
-                                  q2, k0, k1, k2)
+                                  q2)
             else:
                 window = time_window(window_us, window_depth, radius, speed, turn, t, motion[M_SINCE], window_px,
                                       du1, dv1, du2, dv2, fu, fv, age1, age2)
@@ -322,7 +324,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
             if rows_model:
                 fit, tau_s, tau_w, c, kept, rms = fit_rows(ps_, pw, pt, pg, n, min_points, min_spread * share * share,
                                                             outlier_px * share, iterations, lines, used,
-                                                            give_up_rms * share, True)
+                                                            give_up_rms * share, slanted)
             else:
                 fit, tau_s, tau_w, c, kept, rms = fit_plane(ps_, pw, pt, n, min_points, min_spread * share * share,
                                                             outlier_px * share, iterations)

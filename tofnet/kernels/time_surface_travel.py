@@ -108,29 +108,29 @@ def since_reversal(ring, k: int, t: int, t0: int, dt: int, first_step: int, g0: 
 
 @njit(cache=True)
 def to_travel(ring, ps_, pw, pt, pg, n: int, t: int, t0: int, dt: int, g0: float, g1: float, g2: float, h0: float,
-              h1: float, h2: float, z: float, reach: float, q0: float = 0.0, q1: float = 0.0, q2: float = 0.0,
-              k0: float = 0.0, k1: float = 0.0, k2: float = 0.0) -> int:
+              h1: float, h2: float, z: float, reach: float, q0: float = 0.0, q1: float = 0.0,
+              q2: float = 0.0) -> int:
     """Turn the gathered points' times (``pt``, µs before ``t``) into travel before the event's
     (px·m, negative behind) and their positions along the motion (``ps_``) into where the edge
     was, net of the rotation's image motion since (``h`` = ``(B ω)·f`` per rad/s: ``s + h·(Θ(t) − Θ(t_q))``),
     and keep those within ``reach`` px·m of it (the travel plus ``z`` m times the rotation's image motion: a
     depth times the image motion; compacted in place; the event itself always stays). Their positions across
-    the motion (``pw``) likewise, net of the image motion across ``f`` since (``q = Aᵀf⊥``, ``k = Bᵀf⊥``:
-    ``w + (q·(P(t) − P(t_q))) / z + k·(Θ(t) − Θ(t_q))``, ``z`` the depth the pixels behind suggest): where the
+    the motion (``pw``) likewise, net of the translation's image motion across ``f`` since (``q = Aᵀf⊥``:
+    ``w + q·(P(t) − P(t_q)) / z``, ``z`` the depth the pixels behind suggest; ``q = 0``: as gathered): where the
     velocity turned, an edge oblique to the motion crossed them there. Returns the points kept."""
     inverse_dt = 1.0 / dt
     here, turned = travel_at(ring, t, t0, dt, inverse_dt, g0, g1, g2, h0, h1, h2)
-    across, across_turned = travel_at(ring, t, t0, dt, inverse_dt, q0, q1, q2, k0, k1, k2)
+    across = travel_at(ring, t, t0, dt, inverse_dt, q0, q1, q2, 0.0, 0.0, 0.0)[0]
     inverse_z = 1.0 / z if z > 0.0 else 0.0  # no depth suggested (the pixels behind fired with no travel): no shift
     m = 0
     for i in range(n):
         t_q = t + np.int64(pt[i])
         travel, turned_q = travel_at(ring, t_q, t0, dt, inverse_dt, g0, g1, g2, h0, h1, h2)
-        across_q, across_turned_q = travel_at(ring, t_q, t0, dt, inverse_dt, q0, q1, q2, k0, k1, k2)
+        across_q = travel_at(ring, t_q, t0, dt, inverse_dt, q0, q1, q2, 0.0, 0.0, 0.0)[0]
         travel -= here
         shift = turned - turned_q
         ps_[m], pt[m], pg[m] = ps_[i] + shift, travel, pg[i]
-        pw[m] = pw[i] + (across - across_q) * inverse_z + (across_turned - across_turned_q)
+        pw[m] = pw[i] + (across - across_q) * inverse_z
         m += np.int64(travel - z * shift >= -reach)
     return m
 
