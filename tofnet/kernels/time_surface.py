@@ -282,7 +282,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
             # ``ahead_px`` along the motion (the pixels ahead still hold an older edge's times).
             # the rows fit's slope across the motion within its lines (``fit_rows``); not with a rotation: where its
             # image motion runs across f the lines along f are not the edges' tracks (pan: docs/time_surface.md 7d)
-            slanted = not rotation
+            slanted = not rotation and abs(fu) > 1e-6 and abs(fv) > 1e-6  # (along an axis a line's w is one)
             if travel:
                 # the travel a surface at ``window_depth`` makes over ``radius`` px, nor more than ``window_px``
                 # crossings at the edge's pace; in time, back to where the image motion along f reversed

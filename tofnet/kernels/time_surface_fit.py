@@ -138,7 +138,9 @@ def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, 
     rms_px)`` like ``fit_plane``: ``kept`` counts the points on lines of two or more, the
     spread is their variance along ``s`` within their lines, ``τ_w`` the slope of the lines'
     offsets across the motion and ``c`` the offset of the event's line. A last pass above
-    ``give_up_rms`` px rms returns ``FIT_OVER_RMS`` at once (with its ``τ_s`` and rms).
+    ``give_up_rms`` px rms returns ``FIT_OVER_RMS`` at once (with its ``τ_s`` and rms). ``across``
+    False: no ``β`` (``pw`` is not read; the caller knows a line's ``w`` is one, or the lines are not
+    the edges' tracks).
     """
     middle = (lines.shape[0] - 1) // 2
     n_used = 0
@@ -147,7 +149,7 @@ def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, 
     # Line indices are read as unsigned: numba fixes up every signed index for negative values.
     for i in range(n):
         g = np.uint64(pg[i])
-        s, w, t = ps[i], pw[i], pt[i]
+        s, t = ps[i], pt[i]
         used[n_used] = g
         n_used += np.int64(lines[g, L_M] == 0.0)  # lines in the order of their first point
         lines[g, L_M] += 1.0
@@ -155,10 +157,14 @@ def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, 
         lines[g, L_T] += t
         lines[g, L_SS] += s * s
         lines[g, L_ST] += s * t
-        lines[g, L_W] += w
-        lines[g, L_WW] += w * w
-        lines[g, L_SW] += s * w
-        lines[g, L_WT] += w * t
+    if across:  # the sums of w apart: without them (``across`` False) the fit costs what it did before β
+        for i in range(n):
+            g = np.uint64(pg[i])
+            s, w, t = ps[i], pw[i], pt[i]
+            lines[g, L_W] += w
+            lines[g, L_WW] += w * w
+            lines[g, L_SW] += s * w
+            lines[g, L_WT] += w * t
     sxx = sxy = sww = ssw = swy = 0.0
     kept = 0
     for j in range(n_used):
@@ -186,22 +192,31 @@ def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, 
         if sxx < min_spread * kept:
             code = FIT_ILL_CONDITIONED
             break
-        # β where s keeps a spread net of w (det / sww >= min_spread kept), else the slope along s alone
+        # β where the lines' w spread (not rounding's: motion along an axis) and s keeps a spread net of w
+        # (det / sww >= min_spread kept), else the slope along s alone
         det = sxx * sww - ssw * ssw
-        slant = across & (det > min_spread * kept * sww)
+        slant = across & (sww > 1e-6 * kept) & (det > min_spread * kept * sww)
         inverse = 1.0 / (det if slant else sxx)
         tau_s = ((sxy * sww - swy * ssw) if slant else sxy) * inverse
         beta = (swy * sxx - sxy * ssw) * inverse if slant else 0.0
         sq = 0.0
         worst, worst_r = 0, 0.0
         pg[k] = 0  # the padding point (its residual is NaN: not the worst, not summed)
-        for i in range(k + (k & 1)):
-            g = np.uint64(pg[i])
-            r = abs(pt[i] - lines[g, L_MEAN_T] - tau_s * (ps[i] - lines[g, L_MEAN_S])
-                    - beta * (pw[i] - lines[g, L_MEAN_W]))
-            if r > worst_r:  # False for NaN: a line of one point carries no slope
-                worst, worst_r = i, r
-            sq += r * r if r == r else 0.0  # a select, not a branch, on the sum's dependency chain
+        if slant:
+            for i in range(k + (k & 1)):
+                g = np.uint64(pg[i])
+                r = abs(pt[i] - lines[g, L_MEAN_T] - tau_s * (ps[i] - lines[g, L_MEAN_S])
+                        - beta * (pw[i] - lines[g, L_MEAN_W]))
+                if r > worst_r:  # False for NaN: a line of one point carries no slope
+                    worst, worst_r = i, r
+                sq += r * r if r == r else 0.0  # a select, not a branch, on the sum's dependency chain
+        else:
+            for i in range(k + (k & 1)):
+                g = np.uint64(pg[i])
+                r = abs(pt[i] - lines[g, L_MEAN_T] - tau_s * (ps[i] - lines[g, L_MEAN_S]))
+                if r > worst_r:
+                    worst, worst_r = i, r
+                sq += r * r if r == r else 0.0
         slope, pass_sq, pass_kept = abs(tau_s), sq, kept
         if worst_r <= outlier_px * slope:
             break
@@ -220,10 +235,11 @@ def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, 
         lines[g, L_T] -= t
         lines[g, L_SS] -= s * s
         lines[g, L_ST] -= s * t
-        lines[g, L_W] -= w
-        lines[g, L_WW] -= w * w
-        lines[g, L_SW] -= s * w
-        lines[g, L_WT] -= w * t
+        if across:
+            lines[g, L_W] -= w
+            lines[g, L_WW] -= w * w
+            lines[g, L_SW] -= s * w
+            lines[g, L_WT] -= w * t
         _line_stats(lines, g)
         sxx += lines[g, L_CSS]
         sxy += lines[g, L_CST]
