@@ -15,6 +15,7 @@ from __future__ import annotations
 import queue
 import signal
 import threading
+import time
 from multiprocessing.connection import wait
 from multiprocessing.reduction import ForkingPickler
 
@@ -153,3 +154,32 @@ class Channel:
         self.conn.close()
         if self.process.exitcode is not None:
             self.process.close()
+
+
+def answers(expected: dict[int, tuple[Channel, str, str]], timeout: float, stuck=None) -> dict[int, tuple]:
+    """Per worker, its answer (``expected``: its channel, the kind of answer and what it is doing), taken as
+    they come within ``timeout`` seconds in all: a worker's error is reported at once, even while another
+    waits for it (the bands of a packet wait for each other). ``stuck()``: the workers to name first
+    when none answers in time (e.g. those not waiting for the others); a worker that died is named
+    before one that failed because of it."""
+    replies, pending = {}, dict(expected)
+    deadline = time.monotonic() + timeout
+    while pending:
+        ready = wait([h for c, _, _ in pending.values() for h in (c.conn, c.process.sentinel)],
+                     max(0.0, deadline - time.monotonic()))
+        # those with something to say; none within the timeout: the first one stuck
+        answering = [w for w, (c, _, _) in pending.items() if c.conn in ready or c.process.sentinel in ready]
+        if not answering:
+            first = next(iter(pending))
+            answering, ready = [next((w for w in (stuck() if stuck else ()) if w in pending), first)], None
+        for worker in answering:
+            channel, kind, doing = pending.pop(worker)
+            try:
+                replies[worker] = channel.expect(kind, max(0.0, deadline - time.monotonic()), doing, limit=timeout,
+                                                 ready=ready)
+            except BackendError:
+                for other, _, _ in expected.values():
+                    if other is not channel and not other.process.is_alive():
+                        raise other.failure("died", f"while {doing}") from None
+                raise
+    return replies

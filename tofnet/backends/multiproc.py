@@ -14,12 +14,11 @@ from __future__ import annotations
 import multiprocessing
 import os
 import time
-from multiprocessing.connection import wait
 from typing import Iterable
 
 import numpy as np
 
-from tofnet.backends._channel import Channel
+from tofnet.backends._channel import Channel, answers
 from tofnet.backends.bands import resolve_workers, sampled_row_load
 from tofnet.backends.base import Backend, ProgressCallback, RunResult
 from tofnet.backends.graph import GraphExecutor, resolve_probes, sinks_of
@@ -223,31 +222,11 @@ class MultiprocSession:
             self._channels[worker].send(message)
         if meanwhile is not None:
             meanwhile()
-        replies, pending = {}, dict(messages)
-        deadline = time.monotonic() + self.backend.timeout
-        while pending:
-            channels = {w: self._channels[w] for w in pending}
-            ready = wait([h for c in channels.values() for h in (c.conn, c.process.sentinel)],
-                         max(0.0, deadline - time.monotonic()))
-            # those with something to say; none within the timeout: the first one stuck
-            answering = [w for w, c in channels.items() if c.conn in ready or c.process.sentinel in ready]
-            if not answering:
-                answering, ready = [next((w for w in (stuck() if stuck else ()) if w in pending),
-                                         next(iter(pending)))], None
-            for worker in answering:
-                message = pending.pop(worker)
-                doing = f"running chunk {self._seq}" if message[0] in ("run", "band_run") else \
-                    f"answering {message[0]!r}"
-                try:
-                    replies[worker] = channels[worker].expect(_REPLY[message[0]], max(0.0, deadline - time.monotonic()),
-                                                              doing, limit=self.backend.timeout, ready=ready)
-                except BackendError:
-                    # a worker that died makes the others fail (their bands wait for each other): name the cause
-                    for other in messages:
-                        if other != worker and not self._channels[other].process.is_alive():
-                            raise self._channels[other].failure("died", f"while {doing}") from None
-                    raise
-        return replies
+        expected = {}
+        for worker, message in messages.items():
+            doing = f"running chunk {self._seq}" if message[0] in ("run", "band_run") else f"answering {message[0]!r}"
+            expected[worker] = (self._channels[worker], _REPLY[message[0]], doing)
+        return answers(expected, self.backend.timeout, stuck)
 
     def _exchange_quietly(self, kind: str) -> None:
         """Tell every worker ``kind`` (e.g. drop its band) when the session is still open."""
