@@ -278,3 +278,14 @@ def test_one_timeout_bounds_the_start_too(leak_check, monkeypatch):
     with pytest.raises(BackendError, match=r"worker 1 .* did not answer within 3 s while starting"):
         with s:
             pass
+
+
+def test_the_worker_check_runs_multiproc_in_both_its_modes():
+    """``tofnet conformance --backend multiproc --workers 1,2`` once failed on every case: it asked
+    multiproc for ``fuse``, which only the in-process backends take (``Backend.run_modes``)."""
+    from tofnet.conformance.workers import check_workers
+
+    results = check_workers("multiproc", (1, 2), ["edge+u-v"])
+    assert [r.mode for r in results] == ["bands-1", "bands-2", "bands-1-per-core", "bands-2-per-core"]
+    assert all(r.ok for r in results), [r.first for r in results]
+    assert all(r.estimates[0] > 0 for r in results)

@@ -198,6 +198,9 @@ class Backend(ABC):
     #: fuse=..., recording=..., ...)`` as ``LocalBackend``'s; ``"workers"``: ``session(compiled)`` keeps
     #: worker processes for a session's lifetime; ``"open session"``: it is such a running session.
     capabilities: frozenset[str] = frozenset()
+    #: The ways it offers to run one network (a name, the options that select it), each of which
+    #: must give the same bytes with any number of ``workers`` (``tofnet.conformance.workers``).
+    run_modes: tuple[tuple[str, dict], ...] = (("default", {}),)
 
     @abstractmethod
     def run(self, compiled, recording, *, probes: Iterable[str] = (), record_tot: bool = False,

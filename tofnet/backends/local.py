@@ -74,6 +74,7 @@ class LocalBackend(Backend):
     #: Whether this backend may run a recognised chain through a fused kernel.
     fuses = False
     capabilities = frozenset({"stream"})
+    run_modes = (("fused", {"fuse": True}), ("unfused", {"fuse": False}))
 
     def __init__(self, packet_events: int = DEFAULT_PACKET_EVENTS, fuse: bool = True, workers: int | str = 1):
         if isinstance(packet_events, bool) or not isinstance(packet_events, int) or packet_events < 1:

@@ -79,6 +79,7 @@ class MultiprocBackend(Backend):
     """
 
     capabilities = frozenset({"stream", "workers"})
+    run_modes = (("bands", {}), ("per-core", {"per_core": True}))
 
     name = "multiproc"
     arithmetic = "fixed"

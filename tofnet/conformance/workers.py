@@ -1,8 +1,9 @@
 """Workers change nothing: every case run with N bands equals the same backend with one, byte for byte.
 
 ``check_workers("fixed", (1, 2, 3, 7))`` runs each selected case on the backend with one worker
-and with each N of ``workers`` (the sensor cut into N bands, ``tofnet.backends.bands``), both
-fused and model by model, and compares every output's bytes, every count, the steps and
+and with each N of ``workers`` (the sensor cut into N bands, ``tofnet.backends.bands``), in each
+way the backend offers to run a network (``Backend.run_modes``: fused and model by model; for
+``multiproc`` bands and chip core by chip core), and compares every output's bytes, every count, the steps and
 ``t0`` (``tofnet conformance --backend fixed --workers 1,2,3,7``). Small scenes cut into 7
 bands have bands narrower than the halo, bands without events and events on band edges.
 """
@@ -36,26 +37,30 @@ def first_difference(got, expected) -> str:
 
 
 def check_workers(backend: str = "fixed", workers: Iterable[int] = DEFAULT_WORKERS,
-                  cases: Iterable[str] | None = None, *, fuse: Iterable[bool] = (True, False),
+                  cases: Iterable[str] | None = None, *, modes: Iterable[str] | None = None,
                   report: Callable[[CaseResult], None] | None = None) -> list[CaseResult]:
-    """Each case on ``backend`` with each N of ``workers`` against one worker (mode ``bands-N``,
-    ``bands-N-unfused`` for the models); one ``CaseResult`` per case, N and fusion."""
+    """Each case on ``backend`` with each N of ``workers`` against one worker, in each of the backend's
+    ``run_modes`` (all by default; mode ``bands-N``, ``bands-N-unfused`` for the second, ...); one
+    ``CaseResult`` per case, N and mode."""
     from tofnet.compiler import compile_network
 
+    offered = get_backend(backend).run_modes
+    chosen = [m for m in offered if modes is None or m[0] in set(modes)]
     results = []
     for case in select_cases(cases):
         scene = case.build()
         compiled = compile_network(scene.network, patch=scene.patch)
-        for fused in fuse:
+        for mode_name, options in chosen:
+            suffix = "" if mode_name == offered[0][0] else f"-{mode_name}"
             baseline = None
             for n in workers:
                 started = time.perf_counter()
-                mode = f"bands-{n}" + ("" if fused else "-unfused")
+                mode = f"bands-{n}{suffix}"
                 try:
                     if baseline is None:
-                        baseline = get_backend(backend, fuse=fused).run(compiled, scene.recording, record_tot=True)
-                    got = get_backend(backend, fuse=fused, workers=n).run(compiled, scene.recording,
-                                                                          record_tot=True)
+                        baseline = get_backend(backend, workers=1, **options).run(compiled, scene.recording,
+                                                                                  record_tot=True)
+                    got = get_backend(backend, workers=n, **options).run(compiled, scene.recording, record_tot=True)
                     first = first_difference(got, baseline)
                     estimates = tuple(sum(len(r.outputs[name]) for name in r.depth_outputs) for r in (got, baseline))
                 except Exception as err:  # a backend's bug is a failed case, not the end of the suite
