@@ -16,9 +16,10 @@ import numpy as np
 from numba import njit
 
 FIT_OK, FIT_TOO_FEW, FIT_ILL_CONDITIONED, FIT_OVER_RMS = range(4)
-# Per line of a ``fit_rows`` fit: raw sums (count, s, t, s², s t, w, w², s w, w t), means of s, t and w, centred sums.
-(L_M, L_S, L_T, L_SS, L_ST, L_W, L_WW, L_SW, L_WT, L_MEAN_S, L_MEAN_T, L_MEAN_W, L_CSS, L_CST, L_CWW, L_CSW, L_CWT,
- N_L) = range(18)
+# Per line of a ``fit_rows`` fit: raw sums (count, s, t, s², s t, w), means of s, t and w, centred sums of s.
+# (The sums of w², s w and w t are the fit's, over all points: a line's centred ones are those less its
+# mean of w times its sums, so a point adds one sum of w to its line's row, not four.)
+L_M, L_S, L_T, L_SS, L_ST, L_W, L_MEAN_S, L_MEAN_T, L_MEAN_W, L_CSS, L_CST, N_L = range(12)
 
 
 @njit(cache=True)
@@ -104,13 +105,9 @@ def _line_stats(lines, g):
     inv = 1.0 / (m if many else 1.0)
     mean_s, mean_t, mean_w = lines[g, L_S] * inv, lines[g, L_T] * inv, lines[g, L_W] * inv
     css, cst = lines[g, L_SS] - lines[g, L_S] * mean_s, lines[g, L_ST] - lines[g, L_S] * mean_t
-    cww, csw, cwt = (lines[g, L_WW] - lines[g, L_W] * mean_w, lines[g, L_SW] - lines[g, L_S] * mean_w,
-                     lines[g, L_WT] - lines[g, L_W] * mean_t)
     lines[g, L_MEAN_S], lines[g, L_MEAN_T] = (mean_s if many else math.nan), (mean_t if many else math.nan)
     lines[g, L_MEAN_W] = mean_w
     lines[g, L_CSS], lines[g, L_CST] = (css if many else 0.0), (cst if many else 0.0)
-    lines[g, L_CWW], lines[g, L_CSW], lines[g, L_CWT] = (cww if many else 0.0), (csw if many else 0.0), (
-        cwt if many else 0.0)
 
 
 @njit(cache=True, inline="always")
@@ -157,25 +154,30 @@ def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, 
         lines[g, L_T] += t
         lines[g, L_SS] += s * s
         lines[g, L_ST] += s * t
+    qww = qsw = qwt = 0.0  # the sums of w², s w, w t over the points
     if across:  # the sums of w apart: without them (``across`` False) the fit costs what it did before β
         for i in range(n):
             g = np.uint64(pg[i])
             s, w, t = ps[i], pw[i], pt[i]
             lines[g, L_W] += w
-            lines[g, L_WW] += w * w
-            lines[g, L_SW] += s * w
-            lines[g, L_WT] += w * t
-    sxx = sxy = sww = ssw = swy = 0.0
+            qww += w * w
+            qsw += s * w
+            qwt += w * t
+    sxx = sxy = 0.0
+    tww = tsw = twt = 0.0  # the lines' means of w times their sums of w, s, t: q less these are the centred sums
     kept = 0
     for j in range(n_used):
         g = np.uint64(used[j])
         _line_stats(lines, g)
         sxx += lines[g, L_CSS]
         sxy += lines[g, L_CST]
-        sww += lines[g, L_CWW]
-        ssw += lines[g, L_CSW]
-        swy += lines[g, L_CWT]
         kept += np.int64(lines[g, L_M]) if lines[g, L_M] >= 2.0 else 0
+    if across:
+        for j in range(n_used):
+            g = np.uint64(used[j])
+            tww += lines[g, L_W] * lines[g, L_MEAN_W]
+            tsw += lines[g, L_S] * lines[g, L_MEAN_W]
+            twt += lines[g, L_T] * lines[g, L_MEAN_W]
     k = n
     # Line 0 is never used (|w| <= radius √2 < middle): with a NaN mean it makes a point at index k that
     # pads a pass to an even count, which spares a mispredicted branch on the parity per pass.
@@ -194,11 +196,15 @@ def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, 
             break
         # β where the lines' w spread (not rounding's: motion along an axis) and s keeps a spread net of w
         # (det / sww >= min_spread kept), else the slope along s alone
-        det = sxx * sww - ssw * ssw
-        slant = across & (sww > 1e-6 * kept) & (det > min_spread * kept * sww)
-        inverse = 1.0 / (det if slant else sxx)
-        tau_s = ((sxy * sww - swy * ssw) if slant else sxy) * inverse
-        beta = (swy * sxx - sxy * ssw) * inverse if slant else 0.0
+        slant = False
+        if across:
+            sww, ssw, swy = qww - tww, qsw - tsw, qwt - twt
+            det = sxx * sww - ssw * ssw
+            slant = (sww > 1e-6 * kept) & (det > min_spread * kept * sww)
+        if slant:
+            tau_s, beta = (sxy * sww - swy * ssw) / det, (swy * sxx - sxy * ssw) / det
+        else:
+            tau_s, beta = sxy / sxx, 0.0
         sq = 0.0
         worst, worst_r = 0, 0.0
         pg[k] = 0  # the padding point (its residual is NaN: not the worst, not summed)
@@ -226,9 +232,10 @@ def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, 
         s, w, t, g = ps[worst], pw[worst], pt[worst], np.uint64(pg[worst])
         sxx -= lines[g, L_CSS]
         sxy -= lines[g, L_CST]
-        sww -= lines[g, L_CWW]
-        ssw -= lines[g, L_CSW]
-        swy -= lines[g, L_CWT]
+        if across:
+            tww -= lines[g, L_W] * lines[g, L_MEAN_W]
+            tsw -= lines[g, L_S] * lines[g, L_MEAN_W]
+            twt -= lines[g, L_T] * lines[g, L_MEAN_W]
         kept -= np.int64(lines[g, L_M]) if lines[g, L_M] >= 2.0 else 0
         lines[g, L_M] -= 1.0
         lines[g, L_S] -= s
@@ -237,15 +244,16 @@ def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, 
         lines[g, L_ST] -= s * t
         if across:
             lines[g, L_W] -= w
-            lines[g, L_WW] -= w * w
-            lines[g, L_SW] -= s * w
-            lines[g, L_WT] -= w * t
+            qww -= w * w
+            qsw -= s * w
+            qwt -= w * t
         _line_stats(lines, g)
         sxx += lines[g, L_CSS]
         sxy += lines[g, L_CST]
-        sww += lines[g, L_CWW]
-        ssw += lines[g, L_CSW]
-        swy += lines[g, L_CWT]
+        if across:
+            tww += lines[g, L_W] * lines[g, L_MEAN_W]
+            tsw += lines[g, L_S] * lines[g, L_MEAN_W]
+            twt += lines[g, L_T] * lines[g, L_MEAN_W]
         kept += np.int64(lines[g, L_M]) if lines[g, L_M] >= 2.0 else 0
         k -= 1
         ps[worst], pw[worst], pt[worst], pg[worst] = ps[k], pw[k], pt[k], pg[k]
@@ -272,6 +280,6 @@ def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, 
     for j in range(n_used):  # leave the table empty for the next fit
         g = np.uint64(used[j])
         lines[g, L_M] = lines[g, L_S] = lines[g, L_T] = lines[g, L_SS] = lines[g, L_ST] = 0.0
-        lines[g, L_W] = lines[g, L_WW] = lines[g, L_SW] = lines[g, L_WT] = 0.0
+        lines[g, L_W] = 0.0
     lines[0, L_MEAN_T] = 0.0
     return code, tau_s, tau_w, c, kept, _rms(pass_sq, pass_kept, slope) if slope >= 0.0 else 0.0
