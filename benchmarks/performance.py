@@ -45,7 +45,8 @@ import tracemalloc
 import numpy as np
 
 import streams
-from tofnet.backends.event_driven import DEFAULT_PACKET_EVENTS, FixedBackend, FloatBackend
+from tofnet.backends.event_driven import FixedBackend, FloatBackend
+from tofnet.backends.stream import DEFAULT_PACKET_EVENTS
 from tofnet.backends.reference import ReferenceBackend
 from tofnet.io.recording import Recording
 from tofnet.networks import depth_network, improved_network

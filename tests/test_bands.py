@@ -302,3 +302,24 @@ def test_a_regions_table_of_kinds_marks_its_pixels_and_its_halo_and_nothing_else
     own = (x0 <= xs) & (xs < x1) & (y0 <= ys) & (ys < y1)
     halo = (x0 - d <= xs) & (xs < x1 + d) & (y0 - d <= ys) & (ys < y1 + d)
     assert np.array_equal(kind > 1, own) and np.array_equal(kind != 0, halo)
+
+
+def test_run_with_workers_feeds_larger_packets_and_gives_the_same_outputs():
+    """Several workers run in packets of 2^19 events (one hand-over and one wait per packet), one worker
+    in packets of 2^17, unless the user asks for a size; the outputs do not depend on it."""
+    sensor = (64, 48)
+    events = merge_events(moving_pattern(sensor, (300, -150), 400_000, seed=3),
+                          noise_events(sensor, 400, 400_000, seed=5))
+    assert len(events) > 1 << 19
+    recording = Recording(events, intrinsics=TEST_INTRINSICS)
+    network = depth_network(sensor, velocity=VELOCITY)
+    seen = {}
+    for workers in (1, 2):
+        calls = []
+        result = FixedBackend(workers=workers).run(network, recording, progress=lambda d, t: calls.append(d))
+        seen[workers] = (calls, result)
+    assert seen[1][0][0] == 1 << 17 and seen[2][0][0] == 1 << 19
+    assert seen[2][0][-1] == seen[1][0][-1] == len(events)
+    assert sum(len(out) for out in seen[1][1].outputs.values()) > 1000  # estimates to compare
+    assert first_difference(seen[2][1], seen[1][1]) == ''
+    assert FixedBackend(workers=2, packet_events=1000).packet_events == 1000

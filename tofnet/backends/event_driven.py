@@ -8,7 +8,6 @@ through one fused kernel (``tofnet.backends.fusion``); any other graph model by 
 from __future__ import annotations
 
 from tofnet.backends.local import LocalBackend
-from tofnet.backends.stream import DEFAULT_PACKET_EVENTS
 from tofnet.kernels.fixed_point import DEFAULT_FRAC_BITS, DEFAULT_PAYLOAD_BITS, FixedPointFormat
 
 
@@ -34,7 +33,7 @@ class FixedBackend(LocalBackend):
     fuses = True
 
     def __init__(self, frac_bits: int = DEFAULT_FRAC_BITS, payload_bits: int = DEFAULT_PAYLOAD_BITS,
-                 packet_events: int = DEFAULT_PACKET_EVENTS, fuse: bool = True, workers: int | str = 1):
+                 packet_events: int | None = None, fuse: bool = True, workers: int | str = 1):
         super().__init__(packet_events, fuse, workers)
         self.format = FixedPointFormat(frac_bits, payload_bits)
 

@@ -17,7 +17,7 @@ from tofnet.backends.base import Backend, ProgressCallback, RunResult
 from tofnet.backends.fusion import FusedStream, PipelineParams, paper_chain
 from tofnet.backends.graph import GraphExecutor, canonical, resolve_probes, sinks_of
 from tofnet.backends.runtime import clock_of, start_time_us
-from tofnet.backends.stream import DEFAULT_PACKET_EVENTS, GraphStream, run_in_packets
+from tofnet.backends.stream import GraphStream, packet_events_for, run_in_packets
 from tofnet.compiler.bands import input_reach, plan_bands
 from tofnet.compiler.compiled import network_of
 from tofnet.core.network import Network
@@ -76,13 +76,12 @@ class LocalBackend(Backend):
     capabilities = frozenset({"stream"})
     run_modes = (("fused", {"fuse": True}), ("unfused", {"fuse": False}))
 
-    def __init__(self, packet_events: int = DEFAULT_PACKET_EVENTS, fuse: bool = True, workers: int | str = 1):
-        if isinstance(packet_events, bool) or not isinstance(packet_events, int) or packet_events < 1:
-            raise BackendError(f"packet_events must be a positive whole number, got {packet_events!r}")
-        self.packet_events = packet_events
+    def __init__(self, packet_events: int | None = None, fuse: bool = True, workers: int | str = 1):
         self.fuse = bool(fuse)
         #: Bands the sensor is cut into (``tofnet.backends.bands``), run on at most one thread per CPU.
         self.workers = resolve_workers(workers, f"{self.name or 'backend'}: workers")
+        #: Events per packet of ``run`` (None: 2^17 with one worker, 2^19 with several).
+        self.packet_events = packet_events_for(packet_events, self.workers, self.name or "backend")
 
     def _format(self):
         return None

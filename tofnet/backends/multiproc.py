@@ -25,7 +25,7 @@ from tofnet.backends.graph import GraphExecutor, resolve_probes, sinks_of
 from tofnet.backends.fusion import FusedStream, paper_chain
 from tofnet.backends.local import binding, payloads_of, run_fused
 from tofnet.backends.shared_bands import SharedBandKernel, band_rows
-from tofnet.backends.stream import DEFAULT_PACKET_EVENTS
+from tofnet.backends.stream import packet_events_for
 from tofnet.compiler.bands import input_reach
 from tofnet.backends.remote import RemoteModel, plan_workers, placements_for
 from tofnet.backends.runtime import clock_of, start_time_us
@@ -73,7 +73,7 @@ class MultiprocBackend(Backend):
         Run one model per compiled core, every spike through the host (the mapping, checked); by
         default the paper's chain runs each worker's cores as one band over shared memory.
     packet_events
-        Events per packet of a banded run.
+        Events per packet of a banded run (None: 2^19 with several workers, 2^17 with one).
     frac_bits, payload_bits
         Fixed-point format, as for the ``fixed`` backend (docs/fixed_point.md).
     """
@@ -88,7 +88,7 @@ class MultiprocBackend(Backend):
     def __init__(self, workers: int | str | None = None, *, timeout: float = DEFAULT_TIMEOUT,
                  start_timeout: float | None = None, chunk_steps: int = DEFAULT_CHUNK_STEPS,
                  frac_bits: int = DEFAULT_FRAC_BITS, payload_bits: int = DEFAULT_PAYLOAD_BITS,
-                 per_core: bool = False, packet_events: int = DEFAULT_PACKET_EVENTS):
+                 per_core: bool = False, packet_events: int | None = None):
         workers = (os.cpu_count() or 1) if workers is None else resolve_workers(workers, "multiproc: workers")
         start_timeout = timeout if start_timeout is None else start_timeout
         for label, value in (("workers", workers), ("chunk_steps", chunk_steps)):
@@ -106,7 +106,7 @@ class MultiprocBackend(Backend):
         #: True: one model per compiled core, spikes through the pipes (checks the mapping); False: the
         #: paper's chain as one band per worker over shared memory (``shared_bands``), other graphs per core.
         self.per_core = bool(per_core)
-        self.packet_events = packet_events
+        self.packet_events = packet_events_for(packet_events, workers, "multiproc")
 
     def session(self, compiled=None) -> "MultiprocSession":
         """Workers kept alive across runs: ``with backend.session(compiled) as s: s.run(recording)``.
