@@ -103,3 +103,16 @@ def test_cli_convert_and_info(tmp_path, original, capsys):
     facts = json.loads((tmp_path / "info.json").read_text())
     assert facts["events"] == len(events) and facts["sensor_size"] == [64, 48]
     assert facts["poses"]["count"] == len(original[0].trajectory.times) and facts["imu_samples"] == 41
+
+
+@pytest.mark.parametrize("name, module, extra", [("rec.aedat4", "faery", "formats"), ("rec.h5", "h5py", "hdf5")])
+def test_a_writer_without_its_library_is_refused_in_one_line_before_any_work(tmp_path, monkeypatch, capsys,
+                                                                              original, name, module, extra):
+    import sys
+    monkeypatch.setitem(sys.modules, module, None)  # not installed
+    for argv in (["convert", str(original[1]), str(tmp_path / name)],
+                 ["simulate", "slider", str(tmp_path / name), "--duration", "0.01", "--quiet"]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert "\n" not in err and f'pip install "tofnet[{extra}]"' in err and "Traceback" not in err
+        assert sorted(p.name for p in tmp_path.iterdir()) == []  # nothing written, not even a partial file

@@ -17,6 +17,7 @@ import numpy as np
 
 from tofnet.errors import DataError, located, quote, reason
 from tofnet.io.event_source import EventSource
+from tofnet.io.extras import require
 
 #: Standard gravity, m/s² per g (DV's accelerometer unit).
 GRAVITY = 9.80665
@@ -169,7 +170,7 @@ def write_aedat4(path: str | Path, chunks: Iterable[np.ndarray], meta) -> int:
     a source's IMU is complete, and written as a second track after them. Times must be
     >= 0 (AEDAT4 stores unsigned µs).
     """
-    import faery
+    faery = require("faery", path, "writing AEDAT4")
     from faery.extension import aedat
 
     width, height = (int(v) for v in meta.sensor_size)

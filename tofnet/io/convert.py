@@ -29,6 +29,10 @@ def output_kind(out: str | Path) -> str:
     return OUTPUTS[suffix]
 
 
+#: Output kind -> the optional library its writer needs (``tofnet.io.extras``).
+_WRITERS_NEED = {"aedat4": "faery", "hdf5": "h5py"}
+
+
 def check_convert_output(out: str | Path, input_path: str | Path, *, force: bool = False,
                          gt_depth: bool = False) -> str:
     """Refuse, before any work, an output that cannot or must not be written (see
@@ -43,6 +47,9 @@ def check_convert_output(out: str | Path, input_path: str | Path, *, force: bool
     check_output(out, force=force, inputs=inputs, what="output", folder=kind == "ecd")
     if gt_depth and kind == "npz":
         check_output(_depth_path(out), force=force, inputs=inputs, what="true depth output")
+    if kind in _WRITERS_NEED:  # the writer's library, before anything is read or simulated
+        from tofnet.io.extras import require
+        require(_WRITERS_NEED[kind], out, f"writing {kind.upper()}")
     return kind
 
 

@@ -17,12 +17,13 @@ EXTRAS = {
 
 
 def require(module: str, path: object, what: str | None = None) -> ModuleType:
-    """Import ``module`` or raise a one-line ``DataError`` naming the extra to install for ``path``."""
+    """Import ``module`` or raise a one-line ``DataError`` naming the extra to install for ``path``
+    (``what``: what needs it, e.g. "writing AEDAT4"; default: reading the files it reads)."""
     try:
         return importlib.import_module(module)
     except ImportError:
         extra, reads = EXTRAS[module]
-        raise DataError(located(path, None, f"reading {what or reads} needs the '{extra}' extra: "
+        raise DataError(located(path, None, f"{what or 'reading ' + reads} needs the '{extra}' extra: "
                                             f"pip install \"tofnet[{extra}]\" (provides {module})")) from None
 
 
