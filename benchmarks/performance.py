@@ -29,7 +29,10 @@ machine spoils one round rather than one stream:
 
 Then resolution scaling at equal event rate (with the default refractory period and
 with none, which gives every sensor size the same work per event), the multiproc
-backend's speed-up and start-up, and the targets with PASS/FAIL.
+backend's speed-up and start-up, and the targets with PASS/FAIL. Several cores (``--workers``,
+``multiproc``'s bands against ``fixed`` with one worker, with their costs, memory and the
+per-packet latency) are measured by ``benchmarks/scaling.py``, and what two threads of the
+machine can give at best by ``benchmarks/machine_ceiling.py``.
 """
 
 from __future__ import annotations
