@@ -110,3 +110,33 @@ def test_a_first_run_on_a_fresh_install_says_it_compiles_and_reports_the_network
     wall = next(line for line in done.stdout.splitlines() if line.startswith("wall time"))
     rate = summary["events_in"] / summary["wall_time_s"] / 1e6  # events over the network's time only
     assert f"{summary['wall_time_s']:.3f} s network ({rate:.2f} M events/s)" in wall
+
+
+def test_threads_compiling_at_once_count_their_overlap_once():
+    """Bands compile (or wait for numba's lock) in several threads at once: the time not spent running
+    is the union of their intervals, never more than the wall time (a first run with 2 workers said
+    19.8 s of compiling in an 11.6 s run, and 0.000 s for the network)."""
+    import threading
+
+    from tofnet.kernels.compilation import _Watch
+
+    watch = _Watch()
+    inside = threading.Barrier(2)
+
+    def compiling():
+        watch.on_start(None)
+        watch.on_start(None)  # numba nests its events: only the outermost counts
+        inside.wait()
+        time.sleep(0.2)
+        watch.on_end(None)
+        watch.on_end(None)
+
+    begun = time.perf_counter()
+    threads = [threading.Thread(target=compiling) for _ in range(2)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    wall = time.perf_counter() - begun
+    assert watch.count == 2
+    assert 0.2 <= watch.seconds <= wall

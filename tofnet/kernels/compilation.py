@@ -23,28 +23,41 @@ COMPILING = "compiling kernels, first run only (20-60 s; numba caches them; 'tof
 
 
 class _Watch(event.Listener):
-    """Adds up the time of the outermost events of one kind (numba nests them) and counts them."""
+    """Adds up the time during which at least one thread is inside an outermost event of one kind
+    (numba nests them), and counts the outermost events. Threads (a run's bands) compile or wait
+    for numba's lock at the same time: their intervals are merged, not summed, so the seconds
+    never exceed the wall time."""
 
     def __init__(self, on_first_start: Callable[[], None] | None = None):
         self.seconds, self.count = 0.0, 0
         self._depth: dict[int, int] = {}
-        self._opened: dict[int, float] = {}
+        self._inside = 0  # threads inside an outermost event
+        self._since = 0.0  # when the first of them entered
+        self._guard = threading.Lock()
         self.on_start_hook = on_first_start
 
     def on_start(self, ev) -> None:
         me = threading.get_ident()
-        self._depth[me] = self._depth.get(me, 0) + 1
-        if self._depth[me] == 1:
-            self._opened[me] = time.perf_counter()
-            if self.on_start_hook is not None:
-                self.on_start_hook()
+        with self._guard:
+            self._depth[me] = self._depth.get(me, 0) + 1
+            if self._depth[me] > 1:
+                return
+            if self._inside == 0:
+                self._since = time.perf_counter()
+            self._inside += 1
+        if self.on_start_hook is not None:
+            self.on_start_hook()
 
     def on_end(self, ev) -> None:
         me = threading.get_ident()
-        self._depth[me] -= 1
-        if self._depth[me] == 0:
-            self.seconds += time.perf_counter() - self._opened.pop(me)
+        with self._guard:
+            self._depth[me] -= 1
+            if self._depth[me] > 0:
+                return
             self.count += 1
+            self._inside -= 1
+            if self._inside == 0:
+                self.seconds += time.perf_counter() - self._since
 
 
 _said: list[bool] = []
