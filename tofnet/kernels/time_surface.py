@@ -345,7 +345,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
         if slot == EMITTED and hold_px > 0.0 and rms <= hold_rms:
             # this edge's burst lasts about its ramp's width: hold_px pixels (a fit far off the
             # points, e.g. in noise, measured no crossing time: it leaves the hold as it was)
-            flat_bursts[state + B_HOLD] = min(max_hold, np.int64(hold_px * math.sqrt(a * a + b * b)) + 1)
+            flat_bursts[np.uint64(state + B_HOLD)] = min(max_hold, np.int64(hold_px * math.sqrt(a * a + b * b)) + 1)
         if slot == EMITTED and rms > max_rms:
             slot = BAD_FIT
         z = 0.0

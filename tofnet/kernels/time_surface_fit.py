@@ -207,7 +207,7 @@ def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, 
             tau_s, beta = sxy / sxx, 0.0
         sq = 0.0
         worst, worst_r = 0, 0.0
-        pg[k] = 0  # the padding point (its residual is NaN: not the worst, not summed)
+        pg[np.uint64(k)] = 0  # the padding point (its residual is NaN: not the worst, not summed)
         if slant:
             for i in range(k + (k & 1)):
                 g = np.uint64(pg[i])
@@ -256,8 +256,9 @@ def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, 
             twt += lines[g, L_T] * lines[g, L_MEAN_W]
         kept += np.int64(lines[g, L_M]) if lines[g, L_M] >= 2.0 else 0
         k -= 1
-        ps[worst], pw[worst], pt[worst], pg[worst] = ps[k], pw[k], pt[k], pg[k]
-        ps[k], pw[k], pt[k], pg[k] = s, w, t, np.int64(g)
+        last = np.uint64(k)  # >= 0 (a point was the worst): unsigned spares the negative-index fix-ups
+        ps[worst], pw[worst], pt[worst], pg[worst] = ps[last], pw[last], pt[last], pg[last]
+        ps[last], pw[last], pt[last], pg[last] = s, w, t, np.int64(g)
     if code == FIT_OK:
         # The lines' offsets against their position across the motion: τ_w (weighted by points).
         sw = so = sww = swo = total = 0.0
