@@ -108,7 +108,9 @@ def _turn_gains(x, y, fu, fv, rfx, rfy, rcx, rcy):
     return ax * fu + ay * fv, bx * fu + by * fv, zx * fu + zy * fv
 
 
-@njit(cache=True, nogil=True)  # bands run in threads (tofnet.backends.bands)
+# no reference counts (``_nrt``): numba counted one on each scratch array the inlined gather takes (5 atomic
+# increments and decrements per gather); the kernel allocates nothing, and its arrays are all the caller's
+@njit(cache=True, nogil=True, _nrt=False)  # bands run in threads (tofnet.backends.bands)
 def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ring, ring_state, sample_of,
             points, velocity, first_update, ps_, pw, pt, pg, lines, used, counts, out, quality, n_out, index0, t_hi):
     """Run time-ordered events through the estimator; returns ``(n_out, status, t_hi)``.
