@@ -387,7 +387,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
             if not record_rejected:
                 continue
             z = math.nan
-        estimate, q = out[n_out], quality[n_out]
+        estimate, q = out[np.uint64(n_out)], quality[np.uint64(n_out)]
         estimate.t, estimate.x, estimate.y, estimate.z, estimate.step = step_end + latency * dt, x, y, z, step
         q.t_event, q.points, q.rms_px, q.gx, q.gy, q.index, q.reason = t, kept, rms, gx, gy, index0 + i, slot
         n_out += 1
