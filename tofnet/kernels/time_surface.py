@@ -73,16 +73,15 @@ def follow_motion(motion, row, update: int, update_start_us: int, turn: float) -
 
 
 @njit(cache=True, inline="always")
-def _velocity_term_at(x, y, pixel, per_pixel, pinhole, sample_of, points, velocity, j, fx, fy, cx, cy):
-    """``A t`` (px*m/s) for pixel (x, y) under velocity row ``j``, through the lens of
+def _velocity_term_at(x, y, pixel, per_pixel, pinhole, sample_of, points, tx, ty, tz, fx, fy, cx, cy):
+    """``A t`` (px*m/s) for pixel (x, y) under the velocity (tx, ty, tz), through the lens of
     ``points`` (one ``tofnet.kernels.lens.sample_table`` row per sample: the pixel or its patch);
     ``pinhole`` (per pixel, no lens): at the pixel itself, the same numbers without reading the table."""
     if pinhole:
-        at_x, at_y = velocity_term(velocity[j, 0], velocity[j, 1], velocity[j, 2], float(x), float(y), fx, fy, cx, cy)
+        at_x, at_y = velocity_term(tx, ty, tz, float(x), float(y), fx, fy, cx, cy)
     else:
         sample = pixel if per_pixel else sample_of[pixel]
-        at_x, at_y = sampled_velocity_term(velocity[j, 0], velocity[j, 1], velocity[j, 2], points[sample], fx, fy, cx,
-                                           cy)
+        at_x, at_y = sampled_velocity_term(tx, ty, tz, points[sample], fx, fy, cx, cy)
     return at_x, at_y
 
 
@@ -108,7 +107,9 @@ def _turn_gains(x, y, fu, fv, rfx, rfy, rcx, rcy):
     return ax * fu + ay * fv, bx * fu + by * fv, zx * fu + zy * fv
 
 
-@njit(cache=True, nogil=True)  # bands run in threads (tofnet.backends.bands)
+# no reference counts (``_nrt``): numba counted one on each scratch array the inlined gather takes (5 atomic
+# increments and decrements per gather); the kernel allocates nothing, and its arrays are all the caller's
+@njit(cache=True, nogil=True, _nrt=False)  # bands run in threads (tofnet.backends.bands)
 def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ring, ring_state, sample_of,
             points, velocity, first_update, ps_, pw, pt, pg, lines, used, counts, out, quality, n_out, index0, t_hi):
     """Run time-ordered events through the estimator; returns ``(n_out, status, t_hi)``.
@@ -159,6 +160,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
     step, step_start, step_end, update, k = np.int64(0), np.int64(1), np.int64(0), np.int64(0), np.int64(0)
     linear_from = np.int64(0)
     j = 0
+    tx = ty = tz = 0.0  # the step's velocity row (read per step, not per event)
     n_events, plane_size = ts.shape[0], surface.shape[1]
     flat_surface = surface.reshape(-1)
     flat_points, points_columns = points.reshape(-1), points.shape[1]
@@ -202,6 +204,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
             j = update - first_update
             if j < 0 or j >= velocity.shape[0]:
                 return n_out, NO_VELOCITY, t_hi
+            tx, ty, tz = velocity[j, 0], velocity[j, 1], velocity[j, 2]
             if update != motion[M_UPDATE]:
                 follow_motion(motion, velocity[j], update, t0 + update * update_every * dt, turn)
             if travel:
@@ -218,7 +221,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
         # the pixel's own events and A t alone; an event is fitted once the pixel's hold has passed (within a
         # burst, with its edge's start as its own point).
         up = np.uint64(pixel)  # unsigned: no negative-index fix-ups
-        at_x, at_y = _velocity_term_at(x, y, sample, per_pixel, pinhole, sample_of, points, velocity, j, fx, fy, cx,
+        at_x, at_y = _velocity_term_at(x, y, sample, per_pixel, pinhole, sample_of, points, tx, ty, tz, fx, fy, cx,
                                        cy)
         speed2 = at_x * at_x + at_y * at_y
         at_cell = polarity * plane_size + cell  # in the flat surface: no view of the plane (a refcount per event)
@@ -345,7 +348,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
         if slot == EMITTED and hold_px > 0.0 and rms <= hold_rms:
             # this edge's burst lasts about its ramp's width: hold_px pixels (a fit far off the
             # points, e.g. in noise, measured no crossing time: it leaves the hold as it was)
-            flat_bursts[state + B_HOLD] = min(max_hold, np.int64(hold_px * math.sqrt(a * a + b * b)) + 1)
+            flat_bursts[np.uint64(state + B_HOLD)] = min(max_hold, np.int64(hold_px * math.sqrt(a * a + b * b)) + 1)
         if slot == EMITTED and rms > max_rms:
             slot = BAD_FIT
         z = 0.0
@@ -385,7 +388,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
             if not record_rejected:
                 continue
             z = math.nan
-        estimate, q = out[n_out], quality[n_out]
+        estimate, q = out[np.uint64(n_out)], quality[np.uint64(n_out)]
         estimate.t, estimate.x, estimate.y, estimate.z, estimate.step = step_end + latency * dt, x, y, z, step
         q.t_event, q.points, q.rms_px, q.gx, q.gy, q.index, q.reason = t, kept, rms, gx, gy, index0 + i, slot
         n_out += 1

@@ -11,6 +11,7 @@ the hold beside them), so an event touches one cache line of state.
 
 from __future__ import annotations
 
+import numpy as np
 from numba import njit
 
 #: "No event yet" (µs), as the surface's ``time_surface.NEVER``.
@@ -28,11 +29,12 @@ def first_event(flat_bursts, at: int, t: int, ratio: float, refractory_us: int, 
     ``flat_bursts[at:at + N_B]`` (updated; its hold ``B_HOLD`` µs, 0: none yet, the refractory period
     then); ``speed2`` is ``|A t|²`` there. The refractory period is ``refractory_us`` and, with
     ``refractory_reach`` (the refractory depth, m, times 1e6) and motion, the time per pixel at
-    that depth. Without branches but the caller's one: each test is a coin toss on noise."""
-    gap = t - flat_bursts[at + B_LAST]  # the pixel's first event's: since ``NEVER``, so its second event
-    before = flat_bursts[at + B_GAP]  # starts an edge only after the refractory period (a burst's does not)
-    age = t - flat_bursts[at + B_FITTED]
-    held = flat_bursts[at + B_HOLD]
+    that depth. Without branches but the caller's one: each test is a coin toss on noise. The indices are
+    read as unsigned: numba fixes up every signed index for negative values (instructions on every event)."""
+    gap = t - flat_bursts[np.uint64(at + B_LAST)]  # the pixel's first event's: since ``NEVER``, so its second event
+    before = flat_bursts[np.uint64(at + B_GAP)]  # starts an edge only after the refractory period (a burst's does not)
+    age = t - flat_bursts[np.uint64(at + B_FITTED)]
+    held = flat_bursts[np.uint64(at + B_HOLD)]
     reach2 = refractory_reach * refractory_reach
     moving = (refractory_reach > 0.0) & (speed2 > 0.0)
     # a silence after an edge's first event (``before`` > 0) at least 1 / ratio of the one before it,
@@ -46,7 +48,7 @@ def first_event(flat_bursts, at: int, t: int, ratio: float, refractory_us: int, 
     after = float(age + 1)
     early = (age < refractory_us) | (moving & ((after <= 0.0) | (after * after * speed2 <= reach2)))
     fitted = edge & ((held == 0) & ~early | (held != 0) & (age >= held))
-    flat_bursts[at + B_LAST] = t
-    flat_bursts[at + B_GAP] = gap if edge else -gap
-    flat_bursts[at + B_FITTED] = t if fitted else flat_bursts[at + B_FITTED]
+    flat_bursts[np.uint64(at + B_LAST)] = t
+    flat_bursts[np.uint64(at + B_GAP)] = gap if edge else -gap
+    flat_bursts[np.uint64(at + B_FITTED)] = t if fitted else flat_bursts[np.uint64(at + B_FITTED)]
     return edge, fitted

@@ -111,6 +111,20 @@ def _line_stats(lines, g):
 
 
 @njit(cache=True, inline="always")
+def _add_point(lines, used, n_used, g, s, t):
+    """Add a point (``s``, ``t``) to line ``g``'s raw sums, ``g`` to ``used`` if it is the line's first; the
+    lines used so far."""
+    used[n_used] = g
+    n_used += np.int64(lines[g, L_M] == 0.0)  # lines in the order of their first point
+    lines[g, L_M] += 1.0
+    lines[g, L_S] += s
+    lines[g, L_T] += t
+    lines[g, L_SS] += s * s
+    lines[g, L_ST] += s * t
+    return n_used
+
+
+@njit(cache=True, inline="always")
 def _rms(sq, kept, slope):
     """rms distance (px) of ``kept`` points with sum of squared time residuals ``sq`` (µs²) from a slope (µs/px)."""
     return math.sqrt(sq / kept) / slope if slope > 0.0 else math.inf
@@ -144,25 +158,19 @@ def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, 
     # each point added to its line's sums in memory, in order (no branch on where a run of one line ends:
     # in noise the runs are as long as chance makes them); at most 2 round(radius √2) + 1 lines are used.
     # Line indices are read as unsigned: numba fixes up every signed index for negative values.
-    for i in range(n):
-        g = np.uint64(pg[i])
-        s, t = ps[i], pt[i]
-        used[n_used] = g
-        n_used += np.int64(lines[g, L_M] == 0.0)  # lines in the order of their first point
-        lines[g, L_M] += 1.0
-        lines[g, L_S] += s
-        lines[g, L_T] += t
-        lines[g, L_SS] += s * s
-        lines[g, L_ST] += s * t
     qww = qsw = qwt = 0.0  # the sums of w², s w, w t over the points
-    if across:  # the sums of w apart: without them (``across`` False) the fit costs what it did before β
+    if across:  # one pass over the points with the sums of w; without them the fit costs what it did before β
         for i in range(n):
             g = np.uint64(pg[i])
             s, w, t = ps[i], pw[i], pt[i]
+            n_used = _add_point(lines, used, n_used, g, s, t)
             lines[g, L_W] += w
             qww += w * w
             qsw += s * w
             qwt += w * t
+    else:
+        for i in range(n):
+            n_used = _add_point(lines, used, n_used, np.uint64(pg[i]), ps[i], pt[i])
     sxx = sxy = 0.0
     tww = tsw = twt = 0.0  # the lines' means of w times their sums of w, s, t: q less these are the centred sums
     kept = 0
@@ -207,7 +215,7 @@ def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, 
             tau_s, beta = sxy / sxx, 0.0
         sq = 0.0
         worst, worst_r = 0, 0.0
-        pg[k] = 0  # the padding point (its residual is NaN: not the worst, not summed)
+        pg[np.uint64(k)] = 0  # the padding point (its residual is NaN: not the worst, not summed)
         if slant:
             for i in range(k + (k & 1)):
                 g = np.uint64(pg[i])
@@ -256,8 +264,9 @@ def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, 
             twt += lines[g, L_T] * lines[g, L_MEAN_W]
         kept += np.int64(lines[g, L_M]) if lines[g, L_M] >= 2.0 else 0
         k -= 1
-        ps[worst], pw[worst], pt[worst], pg[worst] = ps[k], pw[k], pt[k], pg[k]
-        ps[k], pw[k], pt[k], pg[k] = s, w, t, np.int64(g)
+        last = np.uint64(k)  # >= 0 (a point was the worst): unsigned spares the negative-index fix-ups
+        ps[worst], pw[worst], pt[worst], pg[worst] = ps[last], pw[last], pt[last], pg[last]
+        ps[last], pw[last], pt[last], pg[last] = s, w, t, np.int64(g)
     if code == FIT_OK:
         # The lines' offsets against their position across the motion: τ_w (weighted by points).
         sw = so = sww = swo = total = 0.0

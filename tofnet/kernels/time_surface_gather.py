@@ -62,7 +62,8 @@ def gather(surface, cell: int, row: int, radius: int, t: int, window: int, fu: f
             pg[at] = middle + np.int64(math.floor(across + 0.5))
             n += np.int64(age <= window)
         if dv == 0 and not lo <= 0 <= hi:  # the event itself always counts
-            ps_[n], pw[n], pt[n], pg[n] = 0.0, 0.0, 0.0, middle
+            at = np.uint64(n)
+            ps_[at], pw[at], pt[at], pg[at] = 0.0, 0.0, 0.0, middle
             n += 1
     return n
 
