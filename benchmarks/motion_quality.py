@@ -13,13 +13,12 @@ below: coverage per input event, median and bias of the estimates whose fit lies
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from accuracy import as_written, default_backend, default_cache, log, recording_for, run_improved  # noqa: E402
-from motion_sweep import parse_settings, parse_variants  # noqa: E402
+from accuracy import as_written, default_backend, log, recording_for, run_improved  # noqa: E402
+from motion_sweep import parse_settings, parse_variants, scene_options  # noqa: E402
 
 from tofnet.eval.quality import quality_curve  # noqa: E402
 from tofnet.sim.scenarios import scenario  # noqa: E402
@@ -28,14 +27,7 @@ THRESHOLDS = (0.1, 0.15, 0.2, 0.25, 0.35, 0.5, 0.75, 1.0)
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--motions", default="reversing,steady", help="comma-separated (default reversing,steady)")
-    parser.add_argument("--variants", default="100", help="e.g. 100 or 100,101 (default 100: held out)")
-    parser.add_argument("--duration", type=float, default=1.0, help="seconds per scene (default 1)")
-    parser.add_argument("--set", default="max_rms_px=1", help="time-surface parameters (default max_rms_px=1)")
-    parser.add_argument("--backend", default=None)
-    parser.add_argument("--cache", default=str(default_cache()), help="simulation cache folder ('' = none)")
-    args = parser.parse_args(argv)
+    args = scene_options(__doc__, "reversing,steady", "100", "max_rms_px=1").parse_args(argv)
     settings = parse_settings(args.set)
     backend = args.backend or default_backend()
     cache = Path(args.cache) if args.cache else None

@@ -97,15 +97,22 @@ class Pool:
         return 100.0 * float(np.median(rel)) if rel.size else math.nan
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--motions", default=",".join(MOTIONS), help="comma-separated (default: all)")
-    parser.add_argument("--variants", default="100-103", help="e.g. 0-5 or 100,101 (default 100-103: held out)")
+def scene_options(doc: str, motions: str, variants: str, settings: str) -> argparse.ArgumentParser:
+    """The options of a script over the random scenes (``--motions``, ``--variants``, ``--duration``, ``--set``,
+    ``--backend``, ``--cache``), with the script's own defaults."""
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    parser.add_argument("--motions", default=motions, help=f"comma-separated (default {motions})")
+    parser.add_argument("--variants", default=variants, help=f"e.g. 0-5 or 100,101 (default {variants})")
     parser.add_argument("--duration", type=float, default=1.0, help="seconds per variant (default 1)")
-    parser.add_argument("--set", default="", help="time-surface parameters, e.g. window_px=8,min_points=5")
+    parser.add_argument("--set", default=settings, help="time-surface parameters, e.g. window_px=8,min_points=5 "
+                                                        f"(default {settings or 'none'})")
     parser.add_argument("--backend", default=None)
     parser.add_argument("--cache", default=str(default_cache()), help="simulation cache folder ('' = none)")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = scene_options(__doc__, ",".join(MOTIONS), "100-103", "").parse_args(argv)
     motions = [m for m in args.motions.split(",") if m]
     variants = parse_variants(args.variants)
     settings = parse_settings(args.set)
