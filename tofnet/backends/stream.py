@@ -18,7 +18,7 @@ from tofnet.models.input import check_time_order
 #: Events per packet when a backend runs a whole recording (bounded memory).
 DEFAULT_PACKET_EVENTS = 1 << 17
 #: The same with several workers: each packet is a hand-over to the bands and a wait for the slowest,
-#: whose wake-ups cost ~0.1 ms each on a virtual machine; 4x larger packets were 1.1-1.4x faster with
+#: whose wake-ups cost ~0.1 ms each on a virtual machine; 4x larger packets were 1.1-1.6x faster with
 #: 2 workers and no slower with 1 (docs/performance.md, "Packet size with workers").
 BANDED_PACKET_EVENTS = 1 << 19
 
