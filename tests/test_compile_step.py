@@ -36,6 +36,48 @@ def test_stopwatch_counts_a_compile_and_keeps_it_out_of_the_network_time():
     assert clock.network_seconds() >= 0.05 - 0.01
 
 
+def test_stopwatch_sets_set_up_aside_from_the_network_time_but_not_a_compile_within_it():
+    kernel = fresh_kernel()
+    clock = Stopwatch()
+    with clock.aside():
+        time.sleep(0.05)
+        assert kernel(1) == 2  # a compile during set-up is still a compile
+    time.sleep(0.02)
+    assert clock.compiled == 1
+    assert 0.05 - 0.005 <= clock.setup_seconds < 0.05 + clock.compile_seconds
+    assert clock.network_seconds() == pytest.approx(
+        time.perf_counter() - clock.started - clock.compile_seconds - clock.setup_seconds, abs=0.01)
+    assert 0.02 - 0.005 <= clock.network_seconds() < 0.05
+
+
+def test_building_the_bands_is_set_up_not_the_networks_time(monkeypatch):
+    """With workers the bands' state is built for the first packet: the run reports it apart (as one
+    worker's state, built when the stream opens), so the network's time compares across workers."""
+    from tofnet.api import run
+    from tofnet.backends.bands import BandedKernel
+    from tofnet.io.recording import Recording
+    from tofnet.networks import depth_network, improved_network
+    from tofnet.testing import TEST_INTRINSICS, moving_edge
+
+    build = BandedKernel._build
+
+    def slow_build(self, packet):
+        time.sleep(0.2)
+        build(self, packet)
+
+    monkeypatch.setattr(BandedKernel, "_build", slow_build)
+    recording = Recording(moving_edge((16, 12), -50.0, "u"), intrinsics=TEST_INTRINSICS)
+    velocity = {"source": "constant", "velocity": [-0.1, 0.0, 0.0]}
+    result, _ = run(recording, depth_network((16, 12), velocity=velocity), backend_options={"workers": 2})
+    assert result.extra["workers"] == 2
+    assert result.setup_time >= 0.2 > result.wall_time
+    summary = result.summary()
+    assert summary["setup_time_s"] == result.setup_time
+    assert "setup_time_s" not in result.facts()
+    graph, _ = run(recording, improved_network((16, 12), velocity=velocity))  # model by model: its models' state
+    assert graph.setup_time > 0
+
+
 def test_first_compile_of_a_process_is_logged_once(caplog):
     compilation._said.clear()
     with caplog.at_level(logging.INFO, logger="tofnet.kernels"):

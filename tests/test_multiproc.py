@@ -143,6 +143,8 @@ def test_run_opens_and_closes_its_own_session(session):
     result = MultiprocBackend(workers=2).run(compiled, recording, record_tot=True)
     assert_identical(result, FixedBackend().run(compiled, recording, record_tot=True))
     assert result.extra["workers"] == 2 and set(_children()) == before
+    # starting the workers (spawn, imports, warm-up: seconds) is the run's set-up, not the network's time
+    assert result.setup_time >= result.extra["startup_s"] > result.wall_time
 
 
 # -- failures: each must raise clearly, never hang, and leave nothing behind ---------------

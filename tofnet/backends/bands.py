@@ -133,6 +133,11 @@ class BandedKernel(BandsBase):
                 kernel.promise(self._t_hi)
         self.facts = {"workers": self._pool.threads, "bands": [list(b) for b in self.bands]}
 
+    def prepare(self, packet: int) -> None:
+        """Build the bands' kernels now, for packets of ``packet`` events (else the first packet builds them)."""
+        if not self.kernels:
+            self._build(packet)
+
     @BandsBase.t0_us.setter
     def t0_us(self, value: int) -> None:
         self._t0 = int(value)

@@ -24,7 +24,6 @@ from tofnet.core.network import Network
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, EVENT_DTYPE, TOT_DTYPE
 from tofnet.io.recording import Intrinsics, Recording, VelocitySource, as_velocity_source
-from tofnet.kernels.compilation import Stopwatch
 
 #: Initial size of a fused run's result buffer in estimates (at most one per event); 4M x 28 B
 #: of address space, resident only where written.
@@ -171,8 +170,8 @@ class LocalBackend(Backend):
 
 def run_fused(stream: FusedStream, events: np.ndarray, packet_events: int,
               progress: ProgressCallback | None) -> RunResult:
-    """Feed ``events`` to a fused stream in packets, the kernel writing the estimates in place."""
-    clock = Stopwatch()
+    """Feed ``events`` to a fused stream in packets, the kernel writing the estimates in place; timed by
+    the stream's clock (its set-up apart)."""
     total = len(events)
     # a kernel whose bands run in other processes has them write the estimates to memory it shares
     depth = _Collector(DEPTH_DTYPE, min(total, RESULT_CAPACITY), getattr(stream.kernel, "allocate", None))
@@ -196,7 +195,7 @@ def run_fused(stream: FusedStream, events: np.ndarray, packet_events: int,
     result.outputs[stream.depth_name] = stream.kernel.join_packets(depth.array(), seams)
     if stream.record_tot:
         result.outputs[stream.tot_name] = canonical(tot.array())
-    return result.timed_by(clock)
+    return result.timed_by(stream.clock)
 
 
 class _Collector:

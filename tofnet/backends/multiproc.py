@@ -118,10 +118,10 @@ class MultiprocBackend(Backend):
 
     def run(self, compiled, recording: Recording, *, probes: Iterable[str] = (), record_tot: bool = False,
             progress: ProgressCallback | None = None) -> RunResult:
-        clock = Stopwatch()
         with self.session(compiled) as session:
             result = session.run(recording, probes=probes, record_tot=record_tot, progress=progress)
-        return result.timed_by(clock)  # this run paid for starting the workers too
+        result.setup_time += session.startup_seconds  # this run paid for starting the workers too
+        return result
 
     def open_stream(self, compiled, **options) -> GraphStream | FusedStream:
         """A stream on workers of its own; ``close()`` stops them. Options as ``LocalBackend.open_stream``."""
@@ -320,8 +320,9 @@ class MultiprocSession:
         compiled = self._check_open(compiled)
         clock = Stopwatch()
         t0 = start_time_us(clock_of(compiled.network).t0_us, recording)
-        stream = self.open_stream(compiled, recording=recording, t0_us=t0, probes=probes, record_tot=record_tot,
-                                  fuse=True)
+        with clock.aside():  # the workers build their bands' state
+            stream = self.open_stream(compiled, recording=recording, t0_us=t0, probes=probes, record_tot=record_tot,
+                                      fuse=True)
         if isinstance(stream, FusedStream):
             try:
                 result = run_fused(stream, recording.events, self.backend.packet_events, progress)
@@ -329,7 +330,8 @@ class MultiprocSession:
                 stream.abort()  # its shared buffers
                 raise
             self._exchange_quietly("finish")
-            return result.timed_by(clock)
+            result.setup_time += clock.setup_seconds  # before the stream's own clock started
+            return result
         collected = Collected()
         events, chunk_us = recording.events, self.backend.chunk_steps * stream.timestep_us
         total = len(events)

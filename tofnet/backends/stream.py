@@ -100,12 +100,16 @@ class GraphStream:
         self._build = build
         self.t0_us = t0_us
         self.timestep_us = timestep_us
-        self.executor: GraphExecutor | None = None if t0_us is None else build(t0_us)
+        #: The stream's time: running, compiling kernels, and set-up (building the models and their state).
+        self.clock = Stopwatch()
+        self.executor: GraphExecutor | None = None
+        if t0_us is not None:
+            with self.clock.aside():
+                self.executor = build(t0_us)
         self.sinks, self.payloads = sinks, payloads
         self.primary = primary_output(sinks, payloads)
         self._latest_us: int | None = None
         self._events_in = 0
-        self._clock = Stopwatch()
         self._closed = False
         #: Backend facts added to the result (e.g. the fixed-point format).
         self.extra: dict = {}
@@ -139,7 +143,8 @@ class GraphStream:
             until_us = int(until_us)
         if self.executor is None and len(events):
             self.t0_us = int(events["t"][0])
-            self.executor = self._build(self.t0_us)
+            with self.clock.aside():
+                self.executor = self._build(self.t0_us)
         self._events_in += len(events)
         if len(events):
             self._latest_us = int(events["t"][-1])
@@ -210,7 +215,7 @@ class GraphStream:
         return RunResult(self.backend, outputs, counts, steps, self.t0_us, self.timestep_us,
                          {name: ex.output_latency(name) for name in wanted},
                          {name: ex.payload_of(name) for name in wanted},
-                         {p.name: kinds_of(type(p).counters) for p in ex.network.processes}, extra=dict(self.extra)).timed_by(self._clock)
+                         {p.name: kinds_of(type(p).counters) for p in ex.network.processes}, extra=dict(self.extra)).timed_by(self.clock)
 
 
 class Collected:
@@ -267,8 +272,8 @@ class Collected:
 
 def run_in_packets(stream: GraphStream, events: np.ndarray, packet_events: int,
                    progress: ProgressCallback | None) -> RunResult:
-    """Feed ``events`` in packets; the result holds every output's records and the counts."""
-    clock = Stopwatch()
+    """Feed ``events`` in packets; the result holds every output's records and the counts (timed by the
+    stream's clock, its set-up apart)."""
     collected = Collected()
     total = len(events)
     for lo in range(0, total, packet_events):
@@ -278,4 +283,4 @@ def run_in_packets(stream: GraphStream, events: np.ndarray, packet_events: int,
     result = stream.close()
     collected.add(result.outputs)
     result.outputs = collected.joined(result.payloads, stream._empty)
-    return result.timed_by(clock)
+    return result.timed_by(stream.clock)

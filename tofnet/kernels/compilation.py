@@ -12,7 +12,8 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import Callable
+from contextlib import contextmanager
+from typing import Callable, Iterator
 
 from numba.core import event
 
@@ -91,11 +92,23 @@ def kernels(n: int) -> str:
 
 
 class Stopwatch:
-    """Wall time since creation, split into the network's time and the time spent on kernels (s)."""
+    """Wall time since creation, split into the network's time, the time spent on kernels and the
+    set-up set aside with ``aside()`` (building state, starting workers) (s)."""
 
     def __init__(self) -> None:
         self.started = time.perf_counter()
         self._compile0, self._count0 = _LOCK.seconds, _COMPILES.count
+        #: Seconds set aside as set-up (``aside``), less the kernels' compiles within them.
+        self.setup_seconds = 0.0
+
+    @contextmanager
+    def aside(self) -> Iterator[None]:
+        """Time spent inside is set-up, not the network's (a compile within it stays a compile)."""
+        started, compiled = time.perf_counter(), _LOCK.seconds
+        try:
+            yield
+        finally:
+            self.setup_seconds += max(0.0, time.perf_counter() - started - (_LOCK.seconds - compiled))
 
     @property
     def compile_seconds(self) -> float:
@@ -108,5 +121,5 @@ class Stopwatch:
         return _COMPILES.count - self._count0
 
     def network_seconds(self) -> float:
-        """Seconds since the start, less those spent on kernels (never below 0)."""
-        return max(0.0, time.perf_counter() - self.started - self.compile_seconds)
+        """Seconds since the start, less those spent on kernels and on set-up (never below 0)."""
+        return max(0.0, time.perf_counter() - self.started - self.compile_seconds - self.setup_seconds)
