@@ -20,6 +20,9 @@ NEVER = -(1 << 62)
 #: ``bursts[y * w + x, p]``: the pixel's last event, the silence before it (negative when it
 #: continued a burst), its last fitted event, its hold (µs; 0: none yet, set by ``time_surface``'s fits).
 B_LAST, B_GAP, B_FITTED, B_HOLD, N_B = range(5)
+#: With burst-index surfaces (``burst_surfaces`` K > 1) the row has one slot more: the index of the pixel's
+#: last event in its edge's burst (0: it started the edge; K: beyond the surfaces, or no edge yet).
+B_INDEX = N_B
 
 
 @njit(cache=True, inline="always")
@@ -52,3 +55,12 @@ def first_event(flat_bursts, at: int, t: int, ratio: float, refractory_us: int, 
     flat_bursts[np.uint64(at + B_GAP)] = gap if edge else -gap
     flat_bursts[np.uint64(at + B_FITTED)] = t if fitted else flat_bursts[np.uint64(at + B_FITTED)]
     return edge, fitted
+
+
+@njit(cache=True, inline="always")
+def burst_index(flat_bursts, at: int, edge: bool, cap: int) -> int:
+    """The event's index in its edge's burst (0 when it starts an edge, else one more than the pixel's
+    last, at most ``cap``), kept in ``B_INDEX`` of the row at ``at``: the pixel's own events only."""
+    index = 0 if edge else min(flat_bursts[np.uint64(at + B_INDEX)] + 1, cap)
+    flat_bursts[np.uint64(at + B_INDEX)] = index
+    return index
