@@ -22,7 +22,8 @@ from numba import njit
 
 from tofnet.kernels.cache_hints import prefetch
 from tofnet.kernels.rotation import rotational_flow
-from tofnet.kernels.time_surface_first import B_FITTED, B_HOLD, NEVER, burst_index, first_event
+from tofnet.kernels.time_surface_first import (B_EMITTED, B_FITTED, B_HOLD, B_INDEX, NEVER, burst_index,
+                                               first_event)
 from tofnet.kernels.time_surface_fit import FIT_ILL_CONDITIONED, FIT_OVER_RMS, FIT_TOO_FEW, fit_plane, fit_rows
 from tofnet.kernels.time_surface_motion import (M_SINCE, M_UPDATE, M_VX, M_VY, M_VZ, N_MOTION,  # noqa: F401
                                                 _gains, _turn_gains, _velocity_term_at, follow_motion)
@@ -52,10 +53,10 @@ REJECT_SLOTS = tuple(range(NO_MOTION, EMITTED))  # a first event whose estimate 
 # Fit models (``I_MODEL``): a plane, or lines along the motion with a shared slope.
 MODEL_PLANE, MODEL_ROWS = range(2)
 MODELS = ("plane", "rows")
-# Which later events of a burst are fitted on their burst-index surface (``I_BURST_FIT``): all, or only
-# those whose edge's first event was fitted (it passed the pixel's hold).
-BURST_FIT_ALL, BURST_FIT_FITTED = range(2)
-BURST_FITS = ("all", "fitted")
+# Which later events of a burst are fitted on their burst-index surface (``I_BURST_FIT``): all, only those
+# whose edge's first event was fitted (it passed the pixel's hold), or only those whose first event was emitted.
+BURST_FIT_ALL, BURST_FIT_FITTED, BURST_FIT_EMITTED = range(3)
+BURST_FITS = ("all", "fitted", "emitted")
 # Status of a call.
 OK, UNSORTED, NO_VELOCITY = range(3)
 #: Events between a prefetch of a pixel's state and surface rows and their use.
@@ -112,7 +113,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
     hold_rms, behind_reach, window_px = fp[F_HOLD_RMS], fp[F_BEHIND_REACH], fp[F_WINDOW_PX]
     burst_ratio = fp[F_BURST_RATIO]
     planes = np.int64(surface.shape[0] // 2)  # burst-index surfaces: 1, the first events' only
-    fit_fitted_only = ip[I_BURST_FIT] == BURST_FIT_FITTED
+    burst_fit = ip[I_BURST_FIT]
     nb = np.int64(bursts.shape[2])  # the state row's length
     behind_depth = behind_reach * 1e-6  # m: travel coordinates compare travel (px·m) with it
     # a fit this far off its points is rejected (bad_fit) and sets no hold: unless it is recorded, the fit may stop
@@ -192,10 +193,12 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
         index = 0
         if planes > 1:  # a burst's later event k < K writes surface k and is fitted there, as a first event on 0
             index = burst_index(flat_bursts, state, edge, planes)
+            first_emitted, index = index >= B_EMITTED, index & (B_EMITTED - 1)
             if 0 < index < planes:
                 edge = True  # its own surface takes it
-                fitted = (not fit_fitted_only) or flat_bursts[np.uint64(state + B_FITTED)] == flat_surface[
-                    np.uint64(at_cell)]  # "fitted": its edge's first event (on surface 0) was fitted
+                fitted = (burst_fit == BURST_FIT_ALL or (burst_fit == BURST_FIT_EMITTED and first_emitted)
+                          or (burst_fit == BURST_FIT_FITTED and flat_bursts[np.uint64(state + B_FITTED)]
+                              == flat_surface[np.uint64(at_cell)]))  # its edge's first event (surface 0) was
                 at_cell += 2 * index * plane_size
         flat_surface[np.uint64(at_cell)] = t if edge else flat_surface[np.uint64(at_cell)]
         if not mine:  # a halo row: its surface only, for the band's fits
@@ -353,6 +356,8 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
                 slot = SAME_STEP
             else:
                 last_step[up] = step
+                if planes > 1 and index == 0:  # the edge's later events may ask (``BURST_FIT_EMITTED``)
+                    flat_bursts[np.uint64(state + B_INDEX)] = B_EMITTED
         counts[slot] += 1
         if slot != EMITTED:
             if not record_rejected:

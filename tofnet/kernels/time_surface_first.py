@@ -23,6 +23,8 @@ B_LAST, B_GAP, B_FITTED, B_HOLD, N_B = range(5)
 #: With burst-index surfaces (``burst_surfaces`` K > 1) the row has one slot more: the index of the pixel's
 #: last event in its edge's burst (0: it started the edge; K: beyond the surfaces, or no edge yet).
 B_INDEX = N_B
+#: A flag beside the index there: the edge's first event was emitted.
+B_EMITTED = 1 << 8
 
 
 @njit(cache=True, inline="always")
@@ -60,7 +62,9 @@ def first_event(flat_bursts, at: int, t: int, ratio: float, refractory_us: int, 
 @njit(cache=True, inline="always")
 def burst_index(flat_bursts, at: int, edge: bool, cap: int) -> int:
     """The event's index in its edge's burst (0 when it starts an edge, else one more than the pixel's
-    last, at most ``cap``), kept in ``B_INDEX`` of the row at ``at``: the pixel's own events only."""
-    index = 0 if edge else min(flat_bursts[np.uint64(at + B_INDEX)] + 1, cap)
+    last, at most ``cap``), kept in ``B_INDEX`` of the row at ``at``: the pixel's own events only. Returned
+    with the ``B_EMITTED`` flag the first event's estimate left there (0 for an event that starts an edge)."""
+    kept = flat_bursts[np.uint64(at + B_INDEX)]
+    index = 0 if edge else min((kept & (B_EMITTED - 1)) + 1, cap) | (kept & B_EMITTED)
     flat_bursts[np.uint64(at + B_INDEX)] = index
     return index
