@@ -97,8 +97,9 @@ def test_a_bad_burst_setting_is_refused():
         run(*burst_edge(), burst_surfaces=0, burst_fit="some")
 
 
-def band_network():
-    return improved_network(BAND_SENSOR, time_surface={"t0": 0, "burst_surfaces": 3}, velocity=VELOCITY)
+def band_network(burst_fit="all"):
+    return improved_network(BAND_SENSOR, time_surface={"t0": 0, "burst_surfaces": 3, "burst_fit": burst_fit},
+                            velocity=VELOCITY)
 
 
 def band_recording(seed=1):
@@ -107,11 +108,12 @@ def band_recording(seed=1):
     return Recording(events, intrinsics=TEST_INTRINSICS)
 
 
+@pytest.mark.parametrize("burst_fit", ["all", "emitted"])
 @pytest.mark.parametrize("bands", [[(0, 8), (8, 16)], [(0, 1), (1, 2), (2, 9), (9, 16)]])
-def test_bands_equal_one_band_with_burst_surfaces(bands):
+def test_bands_equal_one_band_with_burst_surfaces(bands, burst_fit):
     recording = band_recording()
-    one = FixedBackend().run(band_network(), recording)
-    banded = with_bands(FixedBackend, bands).run(band_network(), recording)
+    one = FixedBackend().run(band_network(burst_fit), recording)
+    banded = with_bands(FixedBackend, bands).run(band_network(burst_fit), recording)
     assert first_difference(banded, one) == ""
     single = FixedBackend().run(improved_network(BAND_SENSOR, time_surface={"t0": 0}, velocity=VELOCITY), recording)
     assert one.counts["time_surface"]["emitted"] > single.counts["time_surface"]["emitted"]

@@ -22,8 +22,7 @@ from numba import njit
 
 from tofnet.kernels.cache_hints import prefetch
 from tofnet.kernels.rotation import rotational_flow
-from tofnet.kernels.time_surface_first import (B_EMITTED, B_FITTED, B_HOLD, B_INDEX, NEVER, burst_index,
-                                               first_event)
+from tofnet.kernels.time_surface_first import B_EMITTED, B_HOLD, B_INDEX, N_B, NEVER, first_event, later_event
 from tofnet.kernels.time_surface_fit import FIT_ILL_CONDITIONED, FIT_OVER_RMS, FIT_TOO_FEW, fit_plane, fit_rows
 from tofnet.kernels.time_surface_motion import (M_SINCE, M_UPDATE, M_VX, M_VY, M_VZ, N_MOTION,  # noqa: F401
                                                 _gains, _turn_gains, _velocity_term_at, follow_motion)
@@ -72,12 +71,12 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
 
     ``surface[p, (y + r) * (w + 2r) + x + r]`` is the last first event (µs) of pixel (x, y) and
     polarity p (one plane per polarity, so a fit reads one cache line per row; a border of
-    ``r = radius`` pixels stays ``NEVER``); with K = ``surface.shape[0] // 2`` > 1 (burst-index surfaces)
-    plane ``2 k + p`` holds the pixel's last event of index k in its edge's burst, and an event of index
-    0 < k < K is fitted on plane ``2 k + p`` as a first event is on plane p (``I_BURST_FIT``: which are);
+    ``r = radius`` pixels stays ``NEVER``); with burst-index surfaces (``surface`` [K, 2, plane]) ``surface[k, p]``
+    holds the pixel's last event of index k in its edge's burst, and an event of index 0 < k < K is fitted on
+    it as a first event is on ``surface[0, p]`` (``I_BURST_FIT``: which are; ``later_event``);
     ``bursts[y * w + x, p]`` the first-event rule's state
     (``time_surface_first``), with the measured hold (``B_HOLD`` µs, 0 = none yet) in the same row
-    (and, with K > 1, the burst index ``B_INDEX``);
+    (and, with K > 1, a second block of rows as large with the burst index ``B_INDEX``);
     ``prev[y * w + x]`` the pixel's last estimate (z, t) for the consistency rule;
     ``last_step[y * w + x]`` the output step of its last estimate (at most one per pixel and step);
     ``ring`` the camera's displacement per input step and ``ring_state`` (``time_surface_travel``, with ``I_TRAVEL``).
@@ -112,9 +111,10 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
     hold_px, ahead_px, turn, trim_px = fp[F_HOLD_PX], fp[F_AHEAD_PX], fp[F_TURN], fp[F_TRIM_PX]
     hold_rms, behind_reach, window_px = fp[F_HOLD_RMS], fp[F_BEHIND_REACH], fp[F_WINDOW_PX]
     burst_ratio = fp[F_BURST_RATIO]
-    planes = np.int64(surface.shape[0] // 2)  # burst-index surfaces: 1, the first events' only
-    burst_fit = ip[I_BURST_FIT]
-    nb = np.int64(bursts.shape[2])  # the state row's length
+    # burst-index surfaces: ``surface`` [K, 2, plane] (a type of its own, so numba compiles the kernel apart for
+    # it: without them the dead branches below fold away and the loop's machine code is the one-surface kernel's)
+    layered = surface.ndim == 3
+    planes = np.int64(surface.shape[0]) if layered else np.int64(1)
     behind_depth = behind_reach * 1e-6  # m: travel coordinates compare travel (px·m) with it
     # a fit this far off its points is rejected (bad_fit) and sets no hold: unless it is recorded, the fit may stop
     give_up_rms = math.inf if record_rejected else max(max_rms, hold_rms) if hold_px > 0.0 else max_rms
@@ -124,7 +124,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
     linear_from = np.int64(0)
     j = 0
     tx = ty = tz = 0.0  # the step's velocity row (read per step, not per event)
-    n_events, plane_size = ts.shape[0], surface.shape[1]
+    n_events, plane_size = ts.shape[0], surface.shape[surface.ndim - 1]
     flat_surface = surface.reshape(-1)
     flat_points, points_columns = points.reshape(-1), points.shape[1]
     flat_bursts = bursts.reshape(-1)
@@ -134,7 +134,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
             xq = min(np.int64(xs[i + PREFETCH]), width - 1)
             yq = min(max(np.int64(ys[i + PREFETCH]) - row0, 0), np.int64(rows) - 1)
             pq = 1 if ps[i + PREFETCH] != 0 else 0
-            prefetch(flat_bursts, nb * (2 * (yq * width + xq) + pq))
+            prefetch(flat_bursts, N_B * (2 * (yq * width + xq) + pq))
             top = pq * plane_size + yq * row + xq + radius  # the square's first row
             if radius == 3:  # the default, unrolled: a counter and a branch per row were most of this block
                 for dq in range(7):
@@ -188,18 +188,11 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
                                        cy)
         speed2 = at_x * at_x + at_y * at_y
         at_cell = polarity * plane_size + cell  # in the flat surface: no view of the plane (a refcount per event)
-        state = nb * (2 * pixel + polarity)
+        state = np.int64(N_B) * (2 * pixel + polarity)
         edge, fitted = first_event(flat_bursts, state, t, burst_ratio, refractory_us, refractory_reach, speed2)
-        index = 0
-        if planes > 1:  # a burst's later event k < K writes surface k and is fitted there, as a first event on 0
-            index = burst_index(flat_bursts, state, edge, planes)
-            first_emitted, index = index >= B_EMITTED, index & (B_EMITTED - 1)
-            if 0 < index < planes:
-                edge = True  # its own surface takes it
-                fitted = (burst_fit == BURST_FIT_ALL or (burst_fit == BURST_FIT_EMITTED and first_emitted)
-                          or (burst_fit == BURST_FIT_FITTED and flat_bursts[np.uint64(state + B_FITTED)]
-                              == flat_surface[np.uint64(at_cell)]))  # its edge's first event (surface 0) was
-                at_cell += 2 * index * plane_size
+        if layered:  # a burst's later event k < K writes surface k and is fitted there, as a first event on 0
+            at_cell, edge, fitted = later_event(flat_bursts, flat_surface, state, at_cell, plane_size, edge, fitted,
+                                                planes, ip[I_BURST_FIT])
         flat_surface[np.uint64(at_cell)] = t if edge else flat_surface[np.uint64(at_cell)]
         if not mine:  # a halo row: its surface only, for the band's fits
             continue
@@ -318,7 +311,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
             slot = (TOO_FEW_POINTS if fit == FIT_TOO_FEW else ILL_CONDITIONED if fit == FIT_ILL_CONDITIONED
                     else BAD_FIT if fit == FIT_OVER_RMS else EMITTED)
         a, b = tau_s * fu - tau_w * fv, tau_s * fv + tau_w * fu  # ∇T at the event, µs/px along u and v
-        if slot == EMITTED and hold_px > 0.0 and rms <= hold_rms and index == 0:
+        if slot == EMITTED and hold_px > 0.0 and rms <= hold_rms and (not layered or at_cell < 2 * plane_size):
             # this edge's burst lasts about its ramp's width: hold_px pixels (a fit far off the
             # points, e.g. in noise, measured no crossing time: it leaves the hold as it was)
             flat_bursts[np.uint64(state + B_HOLD)] = min(max_hold, np.int64(hold_px * math.sqrt(a * a + b * b)) + 1)
@@ -356,8 +349,8 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
                 slot = SAME_STEP
             else:
                 last_step[up] = step
-                if planes > 1 and index == 0:  # the edge's later events may ask (``BURST_FIT_EMITTED``)
-                    flat_bursts[np.uint64(state + B_INDEX)] = B_EMITTED
+                if layered and at_cell < 2 * plane_size:  # a first event: its burst may ask (``later_event``)
+                    flat_bursts[np.uint64(flat_bursts.shape[0] // 2 + state + B_INDEX)] = B_EMITTED
         counts[slot] += 1
         if slot != EMITTED:
             if not record_rejected:
@@ -366,6 +359,6 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
         estimate, q = out[np.uint64(n_out)], quality[np.uint64(n_out)]
         estimate.t, estimate.x, estimate.y, estimate.z, estimate.step = step_end + latency * dt, x, y, z, step
         q.t_event, q.points, q.rms_px, q.gx, q.gy, q.index, q.reason = t, kept, rms, gx, gy, index0 + i, slot
-        q.burst = index
+        q.burst = at_cell // (2 * plane_size) if layered else 0  # the burst index k: its surface
         n_out += 1
     return n_out, OK, t_hi

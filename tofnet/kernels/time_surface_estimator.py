@@ -175,12 +175,16 @@ class TimeSurfaceEstimator:
             *(c.intrinsics if c.rotation_intrinsics is None else c.rotation_intrinsics), c.hold_fit_rms_px,
             reach(c.behind_depth), c.window_px, c.burst_ratio)
         r, pixels, planes = int(c.radius), width * height, int(c.burst_surfaces)
-        # per burst index k < K and polarity p, plane 2 k + p (k = 0: the first events, ``last_first_event``)
-        self._surface = np.full((2 * planes, (height + 2 * r) * (width + 2 * r)), ts.NEVER, np.int64)
-        self._bursts = np.zeros((pixels, 2, N_B + (planes > 1)), np.int64)  # the holds in it: 0, none yet
-        self._bursts[:, :, [B_LAST, B_FITTED]] = ts.NEVER
+        # per burst index k < K and polarity p, [k, p] (k = 0: the first events, ``last_first_event``); with K = 1
+        # [p] only: the kernel compiled for that type has no burst-index code at all
+        shape = (planes, 2) if planes > 1 else (2,)
+        self._surface = np.full(shape + ((height + 2 * r) * (width + 2 * r),), ts.NEVER, np.int64)
+        # the holds in it: 0, none yet; with K > 1 a second block of rows: the burst index (``later_event``)
+        self._bursts = np.zeros((pixels * (1 + (planes > 1)), 2, N_B), np.int64)
+        self._bursts[:pixels, :, [B_LAST, B_FITTED]] = ts.NEVER
         if planes > 1:
-            self._bursts[:, :, B_INDEX] = planes  # no edge yet: beyond the surfaces
+            self._bursts[pixels:, :, B_INDEX] = planes  # no edge yet: beyond the surfaces
+        self._pixels = pixels
         self._prev = np.zeros((pixels if c.consistency > 0 else 1, 2), np.float64)
         self._last_step = np.full(pixels, ts.NEVER, np.int64)
         self._motion = np.zeros(ts.N_MOTION)
@@ -202,7 +206,7 @@ class TimeSurfaceEstimator:
     @property
     def _hold(self) -> np.ndarray:
         """The holds ``[pixels held, 2]`` (µs, 0: none yet): a view into the first-event rule's state."""
-        return self._bursts[:, :, B_HOLD]
+        return self._bursts[:self._pixels, :, B_HOLD]
 
     @property
     def t0_us(self) -> int | None:
