@@ -144,8 +144,8 @@ class TimeSurfaceEstimator:
     least the first event of every step within the sensor (they move its clock: the travel ring and
     the motion epochs; ``tofnet.kernels.bands.clocked_columns``), or every event (quality's ``index``
     counts the events it was fed).
-    Memory is fixed by the rows held (about 96 B per pixel) plus output buffers as large as
-    the largest packet.
+    Memory is fixed by the rows held (about 96 B per pixel; with ``burst_surfaces`` K > 1, 16 (K - 1) + 80 B
+    more) plus output buffers as large as the largest packet.
     """
 
     def __init__(self, config: TimeSurfaceConfig, t0_us: int | None = None, rows: tuple[int, int] | None = None):
