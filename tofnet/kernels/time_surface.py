@@ -22,12 +22,13 @@ from numba import njit
 
 from tofnet.kernels.cache_hints import prefetch
 from tofnet.kernels.rotation import rotational_flow
-from tofnet.kernels.time_surface_first import B_HOLD, N_B, NEVER, first_event
+from tofnet.kernels.time_surface_first import B_EMITTED, B_HOLD, B_INDEX, N_B, NEVER, first_event, later_event
 from tofnet.kernels.time_surface_fit import FIT_ILL_CONDITIONED, FIT_OVER_RMS, FIT_TOO_FEW, fit_plane, fit_rows
+from tofnet.kernels.time_surface_motion import (M_SINCE, M_UPDATE, M_VX, M_VY, M_VZ, N_MOTION,  # noqa: F401
+                                                _gains, _turn_gains, _velocity_term_at, follow_motion)
 from tofnet.kernels.time_surface_gather import behind_steps, gather, time_window, trimmed_plane
 from tofnet.kernels.time_surface_travel import (RING, S_CHANGE, S_FIRST, advance, pace, since_reversal, to_travel,
                                                 travel_at)
-from tofnet.kernels.velocity import sampled_velocity_term, velocity_term
 
 
 #: Count slots: where each event ended. Drops of events, rejections of estimates, emitted.
@@ -42,69 +43,23 @@ REJECT_SLOTS = tuple(range(NO_MOTION, EMITTED))  # a first event whose estimate 
 # Integer parameters (``ip``) and float parameters (``fp``), by slot.
 (I_WIDTH, I_HEIGHT, I_RADIUS, I_T0, I_DT, I_LATENCY, I_UPDATE_EVERY, I_MIN_POINTS, I_ITERATIONS,
  I_REFRACTORY, I_WINDOW, I_CONSISTENCY_WINDOW, I_MAX_HOLD, I_RECORD_REJECTED, I_MODEL, I_PER_PIXEL, I_PINHOLE,
- I_TRAVEL, I_ROW0, I_ROWS, I_OWN0, I_OWN1, N_IP) = range(23)
+ I_TRAVEL, I_ROW0, I_ROWS, I_OWN0, I_OWN1, I_BURST_FIT, N_IP) = range(24)
 (F_FX, F_FY, F_CX, F_CY, F_OUTLIER, F_MAX_RMS, F_MIN_SPREAD, F_MIN_DEPTH, F_MAX_DEPTH, F_MIN_DENOMINATOR,
  F_WINDOW_DEPTH, F_REFRACTORY_REACH, F_CONSISTENCY, F_HOLD_PX, F_AHEAD_PX, F_TURN, F_TRIM_PX,
  F_RFX, F_RFY, F_RCX, F_RCY, F_HOLD_RMS, F_BEHIND_REACH, F_WINDOW_PX, F_BURST_RATIO,
  N_FP) = range(26)  # F_R*: B ω's intrinsics
 # F_*_REACH: a depth (m) times 1e6 µs/s; over |A t| (px m/s) it is the time (µs) per pixel of a surface that deep.
-# Motion state: the velocity the current epoch started with, its start (µs), the last update seen.
-M_VX, M_VY, M_VZ, M_SINCE, M_UPDATE, N_MOTION = range(6)
 # Fit models (``I_MODEL``): a plane, or lines along the motion with a shared slope.
 MODEL_PLANE, MODEL_ROWS = range(2)
 MODELS = ("plane", "rows")
+# Which later events of a burst are fitted on their burst-index surface (``I_BURST_FIT``): all, only those
+# whose edge's first event was fitted (it passed the pixel's hold), or only those whose first event was emitted.
+BURST_FIT_ALL, BURST_FIT_FITTED, BURST_FIT_EMITTED = range(3)
+BURST_FITS = ("all", "fitted", "emitted")
 # Status of a call.
 OK, UNSORTED, NO_VELOCITY = range(3)
 #: Events between a prefetch of a pixel's state and surface rows and their use.
 PREFETCH = 8
-
-
-@njit(cache=True)
-def follow_motion(motion, row, update: int, update_start_us: int, turn: float) -> None:
-    """Start a new motion epoch at ``update`` when its velocity differs from the epoch's by more
-    than ``turn`` times the epoch's speed (a turn, a start or a stop); ``turn = 0``: never."""
-    dx, dy, dz = row[0] - motion[M_VX], row[1] - motion[M_VY], row[2] - motion[M_VZ]
-    change = math.sqrt(dx * dx + dy * dy + dz * dz)
-    speed = math.sqrt(motion[M_VX] ** 2 + motion[M_VY] ** 2 + motion[M_VZ] ** 2)
-    if motion[M_UPDATE] < 0 or (turn > 0.0 and change > turn * speed):
-        motion[M_VX], motion[M_VY], motion[M_VZ] = row[0], row[1], row[2]
-        motion[M_SINCE] = update_start_us
-    motion[M_UPDATE] = update
-
-
-@njit(cache=True, inline="always")
-def _velocity_term_at(x, y, pixel, per_pixel, pinhole, sample_of, points, tx, ty, tz, fx, fy, cx, cy):
-    """``A t`` (px*m/s) for pixel (x, y) under the velocity (tx, ty, tz), through the lens of
-    ``points`` (one ``tofnet.kernels.lens.sample_table`` row per sample: the pixel or its patch);
-    ``pinhole`` (per pixel, no lens): at the pixel itself, the same numbers without reading the table."""
-    if pinhole:
-        at_x, at_y = velocity_term(tx, ty, tz, float(x), float(y), fx, fy, cx, cy)
-    else:
-        sample = pixel if per_pixel else sample_of[pixel]
-        at_x, at_y = sampled_velocity_term(tx, ty, tz, points[sample], fx, fy, cx, cy)
-    return at_x, at_y
-
-
-@njit(cache=True, inline="always")
-def _gains(x, y, pixel, per_pixel, pinhole, sample_of, points, fu, fv, fx, fy, cx, cy):
-    """``g = Aᵀ f`` at pixel (x, y) (px per m/s of each velocity component, along ``f``): ``g·v = (A v)·f``."""
-    if pinhole:
-        return -fx * fu, -fy * fv, (x - cx) * fu + (y - cy) * fv
-    sample = pixel if per_pixel else sample_of[pixel]
-    ax, ay = sampled_velocity_term(1.0, 0.0, 0.0, points[sample], fx, fy, cx, cy)
-    bx, by = sampled_velocity_term(0.0, 1.0, 0.0, points[sample], fx, fy, cx, cy)
-    zx, zy = sampled_velocity_term(0.0, 0.0, 1.0, points[sample], fx, fy, cx, cy)
-    return ax * fu + ay * fv, bx * fu + by * fv, zx * fu + zy * fv
-
-
-
-@njit(cache=True, inline="always")
-def _turn_gains(x, y, fu, fv, rfx, rfy, rcx, rcy):
-    """``h = Bᵀ f`` at pixel (x, y) (px per rad of each rotation component, along ``f``): ``h·ω = (B ω)·f``."""
-    ax, ay = rotational_flow(1.0, 0.0, 0.0, float(x), float(y), rfx, rfy, rcx, rcy)
-    bx, by = rotational_flow(0.0, 1.0, 0.0, float(x), float(y), rfx, rfy, rcx, rcy)
-    zx, zy = rotational_flow(0.0, 0.0, 1.0, float(x), float(y), rfx, rfy, rcx, rcy)
-    return ax * fu + ay * fv, bx * fu + by * fv, zx * fu + zy * fv
 
 
 # no reference counts (``_nrt``): numba counted one on each scratch array the inlined gather takes (5 atomic
@@ -116,8 +71,12 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
 
     ``surface[p, (y + r) * (w + 2r) + x + r]`` is the last first event (µs) of pixel (x, y) and
     polarity p (one plane per polarity, so a fit reads one cache line per row; a border of
-    ``r = radius`` pixels stays ``NEVER``); ``bursts[y * w + x, p]`` the first-event rule's state
-    (``time_surface_first``), with the measured hold (``B_HOLD`` µs, 0 = none yet) in the same row;
+    ``r = radius`` pixels stays ``NEVER``); with burst-index surfaces (``surface`` [K, 2, plane]) ``surface[k, p]``
+    holds the pixel's last event of index k in its edge's burst, and an event of index 0 < k < K is fitted on
+    it as a first event is on ``surface[0, p]`` (``I_BURST_FIT``: which are; ``later_event``);
+    ``bursts[y * w + x, p]`` the first-event rule's state
+    (``time_surface_first``), with the measured hold (``B_HOLD`` µs, 0 = none yet) in the same row
+    (and, with K > 1, a second block of rows as large with the burst index ``B_INDEX``);
     ``prev[y * w + x]`` the pixel's last estimate (z, t) for the consistency rule;
     ``last_step[y * w + x]`` the output step of its last estimate (at most one per pixel and step);
     ``ring`` the camera's displacement per input step and ``ring_state`` (``time_surface_travel``, with ``I_TRAVEL``).
@@ -152,6 +111,10 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
     hold_px, ahead_px, turn, trim_px = fp[F_HOLD_PX], fp[F_AHEAD_PX], fp[F_TURN], fp[F_TRIM_PX]
     hold_rms, behind_reach, window_px = fp[F_HOLD_RMS], fp[F_BEHIND_REACH], fp[F_WINDOW_PX]
     burst_ratio = fp[F_BURST_RATIO]
+    # burst-index surfaces: ``surface`` [K, 2, plane] (a type of its own, so numba compiles the kernel apart for
+    # it: without them the dead branches below fold away and the loop's machine code is the one-surface kernel's)
+    layered = surface.ndim == 3
+    planes = np.int64(surface.shape[0]) if layered else np.int64(1)
     behind_depth = behind_reach * 1e-6  # m: travel coordinates compare travel (px·m) with it
     # a fit this far off its points is rejected (bad_fit) and sets no hold: unless it is recorded, the fit may stop
     give_up_rms = math.inf if record_rejected else max(max_rms, hold_rms) if hold_px > 0.0 else max_rms
@@ -161,7 +124,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
     linear_from = np.int64(0)
     j = 0
     tx = ty = tz = 0.0  # the step's velocity row (read per step, not per event)
-    n_events, plane_size = ts.shape[0], surface.shape[1]
+    n_events, plane_size = ts.shape[0], surface.shape[surface.ndim - 1]
     flat_surface = surface.reshape(-1)
     flat_points, points_columns = points.reshape(-1), points.shape[1]
     flat_bursts = bursts.reshape(-1)
@@ -227,6 +190,9 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
         at_cell = polarity * plane_size + cell  # in the flat surface: no view of the plane (a refcount per event)
         state = np.int64(N_B) * (2 * pixel + polarity)
         edge, fitted = first_event(flat_bursts, state, t, burst_ratio, refractory_us, refractory_reach, speed2)
+        if layered:  # a burst's later event k < K writes surface k and is fitted there, as a first event on 0
+            at_cell, edge, fitted = later_event(flat_bursts, flat_surface, state, at_cell, plane_size, edge, fitted,
+                                                planes, ip[I_BURST_FIT])
         flat_surface[np.uint64(at_cell)] = t if edge else flat_surface[np.uint64(at_cell)]
         if not mine:  # a halo row: its surface only, for the band's fits
             continue
@@ -345,7 +311,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
             slot = (TOO_FEW_POINTS if fit == FIT_TOO_FEW else ILL_CONDITIONED if fit == FIT_ILL_CONDITIONED
                     else BAD_FIT if fit == FIT_OVER_RMS else EMITTED)
         a, b = tau_s * fu - tau_w * fv, tau_s * fv + tau_w * fu  # ∇T at the event, µs/px along u and v
-        if slot == EMITTED and hold_px > 0.0 and rms <= hold_rms:
+        if slot == EMITTED and hold_px > 0.0 and rms <= hold_rms and (not layered or at_cell < 2 * plane_size):
             # this edge's burst lasts about its ramp's width: hold_px pixels (a fit far off the
             # points, e.g. in noise, measured no crossing time: it leaves the hold as it was)
             flat_bursts[np.uint64(state + B_HOLD)] = min(max_hold, np.int64(hold_px * math.sqrt(a * a + b * b)) + 1)
@@ -383,6 +349,8 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
                 slot = SAME_STEP
             else:
                 last_step[up] = step
+                if layered and at_cell < 2 * plane_size:  # a first event: its burst may ask (``later_event``)
+                    flat_bursts[np.uint64(flat_bursts.shape[0] // 2 + state + B_INDEX)] = B_EMITTED
         counts[slot] += 1
         if slot != EMITTED:
             if not record_rejected:
@@ -391,5 +359,6 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
         estimate, q = out[np.uint64(n_out)], quality[np.uint64(n_out)]
         estimate.t, estimate.x, estimate.y, estimate.z, estimate.step = step_end + latency * dt, x, y, z, step
         q.t_event, q.points, q.rms_px, q.gx, q.gy, q.index, q.reason = t, kept, rms, gx, gy, index0 + i, slot
+        q.burst = at_cell // (2 * plane_size) if layered else 0  # the burst index k: its surface
         n_out += 1
     return n_out, OK, t_hi

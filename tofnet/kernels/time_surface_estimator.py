@@ -17,16 +17,17 @@ import numpy as np
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE
 from tofnet.kernels import time_surface as ts
-from tofnet.kernels.time_surface_first import B_FITTED, B_HOLD, B_LAST, N_B
+from tofnet.kernels.time_surface_first import B_FITTED, B_HOLD, B_INDEX, B_LAST, N_B
 from tofnet.kernels.time_surface_fit import N_L
 from tofnet.kernels.time_surface_travel import N_R, N_S, NOT_YET, RING
 from tofnet.kernels.kernel_config import microseconds
 from tofnet.kernels.lens import SAMPLE_COLUMNS, Lens, sample_table
 
 #: Per estimate, aligned with the depth records: event time µs, points kept by the fit,
-#: their rms distance from the plane (px), the gradient ∇T (s/px), the event's index in the stream.
+#: their rms distance from the plane (px), the gradient ∇T (s/px), the event's index in the stream, the
+#: reason (``record_rejected``) and the event's index in its edge's burst (0 but with ``burst_surfaces`` > 1).
 QUALITY_DTYPE = np.dtype([("t_event", "<i8"), ("points", "<u2"), ("rms_px", "<f4"), ("gx", "<f4"), ("gy", "<f4"),
-                          ("index", "<i8"), ("reason", "u1")])
+                          ("index", "<i8"), ("reason", "u1"), ("burst", "u1")])
 
 #: ``rows(first_update, n_updates) -> (table, table_first)``: camera velocity per update, row ``i``
 #: is update ``table_first + i``; 3 columns (tx, ty, tz m/s) or 6 (+ wx, wy, wz rad/s, camera frame).
@@ -75,6 +76,8 @@ class TimeSurfaceConfig:
     min_depth: float = 0.05
     max_depth: float = 20.0
     min_denominator: float = 0.1
+    burst_surfaces: int = 1
+    burst_fit: str = "all"
     timestep_us: int = 1000
     latency_steps: int = 1
     update_every: int = 1
@@ -91,6 +94,10 @@ class TimeSurfaceConfig:
             problems.append(f"coordinates: expected one of {COORDINATES}, got {self.coordinates!r}")
         if self.coordinates == "travel" and int(self.radius) < 2:
             problems.append(f"coordinates: travel needs radius >= 2 (two pixels behind), got radius {self.radius!r}")
+        if self.burst_fit not in ts.BURST_FITS:
+            problems.append(f"burst_fit: expected one of {ts.BURST_FITS}, got {self.burst_fit!r}")
+        if not 1 <= int(self.burst_surfaces) <= 16:
+            problems.append(f"burst_surfaces: expected an integer 1 .. 16, got {self.burst_surfaces!r}")
         for name in ("radius", "min_points", "update_every", "patch_size", "latency_steps"):
             if int(getattr(self, name)) < 1:
                 problems.append(f"{name}: expected an integer >= 1, got {getattr(self, name)!r}")
@@ -137,8 +144,8 @@ class TimeSurfaceEstimator:
     least the first event of every step within the sensor (they move its clock: the travel ring and
     the motion epochs; ``tofnet.kernels.bands.clocked_columns``), or every event (quality's ``index``
     counts the events it was fed).
-    Memory is fixed by the rows held (about 96 B per pixel) plus output buffers as large as
-    the largest packet.
+    Memory is fixed by the rows held (about 96 B per pixel; with ``burst_surfaces`` K > 1, 16 (K - 1) + 80 B
+    more) plus output buffers as large as the largest packet.
     """
 
     def __init__(self, config: TimeSurfaceConfig, t0_us: int | None = None, rows: tuple[int, int] | None = None):
@@ -151,11 +158,11 @@ class TimeSurfaceEstimator:
         self._ip = np.zeros(ts.N_IP, np.int64)
         self._ip[[ts.I_WIDTH, ts.I_HEIGHT, ts.I_RADIUS, ts.I_DT, ts.I_LATENCY, ts.I_UPDATE_EVERY, ts.I_MIN_POINTS,
                   ts.I_ITERATIONS, ts.I_REFRACTORY, ts.I_WINDOW, ts.I_CONSISTENCY_WINDOW, ts.I_MAX_HOLD, ts.I_MODEL,
-                  ts.I_PER_PIXEL, ts.I_PINHOLE, ts.I_TRAVEL]] = (
+                  ts.I_PER_PIXEL, ts.I_PINHOLE, ts.I_TRAVEL, ts.I_BURST_FIT]] = (
             width, height, c.radius, c.timestep_us, c.latency_steps, c.update_every, c.min_points, c.iterations,
             microseconds(c.refractory), microseconds(c.window), microseconds(c.consistency_window),
             microseconds(c.max_hold), ts.MODELS.index(c.model),
-            c.per_pixel, c.per_pixel and c.lens is None, c.coordinates == "travel")
+            c.per_pixel, c.per_pixel and c.lens is None, c.coordinates == "travel", ts.BURST_FITS.index(c.burst_fit))
         self._ip[[ts.I_HEIGHT, ts.I_ROW0, ts.I_ROWS, ts.I_OWN0, ts.I_OWN1]] = (
             sensor_height, self.held[0], height, own0, own1 if own1 < sensor_height else 1 << 16)
         self._fp = np.zeros(ts.N_FP, np.float64)
@@ -167,10 +174,17 @@ class TimeSurfaceEstimator:
             c.window_depth, reach(c.refractory_depth), c.consistency, c.hold_px, c.ahead_px, c.turn, c.trim_px,
             *(c.intrinsics if c.rotation_intrinsics is None else c.rotation_intrinsics), c.hold_fit_rms_px,
             reach(c.behind_depth), c.window_px, c.burst_ratio)
-        r, pixels = int(c.radius), width * height
-        self._surface = np.full((2, (height + 2 * r) * (width + 2 * r)), ts.NEVER, np.int64)
-        self._bursts = np.zeros((pixels, 2, N_B), np.int64)  # the holds in it: 0, none yet
-        self._bursts[:, :, [B_LAST, B_FITTED]] = ts.NEVER
+        r, pixels, planes = int(c.radius), width * height, int(c.burst_surfaces)
+        # per burst index k < K and polarity p, [k, p] (k = 0: the first events, ``last_first_event``); with K = 1
+        # [p] only: the kernel compiled for that type has no burst-index code at all
+        shape = (planes, 2) if planes > 1 else (2,)
+        self._surface = np.full(shape + ((height + 2 * r) * (width + 2 * r),), ts.NEVER, np.int64)
+        # the holds in it: 0, none yet; with K > 1 a second block of rows: the burst index (``later_event``)
+        self._bursts = np.zeros((pixels * (1 + (planes > 1)), 2, N_B), np.int64)
+        self._bursts[:pixels, :, [B_LAST, B_FITTED]] = ts.NEVER
+        if planes > 1:
+            self._bursts[pixels:, :, B_INDEX] = planes  # no edge yet: beyond the surfaces
+        self._pixels = pixels
         self._prev = np.zeros((pixels if c.consistency > 0 else 1, 2), np.float64)
         self._last_step = np.full(pixels, ts.NEVER, np.int64)
         self._motion = np.zeros(ts.N_MOTION)
@@ -192,7 +206,7 @@ class TimeSurfaceEstimator:
     @property
     def _hold(self) -> np.ndarray:
         """The holds ``[pixels held, 2]`` (µs, 0: none yet): a view into the first-event rule's state."""
-        return self._bursts[:, :, B_HOLD]
+        return self._bursts[:self._pixels, :, B_HOLD]
 
     @property
     def t0_us(self) -> int | None:

@@ -19,6 +19,7 @@ from tofnet.events import EVENT_DTYPE
 from tofnet.kernels.bands import clocked_columns
 from tofnet.kernels.order import pixel_order
 from tofnet.kernels.time_surface_estimator import TimeSurfaceConfig, TimeSurfaceEstimator, event_columns
+from tofnet.kernels.time_surface_first import NEVER
 from tofnet.models.base import Model, ModelContext, concat, records, take
 from tofnet.processes.time_surface import QUALITY, TimeSurfaceProcess
 
@@ -29,7 +30,8 @@ LATENCY_STEPS = TimeSurfaceProcess.port_latency_steps("depth")
 CONFIG_PARAMS = ("model", "coordinates", "radius", "ahead_px", "window", "window_depth", "window_px", "turn",
                  "min_points", "min_spread", "outlier_px", "iterations", "max_rms_px", "trim_px", "hold_px",
                  "hold_fit_rms_px", "burst_ratio", "behind_depth", "refractory_depth", "refractory", "max_hold",
-                 "consistency", "consistency_window", "min_depth", "max_depth", "min_denominator")
+                 "consistency", "consistency_window", "min_depth", "max_depth", "min_denominator", "burst_surfaces",
+                 "burst_fit")
 
 
 def config_of(process: TimeSurfaceProcess, ctx: ModelContext) -> TimeSurfaceConfig:
@@ -183,10 +185,11 @@ class TimeSurfaceModel(Model):
 
     # -- state between runs -------------------------------------------------------------------
     def _surface(self) -> np.ndarray:
-        """A view of the surface ``[2, rows held, W]`` (µs) inside the kernel's border."""
+        """A view of the surfaces ``[2 K, rows held, W]`` (µs) inside the kernel's border: ``[:2]`` the first
+        events' (``last_first_event``), then per burst index ``k < K`` (``burst_surfaces``) two more."""
         width, r = self.ctx.sensor_size[0], self.config.radius
         height = self.estimator.held[1] - self.estimator.held[0]
-        return self.estimator._surface.reshape(2, height + 2 * r, width + 2 * r)[:, r:r + height, r:r + width]
+        return self.estimator._surface.reshape(-1, height + 2 * r, width + 2 * r)[:, r:r + height, r:r + width]
 
     def _hold(self) -> np.ndarray:
         """A view of the holds ``[2, rows held, W]`` (µs)."""
@@ -200,7 +203,7 @@ class TimeSurfaceModel(Model):
 
     def get_var(self, name: str, step: int) -> np.ndarray:
         if name == "last_first_event":
-            return self._own(self._surface()).copy()
+            return self._own(self._surface()[:2]).copy()
         if name == "hold":
             return self._own(self._hold()).astype(np.int64)
         return super().get_var(name, step)
@@ -208,7 +211,11 @@ class TimeSurfaceModel(Model):
     def set_var(self, name: str, value: np.ndarray, step: int) -> None:
         lo, hi = self.estimator.held  # a band takes its halo rows too: its fits read their surface
         if name == "last_first_event":
-            self._surface()[...] = value[:, lo:hi]
+            surfaces, value = self._surface(), value[:, lo:hi]
+            changed = surfaces[:2] != value  # where an edge is forgotten or planted: its later events' too
+            for k in range(1, len(surfaces) // 2):
+                surfaces[2 * k:2 * k + 2][changed] = NEVER
+            surfaces[:2] = value
             return
         if name == "hold":
             self._hold()[...] = np.clip(value[:, lo:hi], 0, np.iinfo(np.int32).max)

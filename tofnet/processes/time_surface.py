@@ -18,6 +18,8 @@ QUALITY = Payload("time_surface_quality", (("t_event", "<i8"), ("points", "<u2")
 
 #: Fit models: lines of pixels along the image motion with their own offsets, or one plane.
 MODELS = ("rows", "plane")
+#: With burst-index surfaces: which later events of a burst are fitted.
+BURST_FITS = ("all", "fitted", "emitted")
 #: What the fit's surface is over: the camera's travel at the first events' times, or the times themselves.
 COORDINATES = ("travel", "time")
 
@@ -109,6 +111,12 @@ class TimeSurfaceProcess(Process):
               minimum=0.0),
         Param("min_depth", "length", 0.05, unit="m", doc="estimates at or below are rejected", minimum=0.0),
         Param("max_depth", "length", 20.0, unit="m", doc="estimates at or above are rejected", minimum=0.0),
+        Param("burst_surfaces", "int", 1, doc="burst-index surfaces K: a burst's k-th later event (k < K) "
+              "writes surface k of its pixel and is fitted on it as a first event is on surface 0 (1: first events "
+              "only; docs/time_surface.md 7e)", minimum=1, maximum=16),
+        Param("burst_fit", "str", "all", doc="with burst_surfaces > 1, which later events are fitted: all, only "
+              "those whose edge's first event was fitted (passed the hold), or only those whose first event was "
+              "emitted", choices=BURST_FITS),
         Param("min_denominator", "float", 0.1, doc="with b_w: estimates whose translational share 1 - (B ω)·∇T is "
               "below are rejected (rotation_dominated)", minimum=0.0),
     )
