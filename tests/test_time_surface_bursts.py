@@ -38,7 +38,7 @@ def burst_edge(seed=0, bursts=4, gap_us=1500, jitter_us=40, speed=100.0, sensor=
 def test_later_burst_events_are_fitted_on_their_own_surfaces():
     events, velocity = burst_edge()
     depth1, quality1, one = run(events, velocity)
-    depth3, quality3, three = run(events, velocity, burst_surfaces=3)
+    depth3, quality3, three = run(events, velocity, burst_surfaces=3, burst_fit="all")
     assert (quality1["burst"] == 0).all() and one.counts["burst"] == 3 * len(events) // 4
     k = quality3["burst"]
     assert set(np.unique(k)) == {0, 1, 2} and np.count_nonzero(k > 0) > len(depth1)
@@ -62,7 +62,7 @@ def test_later_burst_events_are_fitted_on_their_own_surfaces():
 @pytest.mark.parametrize("which", ["fitted", "emitted"])
 def test_fitted_or_emitted_only_fits_fewer_later_events(which):
     events, velocity = burst_edge()
-    _, q_all, _ = run(events, velocity, burst_surfaces=3, record_rejected=True)
+    _, q_all, _ = run(events, velocity, burst_surfaces=3, burst_fit="all", record_rejected=True)
     _, q_some, _ = run(events, velocity, burst_surfaces=3, burst_fit=which, record_rejected=True)
     some, every = np.count_nonzero(q_some["burst"] > 0), np.count_nonzero(q_all["burst"] > 0)
     # one edge: every first event passed the hold (no fit has set one yet), not every one was emitted

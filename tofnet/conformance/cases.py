@@ -298,6 +298,14 @@ def _time_surface_texture() -> Scene:
     return Scene(network, rec(events))
 
 
+@case("time-surface-bursts", "the time-surface estimator with burst-index surfaces (a burst's later events fitted "
+      "on surfaces of their own), on the texture of time-surface-texture")
+def _time_surface_bursts() -> Scene:
+    size, flow = (28, 20), (250.0, -120.0)
+    network = improved_network(size, time_surface={"t0": 0, "burst_surfaces": 4}, velocity=_constant(camera_for(flow)))
+    return Scene(network, _time_surface_texture().recording)
+
+
 @case("graph-paper-and-time-surface", "the paper's network and the time-surface estimator side by side, both "
       "reading the events, on one velocity process; the texture of time-surface-texture")
 def _paper_and_time_surface() -> Scene:

@@ -114,7 +114,7 @@ class TimeSurfaceProcess(Process):
         Param("burst_surfaces", "int", 1, doc="burst-index surfaces K: a burst's k-th later event (k < K) "
               "writes surface k of its pixel and is fitted on it as a first event is on surface 0 (1: first events "
               "only; docs/time_surface.md 7e)", minimum=1, maximum=16),
-        Param("burst_fit", "str", "all", doc="with burst_surfaces > 1, which later events are fitted: all, only "
+        Param("burst_fit", "str", "emitted", doc="with burst_surfaces > 1, which later events are fitted: all, only "
               "those whose edge's first event was fitted (passed the hold), or only those whose first event was "
               "emitted", choices=BURST_FITS),
         Param("min_denominator", "float", 0.1, doc="with b_w: estimates whose translational share 1 - (B ω)·∇T is "
