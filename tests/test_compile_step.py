@@ -182,3 +182,14 @@ def test_threads_compiling_at_once_count_their_overlap_once():
     wall = time.perf_counter() - begun
     assert watch.count == 2
     assert 0.2 <= watch.seconds <= wall
+
+
+def test_warmup_tells_a_kernel_picking_number_from_other_numbers():
+    """``tofnet warmup`` runs one conformance case per code path: a parameter declared ``selects_code``
+    (burst_surfaces: another compiled kernel) makes its own path, other numbers do not."""
+    from tofnet.conformance import get_case
+    from tofnet.warmup import _code_path
+
+    texture, bursts = (_code_path(get_case(name).build()) for name in ("time-surface-texture", "time-surface-bursts"))
+    assert texture != bursts
+    assert _code_path(get_case("patch-d1").build()) == _code_path(get_case("patch-d2").build())

@@ -98,11 +98,16 @@ def _families_warmer(backends: tuple[str, ...]) -> Callable[[], str]:
 
 def _code_path(scene) -> tuple:
     """What decides which kernels a scene calls: its processes' types, connections and choices (the
-    parameters that are words or flags; numbers only change values), and what its recording carries."""
+    parameters that are words or flags, and numbers declared ``selects_code``; other numbers only change
+    values), and what its recording carries."""
     network = scene.network
-    processes = tuple(sorted((type(p).__name__, tuple(sorted((k, repr(v)) for k, v in p.values.items()
-                                                             if isinstance(v, (str, bool)) or v is None)))
-                             for p in network.processes))
+
+    def choices(process) -> tuple:
+        picks = {p.name for p in process.all_params() if p.selects_code}
+        return tuple(sorted((k, repr(v)) for k, v in process.values.items()
+                            if isinstance(v, (str, bool)) or v is None or k in picks))
+
+    processes = tuple(sorted((type(p).__name__, choices(p)) for p in network.processes))
     edges = tuple(sorted((type(a.process).__name__, a.name, type(b.process).__name__, b.name)
                          for a, b in network.connections()))
     recording = scene.recording

@@ -34,6 +34,7 @@ class Param:
     maximum: float | None = None
     optional: bool = False  # None is an accepted value
     reads_file: bool = False  # the value names a file the process reads (protected from outputs)
+    selects_code: bool = False  # a number that picks another compiled kernel (``tofnet warmup`` runs each)
 
     def coerce(self, value: Any, owner: str) -> Any:
         """Return ``value`` converted to this parameter's kind, or raise naming the field."""
