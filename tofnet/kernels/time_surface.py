@@ -22,7 +22,7 @@ from numba import njit
 
 from tofnet.kernels.cache_hints import prefetch
 from tofnet.kernels.rotation import rotational_flow
-from tofnet.kernels.time_surface_first import B_EMITTED, B_HOLD, B_INDEX, N_B, NEVER, first_event, later_event
+from tofnet.kernels.time_surface_first import B_EMITTED, B_HOLD, N_B, NEVER, first_event, index_slot, later_event
 from tofnet.kernels.time_surface_fit import FIT_ILL_CONDITIONED, FIT_OVER_RMS, FIT_TOO_FEW, fit_plane, fit_rows
 from tofnet.kernels.time_surface_motion import (M_SINCE, M_UPDATE, M_VX, M_VY, M_VZ, N_MOTION,  # noqa: F401
                                                 _gains, _turn_gains, _velocity_term_at, follow_motion)
@@ -76,7 +76,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
     it as a first event is on ``surface[0, p]`` (``I_BURST_FIT``: which are; ``later_event``);
     ``bursts[y * w + x, p]`` the first-event rule's state
     (``time_surface_first``), with the measured hold (``B_HOLD`` µs, 0 = none yet) in the same row
-    (and, with K > 1, a second block of rows as large with the burst index ``B_INDEX``);
+    (and, with K > 1, a flat array: those rows, then a word per pixel and polarity, ``index_slot``);
     ``prev[y * w + x]`` the pixel's last estimate (z, t) for the consistency rule;
     ``last_step[y * w + x]`` the output step of its last estimate (at most one per pixel and step);
     ``ring`` the camera's displacement per input step and ``ring_state`` (``time_surface_travel``, with ``I_TRAVEL``).
@@ -350,7 +350,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
             else:
                 last_step[up] = step
                 if layered and at_cell < 2 * plane_size:  # a first event: its burst may ask (``later_event``)
-                    flat_bursts[np.uint64(flat_bursts.shape[0] // 2 + state + B_INDEX)] = B_EMITTED
+                    flat_bursts[index_slot(flat_bursts, state)] = B_EMITTED
         counts[slot] += 1
         if slot != EMITTED:
             if not record_rejected:

@@ -17,7 +17,7 @@ import numpy as np
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE
 from tofnet.kernels import time_surface as ts
-from tofnet.kernels.time_surface_first import B_FITTED, B_HOLD, B_INDEX, B_LAST, N_B
+from tofnet.kernels.time_surface_first import B_FITTED, B_HOLD, B_LAST, N_B
 from tofnet.kernels.time_surface_fit import N_L
 from tofnet.kernels.time_surface_travel import N_R, N_S, NOT_YET, RING
 from tofnet.kernels.kernel_config import microseconds
@@ -144,7 +144,7 @@ class TimeSurfaceEstimator:
     least the first event of every step within the sensor (they move its clock: the travel ring and
     the motion epochs; ``tofnet.kernels.bands.clocked_columns``), or every event (quality's ``index``
     counts the events it was fed).
-    Memory is fixed by the rows held (about 96 B per pixel; with ``burst_surfaces`` K > 1, 16 (K - 1) + 80 B
+    Memory is fixed by the rows held (about 96 B per pixel; with ``burst_surfaces`` K > 1, 16 (K - 1) + 16 B
     more) plus output buffers as large as the largest packet.
     """
 
@@ -179,12 +179,15 @@ class TimeSurfaceEstimator:
         # [p] only: the kernel compiled for that type has no burst-index code at all
         shape = (planes, 2) if planes > 1 else (2,)
         self._surface = np.full(shape + ((height + 2 * r) * (width + 2 * r),), ts.NEVER, np.int64)
-        # the holds in it: 0, none yet; with K > 1 a second block of rows: the burst index (``later_event``)
-        self._bursts = np.zeros((pixels * (1 + (planes > 1)), 2, N_B), np.int64)
-        self._bursts[:pixels, :, [B_LAST, B_FITTED]] = ts.NEVER
-        if planes > 1:
-            self._bursts[pixels:, :, B_INDEX] = planes  # no edge yet: beyond the surfaces
-        self._pixels = pixels
+        # the first-event rule's rows, the holds in them (0: none yet); with K > 1 a flat array of those rows and
+        # then a word per pixel and polarity, the burst index (``time_surface_first.index_slot``)
+        rows = pixels * 2 * N_B
+        self._burst_state = np.zeros(rows + (pixels * 2 if planes > 1 else 0), np.int64)
+        self._bursts = self._burst_state[:rows].reshape(pixels, 2, N_B)
+        self._bursts[:, :, [B_LAST, B_FITTED]] = ts.NEVER
+        self._burst_state[rows:] = planes  # no edge yet: beyond the surfaces
+        if planes == 1:
+            self._burst_state = self._bursts  # the kernel compiled for rows alone
         self._prev = np.zeros((pixels if c.consistency > 0 else 1, 2), np.float64)
         self._last_step = np.full(pixels, ts.NEVER, np.int64)
         self._motion = np.zeros(ts.N_MOTION)
@@ -206,7 +209,7 @@ class TimeSurfaceEstimator:
     @property
     def _hold(self) -> np.ndarray:
         """The holds ``[pixels held, 2]`` (µs, 0: none yet): a view into the first-event rule's state."""
-        return self._bursts[:self._pixels, :, B_HOLD]
+        return self._bursts[:, :, B_HOLD]
 
     @property
     def t0_us(self) -> int | None:
@@ -264,7 +267,7 @@ class TimeSurfaceEstimator:
             hi = self._piece_end(t, lo)
             table, first = self._table(velocity, int(t[lo]), int(t[hi - 1]))
             n_out, status, self._t_hi = ts.process(
-                t[lo:hi], x[lo:hi], y[lo:hi], p[lo:hi], self._ip, self._fp, self._surface, self._bursts,
+                t[lo:hi], x[lo:hi], y[lo:hi], p[lo:hi], self._ip, self._fp, self._surface, self._burst_state,
                 self._prev, self._last_step, self._motion, self._ring, self._ring_state, self._sample_of, self._points,
                 table, first, *self._scratch, self._counts, depth, quality, n_out, self.events_in + lo, self._t_hi)
             if status == ts.UNSORTED:

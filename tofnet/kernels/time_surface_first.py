@@ -20,13 +20,19 @@ NEVER = -(1 << 62)
 #: ``bursts[y * w + x, p]``: the pixel's last event, the silence before it (negative when it
 #: continued a burst), its last fitted event, its hold (µs; 0: none yet, set by ``time_surface``'s fits).
 B_LAST, B_GAP, B_FITTED, B_HOLD, N_B = range(5)
-#: With burst-index surfaces (``burst_surfaces`` K > 1) ``bursts`` holds a second block of rows as large,
-#: after the first (a row's own length and the kernel's loop stay as they are): slot ``B_INDEX`` of the
-#: row there is the index of the pixel's last event in its edge's burst (0: it started the edge; K: beyond
-#: the surfaces, or no edge yet).
-B_INDEX = 0
+#: With burst-index surfaces (``burst_surfaces`` K > 1) the flat state holds, after the rows (whose length
+#: and the kernel's loop stay as they are), one word per pixel and polarity (``index_slot``): the index of
+#: the pixel's last event in its edge's burst (0: it started the edge; K: beyond the surfaces, or no edge yet).
 #: A flag beside the index there: the edge's first event was emitted.
 B_EMITTED = 1 << 8
+
+
+@njit(cache=True, inline="always")
+def index_slot(flat_bursts, at: int) -> np.uint64:
+    """Where the burst index of the pixel and polarity whose row starts at ``at`` is: the state is
+    ``pairs`` rows of ``N_B`` words, then ``pairs`` words."""
+    pairs = flat_bursts.shape[0] // (N_B + 1)
+    return np.uint64(pairs * N_B + at // N_B)
 
 
 @njit(cache=True, inline="always")
@@ -65,13 +71,12 @@ def first_event(flat_bursts, at: int, t: int, ratio: float, refractory_us: int, 
 def later_event(flat_bursts, flat_surface, at: int, at_cell: int, plane_size: int, edge: bool, fitted: bool,
                 planes: int, which: int) -> tuple[int, bool, bool]:
     """With ``planes`` = K > 1 burst-index surfaces: ``(at_cell, writes, fitted)`` for an event whose first-event
-    rule said ``(edge, fitted)``, at a pixel whose state row is at ``at`` (in the first of the two blocks of
-    ``flat_bursts``) and whose cell on surface 0 of its
+    rule said ``(edge, fitted)``, at a pixel whose state row is at ``at`` and whose cell on surface 0 of its
     polarity is ``at_cell``. Its index k in its edge's burst (0 when it starts an edge, else one more than the
-    pixel's last, at most K; ``B_INDEX``, from the pixel's own events) picks its surface, ``at_cell + 2 k
+    pixel's last, at most K; ``index_slot``, from the pixel's own events) picks its surface, ``at_cell + 2 k
     plane_size``; an event of 0 < k < K writes it and is fitted there when ``which`` says (0: all; 1: its edge's
     first event was fitted; 2: it was emitted, the ``B_EMITTED`` flag the kernel leaves beside the index)."""
-    slot = np.uint64(flat_bursts.shape[0] // 2 + at + B_INDEX)
+    slot = index_slot(flat_bursts, at)
     kept = flat_bursts[slot]
     index = 0 if edge else min((kept & (B_EMITTED - 1)) + 1, planes)
     flat_bursts[slot] = index if edge else index | (kept & B_EMITTED)
