@@ -123,3 +123,26 @@ def test_a_plans_camera_key_gets_the_one_camera_check(events_file, tmp_path):
                                   "camera picks one of a file with several")
     plan.write_text("recordings:\n  - {path: ev.npy, calib: calib.txt}\n")
     assert load_plan(plan)
+
+
+def test_set_changes_one_parameter_of_the_chosen_network(events_file, tmp_path, capsys):
+    """``--set PROCESS.PARAM=VALUE``: the value as a spec reads it; it changes what runs."""
+    import json
+
+    runs = {}
+    for name, extra in (("default", []), ("distance 2", ["--set", "time_of_travel.distance=2"]),
+                        ("refractory", ["--set", "input.refractory=20ms"])):
+        out, summary = tmp_path / f"{len(runs)}.npz", tmp_path / f"{len(runs)}.json"
+        assert main(["run", str(events_file), "--out", str(out), "--json", str(summary), *COMMON, *extra]) == 0
+        runs[name] = json.loads(summary.read_text())
+    assert runs["distance 2"]["depth_out"] != runs["default"]["depth_out"]
+    assert runs["refractory"]["dropped"] != runs["default"]["dropped"]  # the input filter drops more
+    capsys.readouterr()
+    out = str(tmp_path / "bad.npz")
+    for bad, why in (("time_surface.burst_surfaces=4", "has no process 'time_surface'; processes: input"),
+                     ("input.refractory=banana", "input.refractory"),
+                     ("time_of_travel.nosuch=1", "has no parameter 'nosuch'; expected"),
+                     ("time_of_travel.distance", "expected PROCESS.PARAM=VALUE")):
+        assert main(["run", str(events_file), "--out", out, *COMMON, "--set", bad]) != 0
+        line = error_line(capsys)
+        assert line.startswith("tofnet run: error: --set ") and why in line, line

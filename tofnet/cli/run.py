@@ -88,6 +88,31 @@ def add_network_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--no-undistort", action="store_true",
                    help="treat the camera as a pinhole even when the recording's calibration has lens "
                         "distortion, which the velocity process otherwise takes into account")
+    g.add_argument("--set", metavar="PROCESS.PARAM=VALUE", action="append", default=[], dest="set_params",
+                   help="set one parameter of one process, as a spec would (units as there), after the options "
+                        "above, e.g. --set time_surface.burst_surfaces=4 or --set input.refractory=5ms; repeatable")
+
+
+def set_parameter(network, item: str) -> None:
+    """``--set PROCESS.PARAM=VALUE``: the value read as a YAML scalar or list (``4``, ``5ms``, ``[0.5, 0, 0]``)
+    and converted and checked as the spec's would be; every mistake is one line naming the option."""
+    import yaml
+
+    from tofnet.errors import NetworkError
+
+    name, equals, text = item.partition("=")
+    process, dot, param = name.strip().partition(".")
+    if not (equals and dot and process and param):
+        raise NetworkError(f"--set {item!r}: expected PROCESS.PARAM=VALUE, e.g. time_surface.burst_surfaces=4")
+    try:
+        value = yaml.safe_load(text) if text.strip() else None
+    except yaml.YAMLError:
+        value = text
+    try:
+        network.process(process).set_param(param, value)
+    except NetworkError as err:
+        raise NetworkError(f"--set {item}: {err}") from None
+    network.validate()
 
 
 def build_network(args, recording_sensor_size, recording=None):
@@ -106,6 +131,8 @@ def build_network(args, recording_sensor_size, recording=None):
                     update_every=args.update_every)
     if args.velocity:
         constant_velocity(network, args.velocity)
+    for item in getattr(args, "set_params", None) or ():
+        set_parameter(network, item)
     if args.patch:
         compile_options["patch"] = "auto" if args.patch == "auto" else parse_size(args.patch, "--patch")
     return network, compile_options, spec_backend, backend_options
