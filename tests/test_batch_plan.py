@@ -44,6 +44,14 @@ def test_a_plan_expands_to_recordings_x_networks_x_grid_in_plan_order(folder):
     assert plan.output == folder / "plan-results" and plan.cache == plan.output / "scenarios"
 
 
+def test_a_grid_sweeps_one_process_parameter_as_tofnet_run_set_does(folder):
+    plan = load_plan(write(folder, "recordings: [a.npy]\nnetworks: [{estimator: improved}]\n"
+                                   "grid:\n  time_surface.burst_surfaces: [1, 4]\n"))
+    tasks = expand(plan)
+    assert [t.parameters for t in tasks] == [{"time_surface.burst_surfaces": 1}, {"time_surface.burst_surfaces": 4}]
+    assert tasks[1].task_id.startswith("a.improved.time_surface.burst_surfaces=4-")
+
+
 def test_task_ids_survive_an_edit_of_the_plan_and_change_with_what_a_task_computes(folder):
     before = {t.task_id for t in expand(load_plan(write(folder, "recordings: [a.npy]\ngrid: {refractory: [20ms]}\n")))}
     after = [t.task_id for t in expand(load_plan(write(folder, "recordings: [a.npy, b.npy]\n"
@@ -79,6 +87,12 @@ def test_task_ids_survive_an_edit_of_the_plan_and_change_with_what_a_task_comput
     ("recordings: [a.npy]\ngrid:\n  refractory:\n    - 20ms\n    - fast\n", 5, "grid.refractory[1]: 'fast'"),
     ("recordings: [a.npy]\ngrid:\n  distance: [1, 0]\n", 3, "expected at least 1 px"),
     ("recordings: [a.npy]\ngrid:\n  refractory: []\n", 3, "at least one value"),
+    ("recordings: [a.npy]\ngrid:\n  time_surface.burst_surfaces: [4]\n", 3,
+     "grid.time_surface.burst_surfaces[0]: 4 for network 'paper': network 'depth' has no process 'time_surface'"),
+    ("recordings: [a.npy]\ngrid:\n  time_of_travel.distance: [2, 0]\n", 3,
+     "grid.time_of_travel.distance[1]: 0 for network 'paper': time_of_travel.distance: expected at least 1 px"),
+    ("recordings: [a.npy]\ngrid:\n  velocity.samples: [/etc/passwd]\n", 3,
+     "velocity.samples names a file: set it in a spec, whose paths are checked"),
     ("recordings: [a.npy\n", 2, "malformed YAML"),
 ])
 def test_errors_name_the_file_the_line_and_the_key(folder, text, line, expected):

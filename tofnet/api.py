@@ -221,12 +221,18 @@ OVERRIDES = {
 
 
 def apply_overrides(network: Network, **values: Any) -> None:
-    """Set parameters by option name (see ``OVERRIDES``); ``None`` values are skipped."""
+    """Set parameters by option name (see ``OVERRIDES``) or as ``PROCESS.PARAM`` (one process's parameter,
+    converted and checked as a spec's); ``None`` values are skipped."""
     for option, value in values.items():
         if value is None:
             continue
+        process, dot, param = option.partition(".")
+        if dot:
+            network.process(process).set_param(param, value)
+            continue
         if option not in OVERRIDES:
-            raise NetworkError(f"unknown override {option!r}; expected one of {', '.join(OVERRIDES)}")
+            raise NetworkError(f"unknown override {option!r}; expected one of {', '.join(OVERRIDES)} "
+                               f"or PROCESS.PARAM")
         classes, param = OVERRIDES[option]
         classes = classes if isinstance(classes, tuple) else (classes,)
         targets = [p for cls in classes for p in network.of_type(cls)]

@@ -16,7 +16,7 @@ BACKEND_KEYS = ("workers",)
 
 def grid_options() -> dict[str, str]:
     """Grid keys: the ``tofnet run`` options ``tofnet.api.apply_overrides`` knows, with - or _, and the
-    backend's ``workers``."""
+    backend's ``workers`` (besides ``PROCESS.PARAM``, one process's parameter, as ``tofnet run --set``)."""
     from tofnet.api import OVERRIDES
     keys = [*OVERRIDES, *BACKEND_KEYS]
     return {**{k.replace("_", "-"): k for k in keys}, **{k: k for k in keys}}
@@ -38,9 +38,11 @@ def read_grid(self, tree: Mapping) -> dict[str, list[Any]]:
     out: dict[str, list[Any]] = {}
     for key, values in section.items():
         path = f"grid.{key}"
+        if isinstance(key, str) and "." in key:  # a process's parameter: checked on every network below
+            options[key] = key
         if key not in options:
             known = ", ".join(sorted(set(options.values())))
-            raise self.fail(section, key, path, f"unknown option; expected one of {known}")
+            raise self.fail(section, key, path, f"unknown option; expected one of {known}, or PROCESS.PARAM")
         if options[key] in out:
             raise self.fail(section, key, path, f"{options[key]} is given twice")
         values = values if isinstance(values, list) else [values]
@@ -54,6 +56,14 @@ def read_grid(self, tree: Mapping) -> dict[str, list[Any]]:
         out[options[key]] = list(values)
     return out
 
+def _refuse_file_parameter(network, option: str) -> None:
+    """A plan from someone else must not point a process at a file by its grid (a spec's file paths are
+    checked where the spec is read): a ``PROCESS.PARAM`` that names a file is refused."""
+    process, dot, param = option.partition(".")
+    if dot and any(p.name == param and p.reads_file for p in network.process(process).all_params()):
+        raise TofnetError(f"{option} names a file: set it in a spec, whose paths are checked")
+
+
 def check_grid(self, plan) -> None:
     """Apply every grid value, then every grid point, to every network (sized 240x180).
 
@@ -61,7 +71,7 @@ def check_grid(self, plan) -> None:
     """
     from tofnet.api import apply_overrides, load_network
     section = self.tree.get("grid") or {}
-    keys = {grid_options()[k]: k for k in section}
+    keys = {grid_options().get(k, k): k for k in section}
     for network in plan.networks:
         def fresh():
             return load_network(network.spec, sensor_size=None if network.spec else (240, 180),
@@ -72,7 +82,9 @@ def check_grid(self, plan) -> None:
                     if option in BACKEND_KEYS:
                         _check_workers(value)
                         continue
-                    apply_overrides(fresh(), **{option: value})
+                    target = fresh()
+                    _refuse_file_parameter(target, option)
+                    apply_overrides(target, **{option: value})
                 except TofnetError as err:
                     raise self.fail(section[keys[option]], j, f"grid.{keys[option]}[{j}]",
                                     f"{quote(value)} for network {network.name!r}: {err}") from None

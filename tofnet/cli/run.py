@@ -108,11 +108,11 @@ def set_parameter(network, item: str) -> None:
         value = yaml.safe_load(text) if text.strip() else None
     except yaml.YAMLError:
         value = text
+    from tofnet.api import apply_overrides
     try:
-        network.process(process).set_param(param, value)
+        apply_overrides(network, **{f"{process}.{param}": value})
     except NetworkError as err:
         raise NetworkError(f"--set {item}: {err}") from None
-    network.validate()
 
 
 def build_network(args, recording_sensor_size, recording=None):
