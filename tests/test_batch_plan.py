@@ -52,6 +52,17 @@ def test_a_grid_sweeps_one_process_parameter_as_tofnet_run_set_does(folder):
     assert tasks[1].task_id.startswith("a.improved.time_surface.burst_surfaces=4-")
 
 
+def test_a_grid_may_not_point_a_process_at_a_file(folder):
+    """Every parameter that names a file a process reads (``reads_file``) is refused in a grid: the
+    angular velocity's gyroscope file as its samples."""
+    from pathlib import Path
+    spec = Path(__file__).resolve().parents[1] / "examples" / "rotation.yaml"
+    for param in ("imu", "samples"):
+        with pytest.raises(PlanError, match=f"angular_velocity.{param} names a file a process reads"):
+            load_plan(write(folder, f"recordings: [a.npy]\nnetworks: [{spec}]\n"
+                                    f"grid:\n  angular_velocity.{param}: [/etc/passwd]\n"))
+
+
 def test_task_ids_survive_an_edit_of_the_plan_and_change_with_what_a_task_computes(folder):
     before = {t.task_id for t in expand(load_plan(write(folder, "recordings: [a.npy]\ngrid: {refractory: [20ms]}\n")))}
     after = [t.task_id for t in expand(load_plan(write(folder, "recordings: [a.npy, b.npy]\n"
@@ -92,7 +103,10 @@ def test_task_ids_survive_an_edit_of_the_plan_and_change_with_what_a_task_comput
     ("recordings: [a.npy]\ngrid:\n  time_of_travel.distance: [2, 0]\n", 3,
      "grid.time_of_travel.distance[1]: 0 for network 'paper': time_of_travel.distance: expected at least 1 px"),
     ("recordings: [a.npy]\ngrid:\n  velocity.samples: [/etc/passwd]\n", 3,
-     "velocity.samples names a file: set it in a spec, whose paths are checked"),
+     "velocity.samples names a file a process reads; a grid sweeps values, not files"),
+    ("recordings: [a.npy]\ngrid:\n  distance: [1]\n  time_of_travel.distance: [2]\n", 2,
+     "grid: for network 'paper': time_of_travel.distance is given twice (as distance too)"),
+    ("recordings: [a.npy]\ngrid:\n  input.refractory: [null]\n", 3, "input.refractory: a value is required"),
     ("recordings: [a.npy\n", 2, "malformed YAML"),
 ])
 def test_errors_name_the_file_the_line_and_the_key(folder, text, line, expected):

@@ -142,7 +142,9 @@ def test_set_changes_one_parameter_of_the_chosen_network(events_file, tmp_path, 
     for bad, why in (("time_surface.burst_surfaces=4", "has no process 'time_surface'; processes: input"),
                      ("input.refractory=banana", "input.refractory"),
                      ("time_of_travel.nosuch=1", "has no parameter 'nosuch'; expected"),
-                     ("time_of_travel.distance", "expected PROCESS.PARAM=VALUE")):
+                     ("time_of_travel.distance", "expected PROCESS.PARAM=VALUE"),
+                     ("nosuch.param=", "expected PROCESS.PARAM=VALUE"),
+                     ("time_of_travel.distance=null", "time_of_travel.distance: a value is required")):
         assert main(["run", str(events_file), "--out", out, *COMMON, "--set", bad]) != 0
         line = error_line(capsys)
         assert line.startswith("tofnet run: error: --set ") and why in line, line

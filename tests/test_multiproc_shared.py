@@ -200,3 +200,20 @@ def test_kill_9_of_a_worker_mid_run_is_reported_and_releases_the_buffers():
         with pytest.raises(Exception, match="killed by signal 9"):
             session.run(RECORDING, compiled=compiled)
     assert str(os.getpid()) not in mapped_buffers()
+
+
+@pytest.mark.parametrize("per_core", [False, True])
+def test_a_streams_set_up_holds_the_workers_start_and_stop_not_its_network_time(per_core):
+    """``tofnet run`` streams a recording that names its size: starting the workers (seconds) and stopping
+    them are the stream's set-up, as for ``run``, never the network's time."""
+    import time
+
+    network = depth_network(SENSOR, input={"refractory": "1ms"}, velocity=VELOCITY)
+    started = time.perf_counter()
+    stream = MultiprocBackend(workers=2, per_core=per_core).open_stream(network, recording=RECORDING)
+    stream.feed_all(RECORDING.events)
+    result = stream.close()
+    elapsed = time.perf_counter() - started
+    startup = result.extra.get("startup_s") if not per_core else None
+    assert result.setup_time >= max(0.3, startup or 0.0)  # spawning and warming up 2 workers: seconds
+    assert result.wall_time + result.setup_time + result.compile_time <= elapsed + 1e-3  # nothing counted twice

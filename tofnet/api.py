@@ -222,13 +222,14 @@ OVERRIDES = {
 
 def apply_overrides(network: Network, **values: Any) -> None:
     """Set parameters by option name (see ``OVERRIDES``) or as ``PROCESS.PARAM`` (one process's parameter,
-    converted and checked as a spec's); ``None`` values are skipped."""
+    converted and checked as a spec's: ``None`` clears an optional one); ``None`` values of the options are
+    skipped (not given)."""
     for option, value in values.items():
-        if value is None:
-            continue
         process, dot, param = option.partition(".")
         if dot:
             network.process(process).set_param(param, value)
+            continue
+        if value is None:
             continue
         if option not in OVERRIDES:
             raise NetworkError(f"unknown override {option!r}; expected one of {', '.join(OVERRIDES)} "

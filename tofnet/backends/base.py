@@ -50,8 +50,8 @@ class RunResult:
     #: the kernels it compiled (0 once numba's cache holds them: first run only).
     compile_time: float = 0.0
     kernels_compiled: int = 0
-    #: Seconds the run spent setting up (building the kernels' state, starting worker processes; not
-    #: in ``wall_time``).
+    #: Seconds the run spent setting up and tearing down (building the kernels' state, starting and
+    #: stopping worker processes; not in ``wall_time``).
     setup_time: float = 0.0
 
     def timed_by(self, clock) -> "RunResult":

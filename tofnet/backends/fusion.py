@@ -275,7 +275,8 @@ class FusedStream:
                 names[2]: {name: int(c) for name, c in zip(OUTCOMES, kernel.outcomes)},
                 names[3]: {}}
         finally:
-            self._release()
+            with self.clock.aside():  # stopping threads or worker processes: not the network's time
+                self._release()
         counts = {name: counts[name] for name in self.order}
         outputs = {self.depth_name: canonical(self._held.pop(self.depth_name, np.empty(0, DEPTH_DTYPE)))}
         if self.record_tot:

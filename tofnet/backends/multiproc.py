@@ -126,12 +126,15 @@ class MultiprocBackend(Backend):
     def open_stream(self, compiled, **options) -> GraphStream | FusedStream:
         """A stream on workers of its own; ``close()`` stops them. Options as ``LocalBackend.open_stream``."""
         session = self.session(compiled)
+        started = time.perf_counter()
         session.open()
         try:
             stream = session.open_stream(**{"fuse": True, **options})
         except BaseException:
             session.close(graceful=False)
             raise
+        # starting the workers and building their bands, before the stream's clock began, is its set-up
+        stream.clock.setup_before(max(0.0, stream.clock.started - started))
         if isinstance(stream, FusedStream):
             stream.releases.append(session.close)
         else:
@@ -384,6 +387,8 @@ class _GuardedStream(GraphStream):
             result = self.session._guarded(finish)
         finally:
             if self.on_close is not None:
-                self.on_close()
+                with self.clock.aside():  # stopping the workers: not the network's time
+                    self.on_close()
+        result.setup_time = self.clock.setup_seconds
         result.extra.update(self.extra)
         return result

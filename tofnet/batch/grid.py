@@ -38,13 +38,13 @@ def read_grid(self, tree: Mapping) -> dict[str, list[Any]]:
     out: dict[str, list[Any]] = {}
     for key, values in section.items():
         path = f"grid.{key}"
-        if isinstance(key, str) and "." in key:  # a process's parameter: checked on every network below
-            options[key] = key
-        if key not in options:
+        dotted = isinstance(key, str) and "." in key  # a process's parameter: checked on every network below
+        if key not in options and not dotted:
             known = ", ".join(sorted(set(options.values())))
             raise self.fail(section, key, path, f"unknown option; expected one of {known}, or PROCESS.PARAM")
-        if options[key] in out:
-            raise self.fail(section, key, path, f"{options[key]} is given twice")
+        option = key if dotted else options[key]
+        if option in out:
+            raise self.fail(section, key, path, f"{option} is given twice")
         values = values if isinstance(values, list) else [values]
         if not values:
             raise self.fail(section, key, path, "expected at least one value")
@@ -53,15 +53,29 @@ def read_grid(self, tree: Mapping) -> dict[str, list[Any]]:
             if repr(value) in seen:  # quoted alone: the list may be long
                 raise self.fail(section, key, path, f"the value {quote(value)} is repeated")
             seen.add(repr(value))
-        out[options[key]] = list(values)
+        out[option] = list(values)
     return out
 
 def _refuse_file_parameter(network, option: str) -> None:
-    """A plan from someone else must not point a process at a file by its grid (a spec's file paths are
-    checked where the spec is read): a ``PROCESS.PARAM`` that names a file is refused."""
+    """A grid sweeps values, not files: a ``PROCESS.PARAM`` that names a file a process reads is refused (a
+    plan from someone else would point a process at a file of the user's)."""
     process, dot, param = option.partition(".")
     if dot and any(p.name == param and p.reads_file for p in network.process(process).all_params()):
-        raise TofnetError(f"{option} names a file: set it in a spec, whose paths are checked")
+        raise TofnetError(f"{option} names a file a process reads; a grid sweeps values, not files: name it in "
+                          f"a spec")
+
+
+def _refuse_twice(network, grid: dict) -> None:
+    """An option of ``tofnet run`` and a ``PROCESS.PARAM`` that set the same parameter of ``network``."""
+    from tofnet.api import OVERRIDES
+    for option in grid:
+        if option not in OVERRIDES:
+            continue
+        classes, param = OVERRIDES[option]
+        classes = classes if isinstance(classes, tuple) else (classes,)
+        for process in (p for cls in classes for p in network.of_type(cls)):
+            if f"{process.name}.{param}" in grid:
+                raise TofnetError(f"{process.name}.{param} is given twice (as {option} too)")
 
 
 def check_grid(self, plan) -> None:
@@ -76,6 +90,10 @@ def check_grid(self, plan) -> None:
         def fresh():
             return load_network(network.spec, sensor_size=None if network.spec else (240, 180),
                                 estimator=network.estimator, allow_import=network.allow_import)[0]
+        try:
+            _refuse_twice(fresh(), plan.grid)
+        except TofnetError as err:
+            raise self.fail(self.tree, "grid", "grid", f"for network {network.name!r}: {err}") from None
         for option, values in plan.grid.items():
             for j, value in enumerate(values):
                 try:

@@ -101,11 +101,12 @@ def set_parameter(network, item: str) -> None:
     from tofnet.errors import NetworkError
 
     name, equals, text = item.partition("=")
-    process, dot, param = name.strip().partition(".")
-    if not (equals and dot and process and param):
-        raise NetworkError(f"--set {item!r}: expected PROCESS.PARAM=VALUE, e.g. time_surface.burst_surfaces=4")
+    process, dot, param = (part.strip() for part in name.partition("."))
+    if not (equals and dot and process and param and text.strip()):
+        raise NetworkError(f"--set {item!r}: expected PROCESS.PARAM=VALUE, e.g. time_surface.burst_surfaces=4 "
+                           f"(null clears an optional parameter)")
     try:
-        value = yaml.safe_load(text) if text.strip() else None
+        value = yaml.safe_load(text)
     except yaml.YAMLError:
         value = text
     from tofnet.api import apply_overrides

@@ -101,6 +101,12 @@ class Stopwatch:
         #: Seconds set aside as set-up (``aside``), less the kernels' compiles within them.
         self.setup_seconds = 0.0
 
+    def setup_before(self, seconds: float) -> None:
+        """``seconds`` of set-up spent before this clock started (worker processes started, say): the
+        clock's span grows by them, the network's time does not."""
+        self.started -= seconds
+        self.setup_seconds += seconds
+
     @contextmanager
     def aside(self) -> Iterator[None]:
         """Time spent inside is set-up, not the network's (a compile within it stays a compile)."""

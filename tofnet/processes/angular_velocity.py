@@ -37,7 +37,7 @@ class AngularVelocityProcess(Process):
               doc="constant camera-frame angular velocity [wx, wy, wz] (source: constant)"),
         Param("samples", "str", None, optional=True, reads_file=True,
               doc="file of 't wx wy wz' lines, seconds and rad/s in the camera frame (source: samples)"),
-        Param("imu", "str", None, optional=True,
+        Param("imu", "str", None, optional=True, reads_file=True,
               doc="an imu.txt file ('t ax ay az gx gy gz'); the recording's when omitted (source: gyro)"),
         Param("rotation_cam_imu", "floats", None, optional=True,
               doc="rotation taking IMU-frame vectors to the camera frame: 9 numbers (3x3, row by row) or a "
