@@ -57,7 +57,7 @@ EXCLUDED = {
 #: Lines excluded by their exact text (a prefix would also match the lines that run).
 EXCLUDED_LINES = {("backends.md", "tofnet conformance"): "all 62 cases x every backend: ~60 s"}
 #: Pages that work on the README's rec/.
-NEEDS_REC = {"time_surface.md"}
+NEEDS_REC = {"time_surface.md", "spec.md"}
 
 
 def command_lines(text: str) -> list[str]:
@@ -104,7 +104,7 @@ def test_every_docs_command_is_run_or_excluded_with_a_reason():
     for line in (line for lines in every.values() for line in lines):
         words = shlex.split(line)
         assert words[0] != "tofnet" or words[1] in SUBCOMMANDS, line
-    assert RUN == ["backends.md", "batch.md", "evaluation.md", "simulator.md", "time_surface.md"]
+    assert RUN == ["backends.md", "batch.md", "evaluation.md", "simulator.md", "spec.md", "time_surface.md"]
     # Every exclusion still names a line of the docs (a stale one would hide nothing).
     for (where, start) in [*EXCLUDED, *EXCLUDED_LINES]:
         hit = [line for page, lines in every.items() if where in ("*", page) for line in lines
@@ -177,5 +177,17 @@ def _time_surface(folder: Path, printed: dict) -> None:
     assert "host" in printed["tofnet compile --estimator improved"]
 
 
+def _spec(folder: Path, printed: dict) -> None:
+    import json
+    dense, distance2 = _depth(folder / "dense.npz"), _depth(folder / "distance2.npz")
+    assert len(dense) > 1000 and len(distance2) > 1000
+    with np.load(folder / "dense.npz") as saved:  # the summary the run stored: the time surface's later events
+        summary = json.loads(str(saved["summary_json"]))
+    counts = summary["counts"]["time_surface"]
+    # a burst's later events fitted too: on this slider 39 % of the events end as a burst's, not 74 % (K = 1),
+    # and 42 % are answered, not 17 %
+    assert counts["burst"] < 0.6 * counts["events_in"] and counts["emitted"] > 0.3 * counts["events_in"]
+
+
 CHECKS = {"backends.md": _backends, "batch.md": _batch, "evaluation.md": _evaluation, "simulator.md": _simulator,
-          "time_surface.md": _time_surface}
+          "spec.md": _spec, "time_surface.md": _time_surface}
