@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterable
 
 from tofnet.backends.base import ProgressCallback, RunResult
 from tofnet.core.network import Network
@@ -163,7 +163,7 @@ def lens_of_run(undistortion: dict | None) -> dict | None:
 
 def load_network(spec: str | Path | None = None, *, sensor_size: tuple[int, int] | None = None,
                  recording: Recording | None = None, rotation: bool = True, estimator: str | None = None,
-                 undistort: bool = True, allow_import: Any = None):
+                 undistort: bool = True, allow_import: Any = None, replaced: Iterable[str] = ()):
     """The network of a YAML spec (or the default network) and the spec's compile/backend settings.
 
     Returns ``(network, compile_options, backend_name_or_None, backend_options)``.
@@ -174,7 +174,8 @@ def load_network(spec: str | Path | None = None, *, sensor_size: tuple[int, int]
     velocity processes ignore the lens). ``estimator`` picks the built-in network (``ESTIMATORS``;
     None: the paper's); a spec names its own processes, so the two do not go together.
     ``allow_import``: the modules the spec's ``module:Class`` types may import (docs/spec.md); the
-    spec's worker counts are capped to the CPU count (``tofnet.io.trust.cap_workers``).
+    spec's worker counts are capped to the CPU count (``tofnet.io.trust.cap_workers``). ``replaced``:
+    the ``PROCESS.PARAM`` the caller sets afterwards (a file named there need not lie in the spec's folder).
     """
     if spec is None:
         network = default_network(recording, sensor_size=sensor_size, rotation=rotation,
@@ -184,7 +185,7 @@ def load_network(spec: str | Path | None = None, *, sensor_size: tuple[int, int]
         raise NetworkError(f"{spec}: --estimator picks a built-in network, and a spec names its own processes; "
                            "give one or the other")
     from tofnet.io.spec import load_spec
-    loaded = load_spec(spec, allow_import=allow_import)
+    loaded = load_spec(spec, allow_import=allow_import, replaced=replaced)
     network = loaded.network
     if not rotation and rotation_summary(network) is not None:
         raise NetworkError(f"{spec}: the spec connects an angular velocity process to its depth neurons (eq. 7); "
@@ -231,18 +232,25 @@ def apply_overrides(network: Network, **values: Any) -> None:
             continue
         if value is None:
             continue
-        if option not in OVERRIDES:
-            raise NetworkError(f"unknown override {option!r}; expected one of {', '.join(OVERRIDES)} "
-                               f"or PROCESS.PARAM")
-        classes, param = OVERRIDES[option]
-        classes = classes if isinstance(classes, tuple) else (classes,)
-        targets = [p for cls in classes for p in network.of_type(cls)]
-        if not targets:
-            raise NetworkError(f"--{option.replace('_', '-')}: the network has no "
-                               f"{' or '.join(cls.__name__ for cls in classes)}")
+        param, targets = override_targets(network, option)
         for process in targets:
             process.set_param(param, value)
     network.validate()
+
+
+def override_targets(network: Network, option: str) -> tuple[str, list]:
+    """The parameter an option of ``OVERRIDES`` sets and the processes of ``network`` it sets it on;
+    ``NetworkError`` for an unknown option or a network without such a process."""
+    if option not in OVERRIDES:
+        raise NetworkError(f"unknown override {option!r}; expected one of {', '.join(OVERRIDES)} "
+                           f"or PROCESS.PARAM")
+    classes, param = OVERRIDES[option]
+    classes = classes if isinstance(classes, tuple) else (classes,)
+    targets = [p for cls in classes for p in network.of_type(cls)]
+    if not targets:
+        raise NetworkError(f"--{option.replace('_', '-')}: the network has no "
+                           f"{' or '.join(cls.__name__ for cls in classes)}")
+    return param, targets
 
 
 def run(recording: Recording, network: Network | None = None, *, backend: str = DEFAULT_BACKEND,

@@ -101,7 +101,7 @@ def set_parameter(network, item: str) -> None:
     from tofnet.errors import NetworkError
 
     name, equals, text = item.partition("=")
-    process, dot, param = (part.strip() for part in name.partition("."))
+    process, dot, param = _setting(item).partition(".")
     if not (equals and dot and process and param and text.strip()):
         raise NetworkError(f"--set {item!r}: expected PROCESS.PARAM=VALUE, e.g. time_surface.burst_surfaces=4 "
                            f"(null clears an optional parameter)")
@@ -116,6 +116,11 @@ def set_parameter(network, item: str) -> None:
         raise NetworkError(f"--set {item}: {err}") from None
 
 
+def _setting(item: str) -> str:
+    """``PROCESS.PARAM`` of a ``--set`` item (blanks around the names dropped)."""
+    return ".".join(part.strip() for part in item.partition("=")[0].partition(".")[::2])
+
+
 def build_network(args, recording_sensor_size, recording=None):
     """The network the options describe, and the compile options and backend it names."""
     from tofnet.api import apply_overrides, constant_velocity, load_network
@@ -126,7 +131,7 @@ def build_network(args, recording_sensor_size, recording=None):
         Path(args.spec) if args.spec else None, sensor_size=sensor or (None if args.spec else recording_sensor_size),
         recording=recording, rotation=not getattr(args, "no_rotation", False),
         undistort=not getattr(args, "no_undistort", False), estimator=getattr(args, "estimator", None),
-        allow_import=args.allow_import)
+        allow_import=args.allow_import, replaced=[_setting(item) for item in getattr(args, "set_params", None) or ()])
     apply_overrides(network, timestep=args.timestep, refractory=args.refractory, distance=args.distance,
                     counter_bits=args.counter_bits, velocity_per=args.velocity_per,
                     update_every=args.update_every)

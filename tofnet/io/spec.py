@@ -13,7 +13,7 @@ import re
 from importlib.metadata import entry_points
 from importlib.resources import files
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Iterable, Mapping
 
 from tofnet.compiler.budget import Budget
 from tofnet.compiler.partition import parse_patch_size, patch_per_layer
@@ -24,7 +24,7 @@ from tofnet.errors import SpecError, TofnetError, located, quote, reason
 from tofnet.io.safe_yaml import (MAX_SPEC_BYTES, _Map, _Seq, _line, _parse_yaml, _read_spec_file,  # noqa: F401
                                  read_yaml_file, yaml_source)
 from tofnet.io.spec_data import Spec
-from tofnet.io.trust import ENTRY_POINTS, allowed_imports, check_import
+from tofnet.io.trust import ENTRY_POINTS, allowed_imports, check_import, file_a_spec_names
 from tofnet.io.spec_writer import (dump_spec, network_signature, network_to_dict, networks_equal,  # noqa: F401
                                    patch_to_data, spec_to_dict, type_name_of)
 TOP_KEYS = ("name", "description", "processes", "connections", "compile", "backend")
@@ -35,9 +35,11 @@ _CONNECTION = re.compile(r"^\s*(\w+)\.(\w+)\s*->\s*(\w+)\.(\w+)\s*$")
 class _Reader:
     """Turns a (line-annotated) tree into a ``Spec``; every error names line and key."""
 
-    def __init__(self, tree: Any, source: str, allow_import: Any = None, folder: Path | None = None):
+    def __init__(self, tree: Any, source: str, allow_import: Any = None, folder: Path | None = None,
+                 replaced: Iterable[str] = ()):
         self.tree, self.source = tree, source
         self.allow, self.folder = allowed_imports(allow_import), folder
+        self.replaced = frozenset(replaced)  # PROCESS.PARAM the caller sets after loading: not the spec's file
 
     def fail(self, container: Any, key: Any, path: str, message: str) -> SpecError:
         return SpecError(located(self.source, _line(container, key), f"{path}: {message}"))
@@ -111,6 +113,8 @@ class _Reader:
                                     f"expected {', '.join(declared)}")
                 try:
                     declared[key].coerce(raw, str(name))
+                    if declared[key].reads_file and isinstance(raw, str) and f"{name}.{key}" not in self.replaced:
+                        raw = file_a_spec_names(raw, self.folder, f"{name}.{key}")
                 except TofnetError as err:
                     raise self.fail(body, key, f"{path}.{key}", _strip_field(str(err), f"{name}.{key}")) from None
                 values[key] = raw
@@ -263,16 +267,18 @@ def _ports(process: Process, kind: type = object) -> str:
 
 # ---------------------------------------------------------------- public API
 
-def load_spec(path_or_text: str | Path, *, allow_import: Any = None) -> Spec:
+def load_spec(path_or_text: str | Path, *, allow_import: Any = None, replaced: Iterable[str] = ()) -> Spec:
     """Read a spec from a file path or from YAML text.
 
     A ``Path``, or a one-line string naming a file, is read as a file; any other string
     is YAML text. Raises ``SpecError`` naming the file, line and key. ``allow_import``:
-    the modules its ``module:Class`` types may import (``tofnet.io.trust``).
+    the modules its ``module:Class`` types may import (``tofnet.io.trust``). A file the spec
+    names must lie in its folder (``tofnet.io.trust.file_a_spec_names``), except for the
+    parameters in ``replaced`` (``PROCESS.PARAM``), which the caller sets after loading.
     """
     text, source, path = yaml_source(path_or_text, "spec")
     folder = path.resolve().parent if path is not None else None
-    return _Reader(_parse_yaml(text, source), source, allow_import, folder).read()
+    return _Reader(_parse_yaml(text, source), source, allow_import, folder, replaced).read()
 
 
 def spec_from_dict(data: Mapping[str, Any], source: str = "<dict>", *, allow_import: Any = None) -> Spec:

@@ -122,6 +122,29 @@ def _refuse_spec_folder(module_name: str, spec_dir: Path) -> None:
                         "name that folder in PYTHONPATH if you trust its code")
 
 
+# ---------------------------------------------------------------- files a spec names
+
+def file_a_spec_names(named: str, folder: Path | None, setting: str = "PROCESS.PARAM") -> str:
+    """The file a spec's parameter names (one declared ``reads_file``), as the run will open it.
+
+    A relative name is taken from the spec's folder and returned as a path through it; a spec
+    given as text or data (no folder) keeps its name, taken from the working folder. Raises
+    ``SpecError`` when the file lies outside that folder once symlinks and ``..`` are resolved:
+    a spec from someone else cannot make tofnet read, and quote in an error, a file elsewhere
+    (``/proc/self/environ``, ``~/.netrc``). The user names such a file themselves
+    (``--set PROCESS.PARAM=FILE``, ``Process.set_param``); ``setting`` names the parameter so.
+    """
+    base = Path.cwd() if folder is None else folder
+    path = Path(named)
+    opened = path if path.is_absolute() or folder is None else folder / path
+    inside = Path(os.path.realpath(base))
+    if not Path(os.path.realpath(base / opened)).is_relative_to(inside):
+        where = "the spec's folder" if folder is not None else "the working folder (the spec is text)"
+        raise SpecError(f"{quote(named)} lies outside {where} {inside}; a spec reads only files in its own folder "
+                        f"or below it; name a file elsewhere yourself: --set {setting}=FILE (set_param in Python)")
+    return named if folder is None else str(opened)
+
+
 # ---------------------------------------------------------------- resources
 
 def cpu_count() -> int:

@@ -1,0 +1,118 @@
+"""A spec reads only files in its own folder: one from someone else cannot make tofnet read, and
+quote in an error, a file elsewhere (``/proc/self/environ``, ``~/.netrc``); the user names such a
+file themselves with ``--set``."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tofnet.batch import load_plan
+from tofnet.errors import SpecError
+from tofnet.io.depth import read_depth
+from tofnet.io.spec import load_spec
+
+from test_reliability_outputs import folder, one_line_error  # noqa: F401  (a fixture and a helper)
+
+SECRET = "API_KEY=sk-live-0123456789abcdefghij"
+
+
+def spec_naming(folder: Path, samples: str, *, param: str = "samples") -> Path:
+    """A paper network in ``folder/spec.yaml`` whose velocity (or angular velocity) reads ``samples``."""
+    rotation = (f"  angular_velocity: {{type: AngularVelocityProcess, source: gyro, {param}: '{samples}'}}\n"
+                if param == "imu" else "")
+    folder.mkdir(parents=True, exist_ok=True)
+    spec = folder / "spec.yaml"
+    spec.write_text("processes:\n"
+                    "  input: {type: InputProcess, sensor_size: [240, 180], timestep: 1ms, refractory: 60ms}\n"
+                    "  time_of_travel: {type: TimeOfTravelProcess, distance: 1, counter_bits: 8}\n"
+                    "  depth: {type: DepthProcess, min_depth: 0.05, max_depth: 20}\n"
+                    "  velocity: {type: VelocityProcess, source: samples, "
+                    f"samples: '{samples if param == 'samples' else 'vel.txt'}', intrinsics: [200, 200, 119.5, 89.5]}}\n"
+                    + rotation +
+                    "connections:\n  - input.events -> time_of_travel.events\n"
+                    "  - time_of_travel.counts -> depth.counts\n  - velocity.a_t -> depth.a_t\n"
+                    + ("  - angular_velocity.b_w -> depth.b_w\n" if rotation else ""))
+    return spec
+
+
+@pytest.fixture
+def secret(tmp_path) -> Path:
+    path = tmp_path / "home" / ".env"
+    path.parent.mkdir()
+    path.write_text(f"{SECRET} 1 2 3\n")
+    return path
+
+
+@pytest.mark.parametrize("how", ["absolute", "dot-dot", "symlink", "symlinked folder"])
+@pytest.mark.parametrize("param", ["samples", "imu"])
+def test_a_file_outside_the_spec_folder_is_refused_before_it_is_read(tmp_path, secret, how, param):
+    specs = tmp_path / "specs"
+    specs.mkdir()
+    named = {"absolute": str(secret), "dot-dot": "../home/.env", "symlink": "link.txt",
+             "symlinked folder": "home/.env"}[how]
+    if how == "symlink":
+        (specs / "link.txt").symlink_to(secret)
+    if how == "symlinked folder":
+        (specs / "home").symlink_to(secret.parent, target_is_directory=True)
+    spec = spec_naming(specs, named, param=param)
+    with pytest.raises(SpecError) as caught:
+        load_spec(spec)
+    message = str(caught.value)
+    process = "angular_velocity" if param == "imu" else "velocity"
+    assert f"spec.yaml:{5 if param == 'samples' else 6}: processes.{process}.{param}:" in message
+    assert f"lies outside the spec's folder {specs}" in message and f"--set {process}.{param}=FILE" in message
+    assert "API_KEY" not in message and "\n" not in message
+
+
+def test_a_file_beside_or_below_the_spec_is_read_from_the_spec_folder_wherever_tofnet_runs(tmp_path, monkeypatch):
+    specs = tmp_path / "specs"
+    (specs / "data").mkdir(parents=True)
+    (specs / "data" / "vel.txt").write_text("0 0.5 0 0\n1 0.5 0 0\n")
+    spec = spec_naming(specs, "data/vel.txt")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    network = load_spec(spec).network
+    assert Path(network.process("velocity").samples) == specs / "data" / "vel.txt"  # not elsewhere/data/vel.txt
+    (specs / "inside.txt").symlink_to(specs / "data" / "vel.txt")  # a symlink that stays inside is fine
+    assert load_spec(spec_naming(specs, "inside.txt")).network.process("velocity").samples == str(specs / "inside.txt")
+
+
+def test_a_spec_given_as_text_reads_only_below_the_working_folder(tmp_path, secret, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    text = spec_naming(tmp_path / "s", str(secret)).read_text()
+    monkeypatch.chdir(tmp_path / "s")
+    with pytest.raises(SpecError, match="lies outside the working folder"):
+        load_spec(text)
+    monkeypatch.chdir(tmp_path)
+    relative = spec_naming(tmp_path / "t", "vel.txt").read_text()
+    assert load_spec(relative).network.process("velocity").samples == "vel.txt"  # kept as written
+
+
+def test_run_refuses_it_in_one_line_and_set_names_a_file_elsewhere(folder, tmp_path, secret, capsys):  # noqa: F811
+    from tofnet.cli import main
+    (tmp_path / "vel.txt").write_text("0 0.5 0 0\n1 0.5 0 0\n")
+    spec = spec_naming(tmp_path / "specs", str(secret))
+    out = tmp_path / "d.npz"
+    assert main(["run", str(folder), "--spec", str(spec), "--out", str(out), "--quiet",
+                 "--set", f"velocity.samples={tmp_path / 'vel.txt'}"]) == 0
+    assert read_depth(out)[1]["summary"] is not None
+    capsys.readouterr()
+    (tmp_path / "bad.txt").write_text("0 0.5 0\n")  # the file --set names is the one read
+    err = one_line_error(capsys, ["run", str(folder), "--spec", str(spec), "--out", str(out), "--quiet", "--force",
+                                  "--set", f"velocity.samples={tmp_path / 'bad.txt'}"])
+    assert "bad.txt:1: expected 4 columns" in err
+    out.unlink()
+    err = one_line_error(capsys, ["run", str(folder), "--spec", str(spec), "--out", str(out), "--quiet"])
+    assert "lies outside the spec's folder" in err and "API_KEY" not in err and not out.exists()
+
+
+def test_a_plan_naming_such_a_spec_is_refused_at_load(tmp_path, secret):
+    spec = spec_naming(tmp_path / "specs", str(secret))
+    np.save(tmp_path / "a.npy", np.zeros(0))
+    plan = tmp_path / "plan.yaml"
+    plan.write_text(f"recordings: [a.npy]\nnetworks: [{spec}]\n")
+    with pytest.raises(SpecError, match="lies outside the spec's folder") as caught:
+        load_plan(plan)
+    assert "API_KEY" not in str(caught.value)
