@@ -204,3 +204,29 @@ def test_a_session_asks_a_backend_what_it_declares_it_can_do():
         s.run(steps=30)
         assert s.step == 30
     assert get_backend("multiproc").capabilities == {"stream", "workers"}
+
+
+@pytest.mark.parametrize("name", ["fixed", "multiproc"])
+def test_a_session_reports_its_set_up_apart_from_the_network_time(name, workers, monkeypatch):
+    """Building the models' state is set-up, as in ``run`` (it was counted as running the network)."""
+    import time
+
+    from tofnet.backends.graph import GraphExecutor
+    build = GraphExecutor.__init__
+
+    def slow_build(self, *args, **kwargs):
+        time.sleep(0.2)
+        build(self, *args, **kwargs)
+
+    if name == "fixed":
+        monkeypatch.setattr(GraphExecutor, "__init__", slow_build)
+    started = time.perf_counter()
+    session = Session(COMPILED, RECORDING, backend=backend_of(name, workers))
+    result = session.finish()
+    elapsed = time.perf_counter() - started
+    if name == "fixed":
+        assert result.setup_time >= 0.2 > result.wall_time
+    else:  # the workers build their models when the stream opens
+        assert result.setup_time > 0, result.setup_time
+    assert result.wall_time + result.setup_time + result.compile_time <= elapsed + 1e-3, \
+        (result.wall_time, result.setup_time, result.compile_time, elapsed)

@@ -28,7 +28,6 @@ from tofnet.core.network import Network
 from tofnet.errors import BackendError, TofnetError
 from tofnet.events import MAX_TIME_US
 from tofnet.io.recording import Recording
-from tofnet.kernels.compilation import Stopwatch
 from tofnet.monitor import Monitor
 
 
@@ -72,7 +71,6 @@ class Session:
         self._collected = Collected()
         self._keep_outputs = keep_outputs
         self._state = "open"
-        self._clock = Stopwatch()
         self._sample()
 
     # -- opening and closing --------------------------------------------------------------------
@@ -282,7 +280,6 @@ class Session:
         self._keep(result.outputs)
         if self._keep_outputs:  # else only the steps run now, in flight until the end
             result.outputs = self._collected.joined(result.payloads, self.stream._empty)
-        result.timed_by(self._clock)
         self._state = "finished"
         self.stop()
         return result
