@@ -67,13 +67,15 @@ def _refuse_file_parameter(network, option: str) -> None:
 
 def _refuse_twice(network, grid: dict) -> None:
     """An option of ``tofnet run`` and a ``PROCESS.PARAM`` that set the same parameter of ``network``."""
-    from tofnet.api import OVERRIDES
+    from tofnet.api import OVERRIDES, override_targets
     for option in grid:
         if option not in OVERRIDES:
             continue
-        classes, param = OVERRIDES[option]
-        classes = classes if isinstance(classes, tuple) else (classes,)
-        for process in (p for cls in classes for p in network.of_type(cls)):
+        try:
+            param, targets = override_targets(network, option)
+        except TofnetError:
+            continue  # a network without the option's process: applying the values says so
+        for process in targets:
             if f"{process.name}.{param}" in grid:
                 raise TofnetError(f"{process.name}.{param} is given twice (as {option} too)")
 
