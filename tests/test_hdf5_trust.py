@@ -230,8 +230,10 @@ def test_every_command_reading_the_recording_takes_allow_external(tmp_path, caps
     run = ["run", str(path), "--velocity", "0.5,0,0", "--intrinsics", "20,20,8,6", "--out", str(depth), "--quiet"]
     assert main(run) == 2 and "--allow-external" in capsys.readouterr().err
     assert main(run + ["--allow-external"]) == 0 and depth.exists()
-    for command in (["export", str(depth), "--maps", str(tmp_path / "maps")],
+    for command in (["export", str(depth), "--maps", str(tmp_path / "maps"), "--recording", str(path)],
                     ["eval", str(path), str(depth)], ["plot", "depthmap", str(path), str(depth)]):
         assert main(command) == 2, command
         assert "refused unless --allow-external" in capsys.readouterr().err, command
+    assert main(["export", str(depth), "--maps", str(tmp_path / "maps")]) == 2  # the recording the depth file names:
+    assert "(DataError); pass --recording PATH to read it and see why" in capsys.readouterr().err  # no quote of it
     assert main(["export", str(depth), "--maps", str(tmp_path / "maps"), "--allow-external"]) == 0

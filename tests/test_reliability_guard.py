@@ -240,3 +240,17 @@ def test_an_output_name_too_long_is_one_line(folder, tmp_path, capsys):
     for argv in (["run", str(long), "--velocity", "0.5,0,0", "--out", str(tmp_path / "d.npz"), "--quiet"],
                  ["info", str(long)], ["convert", str(long), str(tmp_path / "c.npz")]):
         assert "no such file or folder" in one_line_error(capsys, argv)  # an input name too long: one line
+
+
+def test_export_never_quotes_a_file_that_a_depth_file_names_as_its_recording(tmp_path, capsys):
+    """A depth file from someone else chooses the recording export reads when --recording is not given:
+    what cannot be read is named, never quoted (a secrets file read as events quoted its first field)."""
+    secret = tmp_path / "notes.txt"
+    secret.write_text("API_KEY=sk-live-0123456789abcdefghij 1 2 3\n")
+    write_depth(tmp_path / "d.npz", np.zeros(0, dtype=DEPTH_DTYPE), t0_us=0, timestep_us=1000, latency_steps=2,
+                summary={"recording": str(secret)})
+    err = one_line_error(capsys, ["export", str(tmp_path / "d.npz"), "--maps", str(tmp_path / "maps")])
+    assert "that " in err and "pass --recording PATH" in err and "API_KEY" not in err
+    err = one_line_error(capsys, ["export", str(tmp_path / "d.npz"), "--maps", str(tmp_path / "maps"),
+                                  "--recording", str(secret)])  # named by the user: the reader's own message
+    assert "notes.txt:1" in err

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from tofnet.errors import TofnetError
+from tofnet.errors import TofnetError, quote
 
 
 def register(subparsers) -> None:
@@ -49,15 +49,24 @@ def handle(args) -> int:
     check_export_outputs(args)
     depth, meta = read_depth(args.depth)
     recording_path = args.recording or (meta.get("summary") or {}).get("recording")
+    if recording_path is not None and not (isinstance(recording_path, str) and recording_path):
+        raise TofnetError(f"{args.depth}: its summary's recording is not a path; pass --recording PATH")
     recording, bounds = None, None
     window = window_option(args)
     if recording_path:
         from tofnet.io.source import open_recording
-        with open_recording(recording_path, window=window, allow_external=args.allow_external,
-                            **camera_options(args)) as source:
-            # The camera only; the events only when the sensor size must come from their extent.
-            recording = source.metadata() if source.sensor_size is not None else source.read()
-            bounds = source.window
+        try:
+            with open_recording(recording_path, window=window, allow_external=args.allow_external,
+                                **camera_options(args)) as source:
+                # The camera only; the events only when the sensor size must come from their extent.
+                recording = source.metadata() if source.sensor_size is not None else source.read()
+                bounds = source.window
+        except TofnetError as err:
+            if args.recording:
+                raise
+            # the depth file chose this path: its reader's message may quote the file, so say only that
+            raise TofnetError(f"cannot read the recording {quote(recording_path)} that {args.depth} names "
+                              f"({type(err).__name__}); pass --recording PATH to read it and see why") from None
         check_export_outputs(args)  # the files it read (groundtruth.txt, ...) are inputs too
     elif args.ply or not args.sensor_size or window is not None:
         raise TofnetError("--recording is needed (the depth file does not name its recording)")
@@ -109,3 +118,4 @@ def check_export_outputs(args) -> None:
         check_output(args.ply, force=args.force, inputs=inputs, what="--ply")
     if args.maps:
         check_output(args.maps, force=args.force, inputs=inputs, what="--maps", folder=True)
+
