@@ -116,3 +116,18 @@ def test_a_plan_naming_such_a_spec_is_refused_at_load(tmp_path, secret):
     with pytest.raises(SpecError, match="lies outside the spec's folder") as caught:
         load_plan(plan)
     assert "API_KEY" not in str(caught.value)
+
+
+@pytest.mark.parametrize("side", ["calib.txt", "events.txt", "groundtruth.txt"])
+def test_a_recording_side_file_linked_out_of_its_folder_is_never_quoted(folder, tmp_path, secret, capsys, side):  # noqa: F811
+    """A recording someone sends may hold ``calib.txt -> ~/.git-credentials`` (tar and git keep links): an error
+    names the file and where it links, and shows none of what it holds; a file in place is quoted as before."""
+    if side == "groundtruth.txt":
+        secret.write_text(f"{SECRET} 1 2 3 4 5 6 7\n")  # a pose's 8 columns
+    (folder / side).unlink(missing_ok=True)
+    (folder / side).symlink_to(secret)
+    err = one_line_error(capsys, ["info", str(folder)])
+    assert f"{side}:1: " in err and "links out of its folder, to" in err and "API_KEY" not in err
+    (folder / side).unlink()
+    (folder / side).write_text(secret.read_text())  # the recording's own file: its field is quoted
+    assert "API_KEY" in one_line_error(capsys, ["info", str(folder)])

@@ -35,13 +35,18 @@ class UnsupportedError(BackendError):
 def located(path: object, line: int | None, message: str) -> str:
     """Format ``path:line: message`` (line omitted when unknown; an absurdly long path is
     shortened in the middle so that the message stays one readable line)."""
-    text = str(path)
-    if not text.isprintable():  # a newline in a file name must not break the line
-        text = text.encode("unicode_escape", "backslashreplace").decode("ascii")
-    if len(text) > 240:
-        text = f"{text[:100]}...{text[-100:]}"
+    text = shown_path(path)
     where = f"{text}:{line}" if line is not None else text
     return f"{where}: {message}"
+
+
+def shown_path(path: object) -> str:
+    """``path`` for a one-line message: escaped when not printable (a newline in a file name must not
+    break the line), shortened in the middle beyond 240 characters."""
+    text = str(path)
+    if not text.isprintable():
+        text = text.encode("unicode_escape", "backslashreplace").decode("ascii")
+    return text if len(text) <= 240 else f"{text[:100]}...{text[-100:]}"
 
 
 def quote(value: object, limit: int = 40) -> str:
@@ -49,6 +54,21 @@ def quote(value: object, limit: int = 40) -> str:
     user's file than the offending field, and never a whole binary blob."""
     text = repr(value)
     return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def quote_field(path: object, field: object) -> str:
+    """A field of the file ``path`` for an error message: ``quote(field)``, unless a symlink takes the file
+    out of the folder its name is in (a recording's ``calib.txt`` linked to ``/etc/passwd`` or
+    ``~/.git-credentials``): what it holds is not the recording's to show, so it is not quoted."""
+    import os
+    try:
+        linked_out = os.path.dirname(os.path.realpath(path)) != os.path.realpath(os.path.dirname(os.fspath(path)) or ".")
+    except (TypeError, ValueError, OSError):
+        linked_out = True
+    if not linked_out:
+        return quote(field)
+    target = os.path.realpath(path)
+    return f"a field not shown ({shown_path(path)} links out of its folder, to {shown_path(target)})"
 
 
 def reason(err: BaseException, limit: int = 80) -> str:

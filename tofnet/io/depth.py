@@ -16,7 +16,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from tofnet.errors import DataError, located, quote
+from tofnet.errors import DataError, located, quote_field
 from tofnet.events import DEPTH_DTYPE, MAX_TIME_US
 from tofnet.io.files import write_text_atomic
 from tofnet.io.groundtruth import read_text
@@ -175,7 +175,7 @@ def _read_csv(path: Path) -> np.ndarray:
     lines = text.splitlines()
     if not lines or lines[0].strip().replace(" ", "") != CSV_HEADER:
         first = lines[0].strip() if lines else ""
-        raise DataError(located(path, 1, f"expected the header '{CSV_HEADER}', got {quote(first)}"))
+        raise DataError(located(path, 1, f"expected the header '{CSV_HEADER}', got {quote_field(path, first)}"))
     last = len(lines) - 1
     while last > 0 and not lines[last].strip():
         last -= 1
@@ -248,4 +248,4 @@ def _raise_first_bad_row(path: Path, lines: list[str]) -> None:
                 float(field)
             except ValueError:
                 raise DataError(located(path, number, f"column '{name}': expected a number, "
-                                                      f"got {quote(field.strip())}")) from None
+                                                      f"got {quote_field(path, field.strip())}")) from None

@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 
 import tofnet.numba_cache  # noqa: F401 - before any cached kernel: numba picks its cache key at decoration
-from tofnet.errors import DataError, located, quote
+from tofnet.errors import DataError, located, quote_field
 from tofnet.events import EVENT_DTYPE, MAX_TIME_US
 from tofnet.io.arrays import COLUMNS as _COLUMNS, MAX_COORD as _MAX_COORD, check_writable
 from tofnet.io.arrays import events_from_columns, read_events_npy, write_events_npy  # noqa: F401 (their old home)
@@ -304,7 +304,7 @@ def _describe(path: Path, data: bytes, info: np.ndarray) -> str:
     # file may not be an events file at all.
     status, line = int(info[_STATUS]), int(info[_LINE])
     text = data[info[_TOKEN_START]:info[_TOKEN_END]].decode("utf-8", "replace")
-    quoted = quote(text)
+    quoted = quote_field(path, text)
     token = text if len(text) <= 40 else text[:37] + "..."
     name = _COLUMNS[int(info[_COLUMN])] if status != _COLUMN_COUNT else ""
     messages = {

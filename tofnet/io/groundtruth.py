@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tofnet.errors import DataError, located, quote
+from tofnet.errors import DataError, located, quote_field
 from tofnet.events import MAX_TIME_US
 from tofnet.io import files
 
@@ -66,9 +66,9 @@ def finite_number(path: object, line: int, what: str, field: str) -> float:
     try:
         value = float(field) if len(field) <= 1000 else math.nan
     except ValueError:
-        raise DataError(located(path, line, f"{what}: expected a number, got {quote(field)}")) from None
+        raise DataError(located(path, line, f"{what}: expected a number, got {quote_field(path, field)}")) from None
     if not math.isfinite(value):
-        raise DataError(located(path, line, f"{what}: expected a finite number, got {quote(field)}"))
+        raise DataError(located(path, line, f"{what}: expected a finite number, got {quote_field(path, field)}"))
     return value
 
 
