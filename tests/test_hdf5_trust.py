@@ -79,11 +79,18 @@ def test_external_storage_is_refused_unless_allowed_and_then_read(tmp_path, monk
     assert np.array_equal(read_recording(path, allow_external=True).events, EVENTS)
 
 
-@pytest.mark.parametrize("storage", ["fifo", "/dev/zero", "short", "missing"])
+@pytest.mark.parametrize("storage", ["fifo", "/dev/zero", "short", "missing", "elsewhere"])
 def test_external_storage_that_is_not_a_regular_file_holding_the_data_is_refused_even_when_allowed(tmp_path, storage):
-    """A FIFO blocked forever; /dev/zero read as t = 0."""
+    """A FIFO blocked forever; /dev/zero read as t = 0; a file outside the HDF5 file's folder (a file from
+    someone else naming one of yours) is refused even when it holds the bytes."""
     path = tmp_path / "events.h5"
     target = tmp_path / "t.raw"
+    if storage == "elsewhere":
+        (tmp_path / "other").mkdir()
+        target = tmp_path / "other" / "t.raw"
+        target.write_bytes(COLUMNS["t"].tobytes())
+        path = tmp_path / "h5" / "events.h5"
+        path.parent.mkdir()
     if storage == "fifo":
         os.mkfifo(target)
     elif storage == "/dev/zero":
@@ -94,11 +101,12 @@ def test_external_storage_that_is_not_a_regular_file_holding_the_data_is_refused
         for name, data in COLUMNS.items():
             if name == "t":
                 f.create_dataset("events/t", shape=data.shape, dtype=data.dtype,
-                                 external=[(target.name, 0, data.nbytes)])
+                                 external=[(str(target) if storage == "elsewhere" else target.name, 0,
+                                            data.nbytes)])
             else:
                 f.create_dataset(f"events/{name}", data=data)
-    expected = {"fifo": "FIFO", "/dev/zero": "character device", "short": "its files hold 100",
-                "missing": "file not found"}[storage]
+    expected = {"fifo": "FIFO", "/dev/zero": "outside this file's folder", "short": "its files hold 100",
+                "missing": "file not found", "elsewhere": "outside this file's folder"}[storage]
     started = time.monotonic()
     refused(path, expected, allow_external=True)
     refused(path, "refused unless --allow-external")

@@ -140,6 +140,10 @@ class H5File:
         if not self.allow_external:
             raise self._fail(f"{what}; refused unless {ALLOW}")
         target = Path(filename) if os.path.isabs(filename) else self.path.parent / filename
+        folder = os.path.realpath(self.path.parent)
+        if not Path(os.path.realpath(target)).is_relative_to(folder):  # a file from someone else naming ~/.ssh/...
+            raise self._fail(f"{what}, outside this file's folder {folder}; {ALLOW} reads only files beside it or "
+                             "below it")
         try:
             with open_regular(target, "file for HDF5 external data") as handle:
                 return os.fstat(handle.fileno()).st_size
