@@ -62,6 +62,24 @@ def test_the_plans_own_folder_is_never_an_output(folder, capsys, no_cluster):
     assert sorted(os.listdir(folder)) == ["a.npy", "plan.yaml"]
 
 
+def test_a_scenario_cache_of_other_files_is_never_filled(folder, capsys, no_cluster):
+    """A plan from someone else may name any folder of yours as its cache; simulations go only where the
+    folder is empty, new, or holds tofnet's scenarios."""
+    mine = folder / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("precious")
+    path = folder / "plan.yaml"
+    path.write_text(f"output: out\ncache: {mine}\nrecordings: [{{scenario: slider, duration: 0.05}}]\n")
+    err = one_line_error(capsys, ["batch", str(path)])
+    assert "cache is a folder holding 'notes.txt', which is not a simulated scenario" in err
+    assert sorted(os.listdir(mine)) == ["notes.txt"] and not (folder / "out").exists()
+    (mine / "notes.txt").unlink()
+    (mine / "slider-x").mkdir()
+    (mine / "slider-x" / "scenario.json").write_text("{}")  # an earlier batch's scenario
+    (mine / ".slider-y.tmp-1-ab").mkdir()  # a simulation killed half-way
+    check_batch_output(load_plan(path))
+
+
 def test_an_earlier_batchs_folder_needs_force_or_resume(folder, capsys, no_cluster):
     loaded = load_plan(plan(folder))
     mark_output(loaded)  # what a batch does before its first task

@@ -15,7 +15,7 @@ import os
 from pathlib import Path
 
 from tofnet.batch.plan import Plan
-from tofnet.batch.tasks import TASKS_DIR, Task
+from tofnet.batch.tasks import SCENARIO_FILE, TASKS_DIR, Task
 
 #: What a batch writes at the top of its output folder (besides the scenario cache).
 BATCH_FILES = ("results.csv", "results.parquet", "plot.png", TASKS_DIR)
@@ -51,7 +51,25 @@ def check_batch_output(plan: Plan, *, force: bool = False, resume: bool = False)
                  option="--resume to continue it, or --force")
     check_folder_writable(plan.output, "output")
     if any(recording.scenario is not None for recording in plan.recordings):
+        check_cache(plan.cache)
         check_folder_writable(plan.cache, "cache")
+
+
+def check_cache(cache: Path) -> None:
+    """Refuse a scenario cache that holds anything but scenario folders (each with its ``scenario.json``)
+    and their temporary folders: a plan from someone else naming a folder of yours (``cache: ~/data``)
+    would fill it with simulations. One line naming the folder and the first entry that is not tofnet's."""
+    from tofnet.errors import DataError, located, quote
+    if not cache.is_dir():
+        return
+    foreign = [entry.name for entry in sorted(cache.iterdir())
+               if entry.is_symlink() or not entry.is_dir()
+               or not ((entry / SCENARIO_FILE).is_file() or (entry.name.startswith(".") and ".tmp-" in entry.name))]
+    if foreign:
+        more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
+        raise DataError(located(cache, None, f"cache is a folder holding {quote(foreign[0])}{more}, which is not a "
+                                             "simulated scenario; a scenario cache holds only tofnet's scenario "
+                                             "folders: name an empty or new folder, or one an earlier batch filled"))
 
 
 def mark_output(plan: Plan) -> None:

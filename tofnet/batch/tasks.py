@@ -20,6 +20,8 @@ from tofnet.batch.plan import NetworkChoice, Plan, RecordingSource
 
 #: Sub-folder of the output with one folder per task.
 TASKS_DIR = "tasks"
+#: The file that marks a scenario folder of the cache as complete (the simulation's summary).
+SCENARIO_FILE = "scenario.json"
 _UNSAFE = re.compile(r"[^A-Za-z0-9._=+-]+")
 
 

@@ -18,7 +18,7 @@ import uuid
 from pathlib import Path
 from typing import Any
 
-from tofnet.batch.tasks import Task
+from tofnet.batch.tasks import SCENARIO_FILE, Task
 from tofnet.errors import TofnetError
 from tofnet.io.files import write_text_atomic
 from tofnet.io.guard import reading
@@ -26,7 +26,6 @@ from tofnet.io.guard import reading
 ROW_FILE = "row.json"
 DEPTH_FILE = "depth.npz"
 SUMMARY_FILE = "summary.json"
-SCENARIO_FILE = "scenario.json"
 
 
 def simulate_scenario(task: Task) -> str:

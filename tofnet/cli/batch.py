@@ -48,6 +48,8 @@ def handle(args) -> int:
     if args.check:
         print(f"plan {plan.name}: {len(plan.recordings)} recordings x {len(plan.networks)} networks x "
               f"{len(plan.combinations())} grid points = {len(tasks)} tasks -> {plan.output}")
+        if any(recording.scenario is not None for recording in plan.recordings):
+            print(f"scenarios simulated into {plan.cache}")
         for task in tasks:
             print(f"  {task.number:4d}  {task.task_id}")
         return 0
