@@ -84,7 +84,7 @@ def open_dsec(folder: Path, side: str, rectify: bool, allow_external: bool):
             if not rectify and pixel_map is None:
                 raise DataError(located(map_path, None, "missing: the disparity ground truth is rectified, the "
                                                         "rectification map places the events in it"))
-            source.frame_gt = dsec_disparity(disparity, q, None if rectify else pixel_map)
+            source.frame_gt = dsec_disparity(disparity, q, None if rectify else pixel_map, source.sensor_size)
             check_overlap(source, source.frame_gt, disparity / "timestamps.txt")
             source.has_depth = True
             source.notes.append(f"ground truth: {len(source.frame_gt)} disparity maps from {disparity}")
@@ -134,11 +134,13 @@ def _q_matrix(calib: Path) -> np.ndarray:
     return q
 
 
-def dsec_disparity(folder: Path, q: np.ndarray, pixel_map: np.ndarray | None):
-    """``FrameDepth`` of DSEC's ``disparity/event/*.png`` at ``disparity/timestamps.txt``."""
-    from PIL import Image
+def dsec_disparity(folder: Path, q: np.ndarray, pixel_map: np.ndarray | None, sensor_size=None):
+    """``FrameDepth`` of DSEC's ``disparity/event/*.png`` at ``disparity/timestamps.txt``.
 
-    from tofnet.io.frames import FrameDepth, disparity_to_depth, read_png16
+    Every map must be ``sensor_size`` (``(width, height)``; DSEC's maps are the event camera's
+    640x480), or the first map's size when that is not known, within the sensor limits: a map of
+    another size is refused from its header, before it is decoded."""
+    from tofnet.io.frames import FrameDepth, disparity_to_depth, png_size, read_png16
 
     stamps = _required(folder / "timestamps.txt", "the times of the disparity maps (µs, one per line)")
     images = sorted((folder / "event").glob("*.png"))
@@ -148,10 +150,10 @@ def dsec_disparity(folder: Path, q: np.ndarray, pixel_map: np.ndarray | None):
     if len(times) != len(images):
         raise DataError(located(stamps, None, f"{len(times)} timestamps for {len(images)} disparity maps in "
                                               f"{folder / 'event'}"))
-    with Image.open(images[0]) as first:
-        width, height = first.size
-    return FrameDepth(times, lambda k: disparity_to_depth(read_png16(images[k]) / 256.0, q), (height, width),
-                      stamps, pixel_map=pixel_map, what="disparity maps")
+    what, whose = "disparity map", "the events' sensor size" if sensor_size is not None else "the first map's size"
+    size = png_size(images[0], what, None if sensor_size is None else tuple(sensor_size), whose)  # header only
+    return FrameDepth(times, lambda k: disparity_to_depth(read_png16(images[k], size, what, whose) / 256.0, q),
+                      (size[1], size[0]), stamps, pixel_map=pixel_map, what="disparity maps")
 
 
 def read_times(path: Path, scale: float = 1.0, column: int = 0) -> np.ndarray:
