@@ -118,6 +118,23 @@ def test_info_on_a_dsec_folder_with_a_fifo_map_is_one_line_exit_2(folder, capsys
     assert err.endswith("000000.png: is a FIFO (named pipe), expected a regular disparity map")
 
 
+@needs_fifo
+@pytest.mark.parametrize("name, what", [
+    ("events/left/events.h5", "the left events of the DSEC sequence"),
+    ("events/left/rectify_map.h5", "the rectification map (HDF5)"),
+    ("calibration/cam_to_cam.yaml", "the DSEC sequence's calibration"),
+    ("disparity/timestamps.txt", "the times of the disparity maps"),
+])
+def test_a_fifo_as_a_side_file_of_the_sequence_is_named_as_such_not_missing(folder, name, what):
+    fifo = folder / name
+    fifo.unlink()
+    os.mkfifo(fifo)
+    outcome = in_thread(lambda: read_recording(folder), fifo)
+    err = outcome.get("error")
+    assert isinstance(err, DataError), outcome
+    assert f"{fifo.name}: is a FIFO (named pipe), expected {what}" in str(err)
+
+
 def test_a_folder_named_like_a_disparity_map_is_refused(folder):
     (folder / "disparity" / "event" / "000000.png").unlink()
     (folder / "disparity" / "event" / "000000.png").mkdir()

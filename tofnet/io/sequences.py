@@ -45,9 +45,26 @@ def open_sequence(folder: Path, kind: str, *, side: str | None = None, rectify: 
 
 
 def _required(path: Path, what: str) -> Path:
-    if not path.is_file():
+    if not _present(path, what):
         raise DataError(located(path, None, f"missing: {what}"))
     return path
+
+
+def _present(path: Path, what: str) -> bool:
+    """Whether ``path`` is a regular file; one that exists but is not (a FIFO, a folder, ...) is an
+    error, not taken for missing (h5py would block on a FIFO)."""
+    import os
+    import stat
+
+    from tofnet.io.files import _kind
+
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return False
+    if not stat.S_ISREG(mode):
+        raise DataError(located(path, None, f"is {_kind(mode)}, expected {what}"))
+    return True
 
 
 def open_dsec(folder: Path, side: str, rectify: bool, allow_external: bool):
@@ -67,7 +84,8 @@ def open_dsec(folder: Path, side: str, rectify: bool, allow_external: bool):
         source.notes = [n for n in source.notes if not n.startswith("intrinsics from")]  # DsecSource's own
         source.notes.append(f"intrinsics of {camera} from {calib}")
         map_path = folder / "events" / side / "rectify_map.h5"
-        pixel_map = _rectify_map(map_path, source.sensor_size, allow_external) if map_path.is_file() else None
+        pixel_map = _rectify_map(map_path, source.sensor_size, allow_external) \
+            if _present(map_path, "the rectification map (HDF5)") else None
         if rectify:
             if pixel_map is None:
                 raise DataError(located(map_path, None, "missing: --rectify needs the rectification map"))
