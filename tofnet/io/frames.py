@@ -102,20 +102,53 @@ class FrameDepth:
         return self.at(events["t"], events["x"], events["y"], interpolate=interpolate)
 
 
-def read_png16(path: Path) -> np.ndarray:
-    """A 16-bit (or 8-bit) grey PNG as an integer array ``(H, W)``; ``DataError`` naming the file otherwise."""
+def png_size(path: Path, what: str = "PNG image", size: tuple[int, int] | None = None,
+             whose: str = "") -> tuple[int, int]:
+    """``(width, height)`` of a PNG from its header, without decoding it; checked as by ``read_png16``."""
+    return _png(path, what, size, whose, decode=False)[0]
+
+
+def read_png16(path: Path, size: tuple[int, int] | None = None, what: str = "PNG image",
+               whose: str = "") -> np.ndarray:
+    """A 16-bit (or 8-bit) grey PNG as an integer array ``(H, W)``; ``DataError`` naming the file otherwise.
+
+    The file is opened as a regular file (``tofnet.io.files.open_regular``: a FIFO, device or folder
+    is refused unread) and its header is checked before any pixel is decoded: the size must be
+    ``size`` (``(width, height)``, ``whose`` size that is, for the message) when given and within the
+    sensor limits (``MAX_SENSOR_PIXELS``)."""
+    return _png(path, what, size, whose, decode=True)[1]
+
+
+def _png(path: Path, what: str, size: tuple[int, int] | None, whose: str,
+         decode: bool) -> tuple[tuple[int, int], np.ndarray | None]:
+    import warnings
+
     from PIL import Image, UnidentifiedImageError
 
-    from tofnet.io.guard import note_read
-    note_read(path)
-    try:
-        with Image.open(path) as image:
-            if image.mode not in ("I;16", "I;16B", "I", "L"):
-                raise DataError(located(path, None, f"expected a grey 16-bit PNG (disparity x 256), got mode "
-                                                    f"{image.mode}"))
-            return np.asarray(image, dtype=np.int64)
-    except (OSError, UnidentifiedImageError, ValueError) as err:
-        raise DataError(located(path, None, f"not a readable PNG ({str(err).splitlines()[0][:120]})")) from None
+    from tofnet.events import sensor_size_problem
+    from tofnet.io.files import open_regular
+
+    with open_regular(path, what) as handle:
+        try:
+            with warnings.catch_warnings():  # PIL's DecompressionBombWarning: refused below all the same
+                warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+                image = Image.open(handle, formats=["PNG"])
+            with image:
+                width, height = image.size
+                if size is not None and (width, height) != tuple(size):
+                    raise DataError(located(path, None, f"{what} is {width}x{height} px, expected "
+                                                        f"{size[0]}x{size[1]} px" + (f" ({whose})" if whose else "")))
+                problem = sensor_size_problem(width, height)
+                if problem:
+                    raise DataError(located(path, None, f"{what}: {problem}"))
+                if image.mode not in ("I;16", "I;16B", "I", "L"):
+                    raise DataError(located(path, None, f"expected a grey 16-bit PNG (disparity x 256), got mode "
+                                                        f"{image.mode}"))
+                return (width, height), (np.asarray(image, dtype=np.int64) if decode else None)
+        except UnidentifiedImageError:  # its message names the handle, not the file
+            raise DataError(located(path, None, "not a PNG file")) from None
+        except (OSError, ValueError, Image.DecompressionBombError) as err:
+            raise DataError(located(path, None, f"not a readable PNG ({str(err).splitlines()[0][:120]})")) from None
 
 
 def write_png16(path: Path, image: np.ndarray) -> None:

@@ -45,9 +45,26 @@ def open_sequence(folder: Path, kind: str, *, side: str | None = None, rectify: 
 
 
 def _required(path: Path, what: str) -> Path:
-    if not path.is_file():
+    if not _present(path, what):
         raise DataError(located(path, None, f"missing: {what}"))
     return path
+
+
+def _present(path: Path, what: str) -> bool:
+    """Whether ``path`` is a regular file; one that exists but is not (a FIFO, a folder, ...) is an
+    error, not taken for missing (h5py would block on a FIFO)."""
+    import os
+    import stat
+
+    from tofnet.io.files import _kind
+
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return False
+    if not stat.S_ISREG(mode):
+        raise DataError(located(path, None, f"is {_kind(mode)}, expected {what}"))
+    return True
 
 
 def open_dsec(folder: Path, side: str, rectify: bool, allow_external: bool):
@@ -67,7 +84,8 @@ def open_dsec(folder: Path, side: str, rectify: bool, allow_external: bool):
         source.notes = [n for n in source.notes if not n.startswith("intrinsics from")]  # DsecSource's own
         source.notes.append(f"intrinsics of {camera} from {calib}")
         map_path = folder / "events" / side / "rectify_map.h5"
-        pixel_map = _rectify_map(map_path, source.sensor_size, allow_external) if map_path.is_file() else None
+        pixel_map = _rectify_map(map_path, source.sensor_size, allow_external) \
+            if _present(map_path, "the rectification map (HDF5)") else None
         if rectify:
             if pixel_map is None:
                 raise DataError(located(map_path, None, "missing: --rectify needs the rectification map"))
@@ -84,7 +102,7 @@ def open_dsec(folder: Path, side: str, rectify: bool, allow_external: bool):
             if not rectify and pixel_map is None:
                 raise DataError(located(map_path, None, "missing: the disparity ground truth is rectified, the "
                                                         "rectification map places the events in it"))
-            source.frame_gt = dsec_disparity(disparity, q, None if rectify else pixel_map)
+            source.frame_gt = dsec_disparity(disparity, q, None if rectify else pixel_map, source.sensor_size)
             check_overlap(source, source.frame_gt, disparity / "timestamps.txt")
             source.has_depth = True
             source.notes.append(f"ground truth: {len(source.frame_gt)} disparity maps from {disparity}")
@@ -134,11 +152,13 @@ def _q_matrix(calib: Path) -> np.ndarray:
     return q
 
 
-def dsec_disparity(folder: Path, q: np.ndarray, pixel_map: np.ndarray | None):
-    """``FrameDepth`` of DSEC's ``disparity/event/*.png`` at ``disparity/timestamps.txt``."""
-    from PIL import Image
+def dsec_disparity(folder: Path, q: np.ndarray, pixel_map: np.ndarray | None, sensor_size=None):
+    """``FrameDepth`` of DSEC's ``disparity/event/*.png`` at ``disparity/timestamps.txt``.
 
-    from tofnet.io.frames import FrameDepth, disparity_to_depth, read_png16
+    Every map must be ``sensor_size`` (``(width, height)``; DSEC's maps are the event camera's
+    640x480), or the first map's size when that is not known, within the sensor limits: a map of
+    another size is refused from its header, before it is decoded."""
+    from tofnet.io.frames import FrameDepth, disparity_to_depth, png_size, read_png16
 
     stamps = _required(folder / "timestamps.txt", "the times of the disparity maps (µs, one per line)")
     images = sorted((folder / "event").glob("*.png"))
@@ -148,10 +168,10 @@ def dsec_disparity(folder: Path, q: np.ndarray, pixel_map: np.ndarray | None):
     if len(times) != len(images):
         raise DataError(located(stamps, None, f"{len(times)} timestamps for {len(images)} disparity maps in "
                                               f"{folder / 'event'}"))
-    with Image.open(images[0]) as first:
-        width, height = first.size
-    return FrameDepth(times, lambda k: disparity_to_depth(read_png16(images[k]) / 256.0, q), (height, width),
-                      stamps, pixel_map=pixel_map, what="disparity maps")
+    what, whose = "disparity map", "the events' sensor size" if sensor_size is not None else "the first map's size"
+    size = png_size(images[0], what, None if sensor_size is None else tuple(sensor_size), whose)  # header only
+    return FrameDepth(times, lambda k: disparity_to_depth(read_png16(images[k], size, what, whose) / 256.0, q),
+                      (size[1], size[0]), stamps, pixel_map=pixel_map, what="disparity maps")
 
 
 def read_times(path: Path, scale: float = 1.0, column: int = 0) -> np.ndarray:
