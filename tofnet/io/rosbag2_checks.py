@@ -116,14 +116,16 @@ def inflate_message(data: bytes, where: str, topic: str) -> bytes:
             declared = zstd.get_frame_info(rest[:18]).decompressed_size
             if declared is not None and size + declared > limit:
                 raise _too_large(where, what, f"{size + declared:,}", stored)
-            decompressor = zstd.ZstdDecompressor()
-            part = decompressor.decompress(rest, max_length=limit - size + 1)
-            size += len(part)
-            parts.append(part)
-            if size > limit:
-                raise _too_large(where, what, f"more than {limit:,}", stored)
-            if not decompressor.eof:
-                raise zstd.ZstdError("the frame is truncated")
+            decompressor, data_in = zstd.ZstdDecompressor(), rest
+            while not decompressor.eof:  # in steps: a refused message never holds more than the limit
+                if decompressor.needs_input and not data_in:
+                    raise zstd.ZstdError("the frame is truncated")
+                part = decompressor.decompress(data_in, max_length=min(_READ_STEP * 16, limit - size + 1))
+                data_in = b""
+                size += len(part)
+                parts.append(part)
+                if size > limit:
+                    raise _too_large(where, what, f"more than {limit:,}", stored)
             rest = memoryview(decompressor.unused_data)
             if not rest:
                 return b"".join(parts)
