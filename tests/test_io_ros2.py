@@ -32,9 +32,11 @@ def _time(types, us=None, seconds=None):
     return types["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
 
 
-def write_bag2(path, recording, storage="sqlite3", per_message=400, store=None, event_topic="/dvs/events"):
-    """The ECD layout as a ROS 2 bag folder (rosbags' writer, version 9)."""
-    from rosbags.rosbag2 import StoragePlugin, Writer
+def write_bag2(path, recording, storage="sqlite3", per_message=400, store=None, event_topic="/dvs/events",
+               compression=None):
+    """The ECD layout as a ROS 2 bag folder (rosbags' writer, version 9); ``compression``
+    ``"file"`` or ``"message"`` compresses it with zstd."""
+    from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 
     from tofnet.io.ros_types import typestore
 
@@ -43,7 +45,10 @@ def write_bag2(path, recording, storage="sqlite3", per_message=400, store=None, 
     header = types["std_msgs/msg/Header"]
     events = recording.events
     plugin = StoragePlugin.SQLITE3 if storage == "sqlite3" else StoragePlugin.MCAP
-    with Writer(path, version=9, storage_plugin=plugin) as writer:
+    writer = Writer(path, version=9, storage_plugin=plugin)
+    if compression:
+        writer.set_compression(CompressionMode[compression.upper()], CompressionFormat.ZSTD)
+    with writer:
         connection = writer.add_connection(event_topic, "dvs_msgs/msg/EventArray", typestore=store)
         for start in range(0, len(events), per_message):
             part = events[start:start + per_message]

@@ -191,17 +191,20 @@ def _open(path: Path, kind: str):
         from rosbags.rosbag2 import ReaderError
         from rosbags.rosbag2.reader import DirectoryReader, McapReader, Sqlite3Reader
 
-        from tofnet.io.guard import note_read
+        from tofnet.io.files import open_regular
+        from tofnet.io.rosbag2_checks import check_bag_folder
 
         def by_content(file: Path):
-            with open(file, "rb") as handle:
+            with open_regular(file, "ROS 2 bag storage file") as handle:
                 return (Sqlite3Reader if handle.read(16) == _SQLITE_MAGIC else McapReader)(file)
 
         files = sorted(path.glob("*.db3")) + sorted(path.glob("*.mcap")) if path.is_dir() else []
-        for part in [path / "metadata.yaml", *files] if files else []:
-            note_read(part)  # rosbags opens them: protected from the command's outputs all the same
+        # rosbags opens the files by name and inflates zstd unbounded: the files (regular, noted
+        # as inputs) and FILE compression are checked first, MESSAGE compression is bounded here
+        compression = check_bag_folder(path) if path.is_dir() else None
         storage = DirectoryReader(path) if path.is_dir() else by_content(path)
-        reader, errors, what = _Rosbag2(storage), (ReaderError, OSError, KeyError, ValueError), "ROS 2 bag"
+        reader, errors, what = (_Rosbag2(storage, path, compression == "message"),
+                                (ReaderError, OSError, KeyError, ValueError), "ROS 2 bag")
     try:
         reader.open()
     except errors as err:
@@ -218,8 +221,8 @@ def _open(path: Path, kind: str):
 class _Rosbag2:
     """rosbags' ROS 2 storage readers (folder, sqlite3 or MCAP file) with rosbag1's ``Reader`` interface."""
 
-    def __init__(self, storage):
-        self.storage = storage
+    def __init__(self, storage, path: Path, inflate: bool = False):
+        self.storage, self.path, self.inflate = storage, path, inflate
         self.topics: dict = {}
         self.note: str | None = None  # how the bag was opened, when unusually
 
@@ -227,6 +230,8 @@ class _Rosbag2:
         from rosbags.interfaces import TopicInfo
 
         self.storage.open()
+        if self.inflate:  # rosbags yields MESSAGE-compressed messages as stored; inflate_message bounds them
+            self.storage.metadata = self.storage.metadata._replace(compression_mode=None)
         for connection in self.storage.connections:
             info = self.topics.get(connection.topic)
             msgtype = connection.msgtype if info is None or info.msgtype == connection.msgtype else None
@@ -239,7 +244,12 @@ class _Rosbag2:
         return self.storage.connections
 
     def messages(self, connections=()):
-        return self.storage.messages(connections or self.storage.connections, None, None)
+        messages = self.storage.messages(connections or self.storage.connections, None, None)
+        if not self.inflate:
+            return messages
+        from tofnet.io.rosbag2_checks import inflate_message
+        return ((connection, time, inflate_message(data, str(self.path), connection.topic))
+                for connection, time, data in messages)
 
     def close(self) -> None:
         self.storage.close()
