@@ -176,8 +176,19 @@ def test_processes_that_cannot_hold_a_region_run_whole_and_the_result_says_so():
     assert two.extra["whole"] == ["velocity"] and two.extra["banded"] == ["time_surface"]
 
 
+def test_auto_workers_are_the_cpus_this_process_may_use_not_the_hosts(monkeypatch):
+    """In a container or a Slurm job given 2 of a host's 64 CPUs, 'auto' makes 2 bands and threads, not 64."""
+    from tofnet.backends.bands import threads_for
+    from tofnet.backends.multiproc import MultiprocBackend
+    monkeypatch.setattr(os, "cpu_count", lambda: 64)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {3, 5}, raising=False)
+    assert resolve_workers("auto") == resolve_workers(0) == 2 and threads_for(16) == 2
+    assert MultiprocBackend().workers == MultiprocBackend(workers="auto").workers == 2
+
+
 def test_workers_option_and_its_errors(capsys, tmp_path):
-    cpus = os.cpu_count() or 1
+    from tofnet.machine import cpu_count
+    cpus = cpu_count()
     assert resolve_workers(0) == resolve_workers("auto") == cpus and resolve_workers(None) == 1
     assert FixedBackend(workers=7).workers == 7 and get_backend("float", workers="auto").workers == cpus
     for bad in (-1, 1.5, "many", True):

@@ -258,7 +258,8 @@ def test_ctrl_c_in_the_parent_stops_every_worker(leak_check):
 def test_bad_options_are_rejected():
     with pytest.raises(BackendError, match="workers"):
         MultiprocBackend(workers=-1)
-    assert MultiprocBackend(workers=0).workers == MultiprocBackend(workers="auto").workers == (os.cpu_count() or 1)
+    from tofnet.machine import cpu_count
+    assert MultiprocBackend(workers=0).workers == MultiprocBackend(workers="auto").workers == cpu_count()
     with pytest.raises(BackendError, match="timeout"):
         MultiprocBackend(timeout=0)
 

@@ -14,7 +14,6 @@ GIL (numba ``nogil``) and share the packet without copies (docs/performance.md, 
 
 from __future__ import annotations
 
-import os
 import threading
 import weakref
 from concurrent.futures import ThreadPoolExecutor
@@ -34,6 +33,7 @@ from tofnet.kernels.bands import row_load, select_rows, touch
 from tofnet.kernels.input_filter import NEVER
 from tofnet.kernels.kernel_config import KernelConfig, Region
 from tofnet.kernels.region import UNSORTED, TimeOfTravelKernel
+from tofnet.machine import cpu_count
 from tofnet.models.base import Model
 
 #: Packets with fewer events run their bands one after the other in the caller's thread: handing
@@ -49,7 +49,7 @@ def resolve_workers(value, who: str = "workers") -> int:
     if value is None:
         return 1
     if value == "auto" or (isinstance(value, int) and not isinstance(value, bool) and value == 0):
-        return os.cpu_count() or 1
+        return cpu_count()
     if isinstance(value, bool) or not isinstance(value, int) or value < 0:
         raise BackendError(f"{who} must be a whole number of workers (0 or 'auto': one per CPU), got {value!r}")
     return value
@@ -65,7 +65,7 @@ def sampled_row_load(events: np.ndarray, height: int) -> np.ndarray | None:
 
 def threads_for(bands: int) -> int:
     """Threads that run ``bands`` bands: one per band, at most one per CPU."""
-    return max(1, min(bands, os.cpu_count() or 1))
+    return max(1, min(bands, cpu_count()))
 
 
 class BandPool:

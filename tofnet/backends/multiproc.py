@@ -12,7 +12,6 @@ docs/backends.md.
 from __future__ import annotations
 
 import multiprocessing
-import os
 import time
 from typing import Iterable
 
@@ -32,6 +31,7 @@ from tofnet.backends.runtime import clock_of, start_time_us
 from tofnet.backends.stream import Collected, GraphStream
 from tofnet.compiler.compiled import CompiledNetwork, network_of
 from tofnet.kernels.compilation import Stopwatch
+from tofnet.machine import cpu_count
 from tofnet.errors import BackendError
 from tofnet.io.recording import Intrinsics, Recording, VelocitySource
 from tofnet.kernels.fixed_point import DEFAULT_FRAC_BITS, DEFAULT_PAYLOAD_BITS, FixedPointFormat
@@ -61,7 +61,7 @@ class MultiprocBackend(Backend):
     Parameters
     ----------
     workers
-        Worker processes, at most one per core of the largest layer; default ``os.cpu_count()``.
+        Worker processes, at most one per core of the largest layer; default: the CPUs this process may use.
     timeout
         Seconds to wait for any one answer of a worker; a ``BackendError`` names the worker.
     start_timeout
@@ -89,7 +89,7 @@ class MultiprocBackend(Backend):
                  start_timeout: float | None = None, chunk_steps: int = DEFAULT_CHUNK_STEPS,
                  frac_bits: int = DEFAULT_FRAC_BITS, payload_bits: int = DEFAULT_PAYLOAD_BITS,
                  per_core: bool = False, packet_events: int | None = None):
-        workers = (os.cpu_count() or 1) if workers is None else resolve_workers(workers, "multiproc: workers")
+        workers = cpu_count() if workers is None else resolve_workers(workers, "multiproc: workers")
         start_timeout = timeout if start_timeout is None else start_timeout
         for label, value in (("workers", workers), ("chunk_steps", chunk_steps)):
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:

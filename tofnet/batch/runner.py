@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import os
 import signal
 import sys
 import threading
@@ -31,6 +30,7 @@ from tofnet.batch.tasks import Task, expand
 from tofnet.batch.worker import ROW_FILE, base_row, is_complete, one_line, run_task, simulate_scenario, warm_up, \
     write_json
 from tofnet.errors import TofnetError
+from tofnet.machine import cpu_count
 
 #: Seconds between progress lines on a terminal (a log gets one line every ``LOG_EVERY``).
 TTY_EVERY, LOG_EVERY = 0.5, 10.0
@@ -89,7 +89,7 @@ def local_cluster(workers: int | None = None, memory_limit: str | float | None =
     ``memory_limit`` per worker: ``"auto"`` shares the machine's memory equally, a
     number is bytes, a string like ``"2GB"``. A worker over 95 % of it is restarted.
     """
-    n = workers or os.cpu_count() or 1
+    n = workers or cpu_count()
     with _sigint_ignored():  # inherited by the worker processes: Ctrl-C reaches the client only
         return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, memory_limit=memory_limit,
                             host="127.0.0.1", dashboard_address=":0", silence_logs=logging.CRITICAL)

@@ -44,7 +44,7 @@ def register(subparsers) -> None:
 def workers_option(text: str) -> int | str:
     """``--workers``: a whole number, or ``auto``; more than the CPUs runs as asked (the bands of rows are
     the same, a test may want more than the machine has), with one warning line saying so."""
-    from tofnet.io.trust import cpu_count
+    from tofnet.machine import cpu_count
     if text.strip().lower() == "auto":
         return "auto"
     try:

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any, Iterable, Mapping
 
 from tofnet.errors import SpecError, quote
+from tofnet.machine import cpu_count
 
 #: Environment variable: modules a spec may import, separated by commas or spaces.
 ENV_ALLOW_IMPORT = "TOFNET_ALLOW_IMPORT"
@@ -146,13 +147,6 @@ def file_a_spec_names(named: str, folder: Path | None, setting: str = "PROCESS.P
 
 
 # ---------------------------------------------------------------- resources
-
-def cpu_count() -> int:
-    """CPUs this process may use (its affinity mask where the system has one)."""
-    if hasattr(os, "sched_getaffinity"):
-        return max(1, len(os.sched_getaffinity(0)))
-    return max(1, os.cpu_count() or 1)
-
 
 def cap_workers(options: Mapping[str, Any], where: str) -> dict[str, Any]:
     """``options`` with every worker count (``workers``, ``*_workers``) above the CPU count
