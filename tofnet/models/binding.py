@@ -9,6 +9,7 @@ import numpy as np
 
 from tofnet.errors import BackendError, DataError
 from tofnet.io.recording import ConstantVelocity, Intrinsics, Recording, VelocitySource
+from tofnet.units import seconds_of
 
 
 def intrinsics_of(given, recording: Recording | None, who: str) -> Intrinsics:
@@ -62,7 +63,7 @@ def update_times(t0_us: int, timestep_us: int, update_every: int, n_updates: int
     start, ``t0 + j * update_every * timestep``.
     """
     j = np.arange(first_update, first_update + n_updates, dtype=np.int64)
-    return (t0_us + j * update_every * timestep_us) * 1e-6
+    return seconds_of(t0_us + j * update_every * timestep_us)
 
 
 def _checked_table(source: Callable[[np.ndarray], Any], t: np.ndarray, what: str, where: str) -> np.ndarray:
