@@ -31,7 +31,7 @@ def test_random_recipes_are_refused_or_valid(name, rng):
 
 @pytest.mark.parametrize("recipe, refused", [
     (b"allow 1\nt 1 0 0\nstore 1\n", "FIFO"),                        # external storage is a FIFO
-    (b"allow 1\nt 7 0 0\n", "character device"),                     # /dev/zero as storage
+    (b"allow 1\nt 7 0 0\n", "outside this file's folder"),          # /dev/zero as storage
     (b"allow 0\nt 1 0 0\n", "refused unless --allow-external"),
     (b"allow 1\nt 2 0 1\n", "file not found"),                       # virtual source missing
     (b"allow 0\nt 3 1000000000000 0\n", "chunks are written"),       # 10^12 declared, none written
