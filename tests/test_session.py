@@ -92,6 +92,23 @@ def test_variables_round_trip_and_read_only_ones_refuse(name, workers):
             s.executor.get_var("depth", "nope")
 
 
+@pytest.mark.parametrize("name", ["fixed", "multiproc"])
+def test_a_refused_value_changes_nothing_and_the_session_goes_on(name, workers):
+    """multiproc answered the next message with a worker's stale refusal (every later session on those
+    workers failed 'build'); now it says what a local model says, and nothing changed."""
+    with Session(COMPILED, RECORDING, backend=backend_of(name, workers)) as s:
+        s.run(steps=30)
+        before = s.get("time_of_travel.counter").copy()
+        with pytest.raises(BackendError) as refused:
+            s.set("time_of_travel.counter", 999)
+        assert str(refused.value) == "time_of_travel.counter: counter values must be in 0..255 (8-bit counters)"
+        assert np.array_equal(s.get("time_of_travel.counter"), before)
+        s.run(steps=10)
+        assert s.step == 40
+    again = Session(COMPILED, RECORDING, backend=backend_of(name, workers)).finish()
+    assert len(again.depth) > 500
+
+
 def test_a_parameter_changed_mid_recording_applies_from_then_on():
     net = depth_network(SENSOR, input={"refractory": "20ms"}, velocity=VELOCITY)
     with Session(net, RECORDING) as s:
@@ -207,7 +224,7 @@ def test_a_session_asks_a_backend_what_it_declares_it_can_do():
 
 
 @pytest.mark.parametrize("name", ["fixed", "multiproc"])
-def test_a_session_reports_its_set_up_apart_from_the_network_time(name, workers, monkeypatch):
+def test_a_session_reports_its_set_up_apart_from_the_network_time(name, monkeypatch):
     """Building the models' state is set-up, as in ``run`` (it was counted as running the network)."""
     import time
 
@@ -221,12 +238,12 @@ def test_a_session_reports_its_set_up_apart_from_the_network_time(name, workers,
     if name == "fixed":
         monkeypatch.setattr(GraphExecutor, "__init__", slow_build)
     started = time.perf_counter()
-    session = Session(COMPILED, RECORDING, backend=backend_of(name, workers))
+    session = Session(COMPILED, RECORDING, backend=MultiprocBackend(workers=2) if name == "multiproc" else name)
     result = session.finish()
     elapsed = time.perf_counter() - started
     if name == "fixed":
         assert result.setup_time >= 0.2 > result.wall_time
-    else:  # the workers build their models when the stream opens
+    else:  # starting the workers and building their models, before the stream's clock started
         assert result.setup_time > 0, result.setup_time
     assert result.wall_time + result.setup_time + result.compile_time <= elapsed + 1e-3, \
         (result.wall_time, result.setup_time, result.compile_time, elapsed)

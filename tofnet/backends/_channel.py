@@ -29,6 +29,24 @@ KILL_WAIT = 5.0
 DIRECT_BYTES = 4000
 
 
+class WorkerError(BackendError):
+    """A worker that is alive answered with an error (its traceback in the message); ``refusal``: the
+    one-line message of a ``TofnetError`` it raised (a value the user gave refused), else None."""
+
+    def __init__(self, message: str, refusal: str | None = None):
+        super().__init__(message)
+        self.refusal = refusal
+
+
+class WorkersRefused(WorkerError):
+    """Workers that answered one message with errors (``refused`` of them) while ``answered`` others did
+    what it asked (``answers(..., settle=True)``)."""
+
+    def __init__(self, first: WorkerError, refused: int, answered: int):
+        super().__init__(str(first), first.refusal)
+        self.refused, self.answered = refused, answered
+
+
 class Channel:
     """One worker process and the host's end of its pipe."""
 
@@ -107,7 +125,8 @@ class Channel:
                                f"{timeout if limit is None else limit:g} s while {doing}; all workers were stopped (raise the backend's "
                                f"{timeout_name} if the machine is just slow)")
         if message[0] == "error":
-            raise BackendError(f"multiproc worker {self.index} failed while {doing}; its traceback:\n{message[1]}")
+            raise WorkerError(f"multiproc worker {self.index} failed while {doing}; its traceback:\n{message[1]}",
+                              message[2] if len(message) > 2 else None)
         if message[0] != kind:
             raise BackendError(f"multiproc worker {self.index} sent {message[0]!r} while {doing}, expected {kind!r}")
         return message
@@ -156,13 +175,17 @@ class Channel:
             self.process.close()
 
 
-def answers(expected: dict[int, tuple[Channel, str, str]], timeout: float, stuck=None) -> dict[int, tuple]:
+def answers(expected: dict[int, tuple[Channel, str, str]], timeout: float, stuck=None,
+            settle: bool = False) -> dict[int, tuple]:
     """Per worker, its answer (``expected``: its channel, the kind of answer and what it is doing), taken as
     they come within ``timeout`` seconds in all: a worker's error is reported at once, even while another
     waits for it (the bands of a packet wait for each other). ``stuck()``: the workers to name first
     when none answers in time (e.g. those not waiting for the others); a worker that died is named
-    before one that failed because of it."""
+    before one that failed because of it. ``settle``: a worker's error reply is raised only after the
+    others answered (``WorkersRefused``, with how many did), so every pipe holds no stale answer: for
+    messages the workers answer independently (a variable set, a parameter)."""
     replies, pending = {}, dict(expected)
+    refused: list[BackendError] = []
     deadline = time.monotonic() + timeout
     while pending:
         ready = wait([h for c, _, _ in pending.values() for h in (c.conn, c.process.sentinel)],
@@ -177,9 +200,16 @@ def answers(expected: dict[int, tuple[Channel, str, str]], timeout: float, stuck
             try:
                 replies[worker] = channel.expect(kind, max(0.0, deadline - time.monotonic()), doing, limit=timeout,
                                                  ready=ready)
+            except WorkerError as err:
+                if not settle:
+                    raise
+                refused.append(err)
             except BackendError:
                 for other, _, _ in expected.values():
                     if other is not channel and not other.process.is_alive():
                         raise other.failure("died", f"while {doing}") from None
                 raise
+    if refused:
+        raise WorkersRefused(refused[0], refused=len(refused), answered=len(replies))
     return replies
+

@@ -31,10 +31,13 @@ from __future__ import annotations
 
 import os
 import signal
+import sys
 import time
 import traceback
 
 import numpy as np
+
+from tofnet.errors import TofnetError
 
 #: Test hooks armed with ``("fault", kind)``; each fires when the next ``run`` arrives.
 _FAULTS = ("raise", "kill", "hang")
@@ -77,8 +80,10 @@ def worker_main(conn, index: int) -> None:
 
 def _reply_error(conn, index: int) -> None:
     text = f"worker {index} (pid {os.getpid()}):\n{traceback.format_exc()}"
+    error = sys.exc_info()[1]
+    refusal = str(error) if isinstance(error, TofnetError) else None  # the user's mistake: its one line
     try:
-        conn.send(("error", text))
+        conn.send(("error", text, refusal))
     except (BrokenPipeError, OSError):
         pass
 

@@ -17,7 +17,7 @@ from typing import Iterable
 
 import numpy as np
 
-from tofnet.backends._channel import Channel, answers
+from tofnet.backends._channel import Channel, WorkersRefused, answers
 from tofnet.backends.bands import resolve_workers, sampled_row_load
 from tofnet.backends.base import Backend, ProgressCallback, RunResult
 from tofnet.backends.graph import GraphExecutor, resolve_probes, sinks_of
@@ -45,6 +45,9 @@ MAX_CHUNK_STEPS = 1_000_000
 _REPLY = {"build": "built", "run": "run", "counts": "counts", "finish": "finished", "get": "get", "set": "set",
           "param": "param", "band": "band", "band_run": "band_run", "band_promise": "band_promise",
           "band_counts": "band_counts", "band_map": "band_map"}
+#: Messages each worker answers on its own (no worker waits for another): a refusal is raised after the
+#: others answered, so no pipe keeps a stale answer and the session stays usable when all refused alike.
+_ANSWERED_ALONE = {"get", "set", "param", "counts"}
 
 
 def compiled_of(compiled) -> CompiledNetwork:
@@ -230,7 +233,20 @@ class MultiprocSession:
         for worker, message in messages.items():
             doing = f"running chunk {self._seq}" if message[0] in ("run", "band_run") else f"answering {message[0]!r}"
             expected[worker] = (self._channels[worker], _REPLY[message[0]], doing)
-        return answers(expected, self.backend.timeout, stuck)
+        kinds = {message[0] for message in messages.values()}
+        if not kinds <= _ANSWERED_ALONE:
+            return answers(expected, self.backend.timeout, stuck)
+        try:
+            return answers(expected, self.backend.timeout, stuck, settle=True)
+        except WorkersRefused as err:
+            if err.answered and kinds & {"set", "param"}:  # some workers changed their state, others did not
+                self._state = "failed"
+                self.close(graceful=False)
+                raise BackendError(f"{err.refusal or err}; {err.answered} other worker(s) had applied it, so the "
+                                   "session's state differed between workers and its workers were stopped") from None
+            if err.refusal is not None:  # every worker refused the user's value, and nothing changed: as one model
+                raise BackendError(err.refusal) from None
+            raise
 
     def _exchange_quietly(self, kind: str) -> None:
         """Tell every worker ``kind`` (e.g. drop its band) when the session is still open."""
