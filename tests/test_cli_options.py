@@ -148,3 +148,15 @@ def test_set_changes_one_parameter_of_the_chosen_network(events_file, tmp_path, 
         assert main(["run", str(events_file), "--out", out, *COMMON, "--set", bad]) != 0
         line = error_line(capsys)
         assert line.startswith("tofnet run: error: --set ") and why in line, line
+
+
+def test_a_recording_without_poses_says_how_to_give_the_velocity(tmp_path, capsys):
+    """The default network reads the velocity from the poses; without them the line names the options."""
+    from tofnet.events import make_events
+    np.save(tmp_path / "ev.npy", make_events([0, 1000, 2000], [1, 2, 3], [1, 1, 1], [1, 1, 1]))
+    assert main(["run", str(tmp_path / "ev.npy"), "--intrinsics", "200,200,120,90", "--out",
+                 str(tmp_path / "d.npz"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "pass --velocity VX,VY,VZ" in err and "--set velocity.samples=FILE" in err
+    assert main(["run", str(tmp_path / "ev.npy"), "--intrinsics", "200,200,120,90", "--velocity", "0.5,0,0",
+                 "--out", str(tmp_path / "d.npz"), "--quiet"]) == 0

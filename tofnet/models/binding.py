@@ -51,8 +51,10 @@ def velocity_source_of(source: str, constant, samples: str | None, recording: Re
         return read_velocity_samples(samples)
     if recording is None or recording.trajectory is None:
         where = recording.source if recording is not None else "the stream"
-        raise DataError(f"{where}: no ground-truth poses (groundtruth.txt), but velocity process "
-                        f"'{who}' has source: groundtruth; add the poses or use source: constant/samples")
+        raise DataError(f"{where}: no ground-truth poses (groundtruth.txt), so process '{who}' cannot know the "
+                        "camera's velocity: pass --velocity VX,VY,VZ (m/s, camera frame; plan key velocity:) or "
+                        f"--set {who}.source=samples --set {who}.samples=FILE, add groundtruth.txt beside the "
+                        "recording, or set source: constant/samples in the spec")
     return recording.trajectory
 
 
