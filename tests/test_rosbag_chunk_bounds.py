@@ -178,8 +178,10 @@ def test_an_mcap_chunk_bomb_is_refused_within_the_limit(tmp_path, monkeypatch, s
                          "expected at most 1 MiB")
 
 
-def test_an_mcap_chunk_declaring_too_much_is_refused_before_inflating(tmp_path, monkeypatch, small_limit):
-    """The chunk's record (and the summary's chunk index) declare 64 MiB: refused at once."""
+@pytest.mark.parametrize("indexed", [True, False], ids=["indexed", "scanned"])
+def test_an_mcap_chunk_declaring_too_much_is_refused_before_inflating(tmp_path, monkeypatch, small_limit, indexed):
+    """The chunk's record (and the summary's chunk index) declare 64 MiB: refused at once
+    (indexed: from the index when the bag is opened; scanned: from the record)."""
     import tofnet.io.rosbag as rosbag
 
     bag = write_mcap(tmp_path / "declared", monkeypatch, "zstd")
@@ -191,6 +193,8 @@ def test_an_mcap_chunk_declaring_too_much_is_refused_before_inflating(tmp_path, 
     size = data[at + 9 + 16:at + 9 + 24]  # after message_start_time and message_end_time
     assert data.count(size) == 2, "the chunk record and its index"
     mcap.write_bytes(data.replace(size, struct.pack("<Q", BOMB)))
+    if not indexed:
+        _unindexed(bag)
     monkeypatch.setattr(rosbag, "inflate", lambda *args: pytest.fail("inflated"))
     refused_within_limit(bag, str(bag), "a zstd-compressed MCAP chunk inflates to 67,108,864 bytes")
 
@@ -223,3 +227,39 @@ def test_rosbags_is_unchanged_outside_tofnets_reads(tmp_path, monkeypatch, small
         other.join()
     assert inflated == [8 * LIMIT]
     assert len(storage_mcap.DECOMPRESSORS["lz4"](_bomb("lz4", 8 * LIMIT), 100)) == 8 * LIMIT
+
+
+def _overlapping_mcap(path, overlapping):
+    """An MCAP bag of zstd chunks of ~1 MiB of zeros (rosbags closes a chunk past 1 MiB), each
+    spanning the same 16 ns when ``overlapping``, one after the other otherwise."""
+    from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
+
+    from tofnet.io.ros_types import typestore
+
+    writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
+    writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+    with writer:
+        connection = writer.add_connection("/dvs/imu", "sensor_msgs/msg/Imu", typestore=typestore(2))
+        for index in range(5 * 17):
+            writer.write(connection, 1 + (index % 17 if overlapping else index), bytes(1 << 16))
+    return path
+
+
+def test_mcap_chunks_overlapping_in_time_may_not_inflate_past_the_limit_together(tmp_path, monkeypatch):
+    """rosbags merges chunks by time, holding overlapping ones at once: 5 chunks of 1.1 MB,
+    each within a 4 MiB limit, overlapping, are refused at open; one after the other, not."""
+    import tofnet.io.inflate as inflate
+    from rosbags.rosbag2.reader import DirectoryReader
+
+    monkeypatch.setattr(inflate, "MAX_INFLATED_BYTES", 4 * LIMIT)
+    monkeypatch.setattr(inflate, "MAX_INFLATE_RATIO", 2)
+    bag = _overlapping_mcap(tmp_path / "overlapping", True)
+    reader = DirectoryReader(bag)
+    reader.open()
+    chunks = list(reader.storages[0].chunks)
+    reader.close()
+    assert len(chunks) >= 5 and all(c.uncompressed_size < 4 * LIMIT for c in chunks)
+    assert max(c.message_start_time for c in chunks[:-1]) < min(c.message_end_time for c in chunks[:-1])
+    refused(bag, str(bag), "MCAP chunks overlapping in time (read together) inflates to", "expected at most 4 MiB")
+    sequential = _overlapping_mcap(tmp_path / "sequential", False)
+    refused(sequential, "no dvs_msgs/EventArray or event_camera_msgs/EventPacket topic")  # opened and read

@@ -17,7 +17,8 @@ rosbags inflates each compressed chunk in full before it checks anything (785 by
 bz2 in a ROS1 chunk, or 33 KB of zstd in an MCAP chunk, became 1 GiB). tofnet's reads
 inflate them with ``tofnet.io.inflate`` under the ``.npz`` rule instead: ROS1 chunks (bz2,
 lz4) through the open reader's own chunk table, MCAP chunks (zstd, lz4) through rosbags'
-``DECOMPRESSORS`` while tofnet reads (``bounded_chunks``); the errors name the bag.
+``DECOMPRESSORS`` while tofnet reads (``bounded_chunks``), MCAP chunks overlapping in time
+(held at once) under the rule together; the errors name the bag.
 """
 
 from __future__ import annotations
@@ -308,6 +309,27 @@ def _mcap_decompressor(codec: str, rosbags_decompress):
     return decompress
 
 
+def _check_overlapping_chunks(chunks, where: object) -> None:
+    """rosbags merges an MCAP file's indexed chunks by time: chunks whose time spans overlap
+    are inflated and held at once. Each such group, as declared in the chunk index (an MCAP
+    chunk inflating to other than its declared size is refused), must inflate to at most
+    ``inflation_limit`` of its compressed bytes, the rule for one chunk."""
+    import heapq
+
+    live: list[tuple[int, int, int]] = []  # (end time, compressed, inflated) of the chunks held
+    stored = inflated = 0
+    for chunk in sorted(chunks, key=lambda c: c.message_start_time):
+        while live and live[0][0] < chunk.message_start_time:
+            _, done_stored, done_inflated = heapq.heappop(live)
+            stored, inflated = stored - done_stored, inflated - done_inflated
+        heapq.heappush(live, (chunk.message_end_time, chunk.compressed_size, chunk.uncompressed_size))
+        stored, inflated = stored + chunk.compressed_size, inflated + chunk.uncompressed_size
+        if inflated > inflation_limit(stored):
+            what = (f"a {chunk.compression}-compressed MCAP chunk" if len(live) == 1
+                    else f"a group of {len(live)} MCAP chunks overlapping in time (read together)")
+            raise too_large(where, what, f"{inflated:,}", stored)
+
+
 class _Rosbag2:
     """rosbags' ROS 2 storage readers (folder, sqlite3 or MCAP file) with rosbag1's ``Reader`` interface."""
 
@@ -321,6 +343,8 @@ class _Rosbag2:
 
         with bounded_chunks(self.path):  # an MCAP file without a summary is scanned, its chunks inflated
             self.storage.open()
+        for storage in getattr(self.storage, "storages", [self.storage]):
+            _check_overlapping_chunks(getattr(storage, "chunks", None) or [], self.path)
         if self.inflate:  # rosbags yields MESSAGE-compressed messages as stored; inflate_message bounds them
             self.storage.metadata = self.storage.metadata._replace(compression_mode=None)
         for connection in self.storage.connections:
