@@ -31,9 +31,9 @@ REC = pattern_recording(duration_us=20_000)
 
 @pytest.fixture
 def small_limit(monkeypatch):
-    import tofnet.io.rosbag2_checks as checks
+    import tofnet.io.inflate as inflate  # the rule's home
 
-    monkeypatch.setattr(checks, "MAX_INFLATED_BYTES", LIMIT)
+    monkeypatch.setattr(inflate, "MAX_INFLATED_BYTES", LIMIT)
 
 
 def _bomb(size, declared):

@@ -12,17 +12,29 @@ has several topics, one in the events' namespace, else one containing ``left``, 
 first by name wins (noted). ``topics={"events": ..., "pose": ..., "imu": ..., "camera_info": ...}``
 overrides the choice. Every connection tofnet reads must carry its type's standard
 message definition (``tofnet.io.ros_types``); stamps' nanoseconds must be below 10^9.
+
+rosbags inflates each compressed chunk in full before it checks anything (785 bytes of
+bz2 in a ROS1 chunk, or 33 KB of zstd in an MCAP chunk, became 1 GiB). tofnet's reads
+inflate them with ``tofnet.io.inflate`` under the ``.npz`` rule instead: ROS1 chunks (bz2,
+lz4) through the open reader's own chunk table, MCAP chunks (zstd, lz4) through rosbags'
+``DECOMPRESSORS`` while tofnet reads (``bounded_chunks``), MCAP chunks overlapping in time
+(held at once) under the rule together; the errors name the bag.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+import contextlib
+import contextvars
+import threading
+from collections.abc import Iterable, Iterator
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from tofnet.errors import DataError, located, quote, reason
 from tofnet.io.extras import require
+from tofnet.io.inflate import inflate, inflation_limit, too_large
 from tofnet.io.ros_events import _EVENT_WIRE, NSEC_PER_S, PacketDecoder, decode_event_array  # noqa: F401
 from tofnet.io.ros_types import DVS_MSGS, ROLES, definition_problem, typestore  # noqa: F401
 from tofnet.io.event_source import EventSource
@@ -215,7 +227,107 @@ def _open(path: Path, kind: str):
             fallback.note = f"metadata.yaml names no storage plugin: {files[0].name} read as its content says"
             return fallback
         raise DataError(located(path, None, f"not a readable {what} ({reason(err)})")) from None
+    if kind == "rosbag1":
+        _bound_ros1_chunks(reader, path)
     return reader
+
+
+def _bound_ros1_chunks(reader, path: Path) -> None:
+    """The open ROS1 reader inflates its bz2 and lz4 chunks with ``tofnet.io.inflate``.
+
+    rosbags' ``Reader.open`` binds each chunk to a function of its ``decompressors`` table
+    (no declared size is kept, so the limit is the rule applied to the compressed length);
+    they are replaced in this reader's chunk table only: nothing global changes.
+    """
+    from rosbags.rosbag1.reader import decompressors
+
+    codecs = {id(decompressors[name]): name for name in ("bz2", "lz4") if name in decompressors}
+    for position, chunk in reader.chunks.items():
+        codec = codecs.get(id(chunk.decompressor))
+        if codec is not None:
+            what = f"the {codec}-compressed chunk at byte {position:,}"
+            reader.chunks[position] = chunk._replace(decompressor=partial(inflate, codec=codec, where=path, what=what))
+
+
+_BAG: contextvars.ContextVar[str | None] = contextvars.ContextVar("tofnet_rosbag_chunks", default=None)
+_INSTALLING = threading.Lock()
+
+
+@contextlib.contextmanager
+def bounded_chunks(where: object) -> Iterator[None]:
+    """While inside (in this thread or task), MCAP chunks rosbags inflates are inflated by
+    ``tofnet.io.inflate`` under the ``.npz`` rule; errors name ``where``.
+
+    rosbags looks its ``DECOMPRESSORS`` table up for each chunk. Its zstd and lz4 entries are
+    wrapped once, by a function that calls tofnet's bounded inflation only inside this
+    context (a context variable: other threads, and code outside tofnet's reads, get
+    rosbags' own functions, unchanged); nesting is allowed.
+    """
+    _install_mcap_decompressors()
+    token = _BAG.set(str(where))
+    try:
+        yield
+    finally:
+        _BAG.reset(token)
+
+
+def _bounded_iter(items: Iterable, where: object) -> Iterator:
+    """``items`` (a rosbags generator), each step run inside ``bounded_chunks(where)``."""
+    items = iter(items)
+    while True:
+        with bounded_chunks(where):
+            try:
+                item = next(items)
+            except StopIteration:
+                return
+        yield item
+
+
+def _install_mcap_decompressors() -> None:
+    from rosbags.rosbag2 import storage_mcap
+
+    table = storage_mcap.DECOMPRESSORS
+    if all(hasattr(table.get(codec), "rosbags_decompress") for codec in ("zstd", "lz4")):
+        return
+    with _INSTALLING:
+        for codec in ("zstd", "lz4"):
+            current = table.get(codec)
+            if current is not None and not hasattr(current, "rosbags_decompress"):
+                table[codec] = _mcap_decompressor(codec, current)
+
+
+def _mcap_decompressor(codec: str, rosbags_decompress):
+    def decompress(data: bytes, size: int) -> bytes:
+        where = _BAG.get()
+        if where is None:  # not tofnet reading: rosbags' own
+            return rosbags_decompress(data, size)
+        what, limit = f"a {codec}-compressed MCAP chunk", inflation_limit(len(data))
+        if size > limit:  # the size its record declares; rosbags compares it after inflating
+            raise too_large(where, what, f"{size:,}", len(data))
+        return inflate(data, codec, where, what, limit)
+    decompress.rosbags_decompress = rosbags_decompress
+    return decompress
+
+
+def _check_overlapping_chunks(chunks, where: object) -> None:
+    """rosbags merges an MCAP file's indexed chunks by time: chunks whose time spans overlap
+    are inflated and held at once. Each such group, as declared in the chunk index (an MCAP
+    chunk inflating to other than its declared size is refused), must inflate to at most
+    ``inflation_limit`` of its compressed bytes, the rule for one chunk."""
+    import heapq
+
+    live: list[tuple[int, int, int]] = []  # (end time, compressed, inflated) of the chunks held
+    stored = inflated = 0
+    for chunk in sorted(chunks, key=lambda c: c.message_start_time):
+        while live and live[0][0] < chunk.message_start_time:
+            _, done_stored, done_inflated = heapq.heappop(live)
+            stored, inflated = stored - done_stored, inflated - done_inflated
+        heapq.heappush(live, (chunk.message_end_time, chunk.compressed_size, chunk.uncompressed_size))
+        stored, inflated = stored + chunk.compressed_size, inflated + chunk.uncompressed_size
+        if inflated > inflation_limit(stored):
+            what = (f"a {chunk.compression}-compressed MCAP chunk" if len(live) == 1
+                    else f"a group of {len(live)} MCAP chunks overlapping in time (read together)")
+            raise too_large(where, what, f"{inflated:,}", stored)
 
 
 class _Rosbag2:
@@ -229,7 +341,10 @@ class _Rosbag2:
     def open(self) -> None:
         from rosbags.interfaces import TopicInfo
 
-        self.storage.open()
+        with bounded_chunks(self.path):  # an MCAP file without a summary is scanned, its chunks inflated
+            self.storage.open()
+        for storage in getattr(self.storage, "storages", [self.storage]):
+            _check_overlapping_chunks(getattr(storage, "chunks", None) or [], self.path)
         if self.inflate:  # rosbags yields MESSAGE-compressed messages as stored; inflate_message bounds them
             self.storage.metadata = self.storage.metadata._replace(compression_mode=None)
         for connection in self.storage.connections:
@@ -244,7 +359,8 @@ class _Rosbag2:
         return self.storage.connections
 
     def messages(self, connections=()):
-        messages = self.storage.messages(connections or self.storage.connections, None, None)
+        messages = _bounded_iter(self.storage.messages(connections or self.storage.connections, None, None),
+                                 self.path)
         if not self.inflate:
             return messages
         from tofnet.io.rosbag2_checks import inflate_message

@@ -27,7 +27,8 @@ from pathlib import Path, PurePath
 
 from tofnet.errors import DataError, located, quote, reason
 from tofnet.io.files import open_regular, read_text
-from tofnet.io.npy import MAX_INFLATE_RATIO, MAX_INFLATED_BYTES
+from tofnet.io.inflate import inflate, inflation_limit
+from tofnet.io.inflate import too_large as _too_large
 from tofnet.io.safe_yaml import MAX_SPEC_BYTES
 
 if sys.version_info >= (3, 14):  # what rosbags inflates with
@@ -37,17 +38,6 @@ else:  # pragma: no cover
 
 _STORAGE = "ROS 2 bag storage file"
 _READ_STEP = 1 << 20
-
-
-def inflation_limit(stored: int) -> int:
-    """Most bytes ``stored`` compressed bytes may inflate to (the ``.npz`` rule)."""
-    return max(MAX_INFLATED_BYTES, MAX_INFLATE_RATIO * stored)
-
-
-def _too_large(where: object, what: str, size: str, stored: int) -> DataError:
-    return DataError(located(where, None, f"{what} inflates to {size} bytes from {stored:,} (expected at most "
-                                          f"{MAX_INFLATED_BYTES // 2**20} MiB, or {MAX_INFLATE_RATIO}x the "
-                                          "compressed size beyond that: a zip bomb?)"))
 
 
 def check_bag_folder(path: Path) -> str | None:
@@ -107,27 +97,6 @@ def _check_inflated_file(file: Path) -> None:
 
 def inflate_message(data: bytes, where: str, topic: str) -> bytes:
     """One zstd-compressed message (``compression_mode: MESSAGE``), inflated to at most
-    ``inflation_limit(len(data))`` bytes; its frames' declared sizes are checked first."""
-    what = f"topic {quote(topic)}: a zstd-compressed message (compression_mode MESSAGE)"
-    stored, limit = len(data), inflation_limit(len(data))
-    parts, size, rest = [], 0, memoryview(data)
-    try:
-        while True:
-            declared = zstd.get_frame_info(rest[:18]).decompressed_size
-            if declared is not None and size + declared > limit:
-                raise _too_large(where, what, f"{size + declared:,}", stored)
-            decompressor, data_in = zstd.ZstdDecompressor(), rest
-            while not decompressor.eof:  # in steps: a refused message never holds more than the limit
-                if decompressor.needs_input and not data_in:
-                    raise zstd.ZstdError("the frame is truncated")
-                part = decompressor.decompress(data_in, max_length=min(_READ_STEP * 16, limit - size + 1))
-                data_in = b""
-                size += len(part)
-                parts.append(part)
-                if size > limit:
-                    raise _too_large(where, what, f"more than {limit:,}", stored)
-            rest = memoryview(decompressor.unused_data)
-            if not rest:
-                return b"".join(parts)
-    except zstd.ZstdError as err:
-        raise DataError(located(where, None, f"{what} is not zstd data ({reason(err)})")) from None
+    ``inflation_limit(len(data))`` bytes by ``tofnet.io.inflate.inflate``; its frames'
+    declared sizes are checked first."""
+    return inflate(data, "zstd", where, f"topic {quote(topic)}: a zstd-compressed message (compression_mode MESSAGE)")
