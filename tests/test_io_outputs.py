@@ -118,3 +118,27 @@ def test_cli_export_maps_and_cloud(tmp_path, capsys):
                                                                         "age_000001.npy", "depth_000000.npy"]
     assert main(["export", str(tmp_path / "depth.npz")]) == 2
     assert "nothing to do" in capsys.readouterr().err
+
+
+def test_export_uses_the_runs_camera_and_checks_the_cloud_before_any_map(tmp_path, capsys):
+    """A recording without a calibration run with --intrinsics: the depth file records the camera, so the
+    point cloud needs no second --intrinsics; without any camera nothing is written (maps were, before)."""
+    from tofnet.io.depth import read_depth, write_depth
+    from tofnet.testing import moving_edge
+
+    np.save(tmp_path / "ev.npy", moving_edge((8, 6), -50.0, "u"))
+    out = tmp_path / "d.npz"
+    assert main(["run", str(tmp_path / "ev.npy"), "--intrinsics", "100,110,4,3", "--velocity", "0.5,0,0",
+                 "--out", str(out), "--quiet"]) == 0
+    assert read_depth(out)[1]["summary"]["camera"] == {"intrinsics": [100.0, 110.0, 4.0, 3.0],
+                                                         "distortion_model": "radtan", "distortion": []}
+    capsys.readouterr()
+    assert main(["export", str(out), "--ply", str(tmp_path / "cloud.ply"), "--maps", str(tmp_path / "maps")]) == 0
+    assert "camera         the run's, from" in capsys.readouterr().out and (tmp_path / "cloud.ply").is_file()
+    depth, meta = read_depth(out)
+    write_depth(tmp_path / "bare.npz", depth, t0_us=meta["t0_us"], timestep_us=1000, latency_steps=2,
+                summary={"recording": str(tmp_path / "ev.npy")})  # a depth file that names no camera
+    assert main(["export", str(tmp_path / "bare.npz"), "--maps", str(tmp_path / "maps2"), "--ply",
+                 str(tmp_path / "cloud2.ply")]) == 2
+    assert "pass --intrinsics FX,FY,CX,CY" in capsys.readouterr().err
+    assert not (tmp_path / "maps2").exists() and not (tmp_path / "cloud2.ply").exists()

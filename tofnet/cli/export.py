@@ -76,6 +76,16 @@ def handle(args) -> int:
         meta = {**meta, "t0_us": start}  # maps count their windows from the window's start
     sensor = parse_size(args.sensor_size, "--sensor-size") if args.sensor_size else \
         (recording.sensor_size or (240, 180))
+    intrinsics = recording.intrinsics if recording is not None else None
+    if args.ply:  # what the point cloud needs, checked before any map is written
+        if intrinsics is None:
+            intrinsics = run_camera(meta)
+            if intrinsics is None:
+                raise TofnetError("a point cloud needs the camera intrinsics: the recording has none and the depth "
+                                  "file names none; pass --intrinsics FX,FY,CX,CY or --calib FILE")
+            print(f"camera         the run's, from {args.depth} (fx {intrinsics.fx:g}, fy {intrinsics.fy:g} px)")
+        if args.frame == "world" and recording.trajectory is None:
+            raise TofnetError("--frame world needs the recording's poses (groundtruth.txt or the file's pose stream)")
     if args.maps:
         from tofnet.io.maps import depth_maps, write_depth_maps
         window_us = microseconds(seconds(args.window, "--window"))
@@ -87,7 +97,7 @@ def handle(args) -> int:
             print(f"warning        {done['saturated_png_pixels']:,} PNG pixels beyond 65.535 m written as 65535")
     if args.ply:
         from tofnet.io.ply import depth_colors, depth_points, write_ply
-        points = depth_points(depth, recording.intrinsics, recording.trajectory, frame=args.frame,
+        points = depth_points(depth, intrinsics, recording.trajectory, frame=args.frame,
                               raw_pixels=pixels_of(args.pixels, meta) == "raw")
         colors = None if args.no_color else depth_colors(depth["z"])
         written = write_ply(args.ply, points, colors=colors, binary=not args.ascii,
@@ -119,3 +129,15 @@ def check_export_outputs(args) -> None:
     if args.maps:
         check_output(args.maps, force=args.force, inputs=inputs, what="--maps", folder=True)
 
+
+
+def run_camera(meta: dict):
+    """The camera a depth file's run used (``tofnet run`` records it in its summary), or None."""
+    from tofnet.io.recording import Intrinsics
+    camera = (meta.get("summary") or {}).get("camera")
+    try:
+        fx, fy, cx, cy = (float(v) for v in camera["intrinsics"])
+        distortion = tuple(float(v) for v in camera.get("distortion") or ())
+        return Intrinsics(fx, fy, cx, cy, distortion, str(camera.get("distortion_model") or "radtan"))
+    except (TypeError, KeyError, ValueError, AttributeError):
+        return None

@@ -116,6 +116,15 @@ def set_parameter(network, item: str) -> None:
         raise NetworkError(f"--set {item}: {err}") from None
 
 
+def camera_of(intrinsics) -> dict | None:
+    """What a depth file's summary records of the camera the run used (``tofnet export`` back-projects
+    with it when the recording has none): ``[fx, fy, cx, cy]`` px and the lens, or None."""
+    if intrinsics is None:
+        return None
+    return {"intrinsics": [intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy],
+            "distortion_model": intrinsics.distortion_model, "distortion": list(intrinsics.distortion)}
+
+
 def _setting(item: str) -> str:
     """``PROCESS.PARAM`` of a ``--set`` item (blanks around the names dropped)."""
     return ".".join(part.strip() for part in item.partition("=")[0].partition(".")[::2])
@@ -185,6 +194,7 @@ def handle(args) -> int:
     summary["undistortion"] = undistortion_of(network, recording, result, str(args.recording),
                                               no_undistort=getattr(args, "no_undistort", False))
     summary["notes"] = list(recording.notes)
+    summary["camera"] = camera_of(recording.intrinsics)
     summary["total_time_s"] = time.perf_counter() - clock.started
     summary["compile_time_s"], summary["kernels_compiled"] = clock.compile_seconds, clock.compiled
     written = write_outputs(out, result, summary, args.record_tot, check=lambda paths: check_more_outputs(args, paths))
@@ -251,7 +261,8 @@ def write_outputs(out: Path, result, summary: dict, record_tot: bool, check=None
             write_depth(path, records, t0_us=result.t0_us, timestep_us=result.timestep_us,
                         latency_steps=result.latency[name],
                         summary={**result.facts(), "recording": summary["recording"], "notes": summary["notes"],
-                                 "undistortion": lens_of_run(summary.get("undistortion"))})
+                                 "undistortion": lens_of_run(summary.get("undistortion")),
+                                 "camera": summary.get("camera")})
         else:
             write_npz(path, {field: records[field] for field in records.dtype.names}, compress=True)
     return paths
