@@ -91,6 +91,22 @@ def test_windows_from_specs():
             resolve_window(bad, span, default_s=None)
 
 
+def test_a_default_window_with_few_estimates_is_widened_and_says_so():
+    """A real recording's 1,078 estimates over 10.8 s put one in the default 70 ms: a black depth map."""
+    from tofnet.eval.views import widened_window
+    span = (1_000_000, 3_000_000)
+    centred = resolve_window(None, span, default_s=0.07)
+    dense = np.arange(1_000_000, 3_000_000, 10)  # 7,000 stamps in the 70 ms
+    assert widened_window(centred, span, dense, 500) == centred and centred.note() == ""
+    sparse = np.arange(1_000_000, 3_000_000, 1_000)  # 70 in the 70 ms, 2,000 in all
+    wider = widened_window(centred, span, sparse, 500)
+    assert wider.end_us - wider.start_us == 560_000 and wider.start_us < 2_000_000 < wider.end_us
+    assert np.count_nonzero((sparse >= wider.start_us) & (sparse < wider.end_us)) >= 500
+    assert "widened from the default 70 ms" in wider.note() and "560 ms" in wider.label()
+    whole = widened_window(centred, span, sparse[:100], 500)
+    assert whole.whole and (whole.start_us, whole.end_us) == span and whole.widened_from_s == pytest.approx(0.07)
+
+
 def test_back_projection_and_world_transform():
     intr = Intrinsics(100.0, 50.0, 10.0, 20.0)
     cam = back_project(np.array([110]), np.array([20]), np.array([2.0]), intr)

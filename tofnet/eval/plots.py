@@ -61,7 +61,7 @@ def depth_map_figure(recording, depth: np.ndarray, meta: dict, *, window=None, r
         ax.set_xlabel("x [px]")
         ax.set_ylabel("y [px]")
     fig.colorbar(shown, ax=list(axes), label="depth [m]", shrink=0.9, extend="both")
-    fig.suptitle(f"Depth accumulated over {win.label()} ({reduce} per pixel; {len(sel):,} estimates)")
+    fig.suptitle(f"Depth accumulated over {win.label()} ({reduce} per pixel; {len(sel):,} estimates){win.note()}")
     return fig
 
 
@@ -114,7 +114,7 @@ def comparison_figure(recording, runs: dict[str, tuple[np.ndarray, dict]], *, wi
         ax.set_ylabel("estimates per 1 % bin")
         ax.legend(loc="upper right", fontsize="small")
     fig.suptitle(f"The same events, two estimators: depth over {win.label()} ({reduce} per pixel); "
-                 "errors over the whole run")
+                 f"errors over the whole run{win.note()}")
     return fig
 
 

@@ -10,7 +10,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from tofnet.eval.views import Window, resolve_window, time_span_us
+from tofnet.eval.views import Window, resolve_window, sensor_size_of, time_span_us, widened_window
 
 #: Pixels per inch of the PNGs.
 DPI = 120
@@ -31,10 +31,17 @@ def span_us(recording, depth: np.ndarray, meta: dict) -> tuple[int, int]:
 
 
 def figure_window(window, recording, depth: np.ndarray, meta: dict, default_s: float | None) -> Window:
-    """``window`` as a ``Window``: kept when it is one, else resolved (``resolve_window``)."""
+    """``window`` as a ``Window``: kept when it is one, else resolved (``resolve_window``). A default window
+    (none asked for) holding fewer than ``max(500, 2 % of the sensor's pixels)`` estimates is widened
+    (``widened_window``) and says so in its label."""
     if isinstance(window, Window):
         return window
-    return resolve_window(window, span_us(recording, depth, meta), default_s=default_s)
+    span = span_us(recording, depth, meta)
+    resolved = resolve_window(window, span, default_s=default_s)
+    if window is not None and window != "":
+        return resolved
+    width, height = sensor_size_of(recording, depth)
+    return widened_window(resolved, span, depth["t"], max(500, width * height // 50))
 
 
 def new_figure(kind: str) -> Figure:

@@ -21,6 +21,8 @@ class Window:
     end_us: int
     t0_us: int
     whole: bool = False
+    #: The default length (s) this window was widened from, because it held few estimates.
+    widened_from_s: float | None = None
 
     @property
     def duration_s(self) -> float:
@@ -30,9 +32,13 @@ class Window:
         """``"70 ms, 1.465-1.535 s"`` (times since ``t0``) or ``"the whole run (4 s)"``."""
         a = (self.start_us - self.t0_us) * 1e-6
         b = (self.end_us - self.t0_us) * 1e-6
-        if self.whole:
-            return f"the whole run ({b:.2f} s)"
-        return f"{format_seconds(self.duration_s)}, {a:.3f}\u2013{b:.3f} s"
+        return f"the whole run ({b:.2f} s)" if self.whole else f"{format_seconds(self.duration_s)}, {a:.3f}\u2013{b:.3f} s"
+
+    def note(self) -> str:
+        """A title's second line when the window was widened, else ``""``."""
+        if self.widened_from_s is None:
+            return ""
+        return f"\n(widened from the default {format_seconds(self.widened_from_s)}, which held few estimates)"
 
     def contains(self, t_us: np.ndarray) -> np.ndarray:
         t_us = np.asarray(t_us)
@@ -76,6 +82,24 @@ def resolve_window(spec: str | float | None, span_us: tuple[int, int], *, defaul
         return Window(t0, end, t0, whole=True)
     start = t0 + (end - t0 - length_us) // 2
     return Window(start, start + length_us, t0)
+
+
+def widened_window(window: Window, span_us: tuple[int, int], stamps_us: np.ndarray, enough: int) -> Window:
+    """``window`` (a default one), doubled about its centre until it holds ``enough`` of ``stamps_us`` or
+    the whole span: a sparse run's 70 ms held one estimate of a thousand (a black image)."""
+    start, end = window.start_us, window.end_us
+    t0, stop = span_us
+    if window.whole or np.count_nonzero((stamps_us >= start) & (stamps_us < end)) >= enough:
+        return window
+    length = end - start
+    while True:
+        length *= 2
+        if length >= stop - t0:
+            return Window(t0, stop, window.t0_us, whole=True, widened_from_s=window.duration_s)
+        centre = (start + end) // 2
+        a = min(max(t0, centre - length // 2), stop - length)
+        if np.count_nonzero((stamps_us >= a) & (stamps_us < a + length)) >= enough:
+            return Window(a, a + length, window.t0_us, widened_from_s=window.duration_s)
 
 
 def sensor_size_of(recording, depth: np.ndarray) -> tuple[int, int]:
