@@ -22,6 +22,8 @@ from tofnet.networks import depth_network
 from tofnet.processes import AngularVelocityProcess, DepthProcess
 from tofnet.testing import camera_flow, flowing_pattern, turning_trajectory
 
+from optional import optional
+
 SIZE = (40, 24)
 K = Intrinsics(200.0, 200.0, 19.5, 11.5)
 DEPTH_M = 1.5
@@ -164,16 +166,22 @@ def write_recording(folder, events, *, poses: bool, imu: bool) -> None:
         write_imu(folder / "imu.txt", t, np.zeros((len(t), 3)), np.tile(OMEGA, (len(t), 1)))
 
 
-@pytest.mark.parametrize("kind", ["poses", "gyro"])
+@pytest.mark.parametrize("kind", ["poses", "gyro", "aedat4"])
 def test_tofnet_run_compensates_rotation_from_poses_or_a_gyro_and_says_so(events, tmp_path, capsys, kind):
+    """``aedat4``: the gyroscope of an AEDAT4 file, whose IMU comes among its packets (a stream of its events
+    built the network without it: no rotation, and nothing said)."""
     folder = tmp_path / kind
-    write_recording(folder, events, poses=kind == "poses", imu=kind == "gyro")
+    write_recording(folder, events, poses=kind == "poses", imu=kind != "poses")
+    if kind == "aedat4":
+        optional("faery")
+        assert main(["convert", str(folder), str(tmp_path / "rec.aedat4"), "--quiet"]) == 0
+        folder = tmp_path / "rec.aedat4"
     velocity = [] if kind == "poses" else ["--velocity=" + ",".join(map(str, VELOCITY))]  # no poses: a constant A t
     out = tmp_path / "depth.npz"
     assert main(["run", str(folder), "--out", str(out), "--refractory", "0", "--velocity-per", "pixel", "--quiet",
                  *velocity]) == 0
     printed = capsys.readouterr().out
-    assert ("ω from the ground-truth poses" if kind == "poses" else "ω from the gyroscope (imu.txt)") in printed
+    assert ("ω from the ground-truth poses" if kind == "poses" else "ω from the gyroscope (the recording's IMU)") in printed
     assert "rotation dominated" in printed
     depth, meta = read_depth(out)
     assert np.median(depth["z"]) == pytest.approx(DEPTH_M, rel=0.05)
@@ -200,7 +208,7 @@ def test_a_spec_with_rotation_runs_and_no_rotation_refuses_it(tmp_path, events, 
     spec.write_text(text.replace("[240, 180]", f"[{SIZE[0]}, {SIZE[1]}]").replace("refractory: 60ms", "refractory: 0"))
     out = tmp_path / "depth.npz"
     assert main(["run", str(tmp_path / "rec"), "--spec", str(spec), "--out", str(out), "--quiet"]) == 0
-    assert "ω from the gyroscope (imu.txt) with its camera-IMU rotation" in capsys.readouterr().out
+    assert "ω from the gyroscope (the recording's IMU) with its camera-IMU rotation" in capsys.readouterr().out
     assert main(["run", str(tmp_path / "rec"), "--spec", "examples/paper_240x180.yaml", "--sensor-size", "40x24",
                  "--out", str(out), "--quiet", "--force"]) == 0
     assert "not compensated (eq. 8: the spec has no angular velocity process)" in capsys.readouterr().out

@@ -103,7 +103,8 @@ def _rotation_source_text(process: AngularVelocityProcess) -> str:
         return "the ground-truth poses"
     if process.source == "gyro":
         turned = " with its camera-IMU rotation" if process.rotation_cam_imu is not None else ""
-        return f"the gyroscope ({process.imu or 'imu.txt'}){turned}"
+        imu = process.imu or "the recording's IMU"
+        return f"the gyroscope ({imu}){turned}"
     if process.source == "samples":
         return f"samples ({process.samples})"
     return f"a constant ω = {list(process.omega)} rad/s"
@@ -120,7 +121,7 @@ def rotation_line(network: Network, recording: Recording, no_rotation: bool = Fa
         return None
     why = "--no-rotation" if no_rotation else "the spec has no angular velocity process"
     return (f"not compensated (eq. 8: {why}), although the recording has "
-            f"{'turning poses' if found == 'groundtruth' else 'a gyroscope (imu.txt)'}")
+            f"{'turning poses' if found == 'groundtruth' else 'a gyroscope (its IMU)'}")
 
 
 def undistortion_of(network: Network, recording: Recording, result, recording_name: str,

@@ -59,6 +59,7 @@ class AedatSource(EventSource):
         self.n_events = counts.get(self.track_id)
         self._first_t = starts.get(self.track_id)
         self.detail = f"events track {self.track_id}"
+        self._imu_track = any(track.data_type == "imus" for track in tracks)
         for track in tracks:
             if track.id == self.track_id:
                 continue
@@ -87,6 +88,15 @@ class AedatSource(EventSource):
                 from tofnet.io.window import window_rows
                 rows = np.concatenate(imu)
                 self.imu = rows if self.window is None else window_rows(rows, *self.window)
+
+    def metadata(self):
+        """As ``EventSource.metadata``, with the IMU: the container interleaves it with the events, so a file
+        with an IMU track is read once for it, its events skipped (a stream of the events, as ``tofnet run``
+        makes, would otherwise build its network without the gyroscope)."""
+        if self.imu is None and self._imu_track:
+            for _ in self._packets(0):
+                pass  # _packets keeps the IMU (cut to the window) when it is done
+        return super().metadata()
 
     def first_time(self) -> int | None:
         # The index table gives each packet's first time: no decoding (a file without it is decoded).
