@@ -108,6 +108,8 @@ def test_task_ids_survive_an_edit_of_the_plan_and_change_with_what_a_task_comput
      "grid: for network 'paper': time_of_travel.distance is given twice (as distance too)"),
     ("recordings: [a.npy]\ngrid:\n  input.refractory: [null]\n", 3, "input.refractory: a value is required"),
     ("recordings: [a.npy\n", 2, "malformed YAML"),
+    ("recordings:\n  - {path: '*.raw', velocity: [0.3, 0, 0]}\n", 2,
+     "no such file or folder; a pattern is written {glob: ...} (with the same reading keys) to match several"),
 ])
 def test_errors_name_the_file_the_line_and_the_key(folder, text, line, expected):
     path = write(folder, text)

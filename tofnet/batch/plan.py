@@ -261,7 +261,9 @@ class _PlanReader:
             raise self.fail(container, key, path, f"expected a path, got {value!r}")
         resolved = self.resolve(value)
         if not exists(resolved, Path.exists):
-            raise self.fail(container, key, path, located(resolved, None, "no such file or folder"))
+            hint = ("; a pattern is written {glob: ...} (with the same reading keys) to match several"
+                    if any(c in value for c in "*?[") and isinstance(container, Mapping) else "")
+            raise self.fail(container, key, path, located(resolved, None, f"no such file or folder{hint}"))
         return RecordingSource(name=name or _recording_name(resolved), path=str(resolved),
                                reading=tuple(options.items()))
 
