@@ -75,7 +75,7 @@ def format_result(result) -> str:
     lines = [f"batch {result.plan.name}: {len(rows)} tasks, {ok} ok, {len(result.failed)} failed"
              f"{f', {result.resumed} already complete (--resume)' if result.resumed else ''}; "
              f"{events:,} events in {result.wall_time_s:.1f} s"
-             f"{f' on {result.workers} workers' if result.workers else ''}"]
+             f"{f' on {result.workers} worker' + ('s' if result.workers != 1 else '') if result.workers else ''}"]
     for row in result.failed[:20]:
         lines.append(f"  failed  {row['task_id']}: {row.get('error')}")
     if len(result.failed) > 20:
