@@ -140,7 +140,8 @@ def build_network(args, recording_sensor_size, recording=None):
         Path(args.spec) if args.spec else None, sensor_size=sensor or (None if args.spec else recording_sensor_size),
         recording=recording, rotation=not getattr(args, "no_rotation", False),
         undistort=not getattr(args, "no_undistort", False), estimator=getattr(args, "estimator", None),
-        allow_import=args.allow_import, replaced=[_setting(item) for item in getattr(args, "set_params", None) or ()])
+        allow_import=args.allow_import, replaced=[_setting(item) for item in getattr(args, "set_params", None) or ()]
+        + (["VelocityProcess.samples"] if args.velocity else []))  # --velocity makes every velocity constant
     apply_overrides(network, timestep=args.timestep, refractory=args.refractory, distance=args.distance,
                     counter_bits=args.counter_bits, velocity_per=args.velocity_per,
                     update_every=args.update_every)

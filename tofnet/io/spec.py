@@ -39,7 +39,8 @@ class _Reader:
                  replaced: Iterable[str] = ()):
         self.tree, self.source = tree, source
         self.allow, self.folder = allowed_imports(allow_import), folder
-        self.replaced = frozenset(replaced)  # PROCESS.PARAM the caller sets after loading: not the spec's file
+        # PROCESS.PARAM (or ProcessType.PARAM) the caller sets after loading: not the spec's file
+        self.replaced = frozenset(replaced)
 
     def fail(self, container: Any, key: Any, path: str, message: str) -> SpecError:
         return SpecError(located(self.source, _line(container, key), f"{path}: {message}"))
@@ -113,7 +114,8 @@ class _Reader:
                                     f"expected {', '.join(declared)}")
                 try:
                     declared[key].coerce(raw, str(name))
-                    if declared[key].reads_file and isinstance(raw, str) and f"{name}.{key}" not in self.replaced:
+                    if self.folder is not None and declared[key].reads_file and isinstance(raw, str) \
+                            and not {f"{name}.{key}", f"{cls.__name__}.{key}"} & self.replaced:
                         raw = file_a_spec_names(raw, self.folder, f"{name}.{key}")
                 except TofnetError as err:
                     raise self.fail(body, key, f"{path}.{key}", _strip_field(str(err), f"{name}.{key}")) from None
@@ -272,9 +274,10 @@ def load_spec(path_or_text: str | Path, *, allow_import: Any = None, replaced: I
 
     A ``Path``, or a one-line string naming a file, is read as a file; any other string
     is YAML text. Raises ``SpecError`` naming the file, line and key. ``allow_import``:
-    the modules its ``module:Class`` types may import (``tofnet.io.trust``). A file the spec
+    the modules its ``module:Class`` types may import (``tofnet.io.trust``). A file a spec file
     names must lie in its folder (``tofnet.io.trust.file_a_spec_names``), except for the
-    parameters in ``replaced`` (``PROCESS.PARAM``), which the caller sets after loading.
+    parameters in ``replaced`` (``PROCESS.PARAM`` or ``ProcessType.PARAM``), which the caller sets
+    after loading; YAML text given here is the caller's own, and its names are kept as written.
     """
     text, source, path = yaml_source(path_or_text, "spec")
     folder = path.resolve().parent if path is not None else None

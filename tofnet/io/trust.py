@@ -125,25 +125,27 @@ def _refuse_spec_folder(module_name: str, spec_dir: Path) -> None:
 
 # ---------------------------------------------------------------- files a spec names
 
-def file_a_spec_names(named: str, folder: Path | None, setting: str = "PROCESS.PARAM") -> str:
-    """The file a spec's parameter names (one declared ``reads_file``), as the run will open it.
+def file_a_spec_names(named: str, folder: Path, setting: str = "PROCESS.PARAM") -> str:
+    """The file a spec read from ``folder`` names (a parameter declared ``reads_file``), as the run opens it.
 
-    A relative name is taken from the spec's folder and returned as a path through it; a spec
-    given as text or data (no folder) keeps its name, taken from the working folder. Raises
-    ``SpecError`` when the file lies outside that folder once symlinks and ``..`` are resolved:
-    a spec from someone else cannot make tofnet read, and quote in an error, a file elsewhere
-    (``/proc/self/environ``, ``~/.netrc``). The user names such a file themselves
-    (``--set PROCESS.PARAM=FILE``, ``Process.set_param``); ``setting`` names the parameter so.
+    A relative name is taken from the spec's folder, so a spec and its files read the same from
+    any working folder. Raises ``SpecError`` when the file lies outside that folder once links and
+    ``..`` are resolved, as a container build's context keeps to its folder: a spec from someone
+    else cannot make tofnet read, and quote in an error, ``/proc/self/environ``, ``~/.netrc`` or what
+    a link they sent along points at. The user names a file elsewhere (``--set PROCESS.PARAM=FILE``,
+    ``Process.set_param``); ``setting`` names the parameter so.
     """
-    base = Path.cwd() if folder is None else folder
     path = Path(named)
-    opened = path if path.is_absolute() or folder is None else folder / path
-    inside = Path(os.path.realpath(base))
-    if not Path(os.path.realpath(base / opened)).is_relative_to(inside):
-        where = "the spec's folder" if folder is not None else "the working folder (the spec is text)"
-        raise SpecError(f"{quote(named)} lies outside {where} {inside}; a spec reads only files in its own folder "
-                        f"or below it; name a file elsewhere yourself: --set {setting}=FILE (set_param in Python)")
-    return named if folder is None else str(opened)
+    opened = path if path.is_absolute() else folder / path
+    try:
+        inside = Path(os.path.realpath(opened)).is_relative_to(os.path.realpath(folder))
+    except (ValueError, OSError):  # a NUL in the name: the reader says so in one line when it opens it
+        inside = "\x00" in named and not path.is_absolute() and ".." not in path.parts
+    if not inside:
+        raise SpecError(f"{quote(named)} lies outside the spec's folder {folder}, links resolved; a spec reads only "
+                        f"files in its own folder or below it; name a file elsewhere on the command line (tofnet "
+                        f"run or live --set {setting}=FILE) or in Python (set_param)")
+    return str(opened)
 
 
 # ---------------------------------------------------------------- resources
