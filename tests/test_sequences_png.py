@@ -6,12 +6,12 @@ from __future__ import annotations
 import os
 import shutil
 import struct
-import threading
 import zlib
 
 import numpy as np
 import pytest
 
+from tests.fifos import needs_fifo, watched
 from tests.optional import optional
 
 h5py = optional("h5py")
@@ -22,8 +22,6 @@ from tofnet.errors import DataError  # noqa: E402
 from tofnet.events import MAX_SENSOR_PIXELS  # noqa: E402
 from tofnet.io import read_recording  # noqa: E402
 from tofnet.testing_datasets import make_dsec  # noqa: E402
-
-needs_fifo = pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs on this system")
 
 
 @pytest.fixture(scope="module")
@@ -71,36 +69,13 @@ def test_the_blank_png_helper_writes_what_pil_reads(tmp_path):
         assert not np.asarray(image).any()
 
 
-def in_thread(call, fifo=None, timeout: float = 10.0):
-    """``call()``'s outcome (a value or the exception), run in a thread; a reader still blocked on
-    ``fifo`` after ``timeout`` is released (the FIFO opened for writing and closed) and the test fails."""
-    outcome = {}
-
-    def run():
-        try:
-            outcome["value"] = call()
-        except BaseException as err:  # noqa: BLE001 - handed to the test
-            outcome["error"] = err
-
-    thread = threading.Thread(target=run, daemon=True)
-    thread.start()
-    thread.join(timeout)
-    blocked = thread.is_alive()
-    if blocked and fifo is not None:
-        with open(fifo, "wb"):
-            pass
-        thread.join(timeout)
-    assert not blocked, f"blocked for {timeout} s on {fifo}"
-    return outcome
-
-
 @needs_fifo
 @pytest.mark.parametrize("name", ["000000.png", "000004.png"])  # checked at open / when the frame is read
 def test_a_fifo_among_the_disparity_maps_is_refused_without_blocking(folder, name):
     fifo = folder / "disparity" / "event" / name
     fifo.unlink()
     os.mkfifo(fifo)
-    outcome = in_thread(lambda: read_recording(folder), fifo)
+    outcome = watched(lambda: read_recording(folder), fifo)
     err = outcome.get("error")
     assert isinstance(err, DataError), outcome
     assert f"{name}: is a FIFO (named pipe), expected a regular disparity map" in str(err)
@@ -111,7 +86,7 @@ def test_info_on_a_dsec_folder_with_a_fifo_map_is_one_line_exit_2(folder, capsys
     fifo = folder / "disparity" / "event" / "000000.png"
     fifo.unlink()
     os.mkfifo(fifo)
-    outcome = in_thread(lambda: main(["info", str(folder)]), fifo)
+    outcome = watched(lambda: main(["info", str(folder)]), fifo)
     assert outcome.get("value") == 2, outcome
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "Traceback" not in err
@@ -129,7 +104,7 @@ def test_a_fifo_as_a_side_file_of_the_sequence_is_named_as_such_not_missing(fold
     fifo = folder / name
     fifo.unlink()
     os.mkfifo(fifo)
-    outcome = in_thread(lambda: read_recording(folder), fifo)
+    outcome = watched(lambda: read_recording(folder), fifo)
     err = outcome.get("error")
     assert isinstance(err, DataError), outcome
     assert f"{fifo.name}: is a FIFO (named pipe), expected {what}" in str(err)

@@ -11,7 +11,7 @@ import os
 from pathlib import Path
 
 from tofnet.errors import DataError, located, quote
-from tofnet.io.files import open_regular
+from tofnet.io.files import open_regular, present
 
 #: Every format ``read_recording`` knows, with a one-line description (``tofnet info``, docs).
 FORMATS = {
@@ -48,7 +48,7 @@ def detect_format(path: str | Path) -> str:
     if "\x00" in str(path) or not os.path.exists(path):  # os.path: a name too long is "missing", not OSError
         raise DataError(located(path, None, f"no such file or folder; expected {_EXPECTED}"))
     if path.is_dir():
-        if (path / "metadata.yaml").is_file():
+        if present(path / "metadata.yaml", "the ROS 2 bag metadata file"):
             return "rosbag2"
         from tofnet.io.layouts import sequence_kind
         return sequence_kind(path) or "ecd"

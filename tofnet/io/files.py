@@ -74,8 +74,34 @@ def open_regular(path: str | Path, what: str = "file") -> IO[bytes]:
         raise
 
 
+def present(path: str | Path, what: str, *, folder: bool = False) -> bool:
+    """Whether an optional file of a recording (a side file, a companion, a calibration) is there.
+
+    ``False`` when nothing has that name; ``True`` for a regular file (a folder with ``folder``).
+    Anything else under the name -- a FIFO, a folder, a device, a socket, a symlink to nothing --
+    is a one-line ``DataError`` naming the file and what it is (``is a FIFO (named pipe), expected
+    {what}``), never taken for missing, as is a name the system cannot look up (permissions, a
+    loop of symlinks). A reader opening the file with ``open_regular`` checks it again on the
+    descriptor; h5py opens by name, so a file swapped after this check reaches h5py unchecked.
+    """
+    path = Path(path)
+    try:
+        mode = os.stat(path).st_mode
+    except ValueError:  # a NUL byte: no file can have that name
+        return False
+    except OSError as err:
+        if err.errno not in (errno.ENOENT, errno.ENOTDIR, errno.ENAMETOOLONG):
+            raise DataError(located(path, None, f"cannot look up {what}: {_reason(err)}")) from None
+        if os.path.islink(path):
+            raise DataError(located(path, None, f"is a symbolic link to nothing, expected {what}")) from None
+        return False
+    if not (stat.S_ISDIR if folder else stat.S_ISREG)(mode):
+        raise DataError(located(path, None, f"is {_kind(mode)}, expected {what}"))
+    return True
+
+
 def _kind(mode: int) -> str:
-    for test, name in ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
+    for test, name in ((stat.S_ISREG, "a file"), (stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
                        (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"),
                        (stat.S_ISBLK, "a block device")):
         if test(mode):

@@ -18,6 +18,7 @@ import numpy as np
 
 from tofnet.errors import DataError, located, reason
 from tofnet.events import MAX_TIME_US
+from tofnet.io.files import present
 from tofnet.io.hdf5 import ColumnsSource, read_calib_group
 from tofnet.io.frames import FrameDepth
 from tofnet.io.hdf5_checks import H5File
@@ -42,6 +43,9 @@ class DepthImages(FrameDepth):
     def _read(self, k: int) -> np.ndarray:
         if not self.dataset.id.valid:
             import h5py
+            if not present(self.source, "the ground truth (HDF5)"):  # checked again: h5py would wait on a FIFO
+                raise DataError(located(self.source, None, "missing now: the ground truth (HDF5) read when the "
+                                                           "recording was opened"))
             self.dataset = H5File(h5py.File(self.source, "r"), self.source, self.allow_external).dataset(self.name)
         return self.dataset[k]
 
@@ -79,12 +83,13 @@ def trajectory_from_matrices(times_s: np.ndarray, camera_to_world: np.ndarray, s
     return Trajectory(times_s, matrices[:, :3, 3], matrix_to_quaternion(matrices[:, :3, :3]), source=source)
 
 
-def _companion(path: Path, stem_suffix: str, suffixes: tuple[str, ...]) -> Path | None:
-    """``<base><suffix>`` next to ``path`` where ``path`` is ``<base>_data.<ext>``."""
+def _companion(path: Path, stem_suffix: str, suffixes: tuple[str, ...], what: str) -> Path | None:
+    """``<base><suffix>`` next to ``path`` where ``path`` is ``<base>_data.<ext>``; ``None`` when there is
+    none, a one-line error when one exists but is not a regular file (``tofnet.io.files.present``)."""
     stem = path.stem[:-len("_data")] if path.stem.endswith("_data") else path.stem
     for suffix in suffixes:
         candidate = path.with_name(f"{stem}{stem_suffix}{suffix}")
-        if candidate.is_file():
+        if present(candidate, what):
             return candidate
     return None
 
@@ -162,7 +167,7 @@ class MvsecSource(_GroundTruthMixin, ColumnsSource):
             self.imu = np.column_stack([h5.value(f"davis/{side}/imu_ts"), h5.value(f"davis/{side}/imu")])
         for key in (k for k in h5.keys("davis") if k != side):
             self.streams[f"davis/{key}"] = "not read"
-        gt_path = _companion(path, "_gt", (".hdf5", ".h5"))
+        gt_path = _companion(path, "_gt", (".hdf5", ".h5"), "the MVSEC ground truth (HDF5)")
         if gt_path is None:
             self.notes.append("no *_gt.hdf5 next to the file: no poses or depth")
             return
@@ -209,7 +214,8 @@ class M3edSource(_GroundTruthMixin, ColumnsSource):
             self.ms_index = h5.dataset(f"prophesee/{side}/ms_map_idx")  # M3ED's ms_to_idx (µs from 0: t_offset 0)
         for key in sorted(set(h5.keys()) - {"prophesee"}):
             self.streams[key] = "not read"
-        gt_path = _companion(path, "_depth_gt", (".h5", ".hdf5")) or _companion(path, "_pose_gt", (".h5", ".hdf5"))
+        gt_path = _companion(path, "_depth_gt", (".h5", ".hdf5"), "the M3ED depth ground truth (HDF5)") or \
+            _companion(path, "_pose_gt", (".h5", ".hdf5"), "the M3ED pose ground truth (HDF5)")
         if gt_path is None:
             self.notes.append("no *_depth_gt.h5 or *_pose_gt.h5 next to the file: no poses or depth")
             return

@@ -71,5 +71,8 @@ def other_kind(folder: Path) -> str | None:
 
 
 def matches(folder: Path, pattern: str) -> list[Path]:
-    """The regular files of ``folder`` matching ``pattern``, sorted."""
-    return sorted(p for p in folder.glob(pattern) if p.is_file())
+    """The files of ``folder`` matching ``pattern``, sorted; one that is not a regular file (a FIFO, a
+    folder) is a one-line error naming it, not passed over (``tofnet.io.files.present``)."""
+    from tofnet.io.files import present
+
+    return sorted(p for p in folder.glob(pattern) if present(p, f"a regular file ({pattern}: a sequence's events)"))

@@ -27,6 +27,7 @@ import numpy as np
 
 from tofnet.errors import DataError, located
 from tofnet.events import EVENT_DTYPE
+from tofnet.io.files import present
 from tofnet.io.frames import check_overlap
 from tofnet.io.layouts import SIDES
 
@@ -45,26 +46,9 @@ def open_sequence(folder: Path, kind: str, *, side: str | None = None, rectify: 
 
 
 def _required(path: Path, what: str) -> Path:
-    if not _present(path, what):
+    if not present(path, what):
         raise DataError(located(path, None, f"missing: {what}"))
     return path
-
-
-def _present(path: Path, what: str) -> bool:
-    """Whether ``path`` is a regular file; one that exists but is not (a FIFO, a folder, ...) is an
-    error, not taken for missing (h5py would block on a FIFO)."""
-    import os
-    import stat
-
-    from tofnet.io.files import _kind
-
-    try:
-        mode = os.stat(path).st_mode
-    except (OSError, ValueError):
-        return False
-    if not stat.S_ISREG(mode):
-        raise DataError(located(path, None, f"is {_kind(mode)}, expected {what}"))
-    return True
 
 
 def open_dsec(folder: Path, side: str, rectify: bool, allow_external: bool):
@@ -85,7 +69,7 @@ def open_dsec(folder: Path, side: str, rectify: bool, allow_external: bool):
         source.notes.append(f"intrinsics of {camera} from {calib}")
         map_path = folder / "events" / side / "rectify_map.h5"
         pixel_map = _rectify_map(map_path, source.sensor_size, allow_external) \
-            if _present(map_path, "the rectification map (HDF5)") else None
+            if present(map_path, "the rectification map (HDF5)") else None
         if rectify:
             if pixel_map is None:
                 raise DataError(located(map_path, None, "missing: --rectify needs the rectification map"))
@@ -93,11 +77,12 @@ def open_dsec(folder: Path, side: str, rectify: bool, allow_external: bool):
             source.intrinsics, size, _ = read_camera_file(calib, rect_camera)
             source.notes.append(f"events rectified through {map_path.name}; intrinsics of {rect_camera}")
         disparity = folder / "disparity"
+        has_disparity = present(disparity, "the folder of the disparity ground truth", folder=True)
         if side == "right":
-            if disparity.is_dir():
+            if has_disparity:
                 source.notes.append("DSEC disparity ground truth is for the left camera: none for the right")
             return source
-        if disparity.is_dir():
+        if has_disparity:
             q = _q_matrix(calib)
             if not rectify and pixel_map is None:
                 raise DataError(located(map_path, None, "missing: the disparity ground truth is rectified, the "
@@ -161,7 +146,8 @@ def dsec_disparity(folder: Path, q: np.ndarray, pixel_map: np.ndarray | None, se
     from tofnet.io.frames import FrameDepth, disparity_to_depth, png_size, read_png16
 
     stamps = _required(folder / "timestamps.txt", "the times of the disparity maps (µs, one per line)")
-    images = sorted((folder / "event").glob("*.png"))
+    has_maps = present(folder / "event", "the folder of the disparity maps (*.png)", folder=True)
+    images = sorted((folder / "event").glob("*.png")) if has_maps else []
     if not images:
         raise DataError(located(folder / "event", None, "missing: the disparity maps (*.png)"))
     times = read_times(stamps)

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from tofnet.errors import DataError, located
+from tofnet.io.files import present
 from tofnet.io.layouts import PATTERNS, matches
 
 
@@ -94,19 +95,26 @@ class _Span:
         return int(self.times_us[0]), int(self.times_us[-1])
 
 
+class _NoneOrSeveral(DataError):
+    """No file, or several, where ``_near`` looked (not: one that is not a regular file)."""
+
+
 def _near(folder: Path, patterns: tuple[str, ...], what: str, prefer: str = "") -> Path:
-    """A calibration file in ``folder`` or the one above it; one-line errors when none or several."""
+    """A calibration file in ``folder`` or the one above it; one-line errors when none or several
+    (``_NoneOrSeveral``) and when one matching is not a regular file (``tofnet.io.files.present``)."""
     for place in (folder, folder.parent):
-        found = sorted({p for pattern in patterns for p in place.glob(pattern) if p.is_file()})
+        found = sorted({p for pattern in patterns for p in place.glob(pattern) if present(p, f"the {what} file")})
         if prefer and len(found) > 1:
             found = [p for p in found if prefer in p.name] or found
         if len(found) == 1:
             return found[0]
         if found:
-            raise DataError(located(place, None, f"{len(found)} {what} files ({', '.join(p.name for p in found[:3])}): "
-                                                 "put the sequence's own in its folder"))
-    raise DataError(located(folder / patterns[0].replace("*", "").lstrip("/"), None,
-                            f"missing: the {what} (looked for {' or '.join(patterns)} in {folder.name}/ and its parent)"))
+            names = ", ".join(p.name for p in found[:3])
+            raise _NoneOrSeveral(located(place, None, f"{len(found)} {what} files ({names}): "
+                                                      "put the sequence's own in its folder"))
+    raise _NoneOrSeveral(located(folder / patterns[0].replace("*", "").lstrip("/"), None,
+                                 f"missing: the {what} (looked for {' or '.join(patterns)} in {folder.name}/ and its "
+                                 "parent)"))
 
 
 def _mvsec(folder: Path, source, side: str) -> None:
@@ -132,16 +140,19 @@ def _tumvie(folder: Path, source, events: Path, side: str) -> None:
     source.detail = f"TUM-VIE sequence, {side} events"
     source.notes.append(f"intrinsics of camera {index} from {calib}")
     stem = events.name[:-len(f"-events_{side}.h5")]
-    gt = next((p for p in (folder / f"{stem}-vi_gt_data", folder) if (p / "mocap_data.txt").is_file()), None)
+    places = [folder / f"{stem}-vi_gt_data", folder]
+    if not present(places[0], "the folder of the TUM-VIE ground truth", folder=True):
+        places.pop(0)
+    gt = next((p for p in places if present(p / "mocap_data.txt", "the TUM-VIE mocap poses (text)")), None)
     if gt is None:
         source.notes.append(f"no {stem}-vi_gt_data/mocap_data.txt: no poses")
         return
-    if (gt / "imu_data.txt").is_file():
+    if present(gt / "imu_data.txt", "the TUM-VIE IMU samples (text)"):
         source.imu = read_tumvie_imu(gt / "imu_data.txt")
         source.notes.append(f"IMU from {gt / 'imu_data.txt'}")
     try:
         marker = _near(folder, ("mocap-imu-calibration*.json",), "TUM-VIE mocap-IMU calibration")
-    except DataError as err:
+    except _NoneOrSeveral as err:
         source.notes.append(f"mocap_data.txt not used (poses of the marker, not the camera): {err}")
         return
     t_imu_cam = _pose_matrix(_json(calib)["value0"]["T_imu_cam"][index], calib)
