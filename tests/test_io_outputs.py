@@ -142,3 +142,21 @@ def test_export_uses_the_runs_camera_and_checks_the_cloud_before_any_map(tmp_pat
                  str(tmp_path / "cloud2.ply")]) == 2
     assert "pass --intrinsics FX,FY,CX,CY" in capsys.readouterr().err
     assert not (tmp_path / "maps2").exists() and not (tmp_path / "cloud2.ply").exists()
+
+
+@pytest.mark.parametrize("camera", [{"intrinsics": [100, 110, 4]}, {"intrinsics": [100, 110, 4, 3], "distortion": [0.1] * 3},
+                                    {"intrinsics": [-1, 110, 4, 3]}, {"intrinsics": [100, float("nan"), 4, 3]},
+                                    {"intrinsics": [100, 110, 4, 3], "distortion_model": "bogus"}, "camera"])
+def test_a_depth_files_camera_is_checked_as_intrinsics_are(tmp_path, capsys, camera):
+    """The depth file may come from someone else: a camera tofnet run would not write is one line, not a
+    traceback from the lens code or an empty cloud."""
+    from tofnet.io.depth import write_depth
+    from tofnet.testing import moving_edge
+
+    np.save(tmp_path / "ev.npy", moving_edge((8, 6), -50.0, "u"))
+    write_depth(tmp_path / "d.npz", _depth([(1000, 1, 1, 2.0)]), t0_us=0, timestep_us=1000, latency_steps=2,
+                summary={"recording": str(tmp_path / "ev.npy"), "camera": camera})
+    assert main(["export", str(tmp_path / "d.npz"), "--ply", str(tmp_path / "c.ply")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "its summary's camera is not one tofnet run writes" in err
+    assert not (tmp_path / "c.ply").exists()

@@ -79,7 +79,7 @@ def handle(args) -> int:
     intrinsics = recording.intrinsics if recording is not None else None
     if args.ply:  # what the point cloud needs, checked before any map is written
         if intrinsics is None:
-            intrinsics = run_camera(meta)
+            intrinsics = run_camera(meta, args.depth)
             if intrinsics is None:
                 raise TofnetError("a point cloud needs the camera intrinsics: the recording has none and the depth "
                                   "file names none; pass --intrinsics FX,FY,CX,CY or --calib FILE")
@@ -131,13 +131,25 @@ def check_export_outputs(args) -> None:
 
 
 
-def run_camera(meta: dict):
-    """The camera a depth file's run used (``tofnet run`` records it in its summary), or None."""
+def run_camera(meta: dict, depth_path: str):
+    """The camera a depth file's run used (``tofnet run`` records it in its summary), or None when it names
+    none; checked as ``--intrinsics`` is (the depth file may come from someone else): one line otherwise."""
+    import math
+
     from tofnet.io.recording import Intrinsics
     camera = (meta.get("summary") or {}).get("camera")
+    if camera is None:
+        return None
     try:
         fx, fy, cx, cy = (float(v) for v in camera["intrinsics"])
+        model = camera.get("distortion_model") or "radtan"
         distortion = tuple(float(v) for v in camera.get("distortion") or ())
-        return Intrinsics(fx, fy, cx, cy, distortion, str(camera.get("distortion_model") or "radtan"))
-    except (TypeError, KeyError, ValueError, AttributeError):
-        return None
+        counts = {"radtan": (0, 5), "equidistant": (0, 4)}.get(model)
+        if counts is None or len(distortion) not in counts:
+            raise ValueError(f"lens {model!r} with {len(distortion)} coefficients")
+        if not all(math.isfinite(v) for v in (fx, fy, cx, cy, *distortion)) or not (fx > 0 and fy > 0):
+            raise ValueError("fx, fy > 0 and finite numbers expected")
+        return Intrinsics(fx, fy, cx, cy, distortion, model)
+    except (TypeError, KeyError, ValueError, AttributeError) as err:
+        raise TofnetError(f"{depth_path}: its summary's camera is not one tofnet run writes ({str(err)[:80]}); pass "
+                          "--intrinsics FX,FY,CX,CY or --calib FILE") from None

@@ -116,6 +116,21 @@ def set_parameter(network, item: str) -> None:
         raise NetworkError(f"--set {item}: {err}") from None
 
 
+def run_intrinsics(network, recording):
+    """The camera the run used: its velocity process's (a spec's ``intrinsics:`` and lens win over the
+    recording's calibration), else the recording's; None when neither has one."""
+    from tofnet.errors import TofnetError
+    from tofnet.models.binding import camera_of as camera_seen
+    from tofnet.processes import VelocityProcess
+    for process in network.of_type(VelocityProcess):
+        try:
+            return camera_seen(process.intrinsics, process.distortion_model, process.distortion, recording,
+                               process.name)
+        except TofnetError:
+            break
+    return recording.intrinsics
+
+
 def camera_of(intrinsics) -> dict | None:
     """What a depth file's summary records of the camera the run used (``tofnet export`` back-projects
     with it when the recording has none): ``[fx, fy, cx, cy]`` px and the lens, or None."""
@@ -195,7 +210,7 @@ def handle(args) -> int:
     summary["undistortion"] = undistortion_of(network, recording, result, str(args.recording),
                                               no_undistort=getattr(args, "no_undistort", False))
     summary["notes"] = list(recording.notes)
-    summary["camera"] = camera_of(recording.intrinsics)
+    summary["camera"] = camera_of(run_intrinsics(network, recording))
     summary["total_time_s"] = time.perf_counter() - clock.started
     summary["compile_time_s"], summary["kernels_compiled"] = clock.compile_seconds, clock.compiled
     written = write_outputs(out, result, summary, args.record_tot, check=lambda paths: check_more_outputs(args, paths))
