@@ -1,0 +1,34 @@
+"""One compiled signature per kernel whatever the input's kind, so ``tofnet warmup`` covers real runs.
+
+numba compiles a kernel again for every new combination of argument types, and an array's type
+includes its layout ('C' for a contiguous array, 'A' for a strided view: the field of a record
+array is 'A' with two records or more and 'C' with 0 or 1) and whether it is read-only. A kernel
+whose argument types depend on the reader, the packet's size or how the bytes were read compiled
+after ``tofnet warmup`` on real-sensor files (an EVT3 file's words are read-only, faery's packets
+carry uint64 times and bool polarities, a live packet may hold one event). These tests call each
+such kernel the ways the real paths and the warmer do and check that its dispatcher holds one
+overload (cheap: no fresh cache, no warmup).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tofnet.events import EVENT_DTYPE
+
+FAERY_DTYPE = np.dtype([("t", "<u8"), ("x", "<u2"), ("y", "<u2"), ("on", "?")])
+
+
+def test_the_evt3_decoder_has_one_signature_for_writable_read_only_and_empty_words(tmp_path):
+    from tofnet.io import evt3
+
+    words = np.array([0x8001, 0x0002, 0x6003, 0x2804, 0x3005, 0x4003], "<u2")
+    kinds = [words,                                   # the warmer's (and a ROS message's): writable
+             np.frombuffer(words.tobytes(), "<u2"),  # a file's block: read-only
+             words[:0], words[:1]]
+    decoded = [evt3.decode_words(w, 24, 18, 0, evt3.new_state()) for w in kinds]
+    assert np.array_equal(decoded[0], decoded[1]) and len(decoded[0]) == 3 and len(decoded[2]) == 0
+    path = tmp_path / "a.raw"
+    path.write_bytes(b"% evt 3.0\n% geometry 24x18\n" + words.tobytes())
+    assert np.array_equal(np.concatenate(list(evt3.decode_file(path, 24, 18))), decoded[0])
+    assert len(evt3._decode.signatures) == 1, evt3._decode.signatures
