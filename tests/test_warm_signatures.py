@@ -32,3 +32,21 @@ def test_the_evt3_decoder_has_one_signature_for_writable_read_only_and_empty_wor
     path.write_bytes(b"% evt 3.0\n% geometry 24x18\n" + words.tobytes())
     assert np.array_equal(np.concatenate(list(evt3.decode_file(path, 24, 18))), decoded[0])
     assert len(evt3._decode.signatures) == 1, evt3._decode.signatures
+
+
+def test_rechunking_has_one_signature_for_every_readers_packets():
+    """tofnet's own packets (``EVENT_DTYPE``), faery's (uint64 t, bool polarity), a packet of one event
+    and a read-only (memory-mapped) one: one ``_copy_checked``, the same events out."""
+    from tofnet.io import event_source
+
+    ours = np.zeros(5, EVENT_DTYPE)
+    ours["t"], ours["x"], ours["y"], ours["p"] = [1, 2, 3, 4, 5], [0, 1, 2, 3, 4], [4, 3, 2, 1, 0], [1, 0, 1, 0, 1]
+    faery = np.zeros(5, FAERY_DTYPE)
+    faery["t"], faery["x"], faery["y"], faery["on"] = ours["t"], ours["x"], ours["y"], ours["p"].astype(bool)
+    read_only = ours.copy()
+    read_only.flags.writeable = False
+    for packets in ([ours[:2], ours[2:3], ours[3:]], [faery[:1], faery[1:]], [read_only], [faery]):
+        chunks = list(event_source._rechunk(iter(packets), 4))
+        assert np.array_equal(np.concatenate([c for c, _ in chunks]), ours)
+        assert all(back == -1 for _, back in chunks)
+    assert len(event_source._copy_checked.signatures) == 1, event_source._copy_checked.signatures
