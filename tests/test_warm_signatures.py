@@ -50,3 +50,25 @@ def test_rechunking_has_one_signature_for_every_readers_packets():
         assert np.array_equal(np.concatenate([c for c, _ in chunks]), ours)
         assert all(back == -1 for _, back in chunks)
     assert len(event_source._copy_checked.signatures) == 1, event_source._copy_checked.signatures
+
+
+def test_the_input_filter_and_depth_layer_have_one_signature_for_packets_of_any_size():
+    """The paper's network model by model (as ``tofnet live`` feeds 1 ms packets: some hold 0 or 1
+    events, or yield 0 or 1 counter spikes or velocity updates): one ``filter_events``, one
+    ``depth_from_counts``."""
+    from tofnet.backends.registry import get_backend
+    from tofnet.kernels.depth_counts import depth_from_counts
+    from tofnet.kernels.input_filter import filter_events
+    from tofnet.networks import depth_network
+    from tofnet.testing import TEST_INTRINSICS, moving_edge
+    from tofnet.io.recording import Recording
+
+    recording = Recording(moving_edge((16, 12), -50.0, "u"), intrinsics=TEST_INTRINSICS)
+    network = depth_network((16, 12), velocity={"source": "constant", "velocity": [-0.1, 0.0, 0.0]})
+    stream = get_backend("fixed", fuse=False).open_stream(network, recording=recording)
+    events = recording.events
+    cuts = [0, 1, 1, 2, len(events) // 2, len(events)]
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        stream.feed(events[a:b])
+    assert len(filter_events.signatures) == 1, filter_events.signatures
+    assert len(depth_from_counts.signatures) == 1, depth_from_counts.signatures
