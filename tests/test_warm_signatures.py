@@ -72,3 +72,27 @@ def test_the_input_filter_and_depth_layer_have_one_signature_for_packets_of_any_
         stream.feed(events[a:b])
     assert len(filter_events.signatures) == 1, filter_events.signatures
     assert len(depth_from_counts.signatures) == 1, depth_from_counts.signatures
+
+
+def test_the_workers_warmer_touches_fresh_output_with_the_types_the_bands_do(monkeypatch):
+    """``touch`` runs only for packets of ``SERIAL_BELOW`` events or more, in threads: the warmer calls it
+    directly, with the argument types ``BandedKernel.run_events`` passes (one overload after both)."""
+    from tofnet.backends import bands as bands_module
+    from tofnet.backends.registry import get_backend
+    from tofnet.kernels.bands import touch
+    from tofnet.networks import depth_network
+    from tofnet.testing import TEST_INTRINSICS, moving_edge
+    from tofnet.io.recording import Recording
+    from tofnet.warmup import touch_as_bands_do
+
+    touch_as_bands_do()
+    monkeypatch.setattr(bands_module, "SERIAL_BELOW", 0)
+    recording = Recording(moving_edge((24, 16), -50.0, "u"), intrinsics=TEST_INTRINSICS)
+    network = depth_network((24, 16), velocity={"source": "constant", "velocity": [-0.1, 0.0, 0.0]})
+    stream = get_backend("fixed", workers=2).open_stream(network, recording=recording)
+    stream.kernel.one_band_below = 0
+    stream.feed_all(recording.events[:50])  # builds the bands
+    into = np.empty(1 << 18, stream.kernel.buffers()[0].dtype)  # fresh: 7 MB
+    stream.kernel.run_events(recording.events[50:], stream._updates.rows, into, 0)
+    assert stream.kernel._touched[2] > 0  # the real path touched
+    assert len(touch.signatures) == 1, touch.signatures
