@@ -226,9 +226,8 @@ def _rechunk(packets: Iterable[np.ndarray], n: int) -> Iterator[tuple[np.ndarray
     last_t = np.zeros(1, dtype=np.int64)
     started = np.zeros(1, dtype=np.bool_)
     for packet in packets:
-        names = packet.dtype.names
-        columns = [packet[name] for name in names[:4]]
-        start, size = 0, len(packet)
+        columns, size = _columns(packet), len(packet)
+        start = 0
         while start < size:
             take = min(n - fill, size - start)
             first_back = _copy_checked(buffer["t"], buffer["x"], buffer["y"], buffer["p"], fill, *columns,
@@ -244,6 +243,33 @@ def _rechunk(packets: Iterable[np.ndarray], n: int) -> Iterator[tuple[np.ndarray
     if fill:
         # A copy only when most of the buffer is empty (a fresh copy costs page faults too).
         yield (buffer[:fill] if 2 * fill >= n else buffer[:fill].copy()), back
+
+
+#: The column kinds ``_copy_checked`` is compiled for (``EVENT_DTYPE``'s: t, x, y, p).
+_KINDS = tuple(EVENT_DTYPE[name] for name in ("t", "x", "y", "p"))
+
+
+def _columns(packet: np.ndarray) -> list[np.ndarray]:
+    """The t, x, y, p fields of ``packet`` as ``_copy_checked`` reads them, of one kind whatever the reader,
+    so that one compiled signature serves every format (``tofnet warmup`` compiles it on ECD's chunks):
+    a field of the same size as ``EVENT_DTYPE``'s (faery's uint64 t, bool polarity) is viewed as it, which
+    ``_copy_checked`` copies to the same values; and always strided views, as a packet of two or more records
+    gives (numba types the fields of a one-record packet as contiguous, another signature), by copying a
+    one-record packet into two records (the kernel copies ``count`` of them); and read-only views, as a
+    memory-mapped file's are (numba types read-only arrays apart too)."""
+    if len(packet) == 1:
+        packet = np.concatenate([packet, packet])
+    columns = []
+    for name, kind in zip(packet.dtype.names[:4], _KINDS):
+        column = packet[name]
+        if (column.dtype != kind and column.dtype.kind in "biu" and column.dtype.isnative
+                and column.dtype.itemsize == kind.itemsize):
+            column = column.view(kind)
+        else:
+            column = column.view()
+        column.flags.writeable = False  # read-only, as some readers' packets are (memory-mapped files)
+        columns.append(column)
+    return columns
 
 
 @njit(cache=True)

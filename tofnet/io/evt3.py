@@ -57,6 +57,14 @@ def new_state() -> np.ndarray:
 def decode_words(words: np.ndarray, width: int, height: int, t0: int, state: np.ndarray) -> np.ndarray:
     """The CD events of ``words`` (uint16, in file order) as ``EVENT_DTYPE`` records (``t`` µs); ``state`` carries the time base, coordinates and counters to the next call.
     Raises ``ValueError`` naming the word when a coordinate is outside ``width`` x ``height``."""
+    if len(words) == 0:
+        return np.empty(0, dtype=EVENT_DTYPE)
+    # One kernel signature for every caller: the words read-only (a file's block is np.frombuffer of
+    # bytes; the warmer's and a ROS message's are writable), so no run compiles another _decode.
+    words = np.ascontiguousarray(words, dtype="<u2")
+    if words.flags.writeable:
+        words = words.view()
+        words.flags.writeable = False
     out = np.empty(12 * len(words), dtype=EVENT_DTYPE)  # pages are touched only where events are written
     count = _decode(words, width, height, t0, state, out["t"], out["x"], out["y"], out["p"])
     if state[_BAD]:

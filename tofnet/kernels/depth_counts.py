@@ -53,11 +53,11 @@ def depth_rotation_of(m0, m1, m2, m3, w_x, w_y, at_x, at_y, bw_x, bw_y, params, 
 
 
 @njit(cache=True)
-def depth_from_counts(c_step, c_x, c_y, c_dir, c_count, v_step, v_t, velocity, w_step, w_omega, omega, rotation,
-                      ints, floats, out, out_raw, n_out):
+def depth_from_counts(spikes, v_step, v_t, velocity, w_step, w_omega, omega, rotation, ints, floats, out, out_raw,
+                      n_out):
     """Depth estimates of counter spikes; returns ``(n_out, status)`` (0 ok, 1 unsorted).
 
-    Counter spikes ``(sent step m, x, y, direction, count)`` are sorted by step with the spikes
+    Counter spikes ``spikes`` (``TOT_DTYPE``: sent step m, x, y, direction, count) are sorted by step with the spikes
     of one pixel and step together (canonical order); they reach the depth neuron in step
     ``m + 1``, which holds the latest velocity update sent at or before ``m``. Velocity updates
     ``(sent step, t)`` are sorted by step; ``velocity`` carries the held update across calls.
@@ -66,6 +66,9 @@ def depth_from_counts(c_step, c_x, c_y, c_dir, c_count, v_step, v_t, velocity, w
     velocity updates ``(w_step, w_omega)`` are held like the velocity's (``omega`` across calls).
     Estimates go to ``out[n_out:]`` stamped with step ``m + 1`` and ``t0 + (m + 2) * dt`` µs.
     """
+    # the records' fields, read in place (strided); taken here, so that the signature is the records' type
+    # whatever their number (numba types the fields of 0 or 1 records as contiguous, of more as strided)
+    c_step, c_x, c_y, c_dir, c_count = spikes.step, spikes.x, spikes.y, spikes.direction, spikes.count
     ip, cursor, counts, rows, cols, cache_j, cache_w, pend, rec, fp, points, cache_at = views(ints, floats)
     n, n_vel = c_step.shape[0], v_step.shape[0]
     for i in range(1, n):

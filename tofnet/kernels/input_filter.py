@@ -41,15 +41,19 @@ def admit(last, word: int, latest: int, t: int, step_start: int, step_end: int, 
 
 
 @njit(cache=True)
-def filter_events(t, x, y, p, width, height, t0_us, timestep_us, refractory_us, per_polarity,
+def filter_events(events, width, height, t0_us, timestep_us, refractory_us, per_polarity,
                   last, pad, row, stride, offset, out_step, out_x, out_y, out_p, counts):
-    """Accepted events of one packet as (input step, x, y, polarity) spikes; returns how many.
+    """Accepted events of one packet (records with fields t, x, y, p) as (input step, x, y, polarity)
+    spikes; returns how many.
 
     The filter word of pixel ``(x, y)`` and channel ``c`` is
     ``last[((y + pad) * row + x + pad) * stride + offset + c]``; the pixel's latest word
     is channel 0 with one channel, else word ``offset + 2``. ``counts`` (5 slots)
     counts drops by reason and the accepted events. Any time order is handled.
     """
+    # the records' fields, read in place; taken here, so that the signature is the records' type whatever
+    # their number (numba types the fields of 0 or 1 records as contiguous, of more as strided)
+    t, x, y, p = events.t, events.x, events.y, events.p
     latest_word = offset + 2 if per_polarity else offset
     step, step_start, step_end = np.int64(0), np.int64(1), np.int64(0)  # empty: the first event computes its step
     n_out = 0
@@ -109,7 +113,7 @@ class InputFilter:
         n = len(events)
         out_step, out_x, out_y = np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64)
         out_p = np.empty(n, dtype=np.uint8)
-        count = filter_events(events["t"], events["x"], events["y"], events["p"], self.width, self.height,
+        count = filter_events(events, self.width, self.height,
                               self.t0_us, self.timestep_us, self.refractory_us, self.per_polarity,
                               self._last, 0, self.width, self._stride, 0, out_step, out_x, out_y, out_p,
                               self._counts)

@@ -357,8 +357,10 @@ class TimeOfTravelKernel:
         w_step = np.zeros(0, np.int64) if rotation is None else np.ascontiguousarray(rotation["step"])
         if rotation is not None and len(rotation):
             w_omega[:, 0], w_omega[:, 1], w_omega[:, 2] = rotation["wx"], rotation["wy"], rotation["wz"]
-        n_out, status = depth_from_counts(  # the records' fields as strided views, read in place
-            counts["step"], counts["x"], counts["y"], counts["direction"], counts["count"], velocity["step"], v_t,
+        # the counter spikes as records (the kernel reads their fields in place) and the updates' steps
+        # contiguous (a few): the same argument types whatever the number of either (one compiled signature)
+        n_out, status = depth_from_counts(
+            np.ascontiguousarray(counts, dtype=TOT_DTYPE), np.ascontiguousarray(velocity["step"], dtype=np.int64), v_t,
             self._held_velocity, w_step, w_omega, self._held_omega, self._rotation, self._ints, self._floats,
             self._out, self._raw, 0)
         if status:
