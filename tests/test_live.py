@@ -197,3 +197,28 @@ def test_a_png_frame_is_written_beside_the_packets_not_between_them(tmp_path, mo
     assert time.perf_counter() - started < 0.2 and frames.skipped == 1
     assert frames.close().endswith("(1 skipped: the previous one was still being written)")
     assert sorted(p.name for p in (tmp_path / "frames").iterdir()) == ["depth-000001.png", "depth-000002.png"]
+
+
+def test_a_recording_with_a_gyroscope_replays_as_it_runs(tmp_path):
+    """The default network of a recording with an IMU reads its gyroscope (eq. 7); the live session was told
+    only the intrinsics and poses, so it could not start ('no IMU samples')."""
+    from tofnet.api import default_network
+    from tofnet.io.ecd import write_ecd
+    from tofnet.io.recording import Intrinsics
+    from tofnet.io.rotation import write_imu
+
+    recording = pattern_recording(int(SPAN_S * 1e6))
+    folder = tmp_path / "rec"
+    write_ecd(folder, recording.events, intrinsics=Intrinsics(50.0, 50.0, 12.0, 8.0), sensor_size=recording.sensor_size)
+    t = np.arange(-0.01, SPAN_S + 0.02, 0.005) + recording.events["t"][0] * 1e-6
+    write_imu(folder / "imu.txt", t, np.zeros((len(t), 3)), np.tile([0.0, -0.2, 0.0], (len(t), 1)))
+    with open_recording(folder) as source:
+        whole = source.read()
+        network = default_network(whole)
+        from tofnet.api import constant_velocity
+        constant_velocity(network, "0.3,0,0")
+        assert network.process("angular_velocity").source == "gyro"
+        seen = []
+        stats, result = run_live(ReplaySource(source, speed=4.0), network, backend="fixed", on_depth=seen.append)
+    reference, _ = run_recording(whole, network, backend="fixed")
+    assert result.counts == reference.counts and result.counts["depth"]["emitted"] > 0

@@ -197,9 +197,10 @@ class LiveStats:
 
 
 def live_camera(metadata: Recording) -> dict:
-    """What a live session is told of the camera: its intrinsics and, when the source has poses, its
-    velocity (``Session(network, intrinsics=..., velocity_source=...)``)."""
-    return {"intrinsics": metadata.intrinsics, "velocity_source": metadata.trajectory}
+    """What a live session is told of the camera: the source's metadata (``Session(camera=...)``), so its
+    processes bind to its intrinsics, poses and IMU as a run's do (given only the intrinsics and poses, a
+    network whose gyroscope the IMU drives could not start)."""
+    return {"camera": metadata}
 
 
 def warm_up(compiled, metadata: Recording, backend, backend_options) -> None:

@@ -42,13 +42,16 @@ class Session:
     objects or their strings (``"proc.var@x,y"``); ``keep_outputs`` False: what ``run``/``feed``
     return is not also kept for ``outputs()`` and ``finish()`` (a live source running for hours).
     ``step`` is the next step to run: every step before it has run. The session works on
-    its own copy of the network: ``set`` never changes the caller's processes.
+    its own copy of the network: ``set`` never changes the caller's processes. ``camera``: a
+    live source's metadata (a ``Recording`` without events: intrinsics, poses, IMU), instead of
+    ``intrinsics``/``velocity_source``, so that a process the IMU drives binds as in a run.
     """
 
     def __init__(self, network, recording: Recording | None = None, *, backend: str | Backend = "fixed",
                  backend_options: dict | None = None, compile_options: dict | None = None,
                  probes: Iterable[str] = (), record_tot: bool = False, monitors: Iterable[Monitor | str] = (),
-                 intrinsics=None, velocity_source=None, t0_us: int | None = None, keep_outputs: bool = True):
+                 intrinsics=None, velocity_source=None, t0_us: int | None = None, keep_outputs: bool = True,
+                 camera: Recording | None = None):
         from tofnet.compiler import CompiledNetwork, compile_network
 
         compiled = network if isinstance(network, CompiledNetwork) else compile_network(
@@ -63,7 +66,11 @@ class Session:
         if recording is not None and t0_us is None:
             t0_us = start_time_us(clock.t0_us, recording)
         self._resource = None
-        options = dict(recording=recording, intrinsics=intrinsics, velocity_source=velocity_source, t0_us=t0_us,
+        if camera is not None and (recording is not None or intrinsics is not None or velocity_source is not None):
+            raise TofnetError("session: camera= describes a live source's camera whole; give it alone, without a "
+                              "recording, intrinsics or velocity_source")
+        options = dict(recording=recording if camera is None else camera, intrinsics=intrinsics,
+                       velocity_source=velocity_source, t0_us=t0_us,
                        probes=list(dict.fromkeys([*probes, *ports])), record_tot=record_tot)
         self.stream = self._open(options)
         self.timestep_us = self.stream.timestep_us
