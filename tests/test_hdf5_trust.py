@@ -81,8 +81,10 @@ def test_external_storage_is_refused_unless_allowed_and_then_read(tmp_path, monk
 
 @pytest.mark.parametrize("storage", ["fifo", "/dev/zero", "short", "missing", "elsewhere"])
 def test_external_storage_that_is_not_a_regular_file_holding_the_data_is_refused_even_when_allowed(tmp_path, storage):
-    """A FIFO blocked forever; /dev/zero read as t = 0; a file outside the HDF5 file's folder (a file from
-    someone else naming one of yours) is refused even when it holds the bytes."""
+    """A FIFO blocked forever; /dev/zero read as t = 0 (a link to it is outside the folder now, refused as
+    such: a device in the folder is refused by open_regular, tests/test_reliability_inputs.py); a file
+    outside the HDF5 file's folder (a file from someone else naming one of yours) is refused even when
+    it holds the bytes."""
     path = tmp_path / "events.h5"
     target = tmp_path / "t.raw"
     if storage == "elsewhere":

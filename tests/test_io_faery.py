@@ -92,6 +92,28 @@ def test_aedat4_with_imu_and_calibration_side_files(tmp_path, recording):
     assert any("calib.txt" in note for note in read.notes)
 
 
+def test_aedat4_metadata_holds_the_imu_read_once_up_to_the_window(tmp_path, recording, monkeypatch):
+    """The IMU comes among the packets: metadata() decodes the file for it once, stopping after the window."""
+    from tofnet.io import aedat
+    from tofnet.io.window import parse_window
+
+    path = tmp_path / "rec.aedat4"
+    aedat.write_aedat4(path, [recording.events], recording)
+    whole = open_recording(path).metadata().imu
+    assert np.allclose(whole, recording.imu, rtol=1e-6, atol=1e-6)
+    calls = []
+    source_class = type(open_recording(path))
+    real = source_class._read_imu
+    monkeypatch.setattr(source_class, "_read_imu", lambda self: (calls.append(1), real(self)))
+    span = (recording.events["t"][-1] - recording.events["t"][0]) * 1e-6
+    windowed = open_recording(path, window=parse_window(duration=span / 4))
+    first, second = windowed.metadata().imu, windowed.metadata().imu
+    assert calls == [1] and first is second
+    end_s = (windowed.window[1]) * 1e-6
+    assert first[0, 0] <= windowed.window[0] * 1e-6 and first[-1, 0] >= end_s and len(first) < len(whole)
+    assert open_recording(path).metadata(imu=False).imu is None and calls == [1]
+
+
 def test_evt_header_without_size_gives_unknown_sensor_then_extent(tmp_path, recording):
     path = tmp_path / "rec.raw"
     _write(path, recording.events, version="evt2")

@@ -104,13 +104,19 @@ class PngFolder:
         self.frames += 1
         final = self.folder / f"depth-{self.frames:06d}.png"
         depth = self.depth  # copies taken here; the percentiles (10-30 ms at 1280x720) and the PNG in the thread
-        limits = depth.z_range if depth.z_range is not None else depth.z.copy()
+        limits = tuple(depth.z_range) if depth.z_range is not None else depth.z.copy()
         self._pending = self._writer.submit(_write_frame, final, depth.image(), limits, self._palette)
 
-    def close(self) -> str:
-        self.tick(force=True)
-        self._pending.result()
+    def stop(self) -> None:
+        """End the writing thread (after the frame it is writing), with no last frame: the run failed."""
         self._writer.shutdown(wait=True)
+
+    def close(self) -> str:
+        try:
+            self.tick(force=True)
+            self._pending.result()
+        finally:
+            self._writer.shutdown(wait=True)
         skipped = f" ({self.skipped} skipped: the previous one was still being written)" if self.skipped else ""
         return f"{self.frames} PNG frames -> {self.folder}{skipped}"
 

@@ -55,6 +55,10 @@ def check_batch_output(plan: Plan, *, force: bool = False, resume: bool = False)
         check_folder_writable(plan.cache, "cache")
 
 
+#: What a desktop's file browser leaves in any folder it showed (macOS, Windows): not the user's data.
+_DESKTOP_FILES = {".DS_Store", "Thumbs.db", "desktop.ini"}
+
+
 def check_cache(cache: Path) -> None:
     """Refuse a scenario cache that holds anything but scenario folders (each with its ``scenario.json``)
     and their temporary folders: a plan from someone else naming a folder of yours (``cache: ~/data``)
@@ -62,9 +66,9 @@ def check_cache(cache: Path) -> None:
     from tofnet.errors import DataError, located, quote
     if not cache.is_dir():
         return
-    foreign = [entry.name for entry in sorted(cache.iterdir())
-               if entry.is_symlink() or not entry.is_dir()
-               or not ((entry / SCENARIO_FILE).is_file() or (entry.name.startswith(".") and ".tmp-" in entry.name))]
+    foreign = [entry.name for entry in sorted(cache.iterdir()) if entry.name not in _DESKTOP_FILES and (
+               entry.is_symlink() or not entry.is_dir()
+               or not ((entry / SCENARIO_FILE).is_file() or (entry.name.startswith(".") and ".tmp-" in entry.name)))]
     if foreign:
         more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
         raise DataError(located(cache, None, f"cache is a folder holding {quote(foreign[0])}{more}, which is not a "

@@ -59,7 +59,7 @@ def handle(args) -> int:
             with open_recording(recording_path, window=window, allow_external=args.allow_external,
                                 **camera_options(args)) as source:
                 # The camera only; the events only when the sensor size must come from their extent.
-                recording = source.metadata() if source.sensor_size is not None else source.read()
+                recording = source.metadata(imu=False) if source.sensor_size is not None else source.read()
                 bounds = source.window
         except TofnetError as err:
             if args.recording:

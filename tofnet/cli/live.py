@@ -87,9 +87,14 @@ def handle(args) -> int:
             else:
                 note = "no display: give --out DIR for PNG frames of the depth map"
         stop = None if args.seconds is None else _stop_after(args.seconds)
-        stats, result = run_live(source, network, backend=backend, backend_options=backend_options,
-                                 compile_options=compile_options, drop_when_late=args.drop_when_late,
-                                 on_depth=depth.add, tick=view.tick if view else None, stop=stop)
+        try:
+            stats, result = run_live(source, network, backend=backend, backend_options=backend_options,
+                                     compile_options=compile_options, drop_when_late=args.drop_when_late,
+                                     on_depth=depth.add, tick=view.tick if view else None, stop=stop)
+        except BaseException:
+            if isinstance(view, PngFolder):
+                view.stop()  # the frame being written is finished; its thread ends
+            raise
     finally:
         if opened is not None:
             opened.close()

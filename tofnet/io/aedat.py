@@ -60,6 +60,7 @@ class AedatSource(EventSource):
         self._first_t = starts.get(self.track_id)
         self.detail = f"events track {self.track_id}"
         self._imu_track = any(track.data_type == "imus" for track in tracks)
+        self._imu_read = False  # metadata()'s pass for the IMU is made once
         for track in tracks:
             if track.id == self.track_id:
                 continue
@@ -89,14 +90,34 @@ class AedatSource(EventSource):
                 rows = np.concatenate(imu)
                 self.imu = rows if self.window is None else window_rows(rows, *self.window)
 
-    def metadata(self):
+    def metadata(self, *, imu: bool = True):
         """As ``EventSource.metadata``, with the IMU: the container interleaves it with the events, so a file
-        with an IMU track is read once for it, its events skipped (a stream of the events, as ``tofnet run``
-        makes, would otherwise build its network without the gyroscope)."""
-        if self.imu is None and self._imu_track:
-            for _ in self._packets(0):
-                pass  # _packets keeps the IMU (cut to the window) when it is done
+        with an IMU track is decoded once more for it (faery decodes every packet; the events are not kept),
+        up to the window's end, once per source (a stream of the events, as ``tofnet run`` makes, would
+        otherwise build its network without the gyroscope). ``imu`` False: not (``tofnet export``)."""
+        if imu and self.imu is None and self._imu_track and not self._imu_read:
+            self._read_imu()
         return super().metadata()
+
+    def _read_imu(self) -> None:
+        from faery.extension import aedat
+
+        from tofnet.io.window import window_rows
+        stop_s = None if self.window is None or self.window[1] is None else self.window[1] * 1e-6
+        parts = []
+        with aedat.Decoder(self.path) as decoder:
+            try:
+                for track, packet in decoder:
+                    if track.data_type == "imus" and len(packet):
+                        parts.append(imu_to_ecd(packet))
+                        if stop_s is not None and parts[-1][-1, 0] >= stop_s:
+                            break  # a sample at or after the window's end: the rows that cover it are in
+            except RuntimeError as err:
+                raise DataError(located(self.path, None, f"cannot decode ({reason(err)})")) from None
+        self._imu_read = True
+        if parts:
+            rows = np.concatenate(parts)
+            self.imu = rows if self.window is None else window_rows(rows, *self.window)
 
     def first_time(self) -> int | None:
         # The index table gives each packet's first time: no decoding (a file without it is decoded).

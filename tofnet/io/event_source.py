@@ -161,9 +161,10 @@ class EventSource:
             done += len(packet)
             yield packet if self.remap is None else self.remap(packet)
 
-    def metadata(self) -> Recording:
+    def metadata(self, *, imu: bool = True) -> Recording:
         """What is known about the camera before reading the events: a ``Recording`` without
-        events (for streams, which read them in chunks)."""
+        events (for streams, which read them in chunks). ``imu`` False: a reader may leave out an
+        IMU it would have to decode the file for (AEDAT4)."""
         return Recording(events=np.empty(0, EVENT_DTYPE), intrinsics=self.intrinsics, trajectory=self.trajectory,
                          sensor_size=self.sensor_size, imu=self.imu, source=str(self.path), notes=self.notes,
                          frame_gt=self.frame_gt)

@@ -8,8 +8,9 @@ values: a 9 KB file can declare 10^12 events). ``H5File`` is the one way tofnet'
 reach a dataset, and refuses all of these with one line:
 
 - external storage, virtual datasets and external links unless ``allow_external``; even
-  then every file they name must be a regular file next to the HDF5 file (or at the path
-  it gives) holding the bytes, and every virtual source dataset must exist;
+  then every file they name must lie in the HDF5 file's folder or below it (links resolved;
+  an absolute path too) and be a regular file holding the bytes, and every virtual source
+  dataset must exist;
 - a dataset whose allocated storage is less than its declared shape needs (contiguous:
   fewer bytes; chunked: a chunk never written; compressed: more than
   ``max(MAX_INFLATED_BYTES, MAX_INFLATE_RATIO x stored)``, the ``.npz`` rule);

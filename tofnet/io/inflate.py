@@ -45,12 +45,18 @@ class _Codec(NamedTuple):
     empty_ok: bool  # no data inflates to nothing (bz2.decompress); else it is truncated
 
 
+def zstd_module():
+    """The zstd module rosbags inflates with: the standard library's from Python 3.14, else its backport."""
+    if sys.version_info >= (3, 14):
+        from compression import zstd
+    else:  # pragma: no cover
+        from backports import zstd
+    return zstd
+
+
 def _codec(name: str) -> _Codec:
     if name == "zstd":
-        if sys.version_info >= (3, 14):  # what rosbags inflates with
-            from compression import zstd
-        else:  # pragma: no cover
-            from backports import zstd
+        zstd = zstd_module()
         return _Codec(zstd.ZstdDecompressor, lambda view: zstd.get_frame_info(view[:18]).decompressed_size,
                       (zstd.ZstdError,), True, False)
     if name == "lz4":

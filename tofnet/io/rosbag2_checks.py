@@ -22,19 +22,15 @@ opened: rosbags opens them again by name afterwards.
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path, PurePath
 
 from tofnet.errors import DataError, located, quote, reason
 from tofnet.io.files import open_regular, read_text
-from tofnet.io.inflate import inflate, inflation_limit
+from tofnet.io.inflate import inflate, inflation_limit, zstd_module
 from tofnet.io.inflate import too_large as _too_large
 from tofnet.io.safe_yaml import MAX_SPEC_BYTES
 
-if sys.version_info >= (3, 14):  # what rosbags inflates with
-    from compression import zstd
-else:  # pragma: no cover
-    from backports import zstd
+zstd = zstd_module()
 
 _STORAGE = "ROS 2 bag storage file"
 _READ_STEP = 1 << 20
