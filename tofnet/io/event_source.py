@@ -222,7 +222,10 @@ def _rechunk(packets: Iterable[np.ndarray], n: int) -> Iterator[tuple[np.ndarray
     stamped earlier than the one before it (across packets and chunks too), or -1. Each
     event is copied once, in a compiled loop that also checks the order.
     """
-    buffer = np.empty(n, dtype=EVENT_DTYPE)
+    # at least two records, so that the fields are strided views whatever n (a buffer of one record has
+    # contiguous fields: another compiled signature of _copy_checked); only n of them are filled
+    width = max(n, 2)
+    buffer = np.empty(width, dtype=EVENT_DTYPE)
     fill, back = 0, -1
     last_t = np.zeros(1, dtype=np.int64)
     started = np.zeros(1, dtype=np.bool_)
@@ -238,8 +241,8 @@ def _rechunk(packets: Iterable[np.ndarray], n: int) -> Iterator[tuple[np.ndarray
             fill += take
             start += take
             if fill == n:
-                yield buffer, back
-                buffer = np.empty(n, dtype=EVENT_DTYPE)
+                yield buffer[:n], back
+                buffer = np.empty(width, dtype=EVENT_DTYPE)
                 fill, back = 0, -1
     if fill:
         # A copy only when most of the buffer is empty (a fresh copy costs page faults too).
