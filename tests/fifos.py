@@ -31,6 +31,13 @@ while time.monotonic() < end:
 """
 
 
+def fifo_in_place(path):
+    """``path`` (a file that exists) replaced by a FIFO of the same name; returns it."""
+    path.unlink()
+    os.mkfifo(path)
+    return path
+
+
 def watched(call, fifo=None, timeout: float = 10.0) -> dict:
     """``call()``'s outcome: ``{"value": ...}`` or ``{"error": exception}``. When ``fifo`` is given, a
     reader still blocked on it after ``timeout`` s is let go and the test fails."""

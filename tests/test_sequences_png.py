@@ -11,7 +11,7 @@ import zlib
 import numpy as np
 import pytest
 
-from tests.fifos import needs_fifo, watched
+from tests.fifos import fifo_in_place, needs_fifo, watched
 from tests.optional import optional
 
 h5py = optional("h5py")
@@ -72,9 +72,7 @@ def test_the_blank_png_helper_writes_what_pil_reads(tmp_path):
 @needs_fifo
 @pytest.mark.parametrize("name", ["000000.png", "000004.png"])  # checked at open / when the frame is read
 def test_a_fifo_among_the_disparity_maps_is_refused_without_blocking(folder, name):
-    fifo = folder / "disparity" / "event" / name
-    fifo.unlink()
-    os.mkfifo(fifo)
+    fifo = fifo_in_place(folder / "disparity" / "event" / name)
     outcome = watched(lambda: read_recording(folder), fifo)
     err = outcome.get("error")
     assert isinstance(err, DataError), outcome
@@ -83,9 +81,7 @@ def test_a_fifo_among_the_disparity_maps_is_refused_without_blocking(folder, nam
 
 @needs_fifo
 def test_info_on_a_dsec_folder_with_a_fifo_map_is_one_line_exit_2(folder, capsys):
-    fifo = folder / "disparity" / "event" / "000000.png"
-    fifo.unlink()
-    os.mkfifo(fifo)
+    fifo = fifo_in_place(folder / "disparity" / "event" / "000000.png")
     outcome = watched(lambda: main(["info", str(folder)]), fifo)
     assert outcome.get("value") == 2, outcome
     err = capsys.readouterr().err.strip()
@@ -101,9 +97,7 @@ def test_info_on_a_dsec_folder_with_a_fifo_map_is_one_line_exit_2(folder, capsys
     ("disparity/timestamps.txt", "the times of the disparity maps"),
 ])
 def test_a_fifo_as_a_side_file_of_the_sequence_is_named_as_such_not_missing(folder, name, what):
-    fifo = folder / name
-    fifo.unlink()
-    os.mkfifo(fifo)
+    fifo = fifo_in_place(folder / name)
     outcome = watched(lambda: read_recording(folder), fifo)
     err = outcome.get("error")
     assert isinstance(err, DataError), outcome
