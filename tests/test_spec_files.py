@@ -135,3 +135,25 @@ def test_a_recording_side_file_linked_out_of_its_folder_is_never_quoted(folder, 
     (folder / side).unlink()
     (folder / side).write_text(secret.read_text())  # the recording's own file: its field is quoted
     assert "API_KEY" in one_line_error(capsys, ["info", str(folder)])
+
+
+def test_a_field_is_not_quoted_from_a_file_or_folder_linked_out_of_its_folder(tmp_path):
+    """The file, its folder and the folder above are looked at (a DSEC ``disparity/`` linked to someone's
+    secrets); links higher up, such as a cluster's ``/home``, are not: their files are quoted."""
+    from tofnet.errors import quote_field
+    secrets = tmp_path / "secrets"
+    secrets.mkdir()
+    (secrets / "t.txt").write_text(SECRET)
+    rec = tmp_path / "rec"
+    (rec / "disparity").mkdir(parents=True)
+    (rec / "disparity" / "timestamps.txt").write_text("1\n")
+    (rec / "linked").symlink_to(secrets, target_is_directory=True)
+    (rec / "own.txt").symlink_to(rec / "disparity" / "timestamps.txt")  # a link within: quoted
+    assert quote_field(rec / "disparity" / "timestamps.txt", "abc") == "'abc'"
+    assert quote_field(rec / "own.txt", "abc") == "'abc'"
+    shown = quote_field(rec / "linked" / "t.txt", SECRET)
+    assert SECRET not in shown and "linked links out of its folder" in shown
+    (tmp_path / "real_home" / "user" / "rec").mkdir(parents=True)
+    (tmp_path / "home").symlink_to(tmp_path / "real_home", target_is_directory=True)
+    (tmp_path / "real_home" / "user" / "rec" / "calib.txt").write_text("x")
+    assert quote_field(tmp_path / "home" / "user" / "rec" / "calib.txt", "abc") == "'abc'"

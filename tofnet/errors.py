@@ -57,18 +57,26 @@ def quote(value: object, limit: int = 40) -> str:
 
 
 def quote_field(path: object, field: object) -> str:
-    """A field of the file ``path`` for an error message: ``quote(field)``, unless a symlink takes the file
-    out of the folder its name is in (a recording's ``calib.txt`` linked to ``/etc/passwd`` or
-    ``~/.git-credentials``): what it holds is not the recording's to show, so it is not quoted."""
+    """A field of the file ``path`` for an error message: ``quote(field)``, unless a symlink takes the file, or
+    one of the two folders it is in, out of the folder its name is in (a recording's ``calib.txt`` linked
+    to ``~/.git-credentials``, its ``disparity/`` linked to ``~/secrets/``): what it holds is not the
+    recording's to show, so it is not quoted. Links higher up (``/home`` on a cluster) are not looked at."""
     import os
     try:
-        linked_out = os.path.dirname(os.path.realpath(path)) != os.path.realpath(os.path.dirname(os.fspath(path)) or ".")
+        name = os.path.abspath(os.fspath(path))
+        linked = next((link for link in (name, os.path.dirname(name), os.path.dirname(os.path.dirname(name)))
+                       if os.path.islink(link) and not _inside(os.path.realpath(link),
+                                                               os.path.realpath(os.path.dirname(link)))), None)
     except (TypeError, ValueError, OSError):
-        linked_out = True
-    if not linked_out:
+        linked = os.fspath(path) if isinstance(path, (str, os.PathLike)) else str(path)
+    if linked is None:
         return quote(field)
-    target = os.path.realpath(path)
-    return f"a field not shown ({shown_path(path)} links out of its folder, to {shown_path(target)})"
+    return f"a field not shown ({shown_path(linked)} links out of its folder, to {shown_path(os.path.realpath(linked))})"
+
+
+def _inside(path: str, folder: str) -> bool:
+    import os
+    return path == folder or path.startswith(folder.rstrip(os.sep) + os.sep)
 
 
 def reason(err: BaseException, limit: int = 80) -> str:
