@@ -199,6 +199,11 @@ def test_run_monitor_and_plot_units_from_the_command_line(tmp_path):
     assert main(["plot", "units", str(folder), "--pixel", "10,8", "--window", "0.02:0.06", "--out", str(png),
                  "--velocity=-0.5,0.2,0.1"]) == 0
     assert png.stat().st_size > 10_000
+    np.save(tmp_path / "bare.npy", RECORDING.events)  # no calibration: the camera is given, as to tofnet run
+    fx, fy, cx, cy = TEST_INTRINSICS.fx, TEST_INTRINSICS.fy, TEST_INTRINSICS.cx, TEST_INTRINSICS.cy
+    assert main(["plot", "units", str(tmp_path / "bare.npy"), "--pixel", "10,8", "--window", "0.02:0.06",
+                 "--out", str(tmp_path / "bare.png"), "--velocity=-0.5,0.2,0.1",
+                 f"--intrinsics={fx},{fy},{cx},{cy}"]) == 0
 
 
 def test_a_session_asks_a_backend_what_it_declares_it_can_do():

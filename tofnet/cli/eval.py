@@ -56,21 +56,21 @@ def add_timing_options(p: argparse.ArgumentParser) -> None:
 
 def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = None,
                 latency_steps: int | None = None, window=None, allow_external: bool = False,
-                side: str | None = None, rectify: bool = False):
+                side: str | None = None, rectify: bool = False, **camera):
     """Read a recording and a depth file; complete the depth timing from the options.
 
     Returns ``(recording, depth, meta)``. The options fill what the file lacks and must
     agree with what it has; ``t0_us`` is then recovered from the stamps
     (``t = t0 + (step + 1) * dt``). With a time ``window`` only its events are read and
     only the estimates whose input step lies in it are kept. ``side`` and ``rectify`` open a dataset
-    sequence folder as the run did.
+    sequence folder as the run did; ``camera``: ``intrinsics``, ``calib``, ``camera`` (``camera_options``).
     """
     from tofnet.io import read_depth
     from tofnet.io.source import open_recording
     from tofnet.units import microseconds, seconds
 
     with open_recording(recording_path, window=window, allow_external=allow_external, side=side,
-                        rectify=rectify) as source:
+                        rectify=rectify, **camera) as source:
         recording = source.read()
         bounds = source.window
     depth, meta = read_depth(depth_path)

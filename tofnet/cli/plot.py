@@ -48,8 +48,9 @@ def register(subparsers) -> None:
     g.add_argument("--backend", default="fixed", help="backend that runs it (default fixed)")
     g.add_argument("--velocity", metavar="TX,TY,TZ", help="constant camera velocity in m/s instead of the poses")
     p.add_argument("--force", action="store_true", help="overwrite existing PNG files")
-    from tofnet.cli.inputs import add_allow_external, add_sequence_options
+    from tofnet.cli.inputs import add_allow_external, add_camera_options, add_sequence_options
     add_allow_external(p)
+    add_camera_options(p)
     add_sequence_options(p)
     add_timing_options(p)
     p.set_defaults(handler=handle)
@@ -60,7 +61,7 @@ def handle(args) -> int:
         return handle_units(args)
     if args.depth is None:
         raise TofnetError(f"plot {args.kind}: give the depth file written by `tofnet run` after the recording")
-    from tofnet.cli.inputs import sequence_options
+    from tofnet.cli.inputs import camera_options, sequence_options
     from tofnet.eval.metrics import require_timing
     from tofnet.eval.plots import available_kinds, figure, save_figure
     from tofnet.io.ecd import recording_files
@@ -71,8 +72,8 @@ def handle(args) -> int:
     if window_s is not None and window_s <= 0:
         raise TofnetError(f"--error-window must be positive or 'auto', got {args.error_window!r}")
     recording, depth, meta = load_inputs(args.recording, args.depth, timestep=args.timestep,
-                                         latency_steps=args.latency_steps,
-                                         allow_external=args.allow_external, **sequence_options(args))
+                                         latency_steps=args.latency_steps, allow_external=args.allow_external,
+                                         **sequence_options(args), **camera_options(args))
     require_timing(meta)
     options = {"window": args.window, "window_s": window_s, "reduce": args.reduce, "with_gt": not args.no_gt}
     depth_path = Path(args.depth)
@@ -111,7 +112,9 @@ def handle_units(args) -> int:
     from tofnet.io import read_recording
     from tofnet.units import seconds
 
-    recording = read_recording(args.recording, allow_external=args.allow_external)
+    from tofnet.cli.inputs import camera_options, sequence_options
+    recording = read_recording(args.recording, allow_external=args.allow_external, **sequence_options(args),
+                               **camera_options(args))
     network, _, _, _ = load_network(args.spec, sensor_size=None if args.spec else recording.sensor_size,
                                     allow_import=args.allow_import)
     if args.velocity:
