@@ -100,6 +100,15 @@ def present(path: str | Path, what: str, *, folder: bool = False) -> bool:
     return True
 
 
+def lies_in(path: str | Path, folder: str | Path) -> bool:
+    """Whether ``path`` lies in ``folder`` or below it once links and ``..`` are resolved (False for a name
+    the system cannot resolve, one with a NUL say): what a file from someone else may name."""
+    try:
+        return Path(os.path.realpath(path)).is_relative_to(os.path.realpath(folder))
+    except (ValueError, OSError):
+        return False
+
+
 def _kind(mode: int) -> str:
     for test, name in ((stat.S_ISREG, "a file"), (stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
                        (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"),

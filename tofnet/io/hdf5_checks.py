@@ -26,7 +26,7 @@ from pathlib import Path
 
 from tofnet.errors import DataError, located
 from tofnet.io.extras import require
-from tofnet.io.files import open_regular
+from tofnet.io.files import lies_in, open_regular
 from tofnet.io.npy import MAX_INFLATE_RATIO, MAX_INFLATED_BYTES
 
 #: Filters every h5py build has: deflate, shuffle, fletcher32, szip, nbit, scaleoffset, lzf.
@@ -141,10 +141,9 @@ class H5File:
         if not self.allow_external:
             raise self._fail(f"{what}; refused unless {ALLOW}")
         target = Path(filename) if os.path.isabs(filename) else self.path.parent / filename
-        folder = os.path.realpath(self.path.parent)
-        if not Path(os.path.realpath(target)).is_relative_to(folder):  # a file from someone else naming ~/.ssh/...
-            raise self._fail(f"{what}, outside this file's folder {folder}; {ALLOW} reads only files beside it or "
-                             "below it")
+        if not lies_in(target, self.path.parent):  # a file from someone else naming ~/.ssh/...
+            raise self._fail(f"{what}, outside this file's folder {os.path.realpath(self.path.parent)}; {ALLOW} "
+                             "reads only files beside it or below it")
         try:
             with open_regular(target, "file for HDF5 external data") as handle:
                 return os.fstat(handle.fileno()).st_size

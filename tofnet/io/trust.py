@@ -135,13 +135,10 @@ def file_a_spec_names(named: str, folder: Path, setting: str = "PROCESS.PARAM") 
     a link they sent along points at. The user names a file elsewhere (``--set PROCESS.PARAM=FILE``,
     ``Process.set_param``); ``setting`` names the parameter so.
     """
+    from tofnet.io.files import lies_in
     path = Path(named)
     opened = path if path.is_absolute() else folder / path
-    try:
-        inside = Path(os.path.realpath(opened)).is_relative_to(os.path.realpath(folder))
-    except (ValueError, OSError):  # a NUL in the name: the reader says so in one line when it opens it
-        inside = "\x00" in named and not path.is_absolute() and ".." not in path.parts
-    if not inside:
+    if not lies_in(opened, folder):
         raise SpecError(f"{quote(named)} lies outside the spec's folder {folder}, links resolved; a spec reads only "
                         f"files in its own folder or below it; name a file elsewhere on the command line (tofnet "
                         f"run or live --set {setting}=FILE) or in Python (set_param)")
