@@ -62,3 +62,37 @@ def test_tofnets_kernels_are_keyed_on_all_of_its_sources():
     assert isinstance(locator, _WholeSourceStamp)
     assert isinstance(locator.get_source_stamp()[1], str)
     assert caching.CacheImpl._locator_classes[0].__mro__[1] is _WholeSourceStamp
+
+
+LOCATE = """
+import sys
+sys.path.insert(0, {pkg_parent!r})
+from tofnet.numba_cache import register_root
+register_root({root!r})
+from cached_pkg.caller import twice
+print(twice(1))
+"""
+
+
+@pytest.mark.parametrize("checkout", [False, True])
+def test_an_installed_package_caches_in_the_users_folder_not_beside_its_sources(tmp_path, checkout):
+    # pip uninstall leaves files it did not install: kernels cached in site-packages/PKG would keep a folder
+    # there that Python imports as an empty namespace package, shadowing a later install of the package
+    parent = tmp_path / "site-packages"
+    parent.mkdir()
+    _write_package(parent, 3)
+    if checkout:
+        (parent / "pyproject.toml").write_text("[project]\nname = 'cached_pkg'\n")
+    user_cache = tmp_path / "xdg-cache"
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(PYTHONPATH=str(ROOT), XDG_CACHE_HOME=str(user_cache))
+    code = LOCATE.format(pkg_parent=str(parent), root=str(parent / "cached_pkg"))
+    done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "6"
+    beside = list((parent / "cached_pkg").rglob("*.nb[ic]"))
+    in_user_folder = list(user_cache.rglob("*.nb[ic]"))
+    if checkout:
+        assert beside and not in_user_folder
+    else:
+        assert in_user_folder and not beside

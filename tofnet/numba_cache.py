@@ -8,6 +8,12 @@ would a checkout that changes one helper file. Here every cached kernel of a fil
 registered root is keyed on the stamps of all the ``.py`` files under it as well, so any
 change recompiles (20-60 s, once). Imported by every package or module that defines cached
 kernels, before it defines them: numba picks a kernel's cache locator at decoration.
+
+Where the cache lives: ``NUMBA_CACHE_DIR`` when set; beside the sources (``__pycache__``) in a
+source checkout (a ``pyproject.toml`` beside the package); for an installed package, numba's
+per-user cache folder (``~/.cache/numba``), never the environment's ``site-packages``: ``pip
+uninstall`` removes only the files it installed, and a package folder left holding cache files
+is imported as an empty namespace package, shadowing a later install of the same name.
 """
 
 from __future__ import annotations
@@ -29,7 +35,7 @@ def register_root(root: str | Path) -> None:
         _ROOTS.append(root)
         _sources_stamp.cache_clear()
     if _InTree not in CacheImpl._locator_classes:  # before numba's own, in its order: the first that accepts wins
-        CacheImpl._locator_classes[:0] = [_UserProvided, _InTree, _UserWide]
+        CacheImpl._locator_classes[:0] = [_UserProvided, _InTree, _UserWide, _InTreeAtLast]
 
 
 def _root_of(py_file: str) -> str | None:
@@ -67,12 +73,28 @@ class _UserProvided(_WholeSourceStamp, UserProvidedCacheLocator):
     """``NUMBA_CACHE_DIR``, when it is set."""
 
 
+def _is_checkout(root: str) -> bool:
+    """Whether the package folder ``root`` is a source checkout's (its project file beside it), not an install."""
+    return os.path.isfile(os.path.join(os.path.dirname(root), "pyproject.toml"))
+
+
 class _InTree(_WholeSourceStamp, InTreeCacheLocator):
-    """Beside the sources (``__pycache__``), where numba puts them when it may write there."""
+    """Beside the sources (``__pycache__``) of a source checkout, when numba may write there."""
+
+    @classmethod
+    def from_function(cls, py_func, py_file):
+        root = _root_of(py_file)
+        if root is not None and not _is_checkout(root):
+            return None  # an install: the per-user folder (``_UserWide``)
+        return super().from_function(py_func, py_file)
 
 
 class _UserWide(_WholeSourceStamp, UserWideCacheLocator):
-    """numba's per-user cache folder, for installs whose folder is read-only."""
+    """numba's per-user cache folder, for installed packages."""
+
+
+class _InTreeAtLast(_WholeSourceStamp, InTreeCacheLocator):
+    """Beside an installed package's sources, when the user has no writable cache folder (still stamped)."""
 
 
 register_root(Path(__file__).resolve().parent)
