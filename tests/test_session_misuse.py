@@ -26,9 +26,9 @@ def one_line(err) -> str:
     return message
 
 
-def live(backend):
+def live(backend, fuse=False, **options):
     return Session(COMPILED, backend=backend, intrinsics=TEST_INTRINSICS, velocity_source=ConstantVelocity(VELOCITY),
-                   t0_us=0)
+                   t0_us=0, fuse=fuse, **options)
 
 
 @pytest.fixture(scope="module")
@@ -41,15 +41,17 @@ def same(a: dict, b: dict) -> bool:
     return a.keys() == b.keys() and all(a[k].tobytes() == b[k].tobytes() for k in a)
 
 
-@pytest.mark.parametrize("name", ["fixed", "reference", "multiproc"])
+@pytest.mark.parametrize("name", ["fixed", "fixed fused", "reference", "multiproc", "multiproc fused"])
 def test_a_refused_packet_leaves_a_live_session_open_and_unchanged(name, workers):
     """It used to end the session: the next valid packet got "session is failed; open a new one"."""
-    backend = workers if name == "multiproc" else name
+    backend = workers if name.startswith("multiproc") else name.split()[0]
+    fuse = name.endswith("fused")
     half = len(EVENTS) // 2
-    with live(backend) as clean:
+    with live(backend) as clean:  # model by model
         expected = [clean.feed(EVENTS[:half]), clean.feed(EVENTS[half:], until_us=200_000)]
         expected_result = clean.finish()
-    with live(backend) as session:
+    with live(backend, fuse) as session:
+        assert session.fused == fuse
         got = [session.feed(EVENTS[:half])]
         for bad, until in ((EVENTS[:10], None), (list(EVENTS[half:half + 3]), None), (EVENTS[half:], 2**63),
                            (EVENTS[half:], int(EVENTS["t"][-1]) - 1), (EVENTS[half:], "soon")):
@@ -203,3 +205,32 @@ def test_more_misuses_are_one_line_and_leave_the_session_usable():
         assert "use run" in one_line(err)
         session.run(steps=3)
         assert session.monitors[0].values.shape == (4, 1)
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_fused_live_session_hands_back_what_a_model_by_model_one_does(workers):
+    """``tofnet live`` runs the paper's chain through the fused kernel (fuse=True): the same records per
+    packet, and what it cannot do (no process state) is one line."""
+    ends = list(range(12_500, 100_001, 12_500))  # µs: packets of 12.5 ms, each promising its end
+    cuts = np.concatenate([[0], np.searchsorted(EVENTS["t"], ends)])
+    got = {}
+    for fuse in (False, True):
+        with live("fixed", fuse, backend_options={"workers": workers}) as session:
+            got[fuse] = [session.feed(EVENTS[a:b], until_us=end) for a, b, end in zip(cuts[:-1], cuts[1:], ends)]
+            assert session.output_latency("depth.depth") == 2
+            if fuse:
+                for action in (lambda: session.get("time_of_travel.counter"), lambda: session.step,
+                               lambda: session.set("input.refractory", "2ms"), session.counts):
+                    with pytest.raises(BackendError) as err:
+                        action()
+                    assert "fuse=True" in one_line(err)
+            got[fuse].append(session.finish())
+    assert sum(len(p["depth.depth"]) for p in got[True][:-1]) > 0
+    assert all(same(a, b) for a, b in zip(got[True][:-1], got[False][:-1]))
+    assert got[True][-1].counts == got[False][-1].counts
+    recording = Recording(EVENTS, intrinsics=TEST_INTRINSICS, sensor_size=SENSOR)
+    for bad in (dict(network=COMPILED, recording=recording, fuse=True),
+                dict(network=COMPILED, intrinsics=TEST_INTRINSICS, monitors=["depth.depth"], fuse=True)):
+        with pytest.raises(TofnetError) as err:
+            Session(**bad)
+        assert "fuse=True" in one_line(err)

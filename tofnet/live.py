@@ -213,7 +213,7 @@ def warm_up(compiled, metadata: Recording, backend, backend_options) -> None:
     width, height = metadata.sensor_size or (2, 2)
     events = moving_pattern((width, height), (300.0, 200.0), 20_000, sample_us=500)
     cuts, ends = packet_bounds(events["t"], 0, 1000)
-    with Session(compiled, backend=backend, backend_options=backend_options, t0_us=0,
+    with Session(compiled, backend=backend, backend_options=backend_options, t0_us=0, fuse=True,
                  **live_camera(metadata)) as session:
         for i, end in enumerate(ends):  # 1 ms packets, as the run feeds them, then empty ones
             session.feed(events[cuts[i]:cuts[i + 1]], until_us=int(end))
@@ -244,9 +244,9 @@ def run_live(source: LiveSource, network, *, backend: str = "fixed", backend_opt
         nonlocal session, primary, step_us, latency, first
         first = t0_us
         session = Session(compiled, backend=backend, backend_options=backend_options, t0_us=t0_us,
-                          keep_outputs=False, **camera)  # on_depth sees them; memory stays flat for hours
+                          keep_outputs=False, fuse=True, **camera)  # on_depth sees them; memory stays flat for hours
         primary, step_us = session.stream.primary, session.timestep_us
-        latency = session.executor.output_latency(primary) if primary else 0
+        latency = session.output_latency(primary) if primary else 0
 
     try:
         if source.t0_us is not None:  # before the source's clock starts: opening takes time

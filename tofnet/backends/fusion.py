@@ -30,7 +30,7 @@ from tofnet.kernels.region import KernelConfig, KernelOutput, TimeOfTravelKernel
 from tofnet.models.base import Model, concat
 from tofnet.models.binding import UpdateRows, velocity_table
 from tofnet.models.depth import OUTCOMES, depth_settings
-from tofnet.models.input import filter_settings, input_counts
+from tofnet.models.input import check_time_order, filter_settings, input_counts
 from tofnet.models.time_of_travel import unit_settings
 from tofnet.models.velocity import velocity_field, velocity_source
 from tofnet.models.registry import _registered
@@ -145,6 +145,7 @@ class FusedStream:
         self.tot: np.ndarray | None = None
         self._events_in = 0
         self._last_event_us: int | None = None
+        self._latest_us: int | None = None  # the last event's time or a promise (``until_us``), the later
         self._held: dict[str, np.ndarray] = {}  # feed_all: records of steps not complete yet
         # velocity updates (``VelocityRows``: ``self._updates.rows``), computed ``VELOCITY_LOOKAHEAD`` ahead
         self._updates = UpdateRows(lambda first, count: velocity_table(
@@ -153,6 +154,16 @@ class FusedStream:
         self._closed = False
         #: Called once when the stream closes or is given up (e.g. to stop its backend's workers).
         self.releases: list = []
+
+    def check(self, events: np.ndarray, until_us: int | None = None) -> None:
+        """Refuse (changing nothing) a packet ``feed_all`` would refuse, as ``GraphStream.check``: a closed
+        stream, not an event array, times out of range, out of order or before an earlier packet's or promise."""
+        self._admit(events, until_us)
+        if len(events):
+            check_time_order(events, self._latest_us, "stream")
+
+    def _promised(self, until_us: int) -> None:
+        self._latest_us = until_us if self._latest_us is None else max(self._latest_us, until_us)
 
     def _admit(self, events: np.ndarray, until_us: int | None = None) -> tuple[int, int] | None:
         """Checks before anything changes (the kernel checks the time order itself), ``until_us`` as the
@@ -189,9 +200,11 @@ class FusedStream:
         if first:
             self.t0_us = kernel.t0_us
         self._last_event_us = span[1]
+        self._promised(span[1])
         self._events_in += len(events)
         if until_us is not None:
             kernel.promise(until_us)
+            self._promised(until_us)
         return result
 
     def feed(self, events: np.ndarray, until_us: int | None = None) -> np.ndarray:
@@ -206,6 +219,7 @@ class FusedStream:
         if span is None:
             if until_us is not None:
                 self.kernel.promise(until_us)
+                self._promised(until_us)
             self.tot = np.empty(0, TOT_DTYPE) if self.record_tot else None
             return into
         end, n_tot = self._kernel_call(events, span, until_us, into, 0, False, canonical)

@@ -18,7 +18,7 @@ def register(subparsers) -> None:
                     "display, else PNGs with --out) and print the delay from an event to its estimate (p50/p99).",
         conflict_handler="resolve")
     from tofnet.cli.inputs import add_input_options
-    from tofnet.cli.run import add_network_options
+    from tofnet.cli.run import add_network_options, add_workers_option
 
     add_network_options(p)
     add_input_options(p)  # its --camera (a --calib file's camera) is replaced by the live camera below
@@ -40,6 +40,7 @@ def register(subparsers) -> None:
                    help="how long a pixel's estimate stays shown (default 0.2s of source time)")
     v.add_argument("--no-view", action="store_true", help="no window and no PNGs: statistics only")
     p.add_argument("--backend", default=None, help="backend name (default: the spec's, else 'fixed')")
+    add_workers_option(p)
     p.add_argument("--json", metavar="FILE", help="write the statistics as JSON")
     p.set_defaults(handler=handle)
 
@@ -48,6 +49,7 @@ def handle(args) -> int:
     from tofnet.api import DEFAULT_BACKEND
     from tofnet.cli.inputs import camera_options, input_options
     from tofnet.backends.runtime import clock_of
+    from tofnet.cli.run import backend_choice
     from tofnet.cli.run import build_network
     from tofnet.units import seconds
     from tofnet.live import CameraSource, ReplaySource, run_live
@@ -76,7 +78,7 @@ def handle(args) -> int:
             source = ReplaySource(opened, speed=args.speed, packet_us=step_us)
         else:
             source.packet_us = step_us
-        backend = args.backend or spec_backend or DEFAULT_BACKEND
+        backend, backend_options = backend_choice(args, spec_backend, backend_options, DEFAULT_BACKEND)
         depth = DepthMap(network.sensor_size, keep_s=keep)
         view, note = None, None
         if args.out:
@@ -90,7 +92,8 @@ def handle(args) -> int:
         try:
             stats, result = run_live(source, network, backend=backend, backend_options=backend_options,
                                      compile_options=compile_options, drop_when_late=args.drop_when_late,
-                                     on_depth=depth.add, tick=view.tick if view else None, stop=stop)
+                                     on_depth=depth.add if view else None, tick=view.tick if view else None,
+                                     stop=stop)  # no view: no map to keep up
         except BaseException:
             if isinstance(view, PngFolder):
                 view.stop()  # the frame being written is finished; its thread ends

@@ -24,9 +24,7 @@ def register(subparsers) -> None:
     p.add_argument("--out", default="depth.npz", help="depth output, .npz or .csv (default: depth.npz)")
     p.add_argument("--backend", default=None, help="backend name (default: the spec's, else 'fixed'); "
                                                     "see 'tofnet conformance --list'")
-    p.add_argument("--workers", default=None, metavar="N|auto",
-                   help="CPU cores to run on: the sensor is cut into N bands of rows (fixed, float; multiproc: "
-                        "worker processes); 0 or auto: one per CPU (default: the spec's, else 1)")
+    add_workers_option(p)
     p.add_argument("--record-tot", action="store_true",
                    help="also save the time-of-travel spikes (next to --out, *_tot.npz)")
     p.add_argument("--probe", action="append", default=[], metavar="PROCESS.PORT",
@@ -39,6 +37,23 @@ def register(subparsers) -> None:
     p.add_argument("--force", action="store_true", help="overwrite existing output files (never an input)")
     p.add_argument("--quiet", action="store_true", help="no progress, summary only")
     p.set_defaults(handler=handle)
+
+
+def add_workers_option(p: argparse.ArgumentParser) -> None:
+    """``--workers N|auto`` (shared with ``tofnet live``)."""
+    p.add_argument("--workers", default=None, metavar="N|auto",
+                   help="CPU cores to run on: the sensor is cut into N bands of rows (fixed, float; multiproc: "
+                        "worker processes); 0 or auto: one per CPU (default: the spec's, else 1)")
+
+
+def backend_choice(args, spec_backend: str | None, spec_options: dict, default: str) -> tuple[str, dict]:
+    """The backend ``--backend`` or the spec names (else ``default``) and its options: the spec's when it is
+    the spec's backend, with ``--workers``."""
+    backend = args.backend or spec_backend or default
+    options = {} if args.backend and args.backend != spec_backend else dict(spec_options)
+    if args.workers is not None:
+        options["workers"] = workers_option(args.workers)
+    return backend, options
 
 
 def workers_option(text: str) -> int | str:
@@ -189,11 +204,7 @@ def handle(args) -> int:
         network, compile_options, spec_backend, backend_options = build_network(args, recording.sensor_size,
                                                                                  recording)
         check_run_outputs(args, network)  # again: the files the recording, the spec and the network read
-        backend = args.backend or spec_backend or DEFAULT_BACKEND
-        if args.backend and args.backend != spec_backend:
-            backend_options = {}  # the spec's options belong to the spec's backend
-        if args.workers is not None:
-            backend_options = {**backend_options, "workers": workers_option(args.workers)}
+        backend, backend_options = backend_choice(args, spec_backend, backend_options, DEFAULT_BACKEND)
         progress = None if args.quiet else Progress(f"tofnet run [{backend}]")
         options = dict(backend=backend, backend_options=backend_options, compile_options=compile_options,
                        record_tot=args.record_tot, probes=args.probe, progress=progress)
