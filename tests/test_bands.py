@@ -118,6 +118,22 @@ def test_a_stream_fed_small_packets_keeps_one_band_and_returns_what_one_worker_r
     assert two.counts == one.counts and two.extra["bands"] == [[0, SENSOR[1]]]
 
 
+def test_a_stream_whose_first_packet_is_large_runs_bands():
+    network = depth_network(SENSOR, velocity=VELOCITY)
+    recording = scene()
+    events = recording.events
+    copies = -(-bands_module.FUSED_BANDS_FROM // len(events))
+    span = int(events["t"][-1]) + 1
+    packet = np.concatenate([events[["t", "x", "y", "p"]] for _ in range(copies)])  # time order: shifted below
+    packet["t"] += np.repeat(np.arange(copies) * span, len(events))
+    assert len(packet) >= bands_module.FUSED_BANDS_FROM
+    streams = [get_backend("fixed", workers=n).open_stream(network, recording=recording) for n in (1, 2)]
+    a, b = (s.feed_all(packet) for s in streams)
+    assert a["depth.depth"].tobytes() == b["depth.depth"].tobytes() and len(a["depth.depth"])
+    one, two = (s.close() for s in streams)
+    assert two.counts == one.counts and len(two.extra["bands"]) == 2
+
+
 @pytest.fixture(params=["serial", "threads"])
 def hand_over(request, monkeypatch):
     """Bands of a small packet run one after the other in the caller's thread (``serial``); ``threads``

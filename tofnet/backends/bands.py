@@ -37,8 +37,15 @@ from tofnet.machine import cpu_count
 from tofnet.models.base import Model
 
 #: Packets with fewer events run their bands one after the other in the caller's thread: handing
-#: work to another thread costs more than it saves there (docs/performance.md, "Workers").
-SERIAL_BELOW = 8192
+#: work to another thread and back (~0.15-0.3 ms on a virtual machine) costs more than it saves there
+#: (the time surface's bands, 1280x720: 0.61-0.70x of one worker at 8,192-16,384 events in threads,
+#: ~0.9x one after the other; docs/performance.md, "Packet size with workers").
+SERIAL_BELOW = 1 << 15
+#: A stream of the fused kernel whose first packet has fewer events keeps one whole-sensor kernel: below
+#: this, two bands in threads took longer per packet than one kernel (1280x720, 2 CPUs; 1 ms packets of a
+#: 20 M ev/s sensor hold ~20,000 events). A ``run`` asks for bands whatever its packets (docs/performance.md,
+#: "Packet size with workers").
+FUSED_BANDS_FROM = 1 << 18
 #: The block by which ``touch`` shares fresh pages between threads: a transparent huge page (numpy
 #: asks for them on large arrays), whose first touch is one fault, paid by one thread.
 HUGE_PAGE = 1 << 21
@@ -113,12 +120,12 @@ class BandedKernel(BandsBase):
         self._estimates = 0  # of the latest packet
         self.facts = {"workers": 1, "bands": []}
         #: A first packet of fewer events keeps one band (``_build``); ``run`` sets 0: its packets are large.
-        self.one_band_below = SERIAL_BELOW
+        self.one_band_below = FUSED_BANDS_FROM
 
     def _build(self, packet: int) -> None:
-        """The bands' kernels, for a first packet of ``packet`` events: a stream fed small packets (under
-        ``one_band_below``, e.g. 1 ms at 1 M ev/s) keeps one whole-sensor kernel, as one worker would:
-        for them bands cost more than they save (docs/performance.md, "Workers")."""
+        """The bands' kernels, for a first packet of ``packet`` events: a stream fed smaller packets than
+        ``one_band_below`` (1 ms of a 20 M ev/s sensor) keeps one whole-sensor kernel, as one worker would:
+        for them bands cost more than they save (docs/performance.md, "Packet size with workers")."""
         width, height = self.config.sensor_size
         self.bands = self._planned if packet >= self.one_band_below else [(0, height)]
         self._keep = [rows_read(band, self._reach, height, b == 0) for b, band in enumerate(self.bands)]
