@@ -153,6 +153,19 @@ def test_cli_replay_writes_png_frames_atomically(recording_file, tmp_path, capsy
     assert "did not write" in capsys.readouterr().err and (out / "notes.txt").read_text() == "mine"
 
 
+@pytest.mark.parametrize("backend", ["fixed", "multiproc"])
+def test_cli_live_on_two_workers_hands_back_what_one_worker_does(recording_file, tmp_path, backend):
+    import json
+    stats = {}
+    for workers in ("1", "2"):
+        out = tmp_path / f"{backend}-{workers}.json"
+        assert main(["live", "--replay", str(recording_file), "--speed", "4", "--velocity", "0,0,1", "--no-view",
+                     "--backend", backend, "--workers", workers, "--json", str(out)]) == 0
+        stats[workers] = json.loads(out.read_text())
+    assert stats["1"]["depth_out"] == stats["2"]["depth_out"] > 0
+    assert stats["1"]["events_in"] == stats["2"]["events_in"]
+
+
 @pytest.mark.skipif(not (REAL / "evt3.raw").is_file(),
                     reason="needs the real EVT3 recording, not distributed with tofnet (shared/real/ beside the checkout)")
 def test_real_evt3_window_replays_in_step_with_its_clock():
