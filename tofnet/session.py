@@ -46,7 +46,7 @@ class Session:
     live source's metadata (a ``Recording`` without events: intrinsics, poses, IMU), instead of
     ``intrinsics``/``velocity_source``, so that a process the IMU drives binds as in a run.
     ``fuse`` True (a live source without monitors, as ``tofnet live``): the backend may run the paper's
-    chain through its fused kernel, the same records 2-3 times faster per packet, with no process state
+    chain through its fused kernel, the same records several times faster (docs/live.md), with no process state
     to read: ``get``, ``set``, ``step`` and ``counts`` refuse until ``finish`` (docs/sessions.md).
     """
 

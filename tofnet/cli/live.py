@@ -49,8 +49,7 @@ def handle(args) -> int:
     from tofnet.api import DEFAULT_BACKEND
     from tofnet.cli.inputs import camera_options, input_options
     from tofnet.backends.runtime import clock_of
-    from tofnet.cli.run import backend_choice
-    from tofnet.cli.run import build_network
+    from tofnet.cli.run import backend_choice, build_network
     from tofnet.units import seconds
     from tofnet.live import CameraSource, ReplaySource, run_live
     from tofnet.live_view import DepthMap, PngFolder, Window, check_png_folder, has_display
