@@ -6,8 +6,8 @@
 A stream (``open_stream``) is fed packets of a fixed number of events; per packet the mean wall
 time of ``feed_all`` (the canonical order, what a live session asks for) and, for the paper's
 chain, of ``feed`` (the trigger events' order, which one kernel need not sort), with one worker
-and with two whose bands are forced on (``one_band_below`` 0; the time surface's graph stream
-always runs its bands). Each round runs every configuration once, alternating; medians over the
+and with two whose bands are forced on (``one_band_below`` 0; a graph stream, the time surface's
+or the paper's chain model by model, ``paper unfused``, always runs its bands). Each round runs every configuration once, alternating; medians over the
 rounds. The sizes where two workers reach one worker's time set ``bands.FUSED_BANDS_FROM``
 (docs/performance.md, "Packet size with workers"). Markdown to stdout.
 """
@@ -28,9 +28,9 @@ from tofnet.backends.registry import get_backend  # noqa: E402
 from tofnet.networks import depth_network, improved_network  # noqa: E402
 
 
-def per_packet_us(network, recording, parts, workers: int, call: str) -> float:
+def per_packet_us(network, recording, parts, workers: int, call: str, fuse: bool | None = None) -> float:
     """Mean wall µs of ``call`` over ``parts`` (the first three not timed: the kernels' state is built)."""
-    stream = get_backend("fixed", workers=workers).open_stream(network, recording=recording)
+    stream = get_backend("fixed", workers=workers).open_stream(network, recording=recording, fuse=fuse)
     if workers > 1 and hasattr(getattr(stream, "kernel", None), "one_band_below"):
         stream.kernel.one_band_below = 0
     feed = getattr(stream, call)
@@ -56,6 +56,7 @@ def main() -> int:
     recording = streams.edges(sensor, args.rate, max(0.3, 43 * max(sizes) / args.rate))
     velocity = {"source": "constant", "velocity": list(streams.SYNTHETIC_VELOCITY)}
     networks = {"paper": depth_network(sensor, velocity=velocity),
+                "paper unfused": depth_network(sensor, velocity=velocity),
                 "time surface": improved_network(sensor, velocity={**velocity, "per": "pixel"})}
     print(f"# {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}; edges 1280x720 at {args.rate:g} events/s")
     print("\n| network | call | events per packet | 1 worker µs | 2 workers µs | 2 vs 1 |")
@@ -68,7 +69,8 @@ def main() -> int:
                 times: dict[int, list[float]] = {1: [], 2: []}
                 for _ in range(args.rounds):
                     for workers in (1, 2):
-                        times[workers].append(per_packet_us(networks[kind], recording, parts, workers, call))
+                        times[workers].append(per_packet_us(networks[kind], recording, parts, workers, call,
+                                                            False if kind == "paper unfused" else None))
                 one, two = statistics.median(times[1]), statistics.median(times[2])
                 print(f"| {kind} | `{call}` | {size:,} | {one:,.0f} | {two:,.0f} | {one / two:.2f}x |", flush=True)
     print(f"\nreproduce: python benchmarks/stream_packets.py --rate {args.rate:g} --sizes {args.sizes} "

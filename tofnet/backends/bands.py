@@ -23,7 +23,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from tofnet.backends._workers import _Worker
-from tofnet.backends.band_merge import BandsBase, merge, merge_share, rows_read
+from tofnet.backends.band_merge import BandsBase, merge_share, merged_by_step, rows_read
 from tofnet.backends.remote import Placement, RemoteModel, summed_counts
 from tofnet.compiler.bands import Band
 from tofnet.compiler.partition import halo_of, receptive_offsets
@@ -306,11 +306,7 @@ class BandedReader(Model):
 
         def merged(i: int) -> np.ndarray:
             parts = [a[ports[i]] for a in answers]
-            source = np.concatenate(parts)
-            bounds = np.cumsum([0] + [len(p) for p in parts])
-            out = np.empty(len(source), source.dtype)
-            merge(source, np.stack([bounds[:-1], bounds[1:]], 1), out, 0)
-            return out
+            return merged_by_step(parts, parts[0].dtype)
 
         # a port per thread (the copies and the merge release the GIL), unless there is too little to hand over
         records = sum(len(a[port]) for a in answers for port in ports)

@@ -14,10 +14,11 @@ from typing import Callable
 
 import numpy as np
 
+from tofnet.backends.band_merge import merged_by_step
 from tofnet.compiler.partition import rects_mask
 from tofnet.core.process import Process
 from tofnet.kernels.region import Region
-from tofnet.models.base import Model, ModelContext, concat
+from tofnet.models.base import Model, ModelContext
 
 #: A model instance on a worker: (process name, core index; -1 for a whole-layer instance).
 Key = tuple[str, int]
@@ -149,7 +150,9 @@ class RemoteModel:
                 for port, records in outputs.items():
                     if len(records):
                         parts[port].append(records)
-        return {port: concat(chunks, self._dtypes[port]) for port, chunks in parts.items()}
+        # each instance's records are sorted by step: merged by step (bands of rows from the top: the canonical
+        # order), not joined, which left the executor a sort of the whole output (0.4 s of a 1 s run)
+        return {port: merged_by_step(chunks, self._dtypes[port]) for port, chunks in parts.items()}
 
     def _each(self, kind: str, *args) -> list:
         """Send ``(kind, keys, *args)`` to every worker holding an instance; the answers in placement order."""

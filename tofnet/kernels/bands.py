@@ -112,8 +112,7 @@ def merge_by_step(src, steps, parts, dst, at, width):
         hi = parts[best, 1]
         while q < hi and steps[q] == best_step:  # the whole step of this part at once
             q += 1
-        for w in range((q - lo) * width):
-            dst[at * width + w] = src[lo * width + w]
+        dst[at * width:(at + q - lo) * width] = src[lo * width:q * width]  # a block copy, not word by word
         at += q - lo
         cursor[best] = q
 
