@@ -154,7 +154,7 @@ def test_cli_replay_writes_png_frames_atomically(recording_file, tmp_path, capsy
 
 
 @pytest.mark.parametrize("backend", ["fixed", "multiproc"])
-def test_cli_live_on_two_workers_hands_back_what_one_worker_does(recording_file, tmp_path, backend):
+def test_cli_live_on_two_workers_hands_back_what_one_worker_does(recording_file, tmp_path, backend, capsys):
     import json
     stats = {}
     for workers in ("1", "2"):
@@ -162,6 +162,9 @@ def test_cli_live_on_two_workers_hands_back_what_one_worker_does(recording_file,
         assert main(["live", "--replay", str(recording_file), "--speed", "4", "--velocity", "0,0,1", "--no-view",
                      "--backend", backend, "--workers", workers, "--json", str(out)]) == 0
         stats[workers] = json.loads(out.read_text())
+        text = capsys.readouterr().out
+        if backend == "fixed":  # how the work was split, when it was
+            assert ("workers        2 (2 bands of rows" in text) == (workers == "2")
     assert stats["1"]["depth_out"] == stats["2"]["depth_out"] > 0
     assert stats["1"]["events_in"] == stats["2"]["events_in"]
 

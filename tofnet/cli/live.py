@@ -49,7 +49,7 @@ def handle(args) -> int:
     from tofnet.api import DEFAULT_BACKEND
     from tofnet.cli.inputs import camera_options, input_options
     from tofnet.backends.runtime import clock_of
-    from tofnet.cli.run import backend_choice, build_network
+    from tofnet.cli.run import backend_choice, build_network, workers_line
     from tofnet.units import seconds
     from tofnet.live import CameraSource, ReplaySource, run_live
     from tofnet.live_view import DepthMap, PngFolder, Window, check_png_folder, has_display
@@ -105,6 +105,10 @@ def handle(args) -> int:
           f"{step_us / 1000:g} ms)")
     latency = result.latency.get(result.depth_outputs[0], 0) if result.depth_outputs else 0
     print(f"backend        {backend}; depth latency {format_steps(latency)} ({latency * step_us / 1000:g} ms)")
+    split = result.summary().get("workers")
+    if split:  # how the work was split
+        small = "; the first packet was too small for bands (docs/backends.md)" if split["bands"] == 1 else ""
+        print(f"workers        {workers_line(split)}{small}")
     print(f"depth out      {stats.depth_out:,}")
     for line in stats.lines():
         print(line)

@@ -75,7 +75,8 @@ def workers_option(text: str) -> int | str:
 def workers_line(workers: dict) -> str:
     """How a run was split: ``2 (2 bands of rows; run whole: velocity)``."""
     whole = f"; run whole: {', '.join(workers['whole'])}" if workers["whole"] else ""
-    return f"{workers['threads']} ({workers['bands']} bands of rows{whole})"
+    bands = workers["bands"]
+    return f"{workers['threads']} ({bands} band{'s' if bands != 1 else ''} of rows{whole})"
 
 
 def add_network_options(p: argparse.ArgumentParser) -> None:
