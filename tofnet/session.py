@@ -9,8 +9,8 @@
 
 The session keeps the network's state between runs: running in chunks of any size gives
 exactly the records of one run (tests/test_session.py, every backend). It runs the models
-one by one (never the fused kernel), so every process's state can be read. Docs:
-docs/sessions.md.
+one by one (the fused kernel only with ``fuse=True``, for a live source), so every process's
+state can be read. Docs: docs/sessions.md.
 """
 
 from __future__ import annotations
