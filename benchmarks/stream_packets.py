@@ -8,8 +8,9 @@ time of ``feed_all`` (the canonical order, what a live session asks for) and, fo
 chain, of ``feed`` (the trigger events' order, which one kernel need not sort), with one worker
 and with two whose bands are forced on (``one_band_below`` 0; a graph stream, the time surface's
 or the paper's chain model by model, ``paper unfused``, always runs its bands). Each round runs every configuration once, alternating; medians over the
-rounds. The sizes where two workers reach one worker's time set ``bands.FUSED_BANDS_FROM``
-(docs/performance.md, "Packet size with workers"). Markdown to stdout.
+rounds, after one untimed round (numba's kernels loaded or compiled). The sizes where two workers reach
+one worker's time set ``bands.FUSED_BANDS_FROM`` (docs/performance.md, "Streams: packet size"). Markdown
+to stdout.
 """
 
 from __future__ import annotations
@@ -24,11 +25,16 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import streams  # noqa: E402
 
+import numpy as np  # noqa: E402
+
 from tofnet.backends.registry import get_backend  # noqa: E402
+from tofnet.core.network import Network  # noqa: E402
+from tofnet.io.recording import Recording  # noqa: E402
 from tofnet.networks import depth_network, improved_network  # noqa: E402
 
 
-def per_packet_us(network, recording, parts, workers: int, call: str, fuse: bool | None = None) -> float:
+def per_packet_us(network: Network, recording: Recording, parts: list[np.ndarray], workers: int, call: str,
+                  fuse: bool | None = None) -> float:
     """Mean wall µs of ``call`` over ``parts`` (the first three not timed: the kernels' state is built)."""
     stream = get_backend("fixed", workers=workers).open_stream(network, recording=recording, fuse=fuse)
     if workers > 1 and hasattr(getattr(stream, "kernel", None), "one_band_below"):
@@ -62,11 +68,17 @@ def main() -> int:
     print("\n| network | call | events per packet | 1 worker µs | 2 workers µs | 2 vs 1 |")
     print("| --- | --- | ---: | ---: | ---: | ---: |")
     events = recording.events
+    unknown = [k for k in args.networks.split(",") if k not in networks]
+    if unknown:
+        parser.error(f"--networks: unknown {', '.join(unknown)}; choose from {', '.join(networks)}")
     for kind in args.networks.split(","):
         for call in ("feed_all", "feed") if kind == "paper" else ("feed_all",):
             for size in sizes:
                 parts = [events[i:i + size] for i in range(0, min(len(events), size * 43), size)]
                 times: dict[int, list[float]] = {1: [], 2: []}
+                for workers in (1, 2):  # untimed: numba's kernels loaded (or compiled) for this configuration
+                    per_packet_us(networks[kind], recording, parts[:4], workers, call,
+                                  False if kind == "paper unfused" else None)
                 for _ in range(args.rounds):
                     for workers in (1, 2):
                         times[workers].append(per_packet_us(networks[kind], recording, parts, workers, call,

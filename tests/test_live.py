@@ -154,17 +154,21 @@ def test_cli_replay_writes_png_frames_atomically(recording_file, tmp_path, capsy
 
 
 @pytest.mark.parametrize("backend", ["fixed", "multiproc"])
-def test_cli_live_on_two_workers_hands_back_what_one_worker_does(recording_file, tmp_path, backend, capsys):
+@pytest.mark.parametrize("rotation", [True, False])  # eq. 7 runs model by model; without it the chain is fused
+def test_cli_live_on_two_workers_hands_back_what_one_worker_does(recording_file, tmp_path, backend, rotation, capsys):
     import json
     stats = {}
     for workers in ("1", "2"):
         out = tmp_path / f"{backend}-{workers}.json"
         assert main(["live", "--replay", str(recording_file), "--speed", "4", "--velocity", "0,0,1", "--no-view",
-                     "--backend", backend, "--workers", workers, "--json", str(out)]) == 0
+                     "--backend", backend, "--workers", workers, "--json", str(out)]
+                    + ([] if rotation else ["--no-rotation"])) == 0
         stats[workers] = json.loads(out.read_text())
         text = capsys.readouterr().out
-        if backend == "fixed":  # how the work was split, when it was
+        if backend == "fixed" and rotation:  # how the work was split, when it was
             assert ("workers        2 (2 bands of rows" in text) == (workers == "2")
+        if backend == "fixed" and not rotation and workers == "2":  # 1 ms packets: one band, and why
+            assert "workers        1 (1 band of rows); the first packet was too small" in text
     assert stats["1"]["depth_out"] == stats["2"]["depth_out"] > 0
     assert stats["1"]["events_in"] == stats["2"]["events_in"]
 

@@ -220,10 +220,15 @@ def test_a_fused_live_session_hands_back_what_a_model_by_model_one_does(workers)
             assert session.output_latency("depth.depth") == 2
             if fuse:
                 for action in (lambda: session.get("time_of_travel.counter"), lambda: session.step,
-                               lambda: session.set("input.refractory", "2ms"), session.counts):
-                    with pytest.raises(BackendError) as err:
+                               lambda: session.set("input.refractory", "2ms"), session.counts,
+                               lambda: session.add_monitors(["depth.depth"])):
+                    with pytest.raises(TofnetError) as err:
                         action()
                     assert "fuse=True" in one_line(err)
+                assert session.monitors == []  # nothing added; the session goes on below
+            with pytest.raises(TofnetError) as err:
+                session.output_latency("depth.nope")
+            assert "no output 'depth.nope'" in one_line(err) and "depth.depth" in str(err.value)
             got[fuse].append(session.finish())
     assert sum(len(p["depth.depth"]) for p in got[True][:-1]) > 0
     assert all(same(a, b) for a, b in zip(got[True][:-1], got[False][:-1]))

@@ -11,7 +11,7 @@ kernels, before it defines them: numba picks a kernel's cache locator at decorat
 
 Where the cache lives: ``NUMBA_CACHE_DIR`` when set; beside the sources (``__pycache__``) in a
 source checkout (a ``pyproject.toml`` beside the package); for an installed package, numba's
-per-user cache folder (``~/.cache/numba``), never the environment's ``site-packages``: ``pip
+per-user cache folder (``~/.cache/numba`` on Linux), never the environment's ``site-packages``: ``pip
 uninstall`` removes only the files it installed, and a package folder left holding cache files
 is imported as an empty namespace package, shadowing a later install of the same name.
 """

@@ -133,6 +133,9 @@ class Session:
     def add_monitors(self, monitors: Iterable[Monitor | str]) -> None:
         """Start recording more monitors from ``step`` on (a port must be a sink or probed since the
         session opened). Nothing is added when one of them is refused."""
+        if self.fused:
+            raise TofnetError("session: it runs the fused kernel (fuse=True), which keeps no process state to "
+                              "monitor; open it with fuse=False for monitors")
         added = _monitors(monitors)
         ports = self._bind_monitors(added)
         wanted = set(self.stream.sinks) | set(self.stream.payloads)
@@ -165,9 +168,10 @@ class Session:
 
     def output_latency(self, name: str) -> int:
         """Steps from an event's step to the step its records on output ``name`` are stamped."""
-        if self.fused:
-            return self.stream.pipeline.latency[name]
-        return self.executor.output_latency(name)
+        latency = self.stream.pipeline.latency if self.fused else self.executor.latency
+        if name not in latency:
+            raise TofnetError(f"session: no output {name!r}; outputs: {', '.join(latency)}")
+        return latency[name]
 
     @property
     def executor(self):
@@ -181,7 +185,9 @@ class Session:
     @property
     def step(self) -> int:
         """The next step to run (every step before it has run)."""
-        return self.executor.clock if self.fused or self.stream.executor is not None else 0
+        if self.fused:
+            return self.executor.clock  # refuses: a fused kernel runs no steps of its own to count
+        return self.stream.executor.clock if self.stream.executor is not None else 0
 
     @property
     def time(self) -> float:
@@ -283,7 +289,8 @@ class Session:
         except MemoryError:  # e.g. a promise far ahead: every step up to it runs at once
             self._state = "failed"
             self.stop()
-            raise BackendError(f"session: out of memory running the steps from {self.step} on; run fewer steps "
+            where = "the last packet" if self.fused else f"the steps from {self.step} on"
+            raise BackendError(f"session: out of memory running {where}; run fewer steps "
                                "(or promise a nearer until_us) at a time; the session is failed") from None
         except BaseException:
             self._state = "failed"
@@ -291,7 +298,7 @@ class Session:
             raise
 
     def _sample(self) -> None:
-        if not self.monitors or self.stream.executor is None:
+        if not self.monitors or getattr(self.stream, "executor", None) is None:
             return
         step = self.step
         for m in self.monitors:

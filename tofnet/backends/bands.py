@@ -39,12 +39,12 @@ from tofnet.models.base import Model
 #: Packets with fewer events run their bands one after the other in the caller's thread: handing
 #: work to another thread and back (~0.15-0.3 ms on a virtual machine) costs more than it saves there
 #: (the time surface's bands, 1280x720: 0.61-0.70x of one worker at 8,192-16,384 events in threads,
-#: ~0.9x one after the other; docs/performance.md, "Packet size with workers").
+#: ~0.9x one after the other; docs/performance.md, "Streams: packet size").
 SERIAL_BELOW = 1 << 15
-#: A stream of the fused kernel whose first packet has fewer events keeps one whole-sensor kernel: below
-#: this, two bands in threads took longer per packet than one kernel (1280x720, 2 CPUs; 1 ms packets of a
-#: 20 M ev/s sensor hold ~20,000 events). A ``run`` asks for bands whatever its packets (docs/performance.md,
-#: "Packet size with workers").
+#: A stream of the fused kernel whose first packet has fewer events keeps one whole-sensor kernel: two bands
+#: in threads break even at ~2^17 events per packet (0.86-1.09x of one kernel there in different runs, 1.2-1.4x
+#: at 2^18; 1280x720, 2 CPUs), so 2^18 keeps a margin; 1 ms packets of a 20 M ev/s sensor hold ~20,000 events.
+#: A ``run`` asks for bands whatever its packets (docs/performance.md, "Streams: packet size").
 FUSED_BANDS_FROM = 1 << 18
 #: The block by which ``touch`` shares fresh pages between threads: a transparent huge page (numpy
 #: asks for them on large arrays), whose first touch is one fault, paid by one thread.
@@ -125,7 +125,7 @@ class BandedKernel(BandsBase):
     def _build(self, packet: int) -> None:
         """The bands' kernels, for a first packet of ``packet`` events: a stream fed smaller packets than
         ``one_band_below`` (1 ms of a 20 M ev/s sensor) keeps one whole-sensor kernel, as one worker would:
-        for them bands cost more than they save (docs/performance.md, "Packet size with workers")."""
+        for them bands cost more than they save (docs/performance.md, "Streams: packet size")."""
         width, height = self.config.sensor_size
         self.bands = self._planned if packet >= self.one_band_below else [(0, height)]
         self._keep = [rows_read(band, self._reach, height, b == 0) for b, band in enumerate(self.bands)]
@@ -359,10 +359,14 @@ def band_placer(bands: Sequence[Band], threads: int):
 
 
 def band_exchange(pool: BandPool, workers: list) -> Callable[[dict[int, tuple]], dict[int, tuple]]:
-    """``RemoteModel``'s exchange, answered by the bands' message handlers (``_Worker``) in ``pool``'s threads."""
+    """``RemoteModel``'s exchange, answered by the bands' message handlers (``_Worker``) in ``pool``'s threads,
+    or one after the other in the caller's when the runs carry fewer than ``SERIAL_BELOW`` records (a 1 ms
+    packet's spikes: handing them over costs more than the second core saves)."""
     def exchange(messages: dict[int, tuple]) -> dict[int, tuple]:
         keys = sorted(messages)
-        replies = pool.run(lambda i: workers[keys[i]].handle(messages[keys[i]]), len(keys))
+        records = sum(len(r) for m in messages.values() if m[0] == "run" for _, inputs in m[1]
+                      for r in inputs.values())
+        replies = pool.run(lambda i: workers[keys[i]].handle(messages[keys[i]]), len(keys), records < SERIAL_BELOW)
         return dict(zip(keys, replies))
     return exchange
 

@@ -46,7 +46,8 @@ def add_workers_option(p: argparse.ArgumentParser) -> None:
                         "worker processes); 0 or auto: one per CPU (default: the spec's, else 1)")
 
 
-def backend_choice(args, spec_backend: str | None, spec_options: dict, default: str) -> tuple[str, dict]:
+def backend_choice(args: argparse.Namespace, spec_backend: str | None, spec_options: dict,
+                   default: str) -> tuple[str, dict]:
     """The backend ``--backend`` or the spec names (else ``default``) and its options: the spec's when it is
     the spec's backend, with ``--workers``."""
     backend = args.backend or spec_backend or default
