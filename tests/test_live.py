@@ -11,6 +11,7 @@ from optional import optional
 from tofnet.api import run as run_recording
 from tofnet.cli import main
 from tofnet.errors import TofnetError
+from tofnet.events import EVENT_DTYPE
 from tofnet.io.arrays import write_npz_recording
 from tofnet.io.source import open_recording
 from tofnet.live import CameraSource, ReplaySource, packet_bounds, run_live
@@ -70,6 +71,57 @@ def test_live_estimates_equal_a_whole_run(recording_file):
     assert np.array_equal(np.sort(live, order=["t", "x", "y"]), np.sort(reference.outputs[name], order=["t", "x", "y"]))
     assert result.counts == reference.counts
     assert len(result.outputs[name]) < len(live)  # the session kept none of the estimates handed over
+
+
+class _BehindSource:
+    """A source whose clock is always far ahead: every packet is late."""
+    packet_us, t0_us = 1000, 0
+
+    def __init__(self, sizes):
+        self.sizes = sizes
+
+    def packets(self):
+        for i, n in enumerate(self.sizes):
+            events = np.zeros(n, EVENT_DTYPE)
+            events["t"] = i * 1000 + np.arange(n) % 1000
+            yield events, (i + 1) * 1000
+
+    def now_us(self):
+        return 1e12
+
+
+@pytest.mark.parametrize("batch, drop", [(True, False), (False, False), (True, True)])
+def test_a_late_run_catches_up_in_batches_only_where_bands_pay(batch, drop):
+    from tofnet.live import CATCH_UP_EVENTS, LiveStats, catching_up
+    sizes = [5, 0, 7, CATCH_UP_EVENTS, 3, 4]
+    stats = LiveStats()
+    fed = list(catching_up(_BehindSource(sizes), stats, drop, lambda: batch))
+    assert stats.packets == len(sizes) and stats.late_packets == len(sizes)
+    if drop:
+        assert [len(e) for e, _ in fed] == [0] * len(sizes) and stats.dropped_events == sum(sizes)
+    elif batch:  # the packets complete behind a late one come with it, up to CATCH_UP_EVENTS events
+        assert [(len(e), until) for e, until in fed] == [(5 + 0 + 7 + CATCH_UP_EVENTS, 4000), (7, 6000)]
+        assert stats.batches == 2
+        assert np.array_equal(np.concatenate([e["t"] for e, _ in fed]),
+                              np.concatenate([e["t"] for e, _ in _BehindSource(sizes).packets()]))
+    else:
+        assert [len(e) for e, _ in fed] == sizes and stats.batches == 0
+
+
+def test_a_banded_time_surface_behind_catches_up_with_the_estimates_of_a_run(recording_file):
+    from tofnet.networks import improved_network
+    with open_recording(recording_file) as source:
+        whole = source.read()
+        network = improved_network(source.sensor_size)
+        seen = []
+        stats, result = run_live(ReplaySource(source, speed=200.0), network, backend="fixed",
+                                 backend_options={"workers": 2}, on_depth=seen.append)
+    reference, _ = run_recording(whole, network, backend="fixed")
+    name = result.depth_outputs[0]
+    live = np.concatenate(seen)
+    assert stats.batches > 0 and len(live) > 0  # at 200x the recorded speed it falls behind and batches
+    assert np.array_equal(np.sort(live, order=["t", "x", "y"]), np.sort(reference.outputs[name], order=["t", "x", "y"]))
+    assert result.counts == reference.counts
 
 
 def test_falling_behind_is_measured_and_drops_only_when_asked(recording_file):

@@ -171,6 +171,7 @@ class LiveStats:
     behind_us: float = 0.0  # at the last packet
     depth_out: int = 0
     span_us: int = 0  # the source's time covered
+    batches: int = 0  # feeds of several late packets at once (``catching_up``)
     wall_s: float = 0.0
     cpu_s: float = 0.0  # this process's CPU time (all threads) during the run
 
@@ -189,7 +190,8 @@ class LiveStats:
                "keep up)",
                f"packets        {self.packets:,}, late {self.late_packets:,} (fed more than one packet after "
                f"they were complete); behind at most {self.max_behind_us * 1e-3:.1f} ms, at the end "
-               f"{self.behind_us * 1e-3:.1f} ms"]
+               f"{self.behind_us * 1e-3:.1f} ms" + (f"; caught up {self.batches:,} times, several packets at once"
+                                                     if self.batches else "")]
         if self.dropped_packets:
             out.append(f"dropped        {self.dropped_events:,} events in {self.dropped_packets:,} late packets "
                        "(--drop-when-late)")
@@ -222,6 +224,53 @@ def warm_up(compiled, metadata: Recording, backend, backend_options) -> None:
         session.finish()
 
 
+#: Events fed at once at most while a run catches up (``catching_up``).
+CATCH_UP_EVENTS = 1 << 18
+
+
+def _counted(source: LiveSource, stats: "LiveStats", events: np.ndarray, until_us: int,
+             drop_when_late: bool) -> tuple[np.ndarray, bool]:
+    """Count a packet (late: fed more than one packet after it was complete); its events (none when it is
+    dropped late) and whether it was late."""
+    behind = source.now_us() - until_us
+    stats.packets += 1
+    stats.behind_us = max(behind, 0.0)
+    stats.max_behind_us = max(stats.max_behind_us, stats.behind_us)
+    late = behind > source.packet_us
+    if late:
+        stats.late_packets += 1
+        if drop_when_late and len(events):
+            stats.dropped_events += len(events)
+            stats.dropped_packets += 1
+            events = events[:0]
+    return events, late
+
+
+def catching_up(source: LiveSource, stats: "LiveStats", drop_when_late: bool,
+                batch: Callable[[], bool]) -> Iterator[tuple[np.ndarray, int]]:
+    """The source's packets, counted; while the run is behind (a packet late, not dropped) and ``batch()``
+    says so (the session runs bands of rows in threads, which pay on large packets only), the packets already
+    complete after it come with it as one (up to ``CATCH_UP_EVENTS`` events): the same events and promises,
+    so a run that fell behind catches up on several cores (docs/live.md, "Fast sensors")."""
+    packets = source.packets()
+    for events, until_us in packets:
+        events, late = _counted(source, stats, events, until_us, drop_when_late)
+        if not late or drop_when_late or not batch():
+            yield events, until_us
+            continue
+        parts, total = [events], len(events)
+        while total < CATCH_UP_EVENTS and source.now_us() >= until_us + source.packet_us:
+            following = next(packets, None)  # complete already: no wait
+            if following is None:
+                break
+            more, until_us = following[0], following[1]
+            more, _ = _counted(source, stats, more, until_us, drop_when_late)
+            parts.append(more)
+            total += len(more)
+        stats.batches += len(parts) > 1
+        yield (np.concatenate(parts) if len(parts) > 1 else events), until_us
+
+
 def run_live(source: LiveSource, network, *, backend: str = "fixed", backend_options: dict | None = None,
              compile_options: dict | None = None, drop_when_late: bool = False,
              on_depth: Callable[[np.ndarray], None] | None = None, tick: Callable[[], None] | None = None,
@@ -251,17 +300,10 @@ def run_live(source: LiveSource, network, *, backend: str = "fixed", backend_opt
     try:
         if source.t0_us is not None:  # before the source's clock starts: opening takes time
             open_session(source.t0_us)
-        for events, until_us in source.packets():
-            behind = source.now_us() - until_us
-            stats.packets += 1
-            stats.behind_us = max(behind, 0.0)
-            stats.max_behind_us = max(stats.max_behind_us, stats.behind_us)
-            if behind > source.packet_us:
-                stats.late_packets += 1
-                if drop_when_late and len(events):
-                    stats.dropped_events += len(events)
-                    stats.dropped_packets += 1
-                    events = events[:0]
+        def runs_bands() -> bool:  # a graph stream's bands (a fused stream keeps 1 ms packets whole: faster)
+            return session is not None and len(getattr(session.stream, "extra", {}).get("bands", ())) > 1
+
+        for events, until_us in catching_up(source, stats, drop_when_late, runs_bands):
             if session is None:
                 if not len(events):
                     continue

@@ -144,4 +144,4 @@ def summary_of(stats) -> dict:
             "events_per_s": stats.events_in / stats.wall_s if stats.wall_s else 0.0, "packets": stats.packets,
             "late_packets": stats.late_packets, "max_behind_ms": stats.max_behind_us * 1e-3,
             "behind_at_end_ms": stats.behind_us * 1e-3, "dropped_events": stats.dropped_events,
-            "dropped_packets": stats.dropped_packets, "depth_out": stats.depth_out}
+            "dropped_packets": stats.dropped_packets, "depth_out": stats.depth_out, "catch_up_batches": stats.batches}
