@@ -71,3 +71,17 @@ def test_tofnet_run_streams_a_file_that_states_its_size_and_says_the_same(tmp_pa
     assert "monitor" in capsys.readouterr().out
     a, b = np.load(tmp_path / "streamed.npz"), np.load(tmp_path / "read.npz")
     assert all(np.array_equal(a[k], b[k]) for k in ("t_us", "x", "y", "z", "step"))
+
+
+def test_a_streamed_file_runs_in_the_bands_asked_for_and_gives_the_same_bytes(tmp_path):
+    """A file read in chunks is a whole run: its packets are the backend's (2^19 events with workers),
+    so the fused kernel takes its bands (a stream's first-packet rule keeps one band below 2^18)."""
+    path = tmp_path / "rec.h5"
+    assert write_file(path, 2) > 1 << 19
+    results = {}
+    for workers in (1, 2):
+        with open_recording(path) as source:
+            results[workers], _ = run_source(source, depth_network(SENSOR, **NET), backend_options={"workers": workers})
+    assert results[2].summary()["workers"] == {"threads": 2, "bands": 2, "whole": []}
+    assert results[2].depth.tobytes() == results[1].depth.tobytes() and len(results[1].depth) > 10_000
+    assert results[2].counts == results[1].counts

@@ -300,22 +300,26 @@ def constant_velocity(network: Network, text: str) -> None:
 def run_source(source, network: Network, *, backend: str = DEFAULT_BACKEND, backend_options: dict | None = None,
                compile_options: dict | None = None, record_tot: bool = False, probes: tuple[str, ...] | list[str] = (),
                progress: ProgressCallback | None = None, spill_dir=None, spill_bytes: int = 256 << 20,
-               chunk_events: int = 1 << 17) -> tuple[RunResult, Any]:
+               chunk_events: int | None = None) -> tuple[RunResult, Any]:
     """Run ``network`` on an open recording (``tofnet.io.open_recording``), read in chunks.
 
-    Events never sit in memory all at once (one chunk of ``chunk_events``); with
+    Events never sit in memory all at once (one chunk of ``chunk_events``, by default the
+    backend's packet for a whole run: larger with workers, whose bands pay on large packets); with
     ``spill_dir`` an output goes to a temporary file there once it outgrows ``spill_bytes``, and
     comes back as a memory map. The result equals ``run`` on the whole recording.
     """
     from tofnet.backends.registry import get_backend
     from tofnet.backends.runtime import clock_of
-    from tofnet.backends.stream import Collected
+    from tofnet.backends.stream import DEFAULT_PACKET_EVENTS, Collected
     from tofnet.compiler import compile_network
 
     known = source.metadata()
     compiled = compile_network(network, **(compile_options or {}))
-    stream = get_backend(backend, **(backend_options or {})).open_stream(
-        compiled, recording=known, t0_us=clock_of(network).t0_us, probes=probes, record_tot=record_tot)
+    chosen = get_backend(backend, **(backend_options or {}))
+    stream = chosen.open_stream(compiled, recording=known, t0_us=clock_of(network).t0_us, probes=probes,
+                                record_tot=record_tot)
+    if chunk_events is None:
+        chunk_events = getattr(chosen, "packet_events", DEFAULT_PACKET_EVENTS)
     collected = Collected(spill_dir, spill_bytes)
     try:
         read = 0
