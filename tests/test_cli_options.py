@@ -160,3 +160,13 @@ def test_a_recording_without_poses_says_how_to_give_the_velocity(tmp_path, capsy
     assert len(err.splitlines()) == 1 and "pass --velocity VX,VY,VZ" in err and "--set velocity.samples=FILE" in err
     assert main(["run", str(tmp_path / "ev.npy"), "--intrinsics", "200,200,120,90", "--velocity", "0.5,0,0",
                  "--out", str(tmp_path / "d.npz"), "--quiet"]) == 0
+
+
+def test_every_command_that_writes_takes_o_for_out():
+    from tofnet.cli import build_parser
+
+    parser = build_parser()
+    for argv in (["run", "rec.raw"], ["batch", "plan.yaml"], ["demo"], ["live", "--replay", "rec.raw"],
+                 ["plot", "depthmap", "rec", "depth.npz"]):
+        short, long = parser.parse_args([*argv, "-o", "x"]), parser.parse_args([*argv, "--out", "x"])
+        assert short.out == long.out == "x", argv

@@ -19,7 +19,7 @@ def register(subparsers) -> None:
                               description="Runs the whole pipeline on a built-in simulated scene "
                                           "(no arguments needed) and tells you where the pictures are: the "
                                           "paper's network, and beside it the time-surface estimator.")
-    p.add_argument("--out", default="tofnet-demo",
+    p.add_argument("-o", "--out", default="tofnet-demo",
                    help="output folder (default: ./tofnet-demo); the demo replaces its own files there "
                         "(recording/, depth files, eval files, figures/) on every run")
     p.add_argument("--scenario", default="slider", help="built-in scenario (default: slider, the paper's Table 2)")

@@ -33,7 +33,7 @@ def register(subparsers) -> None:
                         "behind and say by how much")
     g.add_argument("--seconds", type=float, default=None, help="stop after this many seconds of wall time")
     v = p.add_argument_group("display")
-    v.add_argument("--out", metavar="DIR", help="write PNG frames of the depth map into DIR (new, empty, or an "
+    v.add_argument("-o", "--out", metavar="DIR", help="write PNG frames of the depth map into DIR (new, empty, or an "
                                                 "earlier live run's) instead of opening a window")
     v.add_argument("--png-every", default="0.5s", metavar="T", help="time between PNG frames (default 0.5s)")
     v.add_argument("--keep", default="0.2s", metavar="T",

@@ -28,8 +28,8 @@ def register(subparsers) -> None:
     p.add_argument("kind", choices=tuple(KIND_HELP), help="which figure")
     p.add_argument("recording", help="the recording the depth was computed from (ECD folder or events file)")
     p.add_argument("depth", nargs="?", help="depth estimates written by `tofnet run` (.npz); not for 'units'")
-    p.add_argument("--out", help="PNG to write (a folder for 'all'); default: next to DEPTH, "
-                                 "named <depth>_<kind>.png")
+    p.add_argument("-o", "--out", help="PNG to write (a folder for 'all'); default: next to DEPTH, "
+                                       "named <depth>_<kind>.png")
     p.add_argument("--window", metavar="START:END|LENGTH",
                    help="time span, seconds since the start: '1.2:1.27', '1200ms:1270ms', or a length "
                         "centred in the run, '70ms' (default: 70ms for depthmap, the whole run otherwise)")

@@ -21,7 +21,7 @@ def register(subparsers) -> None:
     add_network_options(p)
     from tofnet.cli.inputs import add_input_options
     add_input_options(p)
-    p.add_argument("--out", default="depth.npz", help="depth output, .npz or .csv (default: depth.npz)")
+    p.add_argument("-o", "--out", default="depth.npz", help="depth output, .npz or .csv (default: depth.npz)")
     p.add_argument("--backend", default=None, help="backend name (default: the spec's, else 'fixed'); "
                                                     "see 'tofnet conformance --list'")
     add_workers_option(p)
