@@ -220,7 +220,7 @@ def test_cli_live_on_two_workers_hands_back_what_one_worker_does(recording_file,
         if backend == "fixed" and rotation:  # how the work was split, when it was
             assert ("workers        2 (2 bands of rows" in text) == (workers == "2")
         if backend == "fixed" and not rotation and workers == "2":  # 1 ms packets: one band, and why
-            assert "workers        1 (1 band of rows); the first packet was too small" in text
+            assert "workers        1 (1 band of rows; one band: the first packet held " in text
     assert stats["1"]["depth_out"] == stats["2"]["depth_out"] > 0
     assert stats["1"]["events_in"] == stats["2"]["events_in"]
 

@@ -85,3 +85,17 @@ def test_a_streamed_file_runs_in_the_bands_asked_for_and_gives_the_same_bytes(tm
     assert results[2].summary()["workers"] == {"threads": 2, "bands": 2, "whole": []}
     assert results[2].depth.tobytes() == results[1].depth.tobytes() and len(results[1].depth) > 10_000
     assert results[2].counts == results[1].counts
+
+
+def test_a_run_that_asked_for_workers_and_kept_one_band_says_why(tmp_path, capsys):
+    path = tmp_path / "rec.h5"
+    write_file(path, 1)  # ~280,000 events: one chunk of 2^19
+    with open_recording(path) as source:
+        small = source.chunks(100_000)
+        events = next(small)
+    short = tmp_path / "short.h5"
+    write_hdf5(short, [events], Recording(np.empty(0, EVENT_DTYPE), intrinsics=INTRINSICS, sensor_size=SENSOR))
+    assert main(["run", str(short), "--workers", "2", "--out", str(tmp_path / "d.npz"), "--velocity=-0.4,0.1,0.05",
+                 "--quiet"]) == 0
+    assert ("workers        1 (1 band of rows; one band: the first packet held 100,000 events; bands pay from "
+            "262,144 (docs/performance.md))") in capsys.readouterr().out

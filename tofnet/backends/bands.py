@@ -139,6 +139,9 @@ class BandedKernel(BandsBase):
             for kernel in self.kernels:
                 kernel.promise(self._t_hi)
         self.facts = {"workers": self._pool.threads, "bands": [list(b) for b in self.bands]}
+        if len(self.bands) < len(self._planned):
+            self.facts["one_band"] = (f"the first packet held {packet:,} events; bands pay from "
+                                      f"{self.one_band_below:,} (docs/performance.md)")
 
     def prepare(self, packet: int) -> None:
         """Build the bands' kernels now, for packets of ``packet`` events (else the first packet builds them)."""

@@ -184,6 +184,8 @@ class RunResult:
         if "bands" in self.extra:  # how the work was split (workers, bands of rows, what ran whole)
             out["workers"] = {"threads": int(self.extra.get("workers", 1)), "bands": len(self.extra["bands"]),
                               "whole": list(self.extra.get("whole", []))}
+            if "one_band" in self.extra:  # why a run that asked for workers kept one band
+                out["workers"]["one_band"] = str(self.extra["one_band"])
         return out
 
 

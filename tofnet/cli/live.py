@@ -107,10 +107,7 @@ def handle(args) -> int:
     print(f"backend        {backend}; depth latency {format_steps(latency)} ({latency * step_us / 1000:g} ms)")
     split = result.summary().get("workers")
     if split:  # how the work was split
-        asked = args.workers is not None and args.workers.strip() not in ("1",)
-        small = ("; the first packet was too small for bands (docs/backends.md)"
-                 if split["bands"] == 1 and asked and backend in ("fixed", "float") else "")
-        print(f"workers        {workers_line(split)}{small}")
+        print(f"workers        {workers_line(split)}")
     print(f"depth out      {stats.depth_out:,}")
     for line in stats.lines():
         print(line)

@@ -77,7 +77,8 @@ def workers_line(workers: dict) -> str:
     """How a run was split: ``2 (2 bands of rows; run whole: velocity)``."""
     whole = f"; run whole: {', '.join(workers['whole'])}" if workers["whole"] else ""
     bands = workers["bands"]
-    return f"{workers['threads']} ({bands} band{'s' if bands != 1 else ''} of rows{whole})"
+    why = f"; one band: {workers['one_band']}" if workers.get("one_band") else ""
+    return f"{workers['threads']} ({bands} band{'s' if bands != 1 else ''} of rows{whole}{why})"
 
 
 def add_network_options(p: argparse.ArgumentParser) -> None:
