@@ -56,10 +56,10 @@ def _tofnet(*args: str) -> subprocess.CompletedProcess:
                           timeout=300)
 
 
-@pytest.mark.parametrize("name", ["out.h5", "out.aedat4", "out_ecd", "out.npz"])
+@pytest.mark.parametrize("name", ["out.h5", "out.aedat4", "out_ecd", "out.npz", "out.dat"])
 def test_convert_on_a_full_file_system_is_one_line(tmp_path, name):
     optional("h5py" if name.endswith(".h5") else "numpy")
-    if name.endswith(".aedat4"):
+    if name.endswith((".aedat4", ".dat")):
         optional("faery")
     source = tmp_path / "big.npy"
     write_events_npy(source, _events(400_000))  # ~6 MB of events; every output format needs > 2 MB
