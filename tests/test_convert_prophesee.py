@@ -118,6 +118,15 @@ def test_dat_wraps_its_32_bit_clock_below_the_gap_limit(tmp_path):
     assert np.concatenate(list(faery.events_stream_from_file(tmp_path / "rec.dat")))["t"].tolist() == t
 
 
+def test_evt3_silences_longer_than_its_24_bit_clock_read_back(tmp_path):
+    # The encoder writes the time-high wrap-arounds of a silence; tofnet's decoder counts them
+    # (faery 0.7's decoder does not: docs/formats.md).
+    t = [10, 20, 20 + 2**24 + 7, 2**30]
+    source = _npy(tmp_path, t)
+    assert main(["convert", str(source), str(tmp_path / "rec.raw"), "--quiet", "--sensor-size", "64x48"]) == 0
+    assert read_recording(tmp_path / "rec.raw").events["t"].tolist() == t
+
+
 def test_existing_output_large_sensor_and_events_outside_it_are_refused_in_one_line(tmp_path, capsys):
     source = _npy(tmp_path, [10, 20, 30], x=[1, 2, 63])
     (tmp_path / "rec.raw").write_text("precious")

@@ -6,8 +6,8 @@ count; ``tofnet.io.convert`` calls it inside ``atomic_path``. Times are kept exa
 
 - EVT3 and DAT store times from the first event on, that event's time in a ``% t0`` (``% T0``)
   header line (faery's ``zero_t0``; both readers add it back). Written with absolute times
-  instead, an EVT3 file would start with a time word per 2**24 µs of clock (800 MB for a
-  Unix-epoch clock) and a DAT file could not hold a first time past 2**32 µs.
+  instead, an EVT3 file would start with 8 bytes of time words per 2**24 µs of clock (760 MB
+  for a Unix-epoch clock) and a DAT file could not hold a first time past 2**32 µs.
 - DAT's times are 32-bit; a reader tells a wrap-around from a step back by its size, so two
   consecutive events must be less than ``DAT_MAX_GAP_US`` apart.
 - Event Stream has no start time: it stores times from 0 as increments, one byte per 127 µs
