@@ -19,7 +19,7 @@ from optional import optional
 
 faery = optional("faery")
 
-from formats_helpers import T0_US, faery_events, pattern_recording  # noqa: E402
+from formats_helpers import T0_US, FullDiskEncoder, faery_events, pattern_recording  # noqa: E402
 
 NEW = [("evt3", "rec.raw"), ("dat", "rec.dat"), ("es", "rec.es")]
 REAL = Path(__file__).resolve().parents[1].parent / "shared" / "real"  # ../shared/real beside the checkout
@@ -170,20 +170,7 @@ def test_events_out_of_time_order_never_reach_faery(tmp_path, kind):
 def test_encoder_errors_are_one_line(tmp_path, monkeypatch, capsys):
     from faery.extension import evt
 
-    class Encoder:
-        def __init__(self, path, **kwargs):
-            Path(path).write_bytes(b"partial")
-
-        def __enter__(self):
-            return self
-
-        def __exit__(self, *exc):
-            return False
-
-        def write(self, packet):
-            raise RuntimeError("No space left on device (os error 28)")
-
-    monkeypatch.setattr(evt, "Encoder", Encoder)
+    monkeypatch.setattr(evt, "Encoder", FullDiskEncoder)
     source = _npy(tmp_path, [10, 20])
     _refused(capsys, [str(source), str(tmp_path / "rec.raw")], f"{tmp_path / 'rec.raw'}: cannot write: "
                                                                 "No space left on device")

@@ -131,20 +131,9 @@ def test_aedat4_encoder_errors_are_one_line(tmp_path, monkeypatch, capsys):
     optional("faery")
     from faery.extension import aedat
 
-    class Encoder:
-        def __init__(self, path, **kwargs):
-            Path(path).write_bytes(b"partial")
+    from formats_helpers import FullDiskEncoder
 
-        def __enter__(self):
-            return self
-
-        def __exit__(self, *exc):
-            return False
-
-        def write(self, track, packet):
-            raise RuntimeError("No space left on device (os error 28)")
-
-    monkeypatch.setattr(aedat, "Encoder", Encoder)
+    monkeypatch.setattr(aedat, "Encoder", FullDiskEncoder)
     source = tmp_path / "small.npy"
     write_events_npy(source, _events(100))
     assert main(["convert", str(source), str(tmp_path / "out.aedat4"), "--quiet", "--sensor-size", "240x180"]) == 2
