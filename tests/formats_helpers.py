@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from tofnet.io.groundtruth import Trajectory
@@ -35,3 +37,19 @@ def faery_events(events: np.ndarray) -> np.ndarray:
     out = np.empty(len(events), dtype=faery.EVENTS_DTYPE)
     out["t"], out["x"], out["y"], out["on"] = events["t"], events["x"], events["y"], events["p"] == 1
     return out
+
+
+class FullDiskEncoder:
+    """Stands in for a faery encoder: leaves a partial file, then every write fails as faery reports a full disk."""
+
+    def __init__(self, path, **kwargs):
+        Path(path).write_bytes(b"partial")
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def write(self, *packet):
+        raise RuntimeError("No space left on device (os error 28)")

@@ -105,7 +105,9 @@ def test_cli_convert_and_info(tmp_path, original, capsys):
     assert facts["poses"]["count"] == len(original[0].trajectory.times) and facts["imu_samples"] == 41
 
 
-@pytest.mark.parametrize("name, module, extra", [("rec.aedat4", "faery", "formats"), ("rec.h5", "h5py", "hdf5")])
+@pytest.mark.parametrize("name, module, extra", [("rec.aedat4", "faery", "formats"), ("rec.h5", "h5py", "hdf5"),
+                                                ("rec.raw", "faery", "formats"), ("rec.dat", "faery", "formats"),
+                                                ("rec.es", "faery", "formats")])
 def test_a_writer_without_its_library_is_refused_in_one_line_before_any_work(tmp_path, monkeypatch, capsys,
                                                                               original, name, module, extra):
     import sys

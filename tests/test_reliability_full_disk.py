@@ -56,10 +56,10 @@ def _tofnet(*args: str) -> subprocess.CompletedProcess:
                           timeout=300)
 
 
-@pytest.mark.parametrize("name", ["out.h5", "out.aedat4", "out_ecd", "out.npz"])
+@pytest.mark.parametrize("name", ["out.h5", "out.aedat4", "out_ecd", "out.npz", "out.dat"])
 def test_convert_on_a_full_file_system_is_one_line(tmp_path, name):
     optional("h5py" if name.endswith(".h5") else "numpy")
-    if name.endswith(".aedat4"):
+    if name.endswith((".aedat4", ".dat")):
         optional("faery")
     source = tmp_path / "big.npy"
     write_events_npy(source, _events(400_000))  # ~6 MB of events; every output format needs > 2 MB
@@ -131,20 +131,9 @@ def test_aedat4_encoder_errors_are_one_line(tmp_path, monkeypatch, capsys):
     optional("faery")
     from faery.extension import aedat
 
-    class Encoder:
-        def __init__(self, path, **kwargs):
-            Path(path).write_bytes(b"partial")
+    from formats_helpers import FullDiskEncoder
 
-        def __enter__(self):
-            return self
-
-        def __exit__(self, *exc):
-            return False
-
-        def write(self, track, packet):
-            raise RuntimeError("No space left on device (os error 28)")
-
-    monkeypatch.setattr(aedat, "Encoder", Encoder)
+    monkeypatch.setattr(aedat, "Encoder", FullDiskEncoder)
     source = tmp_path / "small.npy"
     write_events_npy(source, _events(100))
     assert main(["convert", str(source), str(tmp_path / "out.aedat4"), "--quiet", "--sensor-size", "240x180"]) == 2

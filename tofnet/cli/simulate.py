@@ -14,11 +14,12 @@ def register(subparsers) -> None:
                               description="Simulate a built-in scenario (ESIM-style event camera with "
                                           "ground-truth depth) and write an ECD folder: events.txt, calib.txt, "
                                           "groundtruth.txt, sensor_size.txt, events_depth.npy; or, for an OUT "
-                                          "named .npz, .h5/.hdf5 or .aedat4, that file, as 'tofnet convert' "
-                                          "writes it.")
+                                          "named .npz, .h5/.hdf5, .aedat4, .raw (EVT3), .dat or .es, that file, as "
+                                          "'tofnet convert' writes it.")
     p.add_argument("scenario", nargs="?", help="scenario name (see --list)")
     p.add_argument("out_dir", nargs="?", metavar="OUT",
-                   help="output folder (created if needed), or a .npz, .h5/.hdf5 or .aedat4 file")
+                   help="output folder (created if needed), or a .npz, .h5/.hdf5, .aedat4, .raw, .dat or .es "
+                        "file")
     p.add_argument("--duration", type=float, metavar="S", help="seconds to simulate (default: 1)")
     p.add_argument("--seed", type=int, default=0, help="seed of textures, thresholds and noise (default: 0)")
     p.add_argument("--sensor-size", metavar="WxH",
@@ -45,7 +46,7 @@ def handle(args) -> int:
         from tofnet.core.params import parse_size
         sensor = parse_size(args.sensor_size, "--sensor-size")
     out = Path(args.out_dir)
-    as_file = out.suffix.lower() in FILE_OUTPUTS
+    as_file = is_file_output(out)
     if as_file:
         from tofnet.io.convert import check_convert_output
         check_convert_output(out, out.parent / f".{out.name}.simulated", force=args.force, gt_depth=True)
@@ -78,8 +79,12 @@ def handle(args) -> int:
     return 0
 
 
-#: OUT suffixes written as one file (``tofnet.io.convert``); any other name is an ECD folder.
-FILE_OUTPUTS = (".npz", ".h5", ".hdf5", ".aedat4")
+def is_file_output(out: str | Path) -> bool:
+    """Whether ``out`` names one file ``tofnet convert`` writes (``tofnet.io.convert.OUTPUTS``); any other
+    name is an ECD folder."""
+    from tofnet.io.convert import OUTPUTS
+
+    return OUTPUTS.get(Path(out).suffix.lower(), "ecd") != "ecd"
 
 
 def simulate_to_file(scenario: str, out: Path, *, force: bool, **options) -> dict:
@@ -140,7 +145,7 @@ def format_summary(s: dict) -> str:
              f"{s['sim_time_s']:.1f} s simulating, {s['write_time_s']:.1f} s writing"
              + (f" ({s['compile_time_s']:.1f} s of it compiling {kernels(s['kernels_compiled'])}: first run only)"
                 if s.get("kernels_compiled") else "")]
-    if s["out_dir"] and Path(s["out_dir"]).suffix.lower() in FILE_OUTPUTS:
+    if s["out_dir"] and is_file_output(s["out_dir"]):
         lines += [f"  {message}" for message in s["files"]]
     elif s["out_dir"]:
         lines.append(f"  wrote {s['out_dir']}: {' '.join(s['files'])}")

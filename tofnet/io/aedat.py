@@ -18,6 +18,7 @@ import numpy as np
 from tofnet.errors import DataError, located, quote, reason
 from tofnet.io.event_source import EventSource
 from tofnet.io.extras import require
+from tofnet.io.faery_shared import encoder_error, faery_packet
 
 #: Standard gravity, m/s² per g (DV's accelerometer unit).
 GRAVITY = 9.80665
@@ -201,7 +202,7 @@ def write_aedat4(path: str | Path, chunks: Iterable[np.ndarray], meta) -> int:
     a source's IMU is complete, and written as a second track after them. Times must be
     >= 0 (AEDAT4 stores unsigned µs).
     """
-    faery = require("faery", path, "writing AEDAT4")
+    require("faery", path, "writing AEDAT4")
     from faery.extension import aedat
 
     width, height = (int(v) for v in meta.sensor_size)
@@ -217,29 +218,14 @@ def write_aedat4(path: str | Path, chunks: Iterable[np.ndarray], meta) -> int:
                     continue
                 if chunk["t"][0] < 0:
                     raise DataError(located(path, None, f"AEDAT4 stores times >= 0 µs, got {int(chunk['t'][0])}"))
-                packet = np.empty(len(chunk), dtype=faery.EVENTS_DTYPE)
-                packet["t"], packet["x"], packet["y"], packet["on"] = (chunk["t"], chunk["x"], chunk["y"],
-                                                                       chunk["p"] == 1)
-                encoder.write(0, packet)
+                encoder.write(0, faery_packet(chunk))
                 written += len(chunk)
             if meta.imu is not None:
                 for packet in _imu_packets(meta.imu):
                     encoder.write(1, packet)
     except RuntimeError as err:  # faery reports I/O errors as "... (os error N)"
-        raise _os_error(err, path) from None
+        raise encoder_error(err, path, "AEDAT4") from None
     return written
-
-
-def _os_error(err: RuntimeError, path) -> Exception:
-    """The ``OSError`` behind the encoder's ``RuntimeError`` (a full disk), else a one-line ``DataError``."""
-    import os
-    import re
-
-    found = re.search(r"\(os error (\d+)\)", str(err))
-    if found:
-        code = int(found.group(1))
-        return OSError(code, os.strerror(code))
-    return DataError(located(path, None, f"the AEDAT4 encoder failed: {quote(reason(err), 80)}"))
 
 
 def _track_node(track: int, type_id: str, name: str, info: dict):

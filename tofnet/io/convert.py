@@ -1,12 +1,13 @@
-"""Write a recording in another format: an ECD folder, ``.npz``, HDF5 (DSEC layout) or AEDAT4.
+"""Write a recording in another format: an ECD folder, ``.npz``, HDF5 (DSEC layout), AEDAT4,
+Prophesee RAW (EVT3), Prophesee DAT (DAT2) or Event Stream (``.es``).
 
-What the target cannot hold is either written as ECD side files next to it (AEDAT4:
-``calib.txt``, ``groundtruth.txt``; ``read_recording`` reads them back) or reported in
-the returned messages; nothing is dropped without a line saying so. The output appears
-under its final name only once complete (``tofnet.io.files``: written under a temporary
-name, synced, then renamed), and is checked before any work (``check_convert_output``).
-HDF5 and AEDAT4 are written chunk by chunk (bounded memory); ECD and ``.npz`` need the
-whole recording in memory.
+What the target cannot hold is either written as ECD side files next to it (AEDAT4, RAW,
+DAT, Event Stream: ``calib.txt``, ``groundtruth.txt``; ``read_recording`` reads them back)
+or reported in the returned messages; nothing is dropped without a line saying so. The
+output appears under its final name only once complete (``tofnet.io.files``: written under
+a temporary name, synced, then renamed), and is checked before any work
+(``check_convert_output``). All but ECD and ``.npz`` are written chunk by chunk (bounded
+memory); those two need the whole recording in memory.
 """
 
 from __future__ import annotations
@@ -17,20 +18,24 @@ from tofnet.errors import DataError, located
 from tofnet.io.source import DEFAULT_CHUNK, EventSource, ProgressHook
 
 #: Output kinds by suffix; a name without suffix is an ECD folder.
-OUTPUTS = {"": "ecd", ".npz": "npz", ".h5": "hdf5", ".hdf5": "hdf5", ".aedat4": "aedat4"}
+OUTPUTS = {"": "ecd", ".npz": "npz", ".h5": "hdf5", ".hdf5": "hdf5", ".aedat4": "aedat4", ".raw": "evt3",
+           ".dat": "dat", ".es": "es"}
+#: Single-file kinds that get ECD side files (``calib.txt``, ``groundtruth.txt``) for the camera and poses.
+_WITH_SIDE_FILES = ("aedat4", "evt3", "dat", "es")
 
 
 def output_kind(out: str | Path) -> str:
-    """``ecd``, ``npz``, ``hdf5`` or ``aedat4`` from the output name; ``DataError`` otherwise."""
+    """``ecd``, ``npz``, ``hdf5``, ``aedat4``, ``evt3`` (``.raw``), ``dat`` or ``es`` from the output name;
+    ``DataError`` otherwise."""
     suffix = Path(out).suffix.lower()
     if suffix not in OUTPUTS:
         raise DataError(located(out, None, f"cannot write {suffix!r}; expected a folder name (ECD), .npz, "
-                                           ".h5/.hdf5 (DSEC layout) or .aedat4"))
+                                           ".h5/.hdf5 (DSEC layout), .aedat4, .raw (EVT3), .dat or .es"))
     return OUTPUTS[suffix]
 
 
 #: Output kind -> the optional library its writer needs (``tofnet.io.extras``).
-_WRITERS_NEED = {"aedat4": "faery", "hdf5": "h5py"}
+_WRITERS_NEED = {"aedat4": "faery", "hdf5": "h5py", "evt3": "faery", "dat": "faery", "es": "faery"}
 
 
 def check_convert_output(out: str | Path, input_path: str | Path, *, force: bool = False,
@@ -81,22 +86,33 @@ def convert(source: EventSource, out: str | Path, *, force: bool = False,
                 count = len(recording.events)
                 _write_ecd(partial, recording, messages)
             else:
-                from tofnet.io.aedat import write_aedat4
-                from tofnet.io.hdf5 import write_hdf5
-                if kind == "aedat4" and source.sensor_size is None:
+                if kind in _WITH_SIDE_FILES and source.sensor_size is None:
                     source.sensor_size = _extent(source)
                     messages.append(f"sensor size {source.sensor_size[0]}x{source.sensor_size[1]} from the "
                                     "events' extent (the input does not say)")
-                writer = write_hdf5 if kind == "hdf5" else write_aedat4
-                count = writer(partial, source.chunks(DEFAULT_CHUNK, progress), source)
+                count = _writer(kind)(partial, source.chunks(DEFAULT_CHUNK, progress), source)
                 meta = source
                 if source.has_depth:
                     messages.append(f"not written: true depth per event ({kind} has no place for it)")
+                if source.imu is not None and kind in ("evt3", "dat", "es"):  # known once the events are read
+                    messages.append(f"not written: IMU ({len(source.imu):,} samples; {kind} has no place for it)")
             if count == 0:
                 raise DataError(located(source.path, None, "no events"))
-    if kind == "aedat4":
+    if kind in _WITH_SIDE_FILES:
         _side_files(out.parent, meta, messages, force, source.path)
     return [f"wrote {count:,} events to {out} ({kind})"] + messages
+
+
+def _writer(kind: str):
+    """The chunk writer of a file ``kind``: ``(path, chunks, meta) -> event count``."""
+    if kind == "hdf5":
+        from tofnet.io.hdf5 import write_hdf5
+        return write_hdf5
+    if kind == "aedat4":
+        from tofnet.io.aedat import write_aedat4
+        return write_aedat4
+    from tofnet.io.prophesee_write import write_prophesee
+    return lambda path, chunks, meta: write_prophesee(path, chunks, meta, kind)
 
 
 def _write_ecd(folder: Path, recording, messages: list[str]) -> None:
