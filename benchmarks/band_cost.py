@@ -10,7 +10,7 @@ of 2 bands (median over the rounds, with their range), and the CPU ms (median) o
 the run, timed in the thread that runs it, net of the parts it calls:
 
 - paper network: the bands' listings (``select_rows``), their kernels (``TimeOfTravelKernel.run_events``,
-  all bands), the merge (``merge`` and ``merge_cuts``) and the rest of ``BandedKernel.run_events``
+  all bands), the merge (``merge_share``, ``merged_by_step``) and the rest of ``BandedKernel.run_events``
   (its Python);
 - time surface: the bands' ``feed`` (each keeps its rows' events: ``TimeSurfaceModel._columns``),
   their estimators (``TimeSurfaceEstimator.feed_columns``), the rest of each model's ``run`` (its
@@ -53,8 +53,8 @@ from tofnet.kernels.time_surface_estimator import TimeSurfaceEstimator  # noqa: 
 from tofnet.models.time_surface import TimeSurfaceModel  # noqa: E402
 
 #: (owner, attribute, part): what is timed, in the thread that runs it.
-PARTS = ((bands, "select_rows", "listing"), (TimeOfTravelKernel, "run_events", "kernels"), (bands, "merge", "merge"),
-         (bands, "merge_cuts", "merge"), (bands.BandedKernel, "run_events", "bands' run"),
+PARTS = ((bands, "select_rows", "listing"), (TimeOfTravelKernel, "run_events", "kernels"),
+         (bands, "merge_share", "merge"), (bands, "merged_by_step", "merge"), (bands.BandedKernel, "run_events", "bands' run"),
          (bands.BandedReader, "feed", "feed"), (TimeSurfaceEstimator, "feed_columns", "kernels"),
          (bands.BandedReader, "run", "bands' run"), (TimeSurfaceModel, "run", "models' run"))
 
