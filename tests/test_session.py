@@ -206,6 +206,37 @@ def test_run_monitor_and_plot_units_from_the_command_line(tmp_path):
                  f"--intrinsics={fx},{fy},{cx},{cy}"]) == 0
 
 
+
+def test_plot_units_never_overwrites_without_force_and_refuses_what_it_does_not_read(tmp_path, capsys):
+    from tofnet.cli import main
+    from tofnet.io import write_ecd
+
+    folder = tmp_path / "rec"
+    write_ecd(folder, RECORDING.events, intrinsics=TEST_INTRINSICS, sensor_size=SENSOR)
+    units = ["plot", "units", str(folder), "--pixel", "10,8", "--window", "0.02:0.06", "--velocity=-0.5,0.2,0.1"]
+    mine = tmp_path / "mine.png"
+    mine.write_text("not tofnet's")
+    assert main([*units, "--out", str(mine)]) == 2
+    assert "exists" in capsys.readouterr().err and mine.read_text() == "not tofnet's"
+    assert main([*units, "--out", str(tmp_path / "notes.txt")]) == 2
+    assert "PNG" in capsys.readouterr().err and not (tmp_path / "notes.txt").exists()
+    assert main([*units, "--out", str(mine), "--force"]) == 0 and mine.stat().st_size > 10_000
+    for extra, flag in ((["--timestep", "2ms"], "--timestep"), (["--reduce", "median"], "--reduce"),
+                        (["--no-gt"], "--no-gt"), (["--error-window", "5ms"], "--error-window")):
+        assert main([*units, "--out", str(tmp_path / "u.png"), *extra]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and flag in err[0] and "not used" in err[0], err
+    depth = tmp_path / "d.npz"
+    assert main(["run", str(folder), "--out", str(depth), "--velocity=-0.5,0.2,0.1", "--quiet"]) == 0
+    capsys.readouterr()
+    for extra, flag in ((["--spec", "nosuch.yaml"], "--spec"), (["--backend", "nosuch"], "--backend"),
+                        (["--velocity", "9,9,9"], "--velocity"), (["--pixel", "1,1"], "--pixel")):
+        assert main(["plot", "depthmap", str(folder), str(depth), "--out", str(tmp_path / "m.png"), *extra]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and flag in err[0] and "not used" in err[0], err
+    assert not (tmp_path / "u.png").exists() and not (tmp_path / "m.png").exists()
+
+
 def test_a_session_asks_a_backend_what_it_declares_it_can_do():
     from tofnet.backends.base import Backend
 

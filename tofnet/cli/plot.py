@@ -33,10 +33,10 @@ def register(subparsers) -> None:
     p.add_argument("--window", metavar="START:END|LENGTH",
                    help="time span, seconds since the start: '1.2:1.27', '1200ms:1270ms', or a length "
                         "centred in the run, '70ms' (default: 70ms for depthmap, the whole run otherwise)")
-    p.add_argument("--error-window", default="auto",
+    p.add_argument("--error-window", default=None,
                    help="window of the error-over-time figure's band, e.g. '20ms' (default auto: about 200 "
                         "matched estimates per window, at most 100 windows, a round number of timesteps)")
-    p.add_argument("--reduce", choices=("latest", "median"), default="latest",
+    p.add_argument("--reduce", choices=("latest", "median"), default=None,
                    help="depth map: each pixel's latest or median depth in the window (default latest)")
     p.add_argument("--no-gt", action="store_true", help="leave out the ground truth panels and overlays")
     g = p.add_argument_group("units")
@@ -45,7 +45,7 @@ def register(subparsers) -> None:
     g.add_argument("--spec", help="YAML network spec (default: the paper's network)")
     from tofnet.cli.trust import add_allow_import
     add_allow_import(g)
-    g.add_argument("--backend", default="fixed", help="backend that runs it (default fixed)")
+    g.add_argument("--backend", default=None, help="backend that runs it (default fixed)")
     g.add_argument("--velocity", metavar="TX,TY,TZ", help="constant camera velocity in m/s instead of the poses")
     p.add_argument("--force", action="store_true", help="overwrite existing PNG files")
     from tofnet.cli.inputs import add_allow_external, add_camera_options, add_sequence_options
@@ -56,7 +56,25 @@ def register(subparsers) -> None:
     p.set_defaults(handler=handle)
 
 
+#: Options only one side reads: the units figure runs a network; the others draw a depth file.
+_UNITS_ONLY = {"pixel": "--pixel", "spec": "--spec", "allow_import": "--allow-import", "backend": "--backend",
+               "velocity": "--velocity"}
+_DEPTH_ONLY = {"depth": "DEPTH", "error_window": "--error-window", "reduce": "--reduce", "no_gt": "--no-gt",
+               "timestep": "--timestep", "latency_steps": "--latency-steps"}
+
+
+def _refuse_unused(args) -> None:
+    """One line for options the chosen figure would not read (they would be silently ignored)."""
+    units = args.kind == "units"
+    unused = [flag for name, flag in (_DEPTH_ONLY if units else _UNITS_ONLY).items()
+              if getattr(args, name) not in (None, False, [])]
+    if unused:
+        what = "runs the network itself (no depth file)" if units else "draws a depth file (the units figure runs a network)"
+        raise TofnetError(f"plot {args.kind}: {', '.join(unused)} not used: this figure {what}")
+
+
 def handle(args) -> int:
+    _refuse_unused(args)
     if args.kind == "units":
         return handle_units(args)
     if args.depth is None:
@@ -68,14 +86,14 @@ def handle(args) -> int:
     from tofnet.io.files import check_output
     from tofnet.units import seconds
 
-    window_s = None if args.error_window == "auto" else seconds(args.error_window, "--error-window")
+    window_s = None if args.error_window in (None, "auto") else seconds(args.error_window, "--error-window")
     if window_s is not None and window_s <= 0:
         raise TofnetError(f"--error-window must be positive or 'auto', got {args.error_window!r}")
     recording, depth, meta = load_inputs(args.recording, args.depth, timestep=args.timestep,
                                          latency_steps=args.latency_steps, allow_external=args.allow_external,
                                          **sequence_options(args), **camera_options(args))
     require_timing(meta)
-    options = {"window": args.window, "window_s": window_s, "reduce": args.reduce, "with_gt": not args.no_gt}
+    options = {"window": args.window, "window_s": window_s, "reduce": args.reduce or "latest", "with_gt": not args.no_gt}
     depth_path = Path(args.depth)
     support = available_kinds(recording)
     if args.kind == "all":
@@ -113,6 +131,12 @@ def handle_units(args) -> int:
     from tofnet.units import seconds
 
     from tofnet.cli.inputs import camera_options, sequence_options
+    from tofnet.io.ecd import recording_files
+    from tofnet.io.files import check_output
+    out = Path(args.out) if args.out else Path(args.recording).with_name(Path(args.recording).stem + "_units.png")
+    if out.suffix.lower() != ".png":
+        raise TofnetError(f"--out: figures are written as PNG, got {out.name!r}")
+    check_output(out, force=args.force, inputs=recording_files(args.recording), what="the units figure")
     recording = read_recording(args.recording, allow_external=args.allow_external, **sequence_options(args),
                                **camera_options(args))
     network, _, _, _ = load_network(args.spec, sensor_size=None if args.spec else recording.sensor_size,
@@ -141,7 +165,6 @@ def handle_units(args) -> int:
             raise TofnetError(f"no events in the window {start:g}..{end:g} s")
         busiest = int(np.bincount(flat).argmax())
         pixels = [(busiest % width, busiest // width)]
-    traces = unit_traces(recording, network, pixels, start, end, backend=args.backend)
-    out = Path(args.out) if args.out else Path(args.recording).with_name(Path(args.recording).stem + "_units.png")
+    traces = unit_traces(recording, network, pixels, start, end, backend=args.backend or "fixed")
     print(save_figure(units_figure(traces), out))
     return 0
