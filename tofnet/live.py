@@ -325,6 +325,8 @@ def run_live(source: LiveSource, network, *, backend: str = "fixed", backend_opt
         if session is None:
             raise TofnetError("live: the source gave no events")
         result = session.finish()  # the steps still in flight (not counted in the delays: nothing waits for them)
+        if primary and primary in result.outputs:
+            stats.depth_out += len(result.outputs[primary])
         for name in result.depth_outputs if on_depth is not None else ():
             if len(result.outputs[name]):
                 on_depth(result.outputs[name])
