@@ -118,3 +118,14 @@ def test_a_writer_without_its_library_is_refused_in_one_line_before_any_work(tmp
         err = capsys.readouterr().err.strip()
         assert "\n" not in err and f'pip install "tofnet[{extra}]"' in err and "Traceback" not in err
         assert sorted(p.name for p in tmp_path.iterdir()) == []  # nothing written, not even a partial file
+
+
+def test_an_npz_that_holds_its_camera_is_not_noted_as_without_one(tmp_path, original):
+    from dataclasses import replace
+
+    recording, path = original
+    assert recording.intrinsics is not None and not any("intrinsics unknown" in n for n in recording.notes)
+    bare = tmp_path / "bare.npz"
+    write_npz_recording(bare, replace(recording, intrinsics=None))
+    again = read_recording(bare)
+    assert again.intrinsics is None and "no calib.txt: intrinsics unknown" in again.notes

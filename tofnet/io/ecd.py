@@ -69,16 +69,22 @@ def read_gt_depth(path: str | Path, n_events: int) -> np.ndarray:
     return depth
 
 
-def attach_sidecars(recording: Recording, folder: Path, gt_depth_name: str | None = GT_DEPTH) -> Recording:
+#: The note of a recording whose camera is not known (no ``calib.txt``, nor intrinsics in the file).
+NO_CALIBRATION = f"no {CALIBRATION}: intrinsics unknown"
+
+
+def attach_sidecars(recording: Recording, folder: Path, gt_depth_name: str | None = GT_DEPTH,
+                    note_missing: bool = True) -> Recording:
     """Add the calibration, poses, IMU, sensor size and true depth found in ``folder``.
 
     A side file that exists but is not a regular file (a folder, a FIFO, ...) is an
-    error, not silently skipped.
+    error, not silently skipped. ``note_missing``: note a missing ``calib.txt`` (not when the
+    caller may still find the intrinsics in the file itself).
     """
     if _present(folder / CALIBRATION):
         recording.intrinsics = read_calibration(folder / CALIBRATION)
-    else:
-        recording.notes.append(f"no {CALIBRATION}: intrinsics unknown")
+    elif note_missing:
+        recording.notes.append(NO_CALIBRATION)
     if _present(folder / GROUNDTRUTH):
         recording.trajectory = read_groundtruth(folder / GROUNDTRUTH)
     if _present(folder / IMU):

@@ -83,7 +83,7 @@ class RecordingSource(EventSource):
 
 def read_in_memory(path: Path, kind: str, columns, window=None) -> tuple[Recording, tuple[int, int] | None]:
     """The recording, and for a ``.npy`` read through a time window, the file's (first, last) event µs."""
-    from tofnet.io.ecd import attach_sidecars, read_ecd
+    from tofnet.io.ecd import NO_CALIBRATION, attach_sidecars, read_ecd
     from tofnet.io.events import read_events_npy, read_events_txt
 
     from tofnet.io.ecd import EVENTS, GT_DEPTH
@@ -112,7 +112,7 @@ def read_in_memory(path: Path, kind: str, columns, window=None) -> tuple[Recordi
         else:
             events = read_events_npy(path, columns=columns)
         recording = attach_sidecars(Recording(events=events, source=str(path), notes=notes), path.parent,
-                                    gt_depth_name=depth_name)
+                                    gt_depth_name=depth_name, note_missing=kind != "npz")
         if kind == "npy" and span is not None and _exists(path.parent / f"{path.stem}_depth.npy"):
             from tofnet.io.ecd import read_gt_depth
             from tofnet.io.npy import map_npy
@@ -121,6 +121,8 @@ def read_in_memory(path: Path, kind: str, columns, window=None) -> tuple[Recordi
         if kind == "npz":
             from tofnet.io.arrays import apply_npz_metadata
             apply_npz_metadata(recording, path)
+            if recording.intrinsics is None:
+                recording.notes.append(NO_CALIBRATION)
     if len(recording.events) == 0 and span is None:
         raise DataError(located(path, None, "no events"))
     return recording, (tuple(span) if span is not None else None)
