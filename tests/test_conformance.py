@@ -136,6 +136,10 @@ def test_cli_lists_and_fails_with_exit_code_1(registered, capsys):
     out = capsys.readouterr().out
     assert "edge+u" in out and "FAIL" in out and "depth z at" in out
     assert main(["conformance", "--backend", "reference", "--case", "speed-4bit-1"]) == 0
+    capsys.readouterr()
+    assert main(["conformance", "--workers", "1,2", "--against", "float", "--case", "edge+u"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--against and --workers" in err[0]
 
 
 def test_the_cases_exercise_what_they_are_named_for():

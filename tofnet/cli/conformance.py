@@ -45,6 +45,10 @@ def handle(args) -> int:
     if args.json:
         from tofnet.io.files import check_output
         check_output(args.json, force=args.force, what="--json")
+    if args.workers and args.against:
+        from tofnet.errors import TofnetError
+        raise TofnetError("--against and --workers do not go together: --workers checks each backend against "
+                          "itself with one worker (run them one after the other)")
     against = args.against or DEFAULT_BASELINE
     backends = args.backend or available_backends()
     workers = workers_list(args.workers) if args.workers else None
