@@ -81,6 +81,25 @@ def test_a_full_240x180_scene_equals_the_fixed_backend_bit_for_bit(session):
     assert_identical(result, FixedBackend().run(compiled, recording, record_tot=True))
 
 
+def test_the_summary_says_how_a_model_by_model_run_was_split(session):
+    from tofnet.networks import improved_network
+
+    paper = compile_network(network(), patch=(8, 8))  # 6 cores per layer, 3 for each worker
+    stream = session.open_stream(paper, recording=texture(), fuse=False)
+    stream.feed_all(texture().events)
+    split = stream.close().summary()["workers"]
+    assert split["threads"] == 2 and split["bands"] == 2 and "velocity" in split["whole"]
+    assert "time_of_travel" not in split["whole"]
+    # the time surface is placed on the host: nothing for the workers, and the summary says so
+    estimator = compile_network(improved_network(SENSOR, velocity={"source": "constant",
+                                                                    "velocity": [-0.5, 0.2, 0.1]}))
+    result = session.run(texture(), compiled=estimator)
+    assert result.summary()["workers"] == {"threads": 1, "bands": 1, "whole": [p.name for p in
+                                                                               estimator.network.processes
+                                                                               if p.placement != "core"]}
+    assert "time_surface" in result.summary()["workers"]["whole"]
+
+
 def test_a_session_keeps_its_workers_between_runs(session):
     pids = session.pids
     compiled = compile_network(network(), patch=(8, 8))

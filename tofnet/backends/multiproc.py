@@ -23,7 +23,7 @@ from tofnet.backends.base import Backend, ProgressCallback, RunResult
 from tofnet.backends.graph import GraphExecutor, resolve_probes, sinks_of
 from tofnet.backends.fusion import FusedStream, paper_chain
 from tofnet.backends.local import binding, payloads_of, run_fused
-from tofnet.backends.shared_bands import SharedBandKernel, band_rows
+from tofnet.backends.shared_bands import SharedBandKernel, band_rows, split_facts
 from tofnet.backends.stream import packet_events_for
 from tofnet.compiler.bands import input_reach
 from tofnet.backends.remote import RemoteModel, plan_workers, placements_for
@@ -317,7 +317,7 @@ class MultiprocSession:
         stream = _GuardedStream(self, self.backend.name, build, t0, clock.timestep_us, sinks,
                                 payloads_of(network, list(dict.fromkeys(sinks + probes))))
         stream.extra = {"frac_bits": self.backend.format.frac_bits, "payload_bits": self.backend.format.payload_bits,
-                        "workers": len(plans), "startup_s": self.startup_seconds}
+                        "startup_s": self.startup_seconds, **split_facts(compiled, plans)}
         return stream
 
     def _banded_stream(self, compiled, pipeline, plans, known, t0_us, record_tot: bool) -> FusedStream:

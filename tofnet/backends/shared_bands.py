@@ -41,6 +41,16 @@ def band_rows(compiled, layer: str, plans) -> list[Band]:
     return [(a, b) for a, b in zip(starts, starts[1:] + [height]) if a < b]
 
 
+def split_facts(compiled, plans) -> dict:
+    """How a model-by-model run was split over the workers, for the summary (``RunResult.extra``): each
+    worker's rows (of the first core-placed layer's cores), and the processes the host runs whole."""
+    network = compiled.network
+    layers = [layer.name for layer in compiled.layers]
+    rows = band_rows(compiled, layers[0], plans) if layers else [(0, network.sensor_size[1])]
+    return {"workers": len(plans), "bands": [list(band) for band in rows],
+            "whole": [p.name for p in network.processes if p.placement != "core"]}
+
+
 class SharedBandKernel(BandsBase):
     """The fused kernel over worker processes, one band each; ``exchange({worker: message}, stuck, meanwhile)``
     talks to them (``MultiprocSession._exchange``)."""
