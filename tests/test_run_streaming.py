@@ -99,3 +99,25 @@ def test_a_run_that_asked_for_workers_and_kept_one_band_says_why(tmp_path, capsy
                  "--quiet"]) == 0
     assert ("workers        1 (1 band of rows; one band: the first packet held 100,000 events; bands pay from "
             "262,144 (docs/performance.md))") in capsys.readouterr().out
+
+
+def test_a_streamed_files_reading_is_timed_apart_from_the_network(tmp_path, monkeypatch):
+    """The file's decoding between packets is the input's time: the network's time (and the speed the
+    summary derives from it) leaves it out, and the summary says it apart."""
+    import time as clock
+
+    path = tmp_path / "rec.h5"
+    write_file(path, 1)
+    slow_down = 0.05
+    with open_recording(path) as source:
+        chunks = source.chunks
+
+        def slow(*args, **kwargs):
+            for chunk in chunks(*args, **kwargs):
+                clock.sleep(slow_down)  # a slow disk
+                yield chunk
+        source.chunks = slow
+        result, _ = run_source(source, depth_network(SENSOR, **NET), chunk_events=50_000)
+    pieces = -(-result.events_in // 50_000)
+    assert pieces >= 5 and result.read_time >= pieces * slow_down and result.wall_time < pieces * slow_down
+    assert result.summary()["read_time_s"] == result.read_time

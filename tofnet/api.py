@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from contextlib import nullcontext
 from pathlib import Path
 from typing import Any, Iterable
 
@@ -323,7 +324,13 @@ def run_source(source, network: Network, *, backend: str = DEFAULT_BACKEND, back
     collected = Collected(spill_dir, spill_bytes)
     try:
         read = 0
-        for chunk in source.chunks(chunk_events, progress):
+        chunks = iter(source.chunks(chunk_events, progress))
+        reading = getattr(stream, "clock", None)  # the file's decoding is not the network's time
+        while True:
+            with reading.reading() if reading is not None else nullcontext():
+                chunk = next(chunks, None)
+            if chunk is None:
+                break
             read += len(chunk)
             collected.add(stream.feed_all(chunk))
         if not read:

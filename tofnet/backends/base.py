@@ -13,7 +13,8 @@ from tofnet.events import DEPTH_DTYPE
 from tofnet.units import seconds_of
 
 #: Summary keys that depend on how and where a run went, not on what it computed.
-RUN_SPECIFIC = ("backend", "wall_time_s", "setup_time_s", "compile_time_s", "kernels_compiled", "workers")
+RUN_SPECIFIC = ("backend", "wall_time_s", "setup_time_s", "read_time_s", "compile_time_s", "kernels_compiled",
+                "workers")
 #: Summary keys for reports only, not stored with the depth files' facts (those stay as they were).
 REPORT_ONLY = ("readers", "latency")
 
@@ -53,12 +54,14 @@ class RunResult:
     #: Seconds the run spent setting up and tearing down (building the kernels' state, starting and
     #: stopping worker processes; not in ``wall_time``).
     setup_time: float = 0.0
+    #: Seconds spent reading the input between packets (a file streamed in chunks; not in ``wall_time``).
+    read_time: float = 0.0
 
     def timed_by(self, clock) -> "RunResult":
         """Take the times of a ``tofnet.kernels.compilation.Stopwatch`` started with the run."""
         self.wall_time, self.compile_time, self.kernels_compiled = (clock.network_seconds(), clock.compile_seconds,
                                                                     clock.compiled)
-        self.setup_time = clock.setup_seconds
+        self.setup_time, self.read_time = clock.setup_seconds, clock.reading_seconds
         return self
 
     # -- the paper network's view -------------------------------------------------------------
@@ -180,7 +183,7 @@ class RunResult:
             "readers": self.readers, "latency": dict(self.latency),
             "steps": self.steps, "timestep_s": seconds_of(self.timestep_us), "latency_steps": self.latency_steps,
             "latency_s": self.latency_seconds, "wall_time_s": self.wall_time,
-            "setup_time_s": self.setup_time, "compile_time_s": self.compile_time, "kernels_compiled": self.kernels_compiled})
+            "setup_time_s": self.setup_time, "read_time_s": self.read_time, "compile_time_s": self.compile_time, "kernels_compiled": self.kernels_compiled})
         if "bands" in self.extra:  # how the work was split (workers, bands of rows, what ran whole)
             out["workers"] = {"threads": int(self.extra.get("workers", 1)), "bands": len(self.extra["bands"]),
                               "whole": list(self.extra.get("whole", []))}

@@ -100,6 +100,8 @@ class Stopwatch:
         self._compile0, self._count0 = _LOCK.seconds, _COMPILES.count
         #: Seconds set aside as set-up (``aside``), less the kernels' compiles within them.
         self.setup_seconds = 0.0
+        #: Seconds spent reading the input between packets (``reading``): a file decoded chunk by chunk.
+        self.reading_seconds = 0.0
 
     def setup_before(self, seconds: float) -> None:
         """``seconds`` of set-up spent before this clock started (worker processes started, say): the
@@ -116,6 +118,15 @@ class Stopwatch:
         finally:
             self.setup_seconds += max(0.0, time.perf_counter() - started - (_LOCK.seconds - compiled))
 
+    @contextmanager
+    def reading(self) -> Iterator[None]:
+        """Time spent inside is the input's (a file read between packets), not the network's."""
+        started, compiled = time.perf_counter(), _LOCK.seconds
+        try:
+            yield
+        finally:
+            self.reading_seconds += max(0.0, time.perf_counter() - started - (_LOCK.seconds - compiled))
+
     @property
     def compile_seconds(self) -> float:
         """Seconds spent compiling or loading kernels since the start."""
@@ -127,5 +138,6 @@ class Stopwatch:
         return _COMPILES.count - self._count0
 
     def network_seconds(self) -> float:
-        """Seconds since the start, less those spent on kernels and on set-up (never below 0)."""
-        return max(0.0, time.perf_counter() - self.started - self.compile_seconds - self.setup_seconds)
+        """Seconds since the start, less those spent on kernels, on set-up and reading (never below 0)."""
+        return max(0.0, time.perf_counter() - self.started - self.compile_seconds - self.setup_seconds
+                   - self.reading_seconds)
