@@ -121,8 +121,9 @@ class LocalBackend(Backend):
         if pool is not None:
             stream.extra.update(facts)
             stream.releases.append(pool.close)
-        if stream.executor is None:
-            build(0)  # check models and bindings now, not at the first event
+        if stream.executor is None:  # check models and bindings now, not at the first event: set-up, not running
+            with stream.clock.aside():
+                build(0)
         fmt = self._format()
         if fmt is not None:
             stream.extra.update(frac_bits=fmt.frac_bits, payload_bits=fmt.payload_bits)
