@@ -108,7 +108,15 @@ def test_existing_outputs_need_force(folder, tmp_path, capsys):
     assert main(["run", str(folder), "--out", str(out), "--quiet", "--force"]) == 0
     assert read_depth(out)[0].dtype == DEPTH_DTYPE
     capsys.readouterr()
-    assert "exists; pass --force" in one_line_error(capsys, ["simulate", "slider", str(folder), "--quiet"])
+    # a recording folder tofnet simulate did not write (no manifest): refused even with --force
+    before = sorted(p.name for p in folder.iterdir())
+    for force in ([], ["--force"]):
+        assert "which tofnet did not write" in one_line_error(capsys, ["simulate", "slider", str(folder), "--quiet",
+                                                                        *force])
+    assert sorted(p.name for p in folder.iterdir()) == before
+    simulated = tmp_path / "sim"
+    assert main(["simulate", "slider", str(simulated), "--duration", "0.02", "--quiet"]) == 0
+    assert "exists; pass --force" in one_line_error(capsys, ["simulate", "slider", str(simulated), "--quiet"])
 
 
 def test_missing_output_folders_are_created(folder, tmp_path, capsys):
@@ -190,3 +198,19 @@ def test_depth_values_are_checked_on_reading(tmp_path, key, value, message):
     np.savez(tmp_path / "d.npz", **arrays)
     with pytest.raises(DataError, match=message):
         read_depth(tmp_path / "d.npz")
+
+
+def test_simulate_never_writes_its_summary_over_its_recording_nor_keeps_an_older_ones_files(tmp_path, capsys):
+    out = tmp_path / "o"
+    err = one_line_error(capsys, ["simulate", "slider", str(out), "--duration", "0.02", "--quiet",
+                                  "--json", str(out / "events.txt")])
+    assert "inside OUT_DIR" in err and not out.exists()
+    for name, clash in (("r.npz", "r.npz"), ("r.npz", "r_depth.npy"), ("r.aedat4", "calib.txt")):
+        err = one_line_error(capsys, ["simulate", "slider", str(tmp_path / name), "--duration", "0.02", "--quiet",
+                                      "--json", str(tmp_path / clash)])
+        assert "the simulated recording writes" in err and not (tmp_path / name).exists()
+    # a rotating scene writes imu.txt; the slider, simulated over it with --force, must not keep it
+    assert main(["simulate", "pan", str(out), "--duration", "0.02", "--quiet"]) == 0 and (out / "imu.txt").is_file()
+    assert main(["simulate", "slider", str(out), "--duration", "0.02", "--quiet", "--force"]) == 0
+    from tofnet.io import read_recording
+    assert not (out / "imu.txt").exists() and read_recording(out).imu is None

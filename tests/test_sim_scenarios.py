@@ -86,5 +86,7 @@ def test_cli_writes_folder_and_summary(capsys, tmp_path):
     assert "events" in text and "depth" in text and "events_depth.npy" in text
     summary = json.loads((tmp_path / "s.json").read_text())
     assert summary["seed"] == 4 and summary["sensor_size"] == [40, 30]
-    assert sorted(p.name for p in out.iterdir()) == sorted(summary["files"])
+    from tofnet.io.guard import MANIFEST
+    assert sorted(p.name for p in out.iterdir() if p.name != MANIFEST) == sorted(summary["files"])
+    assert summary["out_dir"] == str(out)  # not the temporary folder it was written in
     assert len(read_ecd(out).events) == summary["events"]

@@ -26,7 +26,8 @@ def register(subparsers) -> None:
                    help="sensor size in pixels; the intrinsics scale to keep the field of view (default: 240x180)")
     p.add_argument("--list", action="store_true", help="list the scenarios and exit")
     p.add_argument("--json", metavar="FILE", help="also write the summary as JSON")
-    p.add_argument("--force", action="store_true", help="overwrite the recording files already in OUT_DIR")
+    p.add_argument("--force", action="store_true", help="replace OUT_DIR (or the file) when tofnet wrote it before; never a folder holding "
+                        "other files")
     p.add_argument("--quiet", action="store_true", help="no progress, summary only")
     p.set_defaults(handler=handle)
 
@@ -51,12 +52,10 @@ def handle(args) -> int:
         from tofnet.io.convert import check_convert_output
         check_convert_output(out, out.parent / f".{out.name}.simulated", force=args.force, gt_depth=True)
     else:
-        check_out_dir(out, args.force)
-    if args.json:
         from tofnet.io.files import check_output
-        from tofnet.io.ecd import SIDE_FILES
-        written = [out] if as_file else [out / name for name in SIDE_FILES]
-        check_output(args.json, force=args.force, inputs=written, what="--json")
+        check_output(out, force=args.force, what="OUT_DIR", folder=True)
+    if args.json:
+        check_json(Path(args.json), out, as_file, args.force)
     progress = None
     if not args.quiet:
         from tofnet.cli.progress import Progress
@@ -66,9 +65,12 @@ def handle(args) -> int:
     if as_file:
         summary = simulate_to_file(args.scenario, out, duration=args.duration, seed=args.seed, sensor_size=sensor,
                                    progress=progress, force=args.force)
-    else:
-        summary = simulate(args.scenario, out, duration=args.duration, seed=args.seed, sensor_size=sensor,
-                           progress=progress)
+    else:  # the whole folder under a temporary name, then in place of OUT_DIR (never mixed with older files)
+        from tofnet.io.files import atomic_path
+        with atomic_path(out, folder=True, written_by="tofnet simulate") as partial:
+            summary = simulate(args.scenario, partial, duration=args.duration, seed=args.seed,
+                               sensor_size=sensor, progress=progress)
+        summary["out_dir"] = str(out)
     summary["compile_time_s"], summary["kernels_compiled"] = clock.compile_seconds, clock.compiled
     if progress is not None:
         progress.done()
@@ -106,18 +108,19 @@ def simulate_to_file(scenario: str, out: Path, *, force: bool, **options) -> dic
     return summary
 
 
-def check_out_dir(folder: Path, force: bool) -> None:
-    """OUT_DIR must be (or become) a writable folder; recording files already in it are
-    replaced only with ``--force``."""
-    from tofnet.io.ecd import SIDE_FILES
-    from tofnet.io.files import check_folder_writable, check_output
+def check_json(json_path: Path, out: Path, as_file: bool, force: bool) -> None:
+    """``--json`` is neither inside the folder written nor one of the files written (one line)."""
+    from tofnet.io.convert import written_paths
+    from tofnet.io.files import check_output, lies_in
 
-    if folder.exists() and not folder.is_dir():
-        raise TofnetError(f"{folder}: OUT_DIR exists and is not a folder")
-    check_folder_writable(folder, "OUT_DIR")
-    for name in SIDE_FILES:
-        if (folder / name).exists() or (folder / name).is_symlink():
-            check_output(folder / name, force=force, what="OUT_DIR file")
+    if as_file:
+        clash = next((p for p in written_paths(out) if p.resolve() == json_path.resolve()), None)
+        if clash is not None:
+            raise TofnetError(f"--json {json_path}: the simulated recording writes {clash}; choose another name")
+    elif lies_in(json_path, out):
+        raise TofnetError(f"--json {json_path}: inside OUT_DIR {out}, which holds the recording only; "
+                          "choose a name outside it")
+    check_output(json_path, force=force, what="--json")
 
 
 def list_scenarios() -> str:

@@ -24,6 +24,19 @@ OUTPUTS = {"": "ecd", ".npz": "npz", ".h5": "hdf5", ".hdf5": "hdf5", ".aedat4": 
 _WITH_SIDE_FILES = ("aedat4", "evt3", "dat", "es")
 
 
+def written_paths(out: str | Path) -> list[Path]:
+    """Every path converting to ``out`` may write: the output, an ``.npz``'s true depth beside it,
+    the side files beside a single file that cannot hold the camera or poses (an ECD folder: itself)."""
+    out = Path(out)
+    kind = output_kind(out)
+    paths = [out]
+    if kind == "npz":
+        paths.append(_depth_path(out))
+    if kind in _WITH_SIDE_FILES:
+        paths += [out.parent / "calib.txt", out.parent / "groundtruth.txt"]
+    return paths
+
+
 def output_kind(out: str | Path) -> str:
     """``ecd``, ``npz``, ``hdf5``, ``aedat4``, ``evt3`` (``.raw``), ``dat`` or ``es`` from the output name;
     ``DataError`` otherwise."""
