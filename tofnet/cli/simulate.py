@@ -26,8 +26,8 @@ def register(subparsers) -> None:
                    help="sensor size in pixels; the intrinsics scale to keep the field of view (default: 240x180)")
     p.add_argument("--list", action="store_true", help="list the scenarios and exit")
     p.add_argument("--json", metavar="FILE", help="also write the summary as JSON")
-    p.add_argument("--force", action="store_true", help="replace OUT_DIR (or the file) when tofnet wrote it before; never a folder holding "
-                        "other files")
+    p.add_argument("--force", action="store_true",
+                   help="replace OUT_DIR (or the file) when tofnet wrote it before; never a folder holding other files")
     p.add_argument("--quiet", action="store_true", help="no progress, summary only")
     p.set_defaults(handler=handle)
 
