@@ -69,7 +69,8 @@ def _refuse_unused(args) -> None:
     unused = [flag for name, flag in (_DEPTH_ONLY if units else _UNITS_ONLY).items()
               if getattr(args, name) not in (None, False, [])]
     if unused:
-        what = "runs the network itself (no depth file)" if units else "draws a depth file (the units figure runs a network)"
+        what = ("runs the network itself (no depth file)" if units
+                else "draws a depth file (the units figure runs a network)")
         raise TofnetError(f"plot {args.kind}: {', '.join(unused)} not used: this figure {what}")
 
 
