@@ -214,3 +214,11 @@ def test_simulate_never_writes_its_summary_over_its_recording_nor_keeps_an_older
     assert main(["simulate", "slider", str(out), "--duration", "0.02", "--quiet", "--force"]) == 0
     from tofnet.io import read_recording
     assert not (out / "imu.txt").exists() and read_recording(out).imu is None
+
+
+def test_run_refuses_a_summary_named_as_one_of_its_other_outputs(folder, tmp_path, capsys):
+    out = tmp_path / "m.npz"
+    monitor = tmp_path / "m.monitor.time_of_travel.counter.npz"
+    err = one_line_error(capsys, ["run", str(folder), "--out", str(out), "--monitor", "time_of_travel.counter@1,1",
+                                  "--json", str(monitor), "--quiet"])
+    assert "--json name the same file" in err and not out.exists() and not monitor.exists()

@@ -54,9 +54,12 @@ def _early_outputs(args) -> dict[str, Path | None]:
 def check_more_outputs(args, paths: list[Path]) -> None:
     """``tofnet run``: the files named only once the network is known (one per depth output
     of a network with several), checked like the others before any is written."""
-    from tofnet.io.files import check_output
+    from tofnet.io.files import check_output, distinct_outputs
 
-    checked = {path.resolve() for path in _early_outputs(args).values() if path is not None}
+    early = _early_outputs(args)
+    # the summary is written apart from these files: a file of the run named as --json would hold the summary
+    distinct_outputs({"--json": early["--json"], **{f"the output {path}": Path(path) for path in paths}})
+    checked = {path.resolve() for path in early.values() if path is not None}
     inputs = _run_inputs(args)
     for path in paths:
         if Path(path).resolve() not in checked:
