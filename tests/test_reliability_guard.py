@@ -83,6 +83,10 @@ def test_maps_never_go_into_a_folder_of_other_files(folder, tmp_path, capsys):
     err = one_line_error(capsys, ["export", str(tmp_path / "d.npz"), "--maps", str(tmp_path / "photos"), "--force"])
     assert "'a.png', which tofnet did not write" in err
     assert (tmp_path / "photos" / "a.png").read_bytes() == b"png" and (folder / "events.txt").is_file()
+    maps = tmp_path / "maps"
+    for ply in (maps / "index.csv", maps):  # the folder is replaced as a whole: nothing else goes in it
+        err = one_line_error(capsys, ["export", str(tmp_path / "d.npz"), "--maps", str(maps), "--ply", str(ply)])
+        assert "inside the --maps folder" in err and not maps.exists()
 
 
 # ---------------------------------------------------------------- every file a command reads

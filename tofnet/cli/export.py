@@ -123,7 +123,12 @@ def check_export_outputs(args) -> None:
     from tofnet.io.ecd import recording_files
     from tofnet.io.files import check_output
 
+    from tofnet.io.files import lies_in
+
     inputs = [Path(args.depth)] + (recording_files(args.recording) if args.recording else [])
+    if args.ply and args.maps and lies_in(args.ply, args.maps):  # the maps folder is replaced as a whole
+        raise TofnetError(f"--ply {args.ply}: inside the --maps folder {args.maps}, which holds the maps only; "
+                          "choose a name outside it")
     if args.ply:
         check_output(args.ply, force=args.force, inputs=inputs, what="--ply")
     if args.maps:
