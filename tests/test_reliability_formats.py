@@ -311,6 +311,12 @@ def test_run_checks_probe_files_before_reading(tmp_path, capsys):
     assert main(["run", str(tmp_path / "missing.txt"), "--out", str(tmp_path / "d.npz"),
                  "--probe", "input.events", "--quiet"]) == 2
     assert "d.input.events.npz: --probe 'input.events' exists" in capsys.readouterr().err
+    for bad in ("../../x", "input", "input.events/../../y", "a.b.c"):  # it names a file beside --out
+        with pytest.raises(SystemExit) as stop:  # argparse's one line
+            main(["run", str(path), "--out", str(tmp_path / "d.npz"), "--probe", bad, "--quiet"])
+        assert stop.value.code == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "expected PROCESS.PORT" in err[0], err
 
 
 def test_errors_are_tofnet_errors_for_every_format(tmp_path):

@@ -8,7 +8,7 @@ import logging
 import time
 from pathlib import Path
 
-from tofnet.errors import BackendError
+from tofnet.errors import BackendError, quote
 from tofnet.units import format_steps
 
 
@@ -27,7 +27,7 @@ def register(subparsers) -> None:
     add_workers_option(p)
     p.add_argument("--record-tot", action="store_true",
                    help="also save the time-of-travel spikes (next to --out, *_tot.npz)")
-    p.add_argument("--probe", action="append", default=[], metavar="PROCESS.PORT",
+    p.add_argument("--probe", action="append", default=[], metavar="PROCESS.PORT", type=probe_option,
                    help="also save what an output port sent (next to --out: OUT.PROCESS.PORT.npz); repeatable")
     p.add_argument("--monitor", action="append", default=[], metavar="PROCESS.VAR[@X,Y;...]",
                    help="record a state variable (or a port) at the start of every step, optionally at chosen "
@@ -71,6 +71,14 @@ def workers_option(text: str) -> int | str:
         logging.getLogger("tofnet.cli").warning(f"warning: --workers: {value} workers on this machine's {cpu_count()} "
                                                 f"CPUs: at most {cpu_count()} run at once")
     return value
+
+
+def probe_option(text: str) -> str:
+    """``--probe``'s value: ``PROCESS.PORT``, two names (it names a file beside ``--out``)."""
+    import re
+    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*\.[A-Za-z_][A-Za-z0-9_]*", text):
+        raise argparse.ArgumentTypeError(f"expected PROCESS.PORT (two names), got {quote(text, 40)}")
+    return text
 
 
 def workers_line(workers: dict) -> str:
