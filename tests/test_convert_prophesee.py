@@ -187,3 +187,19 @@ def test_real_evt3_through_dat_and_back_keeps_every_event(tmp_path):
     for name in ("a.dat", "b.raw"):
         assert np.array_equal(read_recording(tmp_path / name).events, original.events)
     assert read_recording(tmp_path / "b.raw").sensor_size == (1280, 720)
+
+
+def test_a_folder_where_a_side_file_goes_is_refused_before_anything_is_written(tmp_path, capsys):
+    pytest.importorskip("faery")
+    from tofnet.cli import main
+    from tofnet.io import write_ecd
+    from tofnet.testing import TEST_INTRINSICS
+
+    from formats_helpers import pattern_recording
+
+    recording = pattern_recording()
+    write_ecd(tmp_path / "rec", recording.events, intrinsics=TEST_INTRINSICS, sensor_size=recording.sensor_size)
+    (tmp_path / "out" / "calib.txt").mkdir(parents=True)
+    assert main(["convert", str(tmp_path / "rec"), str(tmp_path / "out" / "x.raw"), "--force", "--quiet"]) == 2
+    assert "calib.txt: side file for the camera or poses: exists and is a folder" in capsys.readouterr().err
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["calib.txt"]

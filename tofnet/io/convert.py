@@ -65,6 +65,9 @@ def check_convert_output(out: str | Path, input_path: str | Path, *, force: bool
     check_output(out, force=force, inputs=inputs, what="output", folder=kind == "ecd")
     if gt_depth and kind == "npz":
         check_output(_depth_path(out), force=force, inputs=inputs, what="true depth output")
+    for side in written_paths(out)[1:] if kind in _WITH_SIDE_FILES else ():  # written only when there is room:
+        if side.is_dir() and not side.is_symlink():  # an existing file is kept and said, a folder cannot be written
+            raise DataError(located(side, None, "side file for the camera or poses: exists and is a folder"))
     if kind in _WRITERS_NEED:  # the writer's library, before anything is read or simulated
         from tofnet.io.extras import require
         require(_WRITERS_NEED[kind], out, f"writing {kind.upper()}")
