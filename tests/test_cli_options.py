@@ -170,3 +170,17 @@ def test_every_command_that_writes_takes_o_for_out():
                  ["plot", "depthmap", "rec", "depth.npz"]):
         short, long = parser.parse_args([*argv, "-o", "x"]), parser.parse_args([*argv, "--out", "x"])
         assert short.out == long.out == "x", argv
+
+
+def test_a_bare_event_file_names_both_missing_camera_facts_at_once(tmp_path, capsys):
+    from tofnet.events import make_events
+    from tofnet.io.events import write_events_npy
+
+    write_events_npy(tmp_path / "ev.npy", make_events([0, 1000], [1, 2], [1, 1], [1, 0]))
+    assert main(["run", str(tmp_path / "ev.npy"), "--out", str(tmp_path / "d.npz"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--velocity" in err[0] and "also pass --intrinsics" in err[0], err
+    assert main(["run", str(tmp_path / "ev.npy"), "--out", str(tmp_path / "d.npz"), "--quiet",
+                 "--intrinsics", "200,200,120,90"]) == 2
+    err = capsys.readouterr().err
+    assert "--velocity" in err and "also pass --intrinsics" not in err  # only what is still missing

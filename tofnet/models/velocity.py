@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tofnet.models.binding import UpdateRows, camera_of, velocity_source_of, velocity_table
+from tofnet.errors import DataError
 from tofnet.core.ports import Payload
 from tofnet.io.recording import VelocitySource
 from tofnet.kernels.lens import Lens, lens_of, sample_table
@@ -55,7 +56,13 @@ def velocity_field(process: VelocityProcess, sensor_size: tuple[int, int], recor
 
 def velocity_source(process: VelocityProcess, recording) -> VelocitySource:
     """The camera velocity ``process`` reads (``recording``: its metadata, for ``groundtruth``)."""
-    return velocity_source_of(process.source, process.velocity, process.samples, recording, process.name)
+    try:
+        return velocity_source_of(process.source, process.velocity, process.samples, recording, process.name)
+    except DataError as err:  # a bare event file lacks both: say so at once, not one run after the other
+        if process.intrinsics is None and (recording is None or recording.intrinsics is None):
+            raise DataError(f"{err}; the camera's calibration is missing too: also pass --intrinsics FX,FY,CX,CY "
+                            "or --calib FILE") from None
+        raise
 
 
 class VelocityModel(Model):
