@@ -215,3 +215,13 @@ def test_a_pass_with_unequal_estimates_is_marked_and_explained():
                                 "depth lies within the quantisation tolerance")
     assert "docs/fixed_point.md" in table[-1]
     assert not format_table([equal]).splitlines()[-1].startswith("pass*")  # no such row, no footnote
+
+
+def test_the_docs_count_the_cases_there_are():
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    readme = re.search(r"`tofnet conformance` runs (\d+) named cases", (root / "README.md").read_text())
+    backends = re.search(r"All (\d+) cases pass for", (root / "docs" / "backends.md").read_text())
+    assert int(readme.group(1)) == int(backends.group(1)) == len(CASES)
