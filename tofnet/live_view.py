@@ -3,22 +3,18 @@
 ``DepthMap`` keeps the latest estimate of every pixel (m) and when it came; a view draws
 the pixels estimated within the last ``keep_s`` seconds (of the source's clock), the
 others blank. ``PngFolder`` writes ``depth-000001.png``, ``depth-000002.png``, ... every
-``every_s`` seconds of wall time, each written to a temporary name and renamed, into a
-folder that is new, empty, or holds only such frames (an earlier live run's).
+``every_s`` seconds of wall time into a folder it is given (``tofnet live --out`` gives it a
+temporary folder, ``tofnet.io.files.atomic_path``, put in place under ``--out`` when the run ends).
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
-import re
 import time
 from pathlib import Path
 
 import numpy as np
-
-from tofnet.errors import TofnetError
-
-_FRAME = re.compile(r"depth-\d{6}\.png")
 
 
 class DepthMap:
@@ -56,17 +52,6 @@ def percentile_limits(z: np.ndarray) -> tuple[float, float]:
     return float(low), float(max(high, low + 1e-3))
 
 
-def check_png_folder(folder: Path) -> None:
-    """Refuse a folder that holds anything but an earlier live run's frames (or is a file)."""
-    if folder.exists() and not folder.is_dir():
-        raise TofnetError(f"--out {folder}: exists and is not a folder")
-    if folder.is_dir():
-        other = [p.name for p in folder.iterdir() if not _FRAME.fullmatch(p.name)]
-        if other:
-            raise TofnetError(f"--out {folder}: the folder holds files tofnet live did not write ({other[0]}, ...); "
-                              "give a new or empty folder")
-
-
 class PngFolder:
     """A frame every ``every_s`` seconds of wall time into ``folder``.
 
@@ -74,15 +59,17 @@ class PngFolder:
     written by a thread of its own, so a frame (about 30 ms at 1280x720) does not hold up the
     packets behind it: written in line, frames every 0.5 s took the p99 delay of a 1280x720
     replay from 5 to 107 ms. A frame due while the previous one is still being written is
-    skipped (``skipped``): the view is a preview, the packets come first."""
+    skipped (``skipped``): the view is a preview, the packets come first.
 
-    def __init__(self, folder: str | Path, depth: DepthMap, every_s: float = 0.5):
+    ``folder`` is created when missing; nothing in it is removed (frames of the same numbers are
+    replaced). ``shown_as``: the folder's name in ``close()``'s line (the final name of a temporary
+    folder; default ``folder``)."""
+
+    def __init__(self, folder: str | Path, depth: DepthMap, every_s: float = 0.5, shown_as: str | Path | None = None):
         from concurrent.futures import ThreadPoolExecutor
         self.folder = Path(folder)
-        check_png_folder(self.folder)
+        self.shown_as = Path(shown_as) if shown_as is not None else self.folder
         self.folder.mkdir(parents=True, exist_ok=True)
-        for old in self.folder.iterdir():  # an earlier run's frames: replaced, not mixed with these
-            old.unlink()
         self.depth, self.every_s, self.frames, self._next = depth, float(every_s), 0, time.perf_counter()
         self.skipped = 0
         self._palette = viridis_palette()  # matplotlib's colour map read once, not in the first frame
@@ -108,8 +95,14 @@ class PngFolder:
         self._pending = self._writer.submit(_write_frame, final, depth.image(), limits, self._palette)
 
     def stop(self) -> None:
-        """End the writing thread (after the frame it is writing), with no last frame: the run failed."""
+        """End the writing thread (after the frame it is writing), with no last frame: the run failed
+        or was interrupted. A frame whose writing failed is not there (``_write_frame``)."""
         self._writer.shutdown(wait=True)
+
+    def summary(self) -> str:
+        """``N PNG frames -> FOLDER`` (and how many were skipped)."""
+        skipped = f" ({self.skipped} skipped: the previous one was still being written)" if self.skipped else ""
+        return f"{self.frames} PNG frames -> {self.shown_as}{skipped}"
 
     def close(self) -> str:
         try:
@@ -117,16 +110,20 @@ class PngFolder:
             self._pending.result()
         finally:
             self._writer.shutdown(wait=True)
-        skipped = f" ({self.skipped} skipped: the previous one was still being written)" if self.skipped else ""
-        return f"{self.frames} PNG frames -> {self.folder}{skipped}"
+        return self.summary()
 
 
 def _write_frame(final: Path, z: np.ndarray, limits, palette: np.ndarray) -> None:
     """``limits``: ``(low, high)`` in m, or every pixel's latest depth to take them from."""
     low, high = limits if isinstance(limits, tuple) else percentile_limits(limits)
     temp = final.with_name(f".{final.name}.tmp")
-    palette_png(temp, z, low, high, palette)
-    os.replace(temp, final)
+    try:
+        palette_png(temp, z, low, high, palette)
+        os.replace(temp, final)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(temp)
+        raise
 
 
 def viridis_palette() -> np.ndarray:

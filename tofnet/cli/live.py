@@ -3,6 +3,7 @@ with the depth map shown and the delay of every estimate measured."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 from pathlib import Path
 
@@ -33,8 +34,10 @@ def register(subparsers) -> None:
                         "behind and say by how much")
     g.add_argument("--seconds", type=float, default=None, help="stop after this many seconds of wall time")
     v = p.add_argument_group("display")
-    v.add_argument("-o", "--out", metavar="DIR", help="write PNG frames of the depth map into DIR (new, empty, or an "
-                                                "earlier live run's) instead of opening a window")
+    v.add_argument("-o", "--out", metavar="DIR",
+                   help="write PNG frames of the depth map into the folder DIR instead of opening a window; DIR "
+                        "must be new or empty, or (with --force) an earlier live run's, which is replaced when "
+                        "the run ends")
     v.add_argument("--png-every", default="0.5s", metavar="T", help="time between PNG frames (default 0.5s)")
     v.add_argument("--keep", default="0.2s", metavar="T",
                    help="how long a pixel's estimate stays shown (default 0.2s of source time)")
@@ -42,6 +45,7 @@ def register(subparsers) -> None:
     p.add_argument("--backend", default=None, help="backend name (default: the spec's, else 'fixed')")
     add_workers_option(p)
     p.add_argument("--json", metavar="FILE", help="write the statistics as JSON")
+    p.add_argument("--force", action="store_true", help="overwrite existing output files (never an input)")
     p.set_defaults(handler=handle)
 
 
@@ -50,15 +54,15 @@ def handle(args) -> int:
     from tofnet.cli.inputs import camera_options, input_options
     from tofnet.backends.runtime import clock_of
     from tofnet.cli.run import backend_choice, build_network, workers_line
+    from tofnet.io.files import atomic_path, write_text_atomic
     from tofnet.units import seconds
     from tofnet.live import CameraSource, ReplaySource, run_live
-    from tofnet.live_view import DepthMap, PngFolder, Window, check_png_folder, has_display
+    from tofnet.live_view import DepthMap, PngFolder, Window, has_display
 
     png_every, keep = seconds(args.png_every, "--png-every"), seconds(args.keep, "--keep")
     if png_every <= 0 or keep <= 0:
         raise TofnetError("--png-every and --keep must be longer than 0 s")
-    if args.out:
-        check_png_folder(Path(args.out))
+    check_live_outputs(args)  # before the source is opened: a refused output costs no run
     opened = None
     if args.replay:
         from tofnet.io.source import open_recording
@@ -70,55 +74,89 @@ def handle(args) -> int:
         source = CameraSource(camera["intrinsics"])
         meta = source.metadata()
         origin = "camera"
-    try:
-        network, compile_options, spec_backend, backend_options = build_network(args, meta.sensor_size, meta)
-        step_us = clock_of(network).timestep_us
-        if args.replay:
-            source = ReplaySource(opened, speed=args.speed, packet_us=step_us)
-        else:
-            source.packet_us = step_us
-        backend, backend_options = backend_choice(args, spec_backend, backend_options, DEFAULT_BACKEND)
-        depth = DepthMap(network.sensor_size, keep_s=keep)
-        view, note = None, None
-        if args.out:
-            view = PngFolder(args.out, depth, png_every)
-        elif not args.no_view:
-            if has_display():
-                view = Window(depth, title=f"tofnet live: {origin}")
-            else:
-                note = "no display: give --out DIR for PNG frames of the depth map"
-        stop = None if args.seconds is None else _stop_after(args.seconds)
+    interrupted = None
+    with contextlib.ExitStack() as frames_folder:  # --out: written under a temporary name, put in place at the end
         try:
-            stats, result = run_live(source, network, backend=backend, backend_options=backend_options,
-                                     compile_options=compile_options, drop_when_late=args.drop_when_late,
-                                     on_depth=depth.add if view else None, tick=view.tick if view else None,
-                                     stop=stop)  # no view: no map to keep up
-        except BaseException:
-            if isinstance(view, PngFolder):
-                view.stop()  # the frame being written is finished; its thread ends
-            raise
-    finally:
-        if opened is not None:
-            opened.close()
-    how = f"replay at {args.speed:g}x" if args.replay else "camera"
-    print(f"source         {origin} ({how}, {network.sensor_size[0]}x{network.sensor_size[1]} px, packets of "
-          f"{step_us / 1000:g} ms)")
-    latency = result.latency.get(result.depth_outputs[0], 0) if result.depth_outputs else 0
-    print(f"backend        {backend}; depth latency {format_steps(latency)} ({latency * step_us / 1000:g} ms)")
-    split = result.summary().get("workers")
-    if split:  # how the work was split
-        print(f"workers        {workers_line(split)}")
-    print(f"depth out      {stats.depth_out:,}")
-    for line in stats.lines():
-        print(line)
-    if view is not None:
-        print(f"view           {view.close()}")
+            network, compile_options, spec_backend, backend_options = build_network(args, meta.sensor_size, meta)
+            from tofnet.cli.outputs import network_files
+            check_live_outputs(args, network_files(network))  # the side files and the network's files read now
+            step_us = clock_of(network).timestep_us
+            if args.replay:
+                source = ReplaySource(opened, speed=args.speed, packet_us=step_us)
+            else:
+                source.packet_us = step_us
+            backend, backend_options = backend_choice(args, spec_backend, backend_options, DEFAULT_BACKEND)
+            depth = DepthMap(network.sensor_size, keep_s=keep)
+            view, note = None, None
+            if args.out:
+                folder = frames_folder.enter_context(atomic_path(args.out, folder=True, written_by="tofnet live"))
+                view = PngFolder(folder, depth, png_every, shown_as=args.out)
+            elif not args.no_view:
+                if has_display():
+                    view = Window(depth, title=f"tofnet live: {origin}")
+                else:
+                    note = "no display: give --out DIR for PNG frames of the depth map"
+            stop = None if args.seconds is None else _stop_after(args.seconds)
+            try:
+                stats, result = run_live(source, network, backend=backend, backend_options=backend_options,
+                                         compile_options=compile_options, drop_when_late=args.drop_when_late,
+                                         on_depth=depth.add if view else None, tick=view.tick if view else None,
+                                         stop=stop)  # no view: no map to keep up
+            except KeyboardInterrupt as err:
+                if not isinstance(view, PngFolder):
+                    raise
+                # Ctrl-C ends a camera run (without --seconds): the whole frames written so far are kept.
+                view.stop()
+                interrupted = err
+            except BaseException:
+                if isinstance(view, PngFolder):
+                    view.stop()  # the frame being written is finished; its thread ends; the folder is removed
+                raise
+        finally:
+            if opened is not None:
+                opened.close()
+        if interrupted is None:
+            how = f"replay at {args.speed:g}x" if args.replay else "camera"
+            print(f"source         {origin} ({how}, {network.sensor_size[0]}x{network.sensor_size[1]} px, packets of "
+                  f"{step_us / 1000:g} ms)")
+            latency = result.latency.get(result.depth_outputs[0], 0) if result.depth_outputs else 0
+            print(f"backend        {backend}; depth latency {format_steps(latency)} ({latency * step_us / 1000:g} ms)")
+            split = result.summary().get("workers")
+            if split:  # how the work was split
+                print(f"workers        {workers_line(split)}")
+            print(f"depth out      {stats.depth_out:,}")
+            for line in stats.lines():
+                print(line)
+            shown = view.close() if view is not None else None
+    if interrupted is not None:
+        print(f"view           {view.summary()} (interrupted)")
+        raise interrupted
+    if shown is not None:
+        print(f"view           {shown}")
     if note:
         print(f"note           {note}")
     if args.json:
-        from tofnet.io.files import write_text_atomic
         write_text_atomic(args.json, json.dumps(summary_of(stats), indent=2) + "\n")
     return 0
+
+
+def check_live_outputs(args, more_inputs: list | None = None) -> None:
+    """Refuse, before any work, a ``--json`` that exists (without ``--force``) or is an input, an ``--out``
+    that is not a new or empty folder or (with ``--force``) one an earlier live run wrote, and the two
+    naming the same place. Run again once the network is built (``more_inputs``: the files it reads)."""
+    from tofnet.io.ecd import recording_files
+    from tofnet.io.files import check_output, distinct_outputs, lies_in
+
+    inputs = (recording_files(args.replay) if args.replay else []) + ([Path(args.spec)] if args.spec else [])
+    inputs += more_inputs or []
+    distinct_outputs({"--out": args.out, "--json": args.json})
+    if args.out and args.json and lies_in(args.json, args.out):
+        raise TofnetError(f"--json {args.json}: lies in the --out folder {args.out}, which holds only the frames "
+                          "tofnet live writes; choose a name outside it")
+    if args.out:
+        check_output(args.out, force=args.force, inputs=inputs, what="--out", folder=True)
+    if args.json:
+        check_output(args.json, force=args.force, inputs=inputs, what="--json")
 
 
 def _stop_after(limit_s: float):

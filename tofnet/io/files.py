@@ -329,6 +329,9 @@ def _check_output(path: Path, force: bool, inputs: list, what: str, option: str,
     if path.exists() or path.is_symlink():
         wrong_kind = (not path.is_dir() or path.is_symlink()) if folder else not path.is_file()
         if wrong_kind:
+            if folder and path.is_symlink():  # replacing it would write beside a folder elsewhere: never
+                raise DataError(located(path, None, f"{what} is a symbolic link; a folder output is written under "
+                                                    "a real folder's name: name the folder itself"))
             kind = "folder" if folder else "regular file"
             raise DataError(located(path, None, f"{what} exists and is not a {kind}"))
         if folder:
