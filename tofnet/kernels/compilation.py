@@ -13,7 +13,7 @@ import logging
 import threading
 import time
 from contextlib import contextmanager
-from typing import Callable, Iterator
+from typing import Callable, ContextManager, Iterator
 
 from numba.core import event
 
@@ -109,23 +109,23 @@ class Stopwatch:
         self.started -= seconds
         self.setup_seconds += seconds
 
-    @contextmanager
-    def aside(self) -> Iterator[None]:
+    def aside(self) -> ContextManager[None]:
         """Time spent inside is set-up, not the network's (a compile within it stays a compile)."""
-        started, compiled = time.perf_counter(), _LOCK.seconds
-        try:
-            yield
-        finally:
-            self.setup_seconds += max(0.0, time.perf_counter() - started - (_LOCK.seconds - compiled))
+        return self._apart("setup_seconds")
+
+    def reading(self) -> ContextManager[None]:
+        """Time spent inside is the input's (a file read between packets), not the network's."""
+        return self._apart("reading_seconds")
 
     @contextmanager
-    def reading(self) -> Iterator[None]:
-        """Time spent inside is the input's (a file read between packets), not the network's."""
+    def _apart(self, bucket: str) -> Iterator[None]:
+        """Add the seconds spent inside, less the kernels' compiles within them, to ``bucket``."""
         started, compiled = time.perf_counter(), _LOCK.seconds
         try:
             yield
         finally:
-            self.reading_seconds += max(0.0, time.perf_counter() - started - (_LOCK.seconds - compiled))
+            spent = max(0.0, time.perf_counter() - started - (_LOCK.seconds - compiled))
+            setattr(self, bucket, getattr(self, bucket) + spent)
 
     @property
     def compile_seconds(self) -> float:
