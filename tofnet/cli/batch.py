@@ -13,7 +13,9 @@ def register(subparsers) -> None:
                                           "(results.csv, and results.parquet with pyarrow) and plot.png. "
                                           "Needs the batch extra: pip install \"tofnet[batch]\".")
     p.add_argument("plan", help="YAML plan (see docs/batch.md)")
-    p.add_argument("-o", "--out", metavar="DIR", help="output folder (default: the plan's output:, else PLAN-results/)")
+    p.add_argument("-o", "--out", metavar="DIR",
+                   help="output folder (default: the plan's output:, else NAME-results/ beside the plan, NAME the "
+                        "plan's name: or its file name)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="use an existing Dask scheduler, e.g. tcp://host:8786 "
                                                           "(default: start a local cluster)")
     p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: one per core)")
