@@ -295,3 +295,34 @@ def test_a_recording_with_a_gyroscope_replays_as_it_runs(tmp_path):
         stats, result = run_live(ReplaySource(source, speed=4.0), network, backend="fixed", on_depth=seen.append)
     reference, _ = run_recording(whole, network, backend="fixed")
     assert result.counts == reference.counts and result.counts["depth"]["emitted"] > 0
+
+
+def test_cli_live_takes_what_run_takes_a_window_and_the_sensor_size(tmp_path, capsys):
+    """live reads a file as tofnet run does (its sensor size, what falls outside it counted) and a time window
+    starts its steps at the window's first event, as tofnet run does: the same estimates and counts."""
+    from tofnet.io.events import write_events_npy
+
+    events = pattern_recording(int(SPAN_S * 1e6)).events.copy()
+    events["x"][::7] += 230  # some beyond the 240x180 a network takes when nothing says the size
+    bare = tmp_path / "bare.npy"
+    write_events_npy(bare, events)
+    camera = ["--velocity", "0.5,0.1,0", "--intrinsics", "200,200,120,30"]
+    for window in ([], ["--start", "0.0123s", "--duration", "0.3s"]):
+        seen = {}
+        for command in (["run", str(bare), "--out", str(tmp_path / "d.npz"), "--force"],
+                        ["live", "--replay", str(bare), "--no-view", "--speed", "8"]):
+            assert main([*command, *camera, *window]) == 0
+            out = capsys.readouterr().out
+            depth = next(line for line in out.splitlines() if line.startswith("depth out")).split()[2]
+            dropped = next(line for line in out.splitlines() if line.endswith("out of bounds")).split()[1]
+            seen[command[0]] = (depth, dropped)
+        assert seen["run"] == seen["live"] and seen["run"][0] != "0" and seen["run"][1] != "0", (window, seen)
+
+
+@pytest.mark.skipif(not (REAL / "evt2.raw").is_file(),
+                    reason="needs the real EVT2 recording, not distributed with tofnet (shared/real/ beside the checkout)")
+def test_cli_live_sizes_a_file_without_its_geometry_by_its_events_as_run_does(capsys):
+    camera = ["--velocity", "0.5,0,0", "--intrinsics", "500,500,320,240"]
+    assert main(["live", "--replay", str(REAL / "evt2.raw"), "--no-view", "--speed", "8", *camera]) == 0
+    out = capsys.readouterr().out
+    assert "640x480 px" in out and "taken from the events' extent" in out

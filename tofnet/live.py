@@ -59,6 +59,15 @@ def packet_bounds(t: np.ndarray, start_us: int, packet_us: int) -> tuple[np.ndar
     return cuts, ends
 
 
+def _first_event_us(source, chunk_events: int) -> int | None:
+    """The first event's time (µs) of a windowed source (its first chunk read once more by the replay)."""
+    chunks = iter(source.chunks(chunk_events))
+    try:
+        return next((int(chunk["t"][0]) for chunk in chunks if len(chunk)), None)
+    finally:
+        getattr(chunks, "close", lambda: None)()
+
+
 class ReplaySource:
     """A recording (an open ``EventSource``) replayed at ``speed`` times its recorded speed."""
 
@@ -68,7 +77,8 @@ class ReplaySource:
         self.source, self.speed, self.packet_us, self.chunk_events = source, float(speed), int(packet_us), chunk_events
         self.first_us: int | None = None
         self._wall0: float | None = None
-        self.t0_us = source.window[0] if source.window is not None else source.first_time()
+        # the session's t0: the first event (of the window), as tofnet run takes it, so both give the same steps
+        self.t0_us = source.first_time() if source.window is None else _first_event_us(source, chunk_events)
 
     def metadata(self) -> Recording:
         return self.source.metadata()
@@ -89,7 +99,7 @@ class ReplaySource:
         for chunk in self.source.chunks(self.chunk_events):
             if not len(chunk):
                 continue
-            if self.first_us is None:  # the clock starts: at the window's start, else the first event
+            if self.first_us is None:  # the clock starts at the first event
                 self.first_us = int(chunk["t"][0]) if self.t0_us is None else min(self.t0_us, int(chunk["t"][0]))
                 self._wall0, last_end = time.perf_counter(), self.first_us
             events = np.concatenate([carry, chunk]) if len(carry) else chunk

@@ -41,7 +41,7 @@ def register(subparsers) -> None:
     v.add_argument("--png-every", default="0.5s", metavar="T", help="time between PNG frames (default 0.5s)")
     v.add_argument("--keep", default="0.2s", metavar="T",
                    help="how long a pixel's estimate stays shown (default 0.2s of source time)")
-    v.add_argument("--no-view", action="store_true", help="no window and no PNGs: statistics only")
+    v.add_argument("--no-view", action="store_true", help="no window: statistics only (and the PNG frames of --out)")
     p.add_argument("--backend", default=None, help="backend name (default: the spec's, else 'fixed')")
     add_workers_option(p)
     p.add_argument("--json", metavar="FILE", help="write the statistics as JSON")
@@ -53,7 +53,7 @@ def handle(args) -> int:
     from tofnet.api import DEFAULT_BACKEND
     from tofnet.cli.inputs import camera_options, input_options
     from tofnet.backends.runtime import clock_of
-    from tofnet.cli.run import backend_choice, build_network, workers_line
+    from tofnet.cli.run import backend_choice, build_network, reader_lines, workers_line
     from tofnet.io.files import atomic_path, write_text_atomic
     from tofnet.units import seconds
     from tofnet.live import CameraSource, ReplaySource, run_live
@@ -69,6 +69,10 @@ def handle(args) -> int:
         opened = open_recording(args.replay, **input_options(args))
         meta = opened.metadata()
         origin = str(args.replay)
+        if meta.sensor_size is None and not args.sensor_size:
+            # as tofnet run reads such a file (whole): its reader may size it by the events' extent (a note says so)
+            meta = opened.read()
+            opened.sensor_size = meta.sensor_size
     else:
         camera = camera_options(args)
         source = CameraSource(camera["intrinsics"])
@@ -124,6 +128,8 @@ def handle(args) -> int:
             split = result.summary().get("workers")
             if split:  # how the work was split
                 print(f"workers        {workers_line(split)}")
+            for line in reader_lines(result.summary()):  # where every event went, as tofnet run says it
+                print(line)
             print(f"depth out      {stats.depth_out:,}")
             for line in stats.lines():
                 print(line)
@@ -133,8 +139,8 @@ def handle(args) -> int:
         raise interrupted
     if shown is not None:
         print(f"view           {shown}")
-    if note:
-        print(f"note           {note}")
+    for line in list(meta.notes) + ([note] if note else []):
+        print(f"note           {line}")
     if args.json:
         write_text_atomic(args.json, json.dumps(summary_of(stats), indent=2) + "\n")
     return 0
