@@ -380,3 +380,14 @@ def test_cli_error_window_is_auto_or_a_positive_duration(tmp_path, capsys):
     capsys.readouterr()
     assert main(["plot", "error", rec, dep, "--out", str(tmp_path / "f.png"), "--error-window", "0"]) == 2
     assert "'auto'" in capsys.readouterr().err
+
+
+def test_the_cloud_says_what_it_lacks_and_only_that():
+    from tofnet.eval.plots import available_kinds
+    from tofnet.events import make_events
+    from tofnet.io.recording import Intrinsics, Recording
+
+    events = make_events([0, 1000], [1, 2], [1, 1], [1, 0])
+    with_camera = Recording(events, intrinsics=Intrinsics(200.0, 200.0, 120.0, 90.0))
+    assert available_kinds(with_camera)["cloud"] == "needs camera poses (groundtruth.txt); the recording has none"
+    assert "intrinsics" in available_kinds(Recording(events))["cloud"]

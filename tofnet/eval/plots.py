@@ -198,8 +198,14 @@ def available_kinds(recording) -> dict[str, str | None]:
     return {"depthmap": None, "histogram": None,
             "error": None if recording.gt_depth is not None else
             "needs per-event ground-truth depth (events_depth.npy), e.g. from `tofnet simulate`",
-            "cloud": None if recording.intrinsics is not None and has_poses(recording.trajectory) else
-            "needs intrinsics (calib.txt) and camera poses (groundtruth.txt)"}
+            "cloud": _cloud_missing(recording)}
+
+
+def _cloud_missing(recording) -> str | None:
+    """What the 3D cloud lacks (it places the estimates in the world: the camera and its poses), or None."""
+    missing = ([] if recording.intrinsics is not None else ["intrinsics (calib.txt, --intrinsics or --calib)"]) + \
+        ([] if has_poses(recording.trajectory) else ["camera poses (groundtruth.txt)"])
+    return f"needs {' and '.join(missing)}; the recording has none" if missing else None
 
 
 def plot_all(recording, depth: np.ndarray, meta: dict, out_dir: str | Path, *, prefix: str = "",
