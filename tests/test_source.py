@@ -28,6 +28,11 @@ def test_content_decides_over_the_name(tmp_path):
     (tmp_path / "z.h5").write_bytes(b"not hdf5 at all")
     with pytest.raises(DataError, match="'.h5' names HDF5 but the content does not start like one"):
         detect_format(tmp_path / "z.h5")
+    # Prophesee: DAT's header says its version, RAW's its evt; the suffix only breaks a tie
+    (tmp_path / "dat.raw").write_bytes(b"% Version 2\n% Width 640\n% Height 480\n\x0c\x08")
+    (tmp_path / "evt.dat").write_bytes(b"% evt 3.0\n% end\n")
+    (tmp_path / "bare.raw").write_bytes(b"% date 2020\n% end\n")
+    assert [detect_format(tmp_path / n) for n in ("dat.raw", "evt.dat", "bare.raw")] == ["dat", "evt", "evt"]
 
 
 class _Synthetic(EventSource):

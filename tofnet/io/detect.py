@@ -111,9 +111,11 @@ def _prophesee_kind(path: Path, head: bytes, suffix: str) -> str:
     lines = [line[1:].strip() for line in header.splitlines() if line.startswith("%")]
     if any(line.startswith("evt ") or line.startswith("format evt") for line in lines):
         return "evt"
+    if any(line.startswith("version") for line in lines):  # DAT's header says its version; a RAW one never does
+        return "dat"
     if suffix == ".raw":
         return "evt"
-    if suffix == ".dat" or any(line.startswith("version") for line in lines):
+    if suffix == ".dat":
         return "dat"
     return _unknown(path, "a '%' header that is neither Prophesee RAW (% evt) nor DAT (% Version)")
 
