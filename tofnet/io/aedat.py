@@ -39,15 +39,18 @@ class AedatSource(EventSource):
             with aedat.Decoder(self.path) as decoder:
                 tracks = decoder.tracks()
                 try:
-                    counts: dict[int, int] = {}
+                    counts: dict[int, int] = {track.id: 0 for track in tracks}  # a track without packets: 0
                     starts: dict[int, int] = {}
+                    ends: dict[int, int] = {}
                     for definition in decoder.file_data_definitions():
                         counts[definition.track_id] = counts.get(definition.track_id, 0) + definition.elements_count
                         if definition.elements_count:
                             starts[definition.track_id] = min(starts.get(definition.track_id, definition.start_t),
                                                               definition.start_t)
+                            ends[definition.track_id] = max(ends.get(definition.track_id, definition.end_t),
+                                                            definition.end_t)
                 except RuntimeError:
-                    counts, starts = {}, {}  # no index table (an interrupted recording): counts unknown
+                    counts, starts, ends = {}, {}, {}  # no index table (an interrupted recording): counts unknown
         except RuntimeError as err:
             raise DataError(located(self.path, None, f"not a readable AEDAT4 file ({reason(err)})")) from None
         events = [track for track in tracks if track.data_type == "events"]
@@ -58,7 +61,7 @@ class AedatSource(EventSource):
         self.track_id = events[0].id
         self.sensor_size = tuple(events[0].dimensions)
         self.n_events = counts.get(self.track_id)
-        self._first_t = starts.get(self.track_id)
+        self._first_t, self._last_t = starts.get(self.track_id), ends.get(self.track_id)
         self.detail = f"events track {self.track_id}"
         self._imu_track = any(track.data_type == "imus" for track in tracks)
         self._imu_read = False  # metadata()'s pass for the IMU is made once
@@ -125,6 +128,10 @@ class AedatSource(EventSource):
         if self._first_t is not None:
             return self._first_t
         return super().first_time()
+
+    def last_time(self) -> int | None:
+        # Likewise the last: each packet's last time is in the index table.
+        return self._last_t if self._last_t is not None else super().last_time()
 
 
 #: Longest AEDAT4 header (its XML description) read: DV writes a few KB.
