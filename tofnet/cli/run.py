@@ -208,8 +208,11 @@ def handle(args) -> int:
     check_run_outputs(args)
     monitors = [Monitor.parse(text, args.monitor_every) for text in args.monitor]
     with open_recording(args.recording, **input_options(args)) as source:
-        # A file that says its sensor size streams through the network in chunks (events never all
-        # in memory); otherwise the size comes from the events' extent, which needs them all.
+        if source.sensor_size is None and args.sensor_size:  # the file does not say: --sensor-size is its size,
+            from tofnet.core.params import parse_size        # not the events' extent (nor a note that it is)
+            source.sensor_size = parse_size(args.sensor_size, "--sensor-size")
+        # A file that says its sensor size (or given one) streams through the network in chunks (events
+        # never all in memory); otherwise the size comes from the events' extent, which needs them all.
         streaming = source.sensor_size is not None and not monitors
         recording = source.metadata() if streaming else source.read()
         network, compile_options, spec_backend, backend_options = build_network(args, recording.sensor_size,
