@@ -47,6 +47,7 @@ class EventSource:
         self.n_events: int | None = None  # known without decoding, else None
         self.has_depth = False
         self.streams: dict[str, str] = {}  # other streams in the file: name -> what
+        self.unread: list[str] = []  # those of them tofnet does not read ("name, what"): convert says so
         self.notes: list[str] = []
         self.window: tuple[int, int | None] | None = None  # [start, stop) µs on the file's clock (set_window)
         self._origin_us = 0  # the file's first event, which relative window times count from
