@@ -184,3 +184,18 @@ def test_a_bare_event_file_names_both_missing_camera_facts_at_once(tmp_path, cap
                  "--intrinsics", "200,200,120,90"]) == 2
     err = capsys.readouterr().err
     assert "--velocity" in err and "also pass --intrinsics" not in err  # only what is still missing
+
+
+def test_an_unknown_option_is_said_by_its_subcommand_with_the_closest_option(capsys):
+    with pytest.raises(SystemExit) as code:
+        main(["run", "rec", "--duraton", "1s"])
+    assert code.value.code == 2
+    assert error_line(capsys) == ("tofnet run: error: unrecognized arguments: --duraton 1s; did you mean --duration? "
+                                  "(see 'tofnet run --help')")
+    with pytest.raises(SystemExit):
+        main(["info", "rec", "--qiet=1", "--nothing-like-it"])
+    assert error_line(capsys) == ("tofnet info: error: unrecognized arguments: --qiet=1 --nothing-like-it; did you "
+                                  "mean --quiet? (see 'tofnet info --help')")
+    with pytest.raises(SystemExit):  # nothing close: no guess
+        main(["convert", "a", "b", "--xyzzy", "extra"])
+    assert error_line(capsys) == "tofnet convert: error: unrecognized arguments: --xyzzy extra (see 'tofnet convert --help')"
