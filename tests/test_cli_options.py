@@ -199,3 +199,15 @@ def test_an_unknown_option_is_said_by_its_subcommand_with_the_closest_option(cap
     with pytest.raises(SystemExit):  # nothing close: no guess
         main(["convert", "a", "b", "--xyzzy", "extra"])
     assert error_line(capsys) == "tofnet convert: error: unrecognized arguments: --xyzzy extra (see 'tofnet convert --help')"
+
+
+def test_the_workers_line_says_bands_and_threads_apart():
+    from tofnet.cli.run import workers_line
+
+    assert workers_line({"threads": 2, "bands": 64, "whole": []}) == "64 bands of rows on 2 threads"
+    assert workers_line({"threads": 1, "bands": 1, "whole": [], "one_band": "small packets"}) == \
+        "1 band of rows on 1 thread; one band: small packets"
+    assert workers_line({"threads": 2, "bands": 2, "whole": ["input", "velocity"], "unit": "threads"}) == \
+        "2 bands of rows on 2 threads; run whole: input, velocity"
+    assert workers_line({"threads": 1, "bands": 1, "whole": ["time_surface"], "unit": "processes"}) == \
+        "1 band of rows on 1 process; run whole: time_surface"

@@ -82,11 +82,12 @@ def probe_option(text: str) -> str:
 
 
 def workers_line(workers: dict) -> str:
-    """How a run was split: ``2 (2 bands of rows; run whole: velocity)``."""
+    """How a run was split: ``64 bands of rows on 2 threads; run whole: velocity`` (multiproc: processes)."""
     whole = f"; run whole: {', '.join(workers['whole'])}" if workers["whole"] else ""
-    bands = workers["bands"]
+    bands, count = workers["bands"], workers["threads"]
+    unit = {"threads": ("thread", "threads"), "processes": ("process", "processes")}[workers.get("unit", "threads")]
     why = f"; one band: {workers['one_band']}" if workers.get("one_band") else ""
-    return f"{workers['threads']} ({bands} band{'s' if bands != 1 else ''} of rows{whole}{why})"
+    return f"{bands} band{'s' if bands != 1 else ''} of rows on {count} {unit[count != 1]}{whole}{why}"
 
 
 def add_network_options(p: argparse.ArgumentParser) -> None:
