@@ -298,7 +298,7 @@ def test_tofnet_run_with_workers_writes_the_same_bytes_and_says_how_it_split(tmp
             outs.append(out.read_bytes())
         assert outs[0] == outs[1]
         text = capsys.readouterr().out
-        assert "(3 bands of rows" in text
+        assert "workers        3 bands of rows on " in text
         assert ("run whole:" in text) == (estimator == "improved")
 
 

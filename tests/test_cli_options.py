@@ -184,3 +184,30 @@ def test_a_bare_event_file_names_both_missing_camera_facts_at_once(tmp_path, cap
                  "--intrinsics", "200,200,120,90"]) == 2
     err = capsys.readouterr().err
     assert "--velocity" in err and "also pass --intrinsics" not in err  # only what is still missing
+
+
+def test_an_unknown_option_is_said_by_its_subcommand_with_the_closest_option(capsys):
+    with pytest.raises(SystemExit) as code:
+        main(["run", "rec", "--duraton", "1s"])
+    assert code.value.code == 2
+    assert error_line(capsys) == ("tofnet run: error: unrecognized arguments: --duraton 1s; did you mean --duration? "
+                                  "(see 'tofnet run --help')")
+    with pytest.raises(SystemExit):
+        main(["info", "rec", "--qiet=1", "--nothing-like-it"])
+    assert error_line(capsys) == ("tofnet info: error: unrecognized arguments: --qiet=1 --nothing-like-it; did you "
+                                  "mean --quiet? (see 'tofnet info --help')")
+    with pytest.raises(SystemExit):  # nothing close: no guess
+        main(["convert", "a", "b", "--xyzzy", "extra"])
+    assert error_line(capsys) == "tofnet convert: error: unrecognized arguments: --xyzzy extra (see 'tofnet convert --help')"
+
+
+def test_the_workers_line_says_bands_and_threads_apart():
+    from tofnet.cli.run import workers_line
+
+    assert workers_line({"threads": 2, "bands": 64, "whole": []}) == "64 bands of rows on 2 threads"
+    assert workers_line({"threads": 1, "bands": 1, "whole": [], "one_band": "small packets"}) == \
+        "1 band of rows on 1 thread; one band: small packets"
+    assert workers_line({"threads": 2, "bands": 2, "whole": ["input", "velocity"], "unit": "threads"}) == \
+        "2 bands of rows on 2 threads; run whole: input, velocity"
+    assert workers_line({"threads": 1, "bands": 1, "whole": ["time_surface"], "unit": "processes"}) == \
+        "1 band of rows on 1 process; run whole: time_surface"

@@ -86,6 +86,30 @@ def test_pixels_outside_the_sensor_are_counted_and_reported(edge_folder, tmp_pat
     assert meta["summary"]["dropped"]["out_of_bounds"] == 40 * 180
 
 
+def test_sensor_size_of_a_file_that_does_not_say_it_is_used_without_the_extent_note(edge_folder, tmp_path, capsys):
+    """--sensor-size on a file without a size (an EVT3 header without geometry): the network runs at it and no
+    note says the size was taken from the events' extent."""
+    from optional import optional
+    optional("faery")
+    assert main(["convert", str(edge_folder), str(tmp_path / "rec.raw"), "--quiet"]) == 0
+    data = (tmp_path / "rec.raw").read_bytes()
+    end = 0
+    while data.startswith(b"%", end):
+        end = data.index(b"\n", end) + 1
+    header = [line for line in data[:end].splitlines(keepends=True)
+              if not line.lower().startswith((b"% geometry", b"% format"))]
+    (tmp_path / "bare.raw").write_bytes(b"".join(header) + data[end:])
+    common = ["run", str(tmp_path / "bare.raw"), "--velocity", "0.5,0,0", "--intrinsics", "200,200,119.5,89.5",
+              "--quiet", "--force", "--out", str(tmp_path / "d.npz")]
+    assert main(common) == 0
+    assert "240x180 taken from the events' extent (pass --sensor-size to set it)" in capsys.readouterr().out
+    assert main(common + ["--sensor-size", "200x180"]) == 0
+    printed = capsys.readouterr().out
+    assert "events' extent" not in printed and "(200x180 px," in printed, printed
+    _, meta = read_depth(tmp_path / "d.npz")
+    assert meta["summary"]["dropped"]["out_of_bounds"] == 40 * 180
+
+
 def one_line_error(capsys, argv):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()

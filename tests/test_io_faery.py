@@ -92,6 +92,65 @@ def test_aedat4_with_imu_and_calibration_side_files(tmp_path, recording):
     assert any("calib.txt" in note for note in read.notes)
 
 
+def _aedat4_with_triggers(path, events):
+    """An AEDAT4 file as a DAVIS writes one: events, an IMU track (without samples here) and 5 triggers."""
+    from faery.extension import aedat
+    from tofnet.io.aedat import _track_node
+    from tofnet.io.faery_shared import faery_packet
+
+    tracks = [_track_node(0, "EVTS", "events", {"sizeX": ("int", SENSOR[0]), "sizeY": ("int", SENSOR[1])}),
+              _track_node(1, "IMUS", "imu", {}), _track_node(2, "TRIG", "triggers", {})]
+    description = [aedat.DescriptionNode(name="outInfo", path="/mainloop/Recorder/outInfo/", attributes={},
+                                         nodes=tracks)]
+    triggers = np.zeros(5, dtype=[("t", "<u8"), ("source", "u1")])
+    triggers["t"] = events["t"][:5]
+    with aedat.Encoder(path=path, description=description, compression=aedat.LZ4_DEFAULT) as encoder:
+        encoder.write(0, faery_packet(events))
+        encoder.write(2, triggers)
+
+
+def test_convert_says_which_aedat4_streams_it_does_not_write(tmp_path, recording, capsys):
+    from tofnet.cli import main
+
+    _aedat4_with_triggers(tmp_path / "davis.aedat4", recording.events)
+    source = open_recording(tmp_path / "davis.aedat4")
+    assert source.streams == {"imus (track 1)": "0 samples (read as the IMU)", "triggers (track 2)": "5 triggers"}
+    assert np.array_equal(source.read().events, recording.events) and source.imu is None
+    unwritten = ("not written: triggers (track 2), 5 triggers (tofnet reads only the events and IMU of "
+                 "davis.aedat4)")
+    for out in ("out.aedat4", "out", "out.npz"):
+        assert main(["convert", str(tmp_path / "davis.aedat4"), str(tmp_path / out), "--quiet"]) == 0
+        assert unwritten in capsys.readouterr().out.splitlines(), out
+    # what tofnet wrote holds the events only: no IMU track, so nothing for info to contradict
+    written = open_recording(tmp_path / "out.aedat4")
+    assert written.streams == {} and written.unread == [] and written.read().imu is None
+    assert np.array_equal(read_recording(tmp_path / "out.aedat4").events, recording.events)
+    assert main(["info", str(tmp_path / "out.aedat4"), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "imu            none" in printed and "other stream" not in printed, printed
+
+
+def test_aedat4_declares_an_imu_track_only_with_an_imu(tmp_path, recording):
+    from tofnet.io.aedat import write_aedat4
+    from tofnet.io.recording import Recording
+
+    bare = Recording(events=recording.events, sensor_size=SENSOR)
+    write_aedat4(tmp_path / "bare.aedat4", [recording.events], bare)
+    source = open_recording(tmp_path / "bare.aedat4")
+    assert source.streams == {} and source.metadata().imu is None and source.read().imu is None
+    write_aedat4(tmp_path / "imu.aedat4", [recording.events], recording)
+    source = open_recording(tmp_path / "imu.aedat4")
+    assert source.streams == {"imus (track 1)": f"{len(recording.imu)} samples (read as the IMU)"}
+    assert np.allclose(source.read().imu, recording.imu, rtol=1e-6, atol=1e-6)
+    # an AEDAT4 source's IMU comes with its events: declared before they are read, written after them
+    with open_recording(tmp_path / "imu.aedat4") as again:
+        write_aedat4(tmp_path / "copy.aedat4", again.chunks(), again)
+    assert np.allclose(read_recording(tmp_path / "copy.aedat4").imu, recording.imu, rtol=1e-6, atol=1e-6)
+    with open_recording(tmp_path / "bare.aedat4") as again:
+        write_aedat4(tmp_path / "copy_bare.aedat4", again.chunks(), again)
+    assert open_recording(tmp_path / "copy_bare.aedat4").streams == {}
+
+
 def test_aedat4_metadata_holds_the_imu_read_once_up_to_the_window(tmp_path, recording, monkeypatch):
     """The IMU comes among the packets: metadata() decodes the file for it once, stopping after the window."""
     from tofnet.io import aedat

@@ -96,3 +96,28 @@ def test_run_on_evt3_and_dat_gives_the_same_depth(evt3, dat):
     for name in ("x", "y", "z", "step"):
         assert np.array_equal(results[0][name], results[1][name])
     assert np.all(results[0]["t"] - results[1]["t"] == EVT3_MINUS_DAT_US)
+
+
+@pytest.mark.parametrize("name, span", [
+    ("evt3.raw", "@11.200224 s .. @21.968221 s (10.768 s)"),
+    ("davis346.aedat4", "@1589163147.368868 s .. @1589163149.728813 s (2.35994 s)")])
+def test_a_window_before_the_recording_says_its_true_span(name, span):
+    from tofnet.errors import DataError
+    from tofnet.io.window import parse_window
+
+    for window, asked in ((parse_window(start="@5s", duration="1s"), "@5.000000 s .. @6.000000 s"),
+                          (parse_window(start="@0s", duration="11.2s"), "@0.000000 s .. @11.200000 s")):
+        with pytest.raises(DataError) as err:
+            read_recording(REAL / name, window=window)
+        assert str(err.value) == (f"{REAL / name}: no events in the time window {asked}; the recording's events "
+                                  f"span {span}")
+
+
+def test_convert_says_the_aedat4_frames_and_triggers_are_not_written(tmp_path):
+    from tofnet.io.convert import convert
+
+    with open_recording(REAL / "davis346.aedat4") as source:
+        messages = convert(source, tmp_path / "out.aedat4")
+    assert ("not written: frame (track 1), 59 frames 346x260; triggers (track 3), 236 triggers (tofnet reads only "
+            "the events and IMU of davis346.aedat4)") in messages
+    assert open_recording(tmp_path / "out.aedat4").streams == {"imus (track 1)": "2363 samples (read as the IMU)"}

@@ -219,9 +219,9 @@ def test_cli_live_on_two_workers_hands_back_what_one_worker_does(recording_file,
         stats[workers] = json.loads(out.read_text())
         text = capsys.readouterr().out
         if backend == "fixed" and rotation:  # how the work was split, when it was
-            assert ("workers        2 (2 bands of rows" in text) == (workers == "2")
+            assert ("workers        2 bands of rows on 2 threads" in text) == (workers == "2")
         if backend == "fixed" and not rotation and workers == "2":  # 1 ms packets: one band, and why
-            assert "workers        1 (1 band of rows; one band: the first packet held " in text
+            assert "workers        1 band of rows on 1 thread; one band: the first packet held " in text
     assert stats["1"]["depth_out"] == stats["2"]["depth_out"] > 0
     assert stats["1"]["events_in"] == stats["2"]["events_in"]
 

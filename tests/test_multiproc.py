@@ -96,7 +96,8 @@ def test_the_summary_says_how_a_model_by_model_run_was_split(session):
     result = session.run(texture(), compiled=estimator)
     assert result.summary()["workers"] == {"threads": 1, "bands": 1, "whole": [p.name for p in
                                                                                estimator.network.processes
-                                                                               if p.placement != "core"]}
+                                                                               if p.placement != "core"],
+                                           "unit": "processes"}
     assert "time_surface" in result.summary()["workers"]["whole"]
 
 

@@ -97,8 +97,8 @@ def test_a_run_that_asked_for_workers_and_kept_one_band_says_why(tmp_path, capsy
     write_hdf5(short, [events], Recording(np.empty(0, EVENT_DTYPE), intrinsics=INTRINSICS, sensor_size=SENSOR))
     assert main(["run", str(short), "--workers", "2", "--out", str(tmp_path / "d.npz"), "--velocity=-0.4,0.1,0.05",
                  "--quiet"]) == 0
-    assert ("workers        1 (1 band of rows; one band: the first packet held 100,000 events; bands pay from "
-            "262,144 (docs/performance.md))") in capsys.readouterr().out
+    assert ("workers        1 band of rows on 1 thread; one band: the first packet held 100,000 events; bands pay "
+            "from 262,144 (docs/performance.md)") in capsys.readouterr().out
 
 
 def test_a_streamed_files_reading_is_timed_apart_from_the_network(tmp_path, monkeypatch):

@@ -312,3 +312,65 @@ def test_a_text_window_survives_a_profiler_holding_its_frames(tmp_path, recordin
     read = read_recording(tmp_path / "events.txt", window=parse_window(start="100ms", duration="50ms"))
     assert len(held) == 1
     assert np.array_equal(read.events, _expected(recording.events, first + 100_000, first + 150_000))
+
+
+def test_a_window_without_events_says_it_as_asked_and_the_recordings_true_span(tmp_path, recording):
+    """A window before the first event, or in a gap, of a file decoded from the start (RAW, DAT) stops
+    decoding early: the message still gives the recording's true end, and ``@`` windows in ``@`` times."""
+    from tofnet.io.window import absolute_text
+
+    events = recording.events
+    first, last = int(events["t"][0]), int(events["t"][-1])
+    t = events["t"] - first
+    gapped = events[(t < 100_000) | (t >= 200_000)]  # no events 100..200 ms
+    write_ecd(tmp_path / "ecd", gapped, intrinsics=None, sensor_size=recording.sensor_size)
+    paths = [tmp_path / "ecd"]
+    for name, module in (("r.npz", None), ("r.h5", "h5py"), ("r.aedat4", "faery"), ("r.raw", "faery"),
+                         ("r.dat", "faery")):
+        if module is None or _installed(module):
+            convert_recording(tmp_path / "ecd", tmp_path / name)
+            paths.append(tmp_path / name)
+    span = f"the recording's events span {absolute_text(first)} .. {absolute_text(last)} (0.29987 s)"
+    for path in paths:
+        for window, asked in ((parse_window(start=f"@{first - 2_000_000}us", duration="1s"),
+                               f"{absolute_text(first - 2_000_000)} .. {absolute_text(first - 1_000_000)}"),
+                              (parse_window(start="@0s", until=f"@{first}us"), f"@0.000000 s .. {absolute_text(first)}"),
+                              (parse_window(start=f"@{first + 120_000}us", duration="50ms"),
+                               f"{absolute_text(first + 120_000)} .. {absolute_text(first + 170_000)}")):
+            with pytest.raises(DataError) as err:
+                read_recording(path, window=window)
+            assert str(err.value) == f"{path}: no events in the time window {asked}; {span}", path
+        with pytest.raises(DataError) as err:  # relative times: said relative, with the true end
+            read_recording(path, window=parse_window(start="120ms", duration="50ms"))
+        assert str(err.value) == (f"{path}: no events in the time window 0.12 s .. 0.17 s from the first event; "
+                                  "the recording ends 0.29987 s after its first event"), path
+
+
+def _installed(module):
+    import importlib.util
+    return importlib.util.find_spec(module) is not None
+
+
+def test_a_reader_that_decodes_from_the_start_finds_the_true_end_for_the_message(recording):
+    """Decoding stops at the first packet past the window: the end the message gives is the file's, found by
+    decoding the rest, not the last time decoded."""
+    from tofnet.io.event_source import EventSource
+
+    class Packets(EventSource):
+        format = "test"
+
+        def _packets(self, size_hint):
+            for part in np.array_split(recording.events, 10):
+                yield part
+
+    from tofnet.io.window import absolute_text
+
+    first, last = int(recording.events["t"][0]), int(recording.events["t"][-1])
+    for window, asked in ((parse_window(start="@0s", duration="1s"), "@0.000000 s .. @1.000000 s"),
+                          (parse_window(start="@0s", until=f"@{first}us"), f"@0.000000 s .. {absolute_text(first)}")):
+        source = Packets("rec.test")
+        source.set_window(window)
+        with pytest.raises(DataError) as err:
+            list(source.chunks())
+        assert str(err.value) == (f"rec.test: no events in the time window {asked}; the recording's events span "
+                                  f"{absolute_text(first)} .. {absolute_text(last)} (0.29987 s)")

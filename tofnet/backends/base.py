@@ -186,7 +186,8 @@ class RunResult:
             "setup_time_s": self.setup_time, "read_time_s": self.read_time, "compile_time_s": self.compile_time, "kernels_compiled": self.kernels_compiled})
         if "bands" in self.extra:  # how the work was split (workers, bands of rows, what ran whole)
             out["workers"] = {"threads": int(self.extra.get("workers", 1)), "bands": len(self.extra["bands"]),
-                              "whole": list(self.extra.get("whole", []))}
+                              "whole": list(self.extra.get("whole", [])),
+                              "unit": str(self.extra.get("unit", "threads"))}  # "threads" counts processes then
             if "one_band" in self.extra:  # why a run that asked for workers kept one band
                 out["workers"]["one_band"] = str(self.extra["one_band"])
         return out

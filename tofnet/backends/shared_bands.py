@@ -48,7 +48,7 @@ def split_facts(compiled, plans) -> dict:
     layers = [layer.name for layer in compiled.layers]
     rows = band_rows(compiled, layers[0], plans) if layers else [(0, network.sensor_size[1])]
     return {"workers": len(plans), "bands": [list(band) for band in rows],
-            "whole": [p.name for p in network.processes if p.placement != "core"]}
+            "whole": [p.name for p in network.processes if p.placement != "core"], "unit": "processes"}
 
 
 class SharedBandKernel(BandsBase):
@@ -76,7 +76,8 @@ class SharedBandKernel(BandsBase):
         except BaseException:
             self.close()
             raise
-        self.facts = {"workers": len(self.bands), "bands": [list(b) for b in self.bands], "shared_memory": True}
+        self.facts = {"workers": len(self.bands), "bands": [list(b) for b in self.bands], "shared_memory": True,
+                      "unit": "processes"}
 
     def _open(self, addresses: dict, reach: int, velocity_source, lookahead: int) -> None:
         """Give each worker its band (``_band_worker.BandWorker``) and its ends of the pipes by which the

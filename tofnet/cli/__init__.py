@@ -19,6 +19,29 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message: str):
         self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 
+    def parse_args(self, args=None, namespace=None):
+        """As argparse's, but unknown options are said by the subcommand's parser (``tofnet run: error: ...
+        (see 'tofnet run --help')``), with the closest option of that subcommand when one is close."""
+        parsed, extras = self.parse_known_args(args, namespace)
+        if extras:
+            commands = {name: sub for action in self._actions if isinstance(action, argparse._SubParsersAction)
+                        for name, sub in action.choices.items()}
+            parser = commands.get(getattr(parsed, "command", None), self)
+            parser.error(f"unrecognized arguments: {' '.join(extras)}{parser.did_you_mean(extras)}")
+        return parsed
+
+    def did_you_mean(self, extras: list[str]) -> str:
+        """``; did you mean --duration?`` for the first unknown option close to one of this parser's."""
+        import difflib
+
+        options = [option for action in self._actions for option in action.option_strings if option.startswith("--")]
+        for word in extras:
+            if word.startswith("--"):
+                close = difflib.get_close_matches(word.partition("=")[0], options, n=1)
+                if close:
+                    return f"; did you mean {close[0]}?"
+        return ""
+
 
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(

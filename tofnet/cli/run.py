@@ -82,11 +82,12 @@ def probe_option(text: str) -> str:
 
 
 def workers_line(workers: dict) -> str:
-    """How a run was split: ``2 (2 bands of rows; run whole: velocity)``."""
+    """How a run was split: ``64 bands of rows on 2 threads; run whole: velocity`` (multiproc: processes)."""
     whole = f"; run whole: {', '.join(workers['whole'])}" if workers["whole"] else ""
-    bands = workers["bands"]
+    bands, count = workers["bands"], workers["threads"]
+    unit = {"threads": ("thread", "threads"), "processes": ("process", "processes")}[workers.get("unit", "threads")]
     why = f"; one band: {workers['one_band']}" if workers.get("one_band") else ""
-    return f"{workers['threads']} ({bands} band{'s' if bands != 1 else ''} of rows{whole}{why})"
+    return f"{bands} band{'s' if bands != 1 else ''} of rows on {count} {unit[count != 1]}{whole}{why}"
 
 
 def add_network_options(p: argparse.ArgumentParser) -> None:
@@ -208,8 +209,11 @@ def handle(args) -> int:
     check_run_outputs(args)
     monitors = [Monitor.parse(text, args.monitor_every) for text in args.monitor]
     with open_recording(args.recording, **input_options(args)) as source:
-        # A file that says its sensor size streams through the network in chunks (events never all
-        # in memory); otherwise the size comes from the events' extent, which needs them all.
+        if source.sensor_size is None and args.sensor_size:  # the file does not say: --sensor-size is its size,
+            from tofnet.core.params import parse_size        # not the events' extent (nor a note that it is)
+            source.sensor_size = parse_size(args.sensor_size, "--sensor-size")
+        # A file that says its sensor size (or given one) streams through the network in chunks (events
+        # never all in memory); otherwise the size comes from the events' extent, which needs them all.
         streaming = source.sensor_size is not None and not monitors
         recording = source.metadata() if streaming else source.read()
         network, compile_options, spec_backend, backend_options = build_network(args, recording.sensor_size,

@@ -22,6 +22,8 @@ from tofnet.io.faery_shared import encoder_error, faery_packet
 
 #: Standard gravity, m/s² per g (DV's accelerometer unit).
 GRAVITY = 9.80665
+#: What the elements of a track are, for ``streams`` (the index table counts elements: frames, triggers, ...).
+_ELEMENTS = {"imus": "samples (read as the IMU)", "frame": "frames", "triggers": "triggers", "events": "events"}
 _IMU_FIELDS = ("accelerometer_x", "accelerometer_y", "accelerometer_z", "gyroscope_x", "gyroscope_y", "gyroscope_z")
 
 
@@ -39,15 +41,18 @@ class AedatSource(EventSource):
             with aedat.Decoder(self.path) as decoder:
                 tracks = decoder.tracks()
                 try:
-                    counts: dict[int, int] = {}
+                    counts: dict[int, int] = {track.id: 0 for track in tracks}  # a track without packets: 0
                     starts: dict[int, int] = {}
+                    ends: dict[int, int] = {}
                     for definition in decoder.file_data_definitions():
                         counts[definition.track_id] = counts.get(definition.track_id, 0) + definition.elements_count
                         if definition.elements_count:
                             starts[definition.track_id] = min(starts.get(definition.track_id, definition.start_t),
                                                               definition.start_t)
+                            ends[definition.track_id] = max(ends.get(definition.track_id, definition.end_t),
+                                                            definition.end_t)
                 except RuntimeError:
-                    counts, starts = {}, {}  # no index table (an interrupted recording): counts unknown
+                    counts, starts, ends = {}, {}, {}  # no index table (an interrupted recording): counts unknown
         except RuntimeError as err:
             raise DataError(located(self.path, None, f"not a readable AEDAT4 file ({reason(err)})")) from None
         events = [track for track in tracks if track.data_type == "events"]
@@ -58,18 +63,21 @@ class AedatSource(EventSource):
         self.track_id = events[0].id
         self.sensor_size = tuple(events[0].dimensions)
         self.n_events = counts.get(self.track_id)
-        self._first_t = starts.get(self.track_id)
+        self._first_t, self._last_t = starts.get(self.track_id), ends.get(self.track_id)
         self.detail = f"events track {self.track_id}"
-        self._imu_track = any(track.data_type == "imus" for track in tracks)
+        # an IMU track with samples (or an unknown count): a track the index table says is empty is not read
+        self._imu_track = any(track.data_type == "imus" and counts.get(track.id) != 0 for track in tracks)
         self._imu_read = False  # metadata()'s pass for the IMU is made once
         for track in tracks:
             if track.id == self.track_id:
                 continue
             count = counts.get(track.id)
             size = f" {track.dimensions[0]}x{track.dimensions[1]}" if track.dimensions else ""
-            what = "samples (read as the IMU)" if track.data_type == "imus" else "packets"
-            self.streams[f"{track.data_type} (track {track.id})"] = \
-                f"{count if count is not None else '?'} {what}{size}"
+            what = _ELEMENTS.get(track.data_type, "elements")
+            name = f"{track.data_type} (track {track.id})"
+            self.streams[name] = f"{count if count is not None else '?'} {what}{size}"
+            if track.data_type != "imus":
+                self.unread.append(f"{name}, {self.streams[name]}")
 
     def _packets(self, size_hint: int) -> Iterable[np.ndarray]:
         from faery.extension import aedat
@@ -125,6 +133,10 @@ class AedatSource(EventSource):
         if self._first_t is not None:
             return self._first_t
         return super().first_time()
+
+    def last_time(self) -> int | None:
+        # Likewise the last: each packet's last time is in the index table.
+        return self._last_t if self._last_t is not None else super().last_time()
 
 
 #: Longest AEDAT4 header (its XML description) read: DV writes a few KB.
@@ -199,15 +211,19 @@ def write_aedat4(path: str | Path, chunks: Iterable[np.ndarray], meta) -> int:
 
     ``meta`` is a ``Recording`` or ``EventSource``: its ``sensor_size`` is needed first,
     its ``imu`` (ECD rows, converted back to µs, g, °/s) is read after the events, so
-    a source's IMU is complete, and written as a second track after them. Times must be
-    >= 0 (AEDAT4 stores unsigned µs).
+    a source's IMU is complete, and written as a second track after them; the track is
+    declared only when there is an IMU (``tofnet info`` shows no IMU track of a file
+    without one). Times must be >= 0 (AEDAT4 stores unsigned µs).
     """
     require("faery", path, "writing AEDAT4")
     from faery.extension import aedat
 
     width, height = (int(v) for v in meta.sensor_size)
-    tracks = [_track_node(0, "EVTS", "events", {"sizeX": ("int", width), "sizeY": ("int", height)}),
-              _track_node(1, "IMUS", "imu", {})]
+    tracks = [_track_node(0, "EVTS", "events", {"sizeX": ("int", width), "sizeY": ("int", height)})]
+    # An IMU track only with samples: those of the recording, or of an AEDAT4 source, whose IMU comes with its events.
+    with_imu = (meta.imu is not None and len(meta.imu) > 0) or (meta.imu is None and getattr(meta, "_imu_track", False))
+    if with_imu:
+        tracks.append(_track_node(1, "IMUS", "imu", {}))
     description = [aedat.DescriptionNode(name="outInfo", path="/mainloop/Recorder/outInfo/", attributes={},
                                          nodes=tracks)]
     written = 0
@@ -220,7 +236,7 @@ def write_aedat4(path: str | Path, chunks: Iterable[np.ndarray], meta) -> int:
                     raise DataError(located(path, None, f"AEDAT4 stores times >= 0 µs, got {int(chunk['t'][0])}"))
                 encoder.write(0, faery_packet(chunk))
                 written += len(chunk)
-            if meta.imu is not None:
+            if with_imu and meta.imu is not None:
                 for packet in _imu_packets(meta.imu):
                     encoder.write(1, packet)
     except RuntimeError as err:  # faery reports I/O errors as "... (os error N)"

@@ -47,11 +47,14 @@ class EventSource:
         self.n_events: int | None = None  # known without decoding, else None
         self.has_depth = False
         self.streams: dict[str, str] = {}  # other streams in the file: name -> what
+        self.unread: list[str] = []  # those of them tofnet does not read ("name, what"): convert says so
         self.notes: list[str] = []
         self.window: tuple[int, int | None] | None = None  # [start, stop) µs on the file's clock (set_window)
         self._origin_us = 0  # the file's first event, which relative window times count from
         self._first_index = 0  # file index of the first event in the window (for _depth)
         self._last_seen_us: int | None = None  # latest time decoded, for "the window is past the end"
+        self._seen_end = False  # decoding went to the file's end: _last_seen_us is its last event
+        self._asked = None  # the TimeWindow as asked (set_window), for messages in the user's terms
         self.frame_gt = None  # ground truth as frames (tofnet.io.frames.FrameDepth): dataset sequences
         self.remap = None  # moves each packet's pixels (tofnet.io.sequences.PixelRemap: DSEC --rectify)
 
@@ -87,6 +90,25 @@ class EventSource:
         """The file's last event time when it is cheap to know (else what decoding saw)."""
         return self._last_seen_us
 
+    def last_time(self) -> int | None:
+        """The file's last event time (µs), for messages; ``None`` when the file cannot say. Readers that
+        know it cheaply override this; the default is what decoding saw when it went to the end, else the
+        rest of the file is decoded for it (only a window without events asks: an error follows)."""
+        if not self._seen_end:
+            packets = iter(self._packets(DEFAULT_CHUNK))
+            try:
+                for packet in packets:
+                    if len(packet):
+                        self._last_seen_us = int(packet[packet.dtype.names[0]][-1])
+            except BaseException as err:
+                if not isinstance(err, DataError) and not is_decode_error(err, self.format):
+                    raise
+                return None  # a file that cannot be decoded to its end: its end is not said
+            finally:
+                getattr(packets, "close", lambda: None)()
+            self._seen_end = True
+        return self._last_seen_us
+
     # --- time windows -------------------------------------------------------------
     def set_window(self, window) -> None:
         """Read only the events of ``window`` (a ``tofnet.io.window.TimeWindow``); poses and IMU are
@@ -97,7 +119,7 @@ class EventSource:
         if first is None:
             raise DataError(located(self.path, None, "no events"))
         start, stop = window.resolve(first)
-        self.window, self._origin_us = (start, stop), first
+        self.window, self._origin_us, self._asked = (start, stop), first, window
         self.trajectory = window_trajectory(self.trajectory, start, stop)
         self.imu = window_rows(self.imu, start, stop)
         self.n_events = self._window_count(start, stop)
@@ -113,6 +135,22 @@ class EventSource:
         rel = (start - self._origin_us) * 1e-6
         end = "the end" if stop is None else f"{(stop - self._origin_us) * 1e-6:g} s"
         return f"{rel:g} s .. {end} from the first event"
+
+    def empty_window(self) -> DataError:
+        """The one-line error for a window without events: the window in the terms it was asked in
+        (absolute ``@`` times when an end was given so) and where the recording's events lie."""
+        from tofnet.io.window import absolute_text
+
+        start, stop = self.window
+        first, last = self._origin_us, self.last_time()
+        if self._asked is not None and self._asked.absolute:
+            asked = f"{absolute_text(start)} .. {'the end' if stop is None else absolute_text(stop)}"
+            span = f"the recording's first event is at {absolute_text(first)}" if last is None else \
+                f"the recording's events span {absolute_text(first)} .. {absolute_text(last)} ({(last - first) * 1e-6:g} s)"
+        else:
+            asked = self.window_text()
+            span = "" if last is None else f"the recording ends {(last - first) * 1e-6:g} s after its first event"
+        return DataError(located(self.path, None, f"no events in the time window {asked}" + (span and f"; {span}")))
 
     # --- the interface ------------------------------------------------------------
     def chunks(self, n_events: int = DEFAULT_CHUNK, progress: ProgressHook | None = None) -> Iterator[np.ndarray]:
@@ -138,9 +176,7 @@ class EventSource:
                 progress(done, self.n_events)
             yield chunk
         if done == 0 and self.window is not None:
-            end = self._window_end_us()
-            spans = "" if end is None else f"; the recording ends {(end - self._origin_us) * 1e-6:g} s after its first event"
-            raise DataError(located(self.path, None, f"no events in the time window {self.window_text()}{spans}"))
+            raise self.empty_window()
 
     def _checked_packets(self, size_hint: int) -> Iterator[np.ndarray]:
         """``_packets``, each checked by ``check_packet``; decoding libraries' errors as ``DataError``."""

@@ -75,6 +75,9 @@ class ColumnsSource(EventSource):
     def _window_end_us(self) -> int | None:
         return int(self._times(self.n_rows - 1, self.n_rows)[0]) if self.n_rows else None
 
+    def last_time(self) -> int | None:
+        return self._window_end_us()  # known without decoding
+
     def _index_at(self, us: int) -> int:
         """The first event at or after ``us``: the ms index narrows it, a binary search finds it."""
         from tofnet.io.window import first_at_or_after

@@ -48,6 +48,9 @@ class RecordingSource(EventSource):
     def _window_end_us(self) -> int | None:
         return self._span[1] if self._span else int(self.recording.events["t"][-1])
 
+    def last_time(self) -> int | None:
+        return self._window_end_us()  # known without decoding
+
     def set_window(self, window) -> None:
         # Loaded whole already (text and numpy have no index): the window is a slice, found by
         # binary search on the sorted times (a time going back is caught by the reader first).
@@ -57,9 +60,7 @@ class RecordingSource(EventSource):
         lo = int(np.searchsorted(t, start, side="left"))
         hi = len(t) if stop is None else max(int(np.searchsorted(t, stop, side="left")), lo)
         if hi == lo:
-            raise DataError(located(self.path, None, f"no events in the time window {self.window_text()}; the "
-                                                     f"recording ends {(self._window_end_us() - self._origin_us) * 1e-6:g}"
-                                                     " s after its first event"))
+            raise self.empty_window()
         recording = self.recording
         self.recording = Recording(events=recording.events[lo:hi], intrinsics=recording.intrinsics,
                                    trajectory=recording.trajectory, sensor_size=recording.sensor_size,

@@ -32,7 +32,12 @@ class TimePoint:
     absolute: bool = False
 
     def text(self) -> str:
-        return f"@{self.us * 1e-6:.6f} s" if self.absolute else f"{self.us * 1e-6:g} s"
+        return absolute_text(self.us) if self.absolute else f"{self.us * 1e-6:g} s"
+
+
+def absolute_text(us: int) -> str:
+    """``@1589163147.368868 s``: a time on the file's clock as ``@`` times are written, exact to the µs."""
+    return f"@{Decimal(int(us)).scaleb(-6):f} s"
 
 
 def parse_time(value: object, what: str, *, absolute_allowed: bool = True) -> TimePoint:
@@ -77,6 +82,11 @@ class TimeWindow:
         if self.until is not None:
             parts.append(f"until {self.until.text()}")
         return ", ".join(parts)
+
+    @property
+    def absolute(self) -> bool:
+        """Whether an end was given on the file's clock (``@``): messages then say absolute times."""
+        return any(point is not None and point.absolute for point in (self.start, self.until))
 
 
 def parse_window(start: object = None, duration: object = None, until: object = None,
@@ -169,6 +179,7 @@ def window_filter(source, packets: Iterable[np.ndarray], start: int,
             yield packet[lo:hi]
         if stop is not None and last >= stop:
             return
+    source._seen_end = True  # every packet decoded: _last_seen_us is the file's last event
 
 
 def first_at_or_after(times, n: int, value: int, bracket: tuple[int, int] | None = None) -> int:
