@@ -82,7 +82,7 @@ def test_a_streamed_file_runs_in_the_bands_asked_for_and_gives_the_same_bytes(tm
     for workers in (1, 2):
         with open_recording(path) as source:
             results[workers], _ = run_source(source, depth_network(SENSOR, **NET), backend_options={"workers": workers})
-    assert results[2].summary()["workers"] == {"threads": 2, "bands": 2, "whole": []}
+    assert results[2].summary()["workers"] == {"threads": 2, "bands": 2, "whole": [], "unit": "threads"}
     assert results[2].depth.tobytes() == results[1].depth.tobytes() and len(results[1].depth) > 10_000
     assert results[2].counts == results[1].counts
 
