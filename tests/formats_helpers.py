@@ -53,3 +53,14 @@ class FullDiskEncoder:
 
     def write(self, *packet):
         raise RuntimeError("No space left on device (os error 28)")
+
+
+def strip_geometry(raw: Path, out: Path) -> None:
+    """Copy a Prophesee RAW file to ``out`` without the header lines that give its sensor size."""
+    data = Path(raw).read_bytes()
+    end = 0
+    while data.startswith(b"%", end):
+        end = data.index(b"\n", end) + 1
+    kept = [line for line in data[:end].splitlines(keepends=True)
+            if not line.lower().startswith((b"% geometry", b"% format"))]
+    Path(out).write_bytes(b"".join(kept) + data[end:])

@@ -92,13 +92,8 @@ def test_sensor_size_of_a_file_that_does_not_say_it_is_used_without_the_extent_n
     from optional import optional
     optional("faery")
     assert main(["convert", str(edge_folder), str(tmp_path / "rec.raw"), "--quiet"]) == 0
-    data = (tmp_path / "rec.raw").read_bytes()
-    end = 0
-    while data.startswith(b"%", end):
-        end = data.index(b"\n", end) + 1
-    header = [line for line in data[:end].splitlines(keepends=True)
-              if not line.lower().startswith((b"% geometry", b"% format"))]
-    (tmp_path / "bare.raw").write_bytes(b"".join(header) + data[end:])
+    from formats_helpers import strip_geometry
+    strip_geometry(tmp_path / "rec.raw", tmp_path / "bare.raw")
     common = ["run", str(tmp_path / "bare.raw"), "--velocity", "0.5,0,0", "--intrinsics", "200,200,119.5,89.5",
               "--quiet", "--force", "--out", str(tmp_path / "d.npz")]
     assert main(common) == 0

@@ -176,13 +176,8 @@ def test_aedat4_metadata_holds_the_imu_read_once_up_to_the_window(tmp_path, reco
 def test_evt_header_without_size_gives_unknown_sensor_then_extent(tmp_path, recording):
     path = tmp_path / "rec.raw"
     _write(path, recording.events, version="evt2")
-    data = path.read_bytes()
-    header_end = 0
-    while data.startswith(b"%", header_end):
-        header_end = data.index(b"\n", header_end) + 1
-    kept = [line for line in data[:header_end].splitlines(keepends=True)
-            if not line.lower().startswith((b"% geometry", b"% format"))]
-    (tmp_path / "bare.raw").write_bytes(b"".join(kept) + data[header_end:])
+    from formats_helpers import strip_geometry
+    strip_geometry(path, tmp_path / "bare.raw")
     source = open_recording(tmp_path / "bare.raw")
     assert source.sensor_size is None
     read = source.read()
