@@ -129,3 +129,17 @@ def test_an_npz_that_holds_its_camera_is_not_noted_as_without_one(tmp_path, orig
     write_npz_recording(bare, replace(recording, intrinsics=None))
     again = read_recording(bare)
     assert again.intrinsics is None and "no calib.txt: intrinsics unknown" in again.notes
+
+
+def test_convert_says_what_of_an_hdf5_it_does_not_write(tmp_path, original, capsys):
+    h5py = pytest.importorskip("h5py")
+    events = original[0].events
+    path = tmp_path / "dsec.h5"
+    with h5py.File(path, "w") as h5:
+        for key in ("x", "y", "t", "p"):
+            h5[f"events/{key}"] = events[key]
+        h5["t_offset"] = np.int64(0)
+        h5["images"] = np.zeros((3, 4, 5), np.uint8)  # a stream tofnet does not read
+    assert main(["convert", str(path), str(tmp_path / "out.npz"), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "not written: images (tofnet reads only the events, camera, poses and IMU of dsec.h5)" in out, out

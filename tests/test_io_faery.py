@@ -116,8 +116,8 @@ def test_convert_says_which_aedat4_streams_it_does_not_write(tmp_path, recording
     source = open_recording(tmp_path / "davis.aedat4")
     assert source.streams == {"imus (track 1)": "0 samples (read as the IMU)", "triggers (track 2)": "5 triggers"}
     assert np.array_equal(source.read().events, recording.events) and source.imu is None
-    unwritten = ("not written: triggers (track 2), 5 triggers (tofnet reads only the events and IMU of "
-                 "davis.aedat4)")
+    unwritten = ("not written: triggers (track 2), 5 triggers (tofnet reads only the events, camera, poses and IMU "
+                 "of davis.aedat4)")
     for out in ("out.aedat4", "out", "out.npz"):
         assert main(["convert", str(tmp_path / "davis.aedat4"), str(tmp_path / out), "--quiet"]) == 0
         assert unwritten in capsys.readouterr().out.splitlines(), out

@@ -75,9 +75,11 @@ class AedatSource(EventSource):
             size = f" {track.dimensions[0]}x{track.dimensions[1]}" if track.dimensions else ""
             what = _ELEMENTS.get(track.data_type, "elements")
             name = f"{track.data_type} (track {track.id})"
-            self.streams[name] = f"{count if count is not None else '?'} {what}{size}"
+            shown = f"{count if count is not None else '?'} {what}{size}"
             if track.data_type != "imus":
-                self.unread.append(f"{name}, {self.streams[name]}")
+                self.not_read(name, shown)
+            else:
+                self.streams[name] = shown
 
     def _packets(self, size_hint: int) -> Iterable[np.ndarray]:
         from faery.extension import aedat

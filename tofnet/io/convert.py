@@ -116,9 +116,9 @@ def convert(source: EventSource, out: str | Path, *, force: bool = False,
                 raise DataError(located(source.path, None, "no events"))
     if kind in _WITH_SIDE_FILES:
         _side_files(out.parent, meta, messages, force, source.path)
-    if source.unread:  # streams of the input tofnet does not read (AEDAT4's frames and triggers)
-        messages.append(f"not written: {'; '.join(source.unread)} (tofnet reads only the events and IMU of "
-                        f"{source.path.name})")
+    if source.unread:  # streams of the input tofnet does not read (AEDAT4's frames, an HDF5's images, a bag's topics)
+        messages.append(f"not written: {'; '.join(source.unread)} (tofnet reads only the events, camera, poses and "
+                        f"IMU of {source.path.name})")
     return [f"wrote {count:,} events to {out} ({kind})"] + messages
 
 

@@ -236,6 +236,11 @@ class EventSource:
         check_metadata(recording, self.path)  # some readers find metadata (AEDAT4's IMU) among the events
         return recording
 
+    def not_read(self, name: str, what: str = "not read") -> None:
+        """A stream of the file tofnet does not read: shown by ``tofnet info``, said by ``tofnet convert``."""
+        self.streams[name] = what
+        self.unread.append(name if what == "not read" else f"{name}, {what}")
+
     def describe(self) -> str:
         """``format (detail)`` for messages and ``tofnet info``."""
         return f"{self.format} ({self.detail})" if self.detail else self.format

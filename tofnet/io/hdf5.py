@@ -142,7 +142,7 @@ class DsecSource(ColumnsSource):
         if self.intrinsics is None:
             self._dsec_calibration()
         for key in sorted(set(h5.keys()) - {"events", "ms_to_idx", "t_offset", "calib", "poses", "imu"}):
-            self.streams[key] = "not read"
+            self.not_read(key)
 
     def _dsec_calibration(self) -> None:
         # DSEC: <sequence>/events/{left,right}/events.h5 and <sequence>/calibration/cam_to_cam.yaml.

@@ -162,11 +162,11 @@ class MvsecSource(_GroundTruthMixin, ColumnsSource):
             images = h5.dataset(f"davis/{side}/image_raw")
             height, width = images.shape[1:]
             self.sensor_size = (int(width), int(height))
-            self.streams[f"davis/{side}/image_raw"] = f"{images.shape[0]} images"
+            self.not_read(f"davis/{side}/image_raw", f"{images.shape[0]} images")
         if f"davis/{side}/imu" in h5 and f"davis/{side}/imu_ts" in h5:
             self.imu = np.column_stack([h5.value(f"davis/{side}/imu_ts"), h5.value(f"davis/{side}/imu")])
         for key in (k for k in h5.keys("davis") if k != side):
-            self.streams[f"davis/{key}"] = "not read"
+            self.not_read(f"davis/{key}")
         gt_path = _companion(path, "_gt", (".hdf5", ".h5"), "the MVSEC ground truth (HDF5)")
         if gt_path is None:
             self.notes.append("no *_gt.hdf5 next to the file: no poses or depth")
@@ -213,7 +213,7 @@ class M3edSource(_GroundTruthMixin, ColumnsSource):
         if f"prophesee/{side}/ms_map_idx" in h5 and h5.dataset(f"prophesee/{side}/ms_map_idx").ndim == 1:
             self.ms_index = h5.dataset(f"prophesee/{side}/ms_map_idx")  # M3ED's ms_to_idx (µs from 0: t_offset 0)
         for key in sorted(set(h5.keys()) - {"prophesee"}):
-            self.streams[key] = "not read"
+            self.not_read(key)
         gt_path = _companion(path, "_depth_gt", (".h5", ".hdf5"), "the M3ED depth ground truth (HDF5)") or \
             _companion(path, "_pose_gt", (".h5", ".hdf5"), "the M3ED pose ground truth (HDF5)")
         if gt_path is None:

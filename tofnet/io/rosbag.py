@@ -97,7 +97,7 @@ class RosbagSource(EventSource):
                                                      f"topics: {found}"))
         for name, info in sorted(available.items()):
             if name not in chosen.values():
-                self.streams[name] = f"{info.msgtype}, {info.msgcount} messages"
+                self.not_read(name, f"{info.msgtype}, {info.msgcount} messages")
         return chosen
 
     def _check_definitions(self) -> None:
