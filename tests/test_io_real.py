@@ -119,5 +119,5 @@ def test_convert_says_the_aedat4_frames_and_triggers_are_not_written(tmp_path):
     with open_recording(REAL / "davis346.aedat4") as source:
         messages = convert(source, tmp_path / "out.aedat4")
     assert ("not written: frame (track 1), 59 frames 346x260; triggers (track 3), 236 triggers (tofnet reads only "
-            "the events and IMU of davis346.aedat4)") in messages
+            "the events, camera, poses and IMU of davis346.aedat4)") in messages
     assert open_recording(tmp_path / "out.aedat4").streams == {"imus (track 1)": "2363 samples (read as the IMU)"}
