@@ -71,8 +71,11 @@ def handle(args) -> int:
         origin = str(args.replay)
         if meta.sensor_size is None and not args.sensor_size:
             # as tofnet run reads such a file (whole): its reader may size it by the events' extent (a note says so)
-            meta = opened.read()
-            opened.sensor_size = meta.sensor_size
+            whole = opened.read()
+            opened.sensor_size, notes = whole.sensor_size, whole.notes
+            del whole  # the replay reads the file again: its events are not kept through it
+            meta = opened.metadata()
+            meta.notes = notes
     else:
         camera = camera_options(args)
         source = CameraSource(camera["intrinsics"])
