@@ -69,7 +69,7 @@ def every_parameter_changed() -> Network:
                               outlier_px=0.3, iterations=4, max_rms_px=0.2, trim_px=0.5, hold_px=2.0, burst_ratio=3.0,
                               hold_fit_rms_px=0.8, behind_depth="8m", refractory_depth="8m", refractory="1ms", max_hold=0.5,
                               consistency=0.2, consistency_window="100ms", min_depth="10cm", max_depth=15.0,
-                              min_denominator=0.2, burst_surfaces=3, burst_fit="fitted")
+                              min_denominator=0.2, max_turn=30.0, burst_surfaces=3, burst_fit="fitted")
     inp.events.connect(baf.events)
     baf.passed.connect(lens.events)
     lens.undistorted.connect(tot.events)

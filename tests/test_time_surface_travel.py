@@ -113,18 +113,23 @@ def turning_edge(n_steps=1500, sub=20):
             column = int(np.floor(position))
             if 0 <= column < SENSOR[0] and column not in crossed:
                 crossed[column] = 1000 + step * 1000 + (part + 1) * 1000 // sub
-    xs, ts = np.array(list(crossed)), np.array(list(crossed.values()))
-    t = np.repeat(ts, SENSOR[1])
-    x = np.repeat(xs, SENSOR[1])
-    y = np.tile(np.arange(SENSOR[1]), len(xs))
-    filler = np.arange(1000, int(t.max()) + 1000, 1000)  # an OFF event every step, as noise makes
+    velocity = np.column_stack([np.full(n_steps, tx), np.zeros(n_steps), np.zeros(n_steps), np.zeros(n_steps), wy,
+                                np.zeros(n_steps)])
+    return columns_crossing(list(crossed), list(crossed.values()), velocity)
+
+
+def columns_crossing(columns, times_us, velocity):
+    """ON events of whole pixel columns at their times (µs), an OFF event at pixel (0, 0) every step as a
+    sensor's noise makes, and the velocity rows (one per 1 ms step; the first held by update 1)."""
+    t = np.repeat(np.asarray(times_us, np.int64), SENSOR[1])
+    x = np.repeat(np.asarray(columns, np.int64), SENSOR[1])
+    y = np.tile(np.arange(SENSOR[1]), len(columns))
+    filler = np.arange(1000, int(t.max()) + 1000, 1000)
     t_all = np.concatenate([t, filler])
     order = np.argsort(t_all, kind="stable")
     events = make_events(t_all[order], np.concatenate([x, np.zeros(len(filler), np.int64)])[order],
                          np.concatenate([y, np.zeros(len(filler), np.int64)])[order],
                          np.concatenate([np.ones(len(t), np.int64), np.zeros(len(filler), np.int64)])[order])
-    velocity = np.column_stack([np.full(n_steps, tx), np.zeros(n_steps), np.zeros(n_steps), np.zeros(n_steps), wy,
-                                np.zeros(n_steps)])
     velocity = np.concatenate([velocity[:1], velocity])
 
     def rows(first, count):
@@ -141,3 +146,60 @@ def test_travel_takes_the_rotation_out_while_it_changes():
     error = np.abs(travel["z"] / DEPTH - 1)
     assert np.median(error) < 2e-3 and np.percentile(error, 90) < 5e-3  # B ω at the event for the whole square
     assert np.median(np.abs(time["z"] / DEPTH - 1)) > 50 * np.median(error)  # eq. 7 with the present ω only
+
+
+def forward_edge(speed_of_step, n_steps=800, x0=0.02, z0=1.0, cy=11.0):
+    """A vertical edge at x0 m on a plane z0 m away, the camera moving along its optical axis at
+    ``speed_of_step(k)`` m/s in step k (1 ms): the image moves away from the principal point and speeds up
+    as it goes (``(1 + e s)²``, docs/time_surface.md 7g). Pixel columns fire ON when the edge reaches
+    them; returns the events, the velocity rows, the intrinsics and the true depth (m) at a time (µs)."""
+    intrinsics = (F, F, 15.5, cy)
+    tz = np.array([speed_of_step(k) for k in range(n_steps)])
+    pz = np.concatenate([[0.0], np.cumsum(tz) * 1e-3])  # at each step's start (input step k + 1 starts at k ms)
+    xs, ts = [], []
+    for column in range(SENSOR[0]):
+        offset = column - intrinsics[2]
+        if offset <= 0:
+            continue
+        needed = z0 - F * x0 / offset  # the travel at which the edge reaches the column
+        k = np.searchsorted(pz, needed, side="right") - 1
+        if 0 <= needed and k < n_steps:
+            xs.append(column)
+            ts.append(int(round(1000 + (k + (needed - pz[k]) / (tz[k] * 1e-3)) * 1000)))
+    events, rows = columns_crossing(xs, ts, np.column_stack([np.zeros(n_steps), np.zeros(n_steps), tz]))
+
+    def true_depth(t_us):
+        k = np.clip((np.asarray(t_us) - 1000) // 1000, 0, n_steps - 1)
+        return z0 - (pz[k] + tz[k] * ((np.asarray(t_us) - 1000) - k * 1000) * 1e-6)
+
+    return events, rows, intrinsics, true_depth
+
+
+@pytest.mark.parametrize("profile", ["constant", "changing"])
+def test_forward_motion_gives_the_depth_where_the_image_speeds_up(profile):
+    # constant: the kernel works in time (its points' times scaled by their own image speed); changing: in
+    # travel, each point's travel taken with its own pixel's gains. With the event's gains alone the slope came
+    # out Z (1 + 3 e), e = 1 / (4 to 15 px) here: 20-75 % too deep.
+    speed = (lambda k: 2.0) if profile == "constant" else (lambda k: 2.0 + 1.0 * np.sin(0.05 * k))
+    events, rows, intrinsics, true_depth = forward_edge(speed)
+    estimator = TimeSurfaceEstimator(TimeSurfaceConfig(SENSOR, intrinsics, per_pixel=True), t0_us=0)
+    depth, quality = estimator.feed(events, rows)
+    on_axis = depth["y"] == 11  # the row through the principal point: the motion there is along the edge's normal
+    assert np.count_nonzero(on_axis) >= 5
+    rel = depth["z"][on_axis] / true_depth(quality["t_event"][on_axis]) - 1
+    assert np.max(np.abs(rel)) < 1e-3, rel  # (1e-5 measured: times are rounded to 1 µs)
+
+
+def test_the_window_stops_where_the_image_motion_turned():
+    ring, state = np.zeros((tt.RING, tt.N_R)), np.full(tt.N_S, tt.NOT_YET, np.int64)
+    for k in range(100):  # 63° off +x for steps 0-59, then along +x
+        tt.advance(ring, state, k, np.array([0.5, 1.0, 0.0] if k < 60 else [1.0, 0.0, 0.0]), 1e-3)
+    along, across = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0)  # g and c: image motion along f and across it per m/s
+
+    def window(cos_turn):
+        return tt.since_reversal(ring, 99, 99_500, 0, 1000, 0, *along, 0.0, 0.0, 0.0, 1e9, *across, 0.0, 0.0, 0.0,
+                                 cos_turn)
+
+    assert window(0.0) == 99_500  # 90°: back to the first step (no reversal)
+    assert window(float(np.cos(np.radians(45)))) == 39_500  # back to step 60, where the motion turned by 63°
+    assert window(float(np.cos(np.radians(70)))) == 99_500

@@ -26,7 +26,7 @@ from tofnet.kernels.time_surface_first import B_EMITTED, B_HOLD, N_B, NEVER, fir
 from tofnet.kernels.time_surface_fit import FIT_ILL_CONDITIONED, FIT_OVER_RMS, FIT_TOO_FEW, fit_plane, fit_rows
 from tofnet.kernels.time_surface_motion import (M_SINCE, M_UPDATE, M_VX, M_VY, M_VZ, N_MOTION,  # noqa: F401
                                                 _gains, _turn_gains, _velocity_term_at, follow_motion)
-from tofnet.kernels.time_surface_gather import behind_steps, gather, time_window, trimmed_plane
+from tofnet.kernels.time_surface_gather import behind_steps, expand, gather, time_window, trimmed_plane
 from tofnet.kernels.time_surface_travel import (RING, S_CHANGE, S_FIRST, advance, pace, since_reversal, to_travel,
                                                 travel_at)
 
@@ -46,8 +46,8 @@ REJECT_SLOTS = tuple(range(NO_MOTION, EMITTED))  # a first event whose estimate 
  I_TRAVEL, I_ROW0, I_ROWS, I_OWN0, I_OWN1, I_BURST_FIT, N_IP) = range(24)
 (F_FX, F_FY, F_CX, F_CY, F_OUTLIER, F_MAX_RMS, F_MIN_SPREAD, F_MIN_DEPTH, F_MAX_DEPTH, F_MIN_DENOMINATOR,
  F_WINDOW_DEPTH, F_REFRACTORY_REACH, F_CONSISTENCY, F_HOLD_PX, F_AHEAD_PX, F_TURN, F_TRIM_PX,
- F_RFX, F_RFY, F_RCX, F_RCY, F_HOLD_RMS, F_BEHIND_REACH, F_WINDOW_PX, F_BURST_RATIO,
- N_FP) = range(26)  # F_R*: B ω's intrinsics
+ F_RFX, F_RFY, F_RCX, F_RCY, F_HOLD_RMS, F_BEHIND_REACH, F_WINDOW_PX, F_BURST_RATIO, F_COS_TURN,
+ N_FP) = range(27)  # F_R*: B ω's intrinsics
 # F_*_REACH: a depth (m) times 1e6 µs/s; over |A t| (px m/s) it is the time (µs) per pixel of a surface that deep.
 # Fit models (``I_MODEL``): a plane, or lines along the motion with a shared slope.
 MODEL_PLANE, MODEL_ROWS = range(2)
@@ -110,7 +110,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
     window_depth, refractory_reach, consistency = fp[F_WINDOW_DEPTH], fp[F_REFRACTORY_REACH], fp[F_CONSISTENCY]
     hold_px, ahead_px, turn, trim_px = fp[F_HOLD_PX], fp[F_AHEAD_PX], fp[F_TURN], fp[F_TRIM_PX]
     hold_rms, behind_reach, window_px = fp[F_HOLD_RMS], fp[F_BEHIND_REACH], fp[F_WINDOW_PX]
-    burst_ratio = fp[F_BURST_RATIO]
+    burst_ratio, cos_turn = fp[F_BURST_RATIO], fp[F_COS_TURN]
     # burst-index surfaces: ``surface`` [K, 2, plane] (a type of its own, so numba compiles the kernel apart for
     # it: without them the dead branches below fold away and the loop's machine code is the one-surface kernel's)
     layered = surface.ndim == 3
@@ -266,22 +266,30 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
                     window = np.int64(math.floor(reach / rate))
                     n = gather(flat_surface, at_cell, row, radius, t, window, fu, fv, ahead_px, middle, ps_, pw, pt,
                                pg)
+                    # each point's own image speed (``to_travel`` takes it below); not net of a rotation
+                    expand(ps_, pt, n, 0.0 if rotation else tz / speed)
                 else:
                     g0, g1, g2 = _gains(x, y, sample, per_pixel, pinhole, sample_of, points, fu, fv, fx, fy, cx, cy)
+                    # Aᵀf⊥ and Bᵀf⊥ (f⊥ = (-fv, fu)): the image motion across f, where the window stops once the
+                    # motion turned by max_turn, and where the velocity turned, the points moved across f too
+                    q0, q1, q2 = _gains(x, y, sample, per_pixel, pinhole, sample_of, points, -fv, fu, fx, fy, cx, cy)
+                    k0 = k1 = k2 = 0.0
+                    if rotation:
+                        k0, k1, k2 = _turn_gains(x, y, -fv, fu, rfx, rfy, rcx, rcy)
                     window = since_reversal(ring, k, t, t0, dt, np.int64(ring_state[S_FIRST]), g0, g1, g2,
-                                            z_guess * h0, z_guess * h1, z_guess * h2, reach)
+                                            z_guess * h0, z_guess * h1, z_guess * h2, reach, q0, q1, q2,
+                                            z_guess * k0, z_guess * k1, z_guess * k2, cos_turn)
                     n = gather(flat_surface, at_cell, row, radius, t, window, fu, fv, ahead_px, middle, ps_, pw, pt,
                                pg)
-                    q0 = q1 = q2 = 0.0
-                    if slanted:  # Aᵀf⊥ (f⊥ = (-fv, fu)): where the velocity turned, the points moved across f too
-                        q0, q1, q2 = _gains(x, y, sample, per_pixel, pinhole, sample_of, points, -fv, fu, fx, fy, cx,
-                                            cy)
+                    if not slanted:
+                        q0 = q1 = q2 = 0.0
                     n = to_travel(ring, ps_, pw, pt, pg, n, t, t0, dt, g0, g1, g2, h0, h1, h2, z_guess, reach, q0, q1,
                                   q2)
             else:
                 window = time_window(window_us, window_depth, radius, speed, turn, t, motion[M_SINCE], window_px,
                                       du1, dv1, du2, dv2, fu, fv, age1, age2)
                 n = gather(flat_surface, at_cell, row, radius, t, window, fu, fv, ahead_px, middle, ps_, pw, pt, pg)
+                expand(ps_, pt, n, 0.0 if rotation else tz / speed)
             if n < min_points and not record_rejected:  # fewer points than a fit keeps: too few, whatever the fit
                 counts[TOO_FEW_POINTS] += 1
                 continue

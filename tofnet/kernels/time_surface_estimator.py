@@ -9,6 +9,7 @@ rms residual and gradient, and the index of the event in the stream.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 from typing import Callable
 
@@ -76,6 +77,7 @@ class TimeSurfaceConfig:
     min_depth: float = 0.05
     max_depth: float = 20.0
     min_denominator: float = 0.1
+    max_turn: float = 45.0
     burst_surfaces: int = 1
     burst_fit: str = "emitted"
     timestep_us: int = 1000
@@ -109,6 +111,8 @@ class TimeSurfaceConfig:
                      "max_hold", "hold_fit_rms_px", "behind_depth", "window_px"):
             if not float(getattr(self, name)) >= 0:
                 problems.append(f"{name}: expected a number >= 0, got {getattr(self, name)!r}")
+        if not 0 < float(self.max_turn) <= 180:
+            problems.append(f"max_turn: expected degrees in (0, 180], got {self.max_turn!r}")
         if not float(self.burst_ratio) >= 1:
             problems.append(f"burst_ratio: expected a number >= 1, got {self.burst_ratio!r}")
         if not int(self.timestep_us) >= 1:
@@ -125,6 +129,12 @@ class TimeSurfaceConfig:
 
     def replace(self, **changes) -> "TimeSurfaceConfig":
         return TimeSurfaceConfig(**{**asdict(self), **changes})
+
+
+def cos_turn(max_turn_deg: float) -> float:
+    """``max_turn`` (degrees) as the kernel takes it (``time_surface.F_COS_TURN``): its cosine, exactly 0 at 90°
+    and beyond (the window stops where the image motion along ``f`` reverses, as without the bound)."""
+    return 0.0 if max_turn_deg >= 90.0 else math.cos(math.radians(max_turn_deg))
 
 
 def reach(depth_m: float) -> float:
@@ -169,11 +179,11 @@ class TimeSurfaceEstimator:
         self._fp[[ts.F_FX, ts.F_FY, ts.F_CX, ts.F_CY, ts.F_OUTLIER, ts.F_MAX_RMS, ts.F_MIN_SPREAD, ts.F_MIN_DEPTH,
                   ts.F_MAX_DEPTH, ts.F_MIN_DENOMINATOR, ts.F_WINDOW_DEPTH, ts.F_REFRACTORY_REACH, ts.F_CONSISTENCY,
                   ts.F_HOLD_PX, ts.F_AHEAD_PX, ts.F_TURN, ts.F_TRIM_PX, ts.F_RFX, ts.F_RFY, ts.F_RCX, ts.F_RCY,
-                  ts.F_HOLD_RMS, ts.F_BEHIND_REACH, ts.F_WINDOW_PX, ts.F_BURST_RATIO]] = (
+                  ts.F_HOLD_RMS, ts.F_BEHIND_REACH, ts.F_WINDOW_PX, ts.F_BURST_RATIO, ts.F_COS_TURN]] = (
             *c.intrinsics, c.outlier_px, c.max_rms_px, c.min_spread, c.min_depth, c.max_depth, c.min_denominator,
             c.window_depth, reach(c.refractory_depth), c.consistency, c.hold_px, c.ahead_px, c.turn, c.trim_px,
             *(c.intrinsics if c.rotation_intrinsics is None else c.rotation_intrinsics), c.hold_fit_rms_px,
-            reach(c.behind_depth), c.window_px, c.burst_ratio)
+            reach(c.behind_depth), c.window_px, c.burst_ratio, cos_turn(c.max_turn))
         r, pixels, planes = int(c.radius), width * height, int(c.burst_surfaces)
         # per burst index k < K and polarity p, [k, p] (k = 0: the first events, ``last_first_event``); with K = 1
         # [p] only: the kernel compiled for that type has no burst-index code at all

@@ -69,6 +69,18 @@ def gather(surface, cell: int, row: int, radius: int, t: int, window: int, fu: f
 
 
 @njit(cache=True, inline="always")
+def expand(ps_, pt, n: int, expansion: float) -> None:
+    """Scale the first ``n`` points' times (µs before the event) by ``1 + e s`` (``s`` px along the motion,
+    ``e = t_z / |A t|`` per px): under a translation the image at ``s`` moves ``1 + e s`` times as fast as
+    at the event, so the scaled times are a line in ``s`` whose slope is the event's (docs/time_surface.md,
+    7g). ``e = 0`` (no motion along the optical axis): nothing to do. Held at 1/4 within a few pixels of
+    the focus of expansion."""
+    if expansion != 0.0:
+        for i in range(n):
+            pt[i] = pt[i] * max(1.0 + expansion * ps_[i], 0.25)
+
+
+@njit(cache=True, inline="always")
 def time_window(window_us, window_depth, radius, speed, turn, t, since, window_px, du1, dv1, du2, dv2, fu, fv, age1,
                  age2):
     """Step 2's window in time (µs): the time a surface at ``window_depth`` takes to move ``radius`` px (at

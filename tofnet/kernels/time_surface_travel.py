@@ -81,12 +81,14 @@ def travel_at(ring, t: int, t0: int, dt: int, inverse_dt: float, g0: float, g1: 
 
 @njit(cache=True)
 def since_reversal(ring, k: int, t: int, t0: int, dt: int, first_step: int, g0: float, g1: float, g2: float,
-                   z0: float, z1: float, z2: float, reach: float) -> int:
+                   z0: float, z1: float, z2: float, reach: float, c0: float = 0.0, c1: float = 0.0, c2: float = 0.0,
+                   y0: float = 0.0, y1: float = 0.0, y2: float = 0.0, cos_turn: float = 0.0) -> int:
     """The age (µs) of the oldest first event the fit may use: back from time ``t`` (step ``k``) while the
     image motion along the event's ``f`` keeps its sign (``g·v + z·ω > 0``, ``z`` the rotation's gains
-    times the depth the pixels behind suggest: a pixel behind still holds this pass's edge) and the
-    travel (with ``z·Θ``: the depth times the image motion) stays within ``reach`` px·m; never past the
-    ring or its first step."""
+    times the depth the pixels behind suggest: a pixel behind still holds this pass's edge) and its
+    direction stays within the turn whose cosine is ``cos_turn`` of ``f`` (``c·v + y·ω`` across ``f``, ``c``
+    and ``y`` as ``g`` and ``z`` for ``f⊥``; ``cos_turn`` 0: reversals only), and the travel (with ``z·Θ``:
+    the depth times the image motion) stays within ``reach`` px·m; never past the ring or its first step."""
     start = t0 + k * dt
     r = k & MASK
     travelled = (g0 * ring[r, R_VX] + g1 * ring[r, R_VY] + g2 * ring[r, R_VZ] + z0 * ring[r, R_WX]
@@ -98,7 +100,9 @@ def since_reversal(ring, k: int, t: int, t0: int, dt: int, first_step: int, g0: 
         r = m & MASK
         along = (g0 * ring[r, R_VX] + g1 * ring[r, R_VY] + g2 * ring[r, R_VZ] + z0 * ring[r, R_WX] + z1 * ring[r, R_WY]
                  + z2 * ring[r, R_WZ])
-        if along <= 0.0:
+        across = (c0 * ring[r, R_VX] + c1 * ring[r, R_VY] + c2 * ring[r, R_VZ] + y0 * ring[r, R_WX] + y1 * ring[r, R_WY]
+                  + y2 * ring[r, R_WZ])
+        if along <= cos_turn * math.sqrt(along * along + across * across):
             break
         travelled += along * dt_s
         start -= dt
@@ -117,20 +121,27 @@ def to_travel(ring, ps_, pw, pt, pg, n: int, t: int, t0: int, dt: int, g0: float
     depth times the image motion; compacted in place; the event itself always stays). Their positions across
     the motion (``pw``) likewise, net of the translation's image motion across ``f`` since (``q = Aᵀf⊥``:
     ``w + q·(P(t) − P(t_q)) / z``, ``z`` the depth the pixels behind suggest; ``q = 0``: as gathered): where the
-    velocity turned, an edge oblique to the motion crossed them there. Returns the points kept."""
+    velocity turned, an edge oblique to the motion crossed them there. Each point's travel and shift across
+    are taken with its own pixel's gains (``Aᵀf`` there is ``g + (0, 0, s)``, ``Aᵀf⊥`` is ``q + (0, 0, w)``):
+    for a pinhole camera the travel is then exactly ``Z s`` under any translation, where the event's gains
+    alone leave it curved by the motion along the optical axis (docs/time_surface.md, 7g). Returns the
+    points kept."""
     inverse_dt = 1.0 / dt
     here, turned = travel_at(ring, t, t0, dt, inverse_dt, g0, g1, g2, h0, h1, h2)
     across = travel_at(ring, t, t0, dt, inverse_dt, q0, q1, q2, 0.0, 0.0, 0.0)[0]
+    slanted = q0 != 0.0 or q1 != 0.0 or q2 != 0.0
     inverse_z = 1.0 / z if z > 0.0 else 0.0  # no depth suggested (the pixels behind fired with no travel): no shift
+    forward = travel_at(ring, t, t0, dt, inverse_dt, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)[0]  # P_z (m)
     m = 0
     for i in range(n):
         t_q = t + np.int64(pt[i])
         travel, turned_q = travel_at(ring, t_q, t0, dt, inverse_dt, g0, g1, g2, h0, h1, h2)
         across_q = travel_at(ring, t_q, t0, dt, inverse_dt, q0, q1, q2, 0.0, 0.0, 0.0)[0]
-        travel -= here
+        forward_q = travel_at(ring, t_q, t0, dt, inverse_dt, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)[0]
+        travel += ps_[i] * (forward_q - forward) - here
         shift = turned - turned_q
         ps_[m], pt[m], pg[m] = ps_[i] + shift, travel, pg[i]
-        pw[m] = pw[i] + (across - across_q) * inverse_z
+        pw[m] = pw[i] + (across - across_q + (pw[i] * (forward - forward_q) if slanted else 0.0)) * inverse_z
         m += np.int64(travel - z * shift >= -reach)
     return m
 

@@ -30,8 +30,8 @@ LATENCY_STEPS = TimeSurfaceProcess.port_latency_steps("depth")
 CONFIG_PARAMS = ("model", "coordinates", "radius", "ahead_px", "window", "window_depth", "window_px", "turn",
                  "min_points", "min_spread", "outlier_px", "iterations", "max_rms_px", "trim_px", "hold_px",
                  "hold_fit_rms_px", "burst_ratio", "behind_depth", "refractory_depth", "refractory", "max_hold",
-                 "consistency", "consistency_window", "min_depth", "max_depth", "min_denominator", "burst_surfaces",
-                 "burst_fit")
+                 "consistency", "consistency_window", "min_depth", "max_depth", "min_denominator", "max_turn",
+                 "burst_surfaces", "burst_fit")
 
 
 def config_of(process: TimeSurfaceProcess, ctx: ModelContext) -> TimeSurfaceConfig:
