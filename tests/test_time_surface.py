@@ -324,6 +324,8 @@ def test_a_bad_configuration_is_one_error_naming_the_fields():
         TimeSurfaceConfig(SENSOR, INTRINSICS, model="cubic", radius=0)
     with pytest.raises(BackendError, match="max_depth"):
         TimeSurfaceConfig(SENSOR, INTRINSICS, min_depth=5.0, max_depth=1.0)
+    with pytest.raises(BackendError, match="max_turn: expected degrees from 1 to 180, got 0.5"):
+        TimeSurfaceConfig(SENSOR, INTRINSICS, max_turn=0.5)
     with pytest.raises(BackendError, match="behind_depth: needs radius >= 2"):
         TimeSurfaceConfig(SENSOR, INTRINSICS, radius=1)
     with pytest.raises(BackendError, match="window_px: needs radius >= 2"):

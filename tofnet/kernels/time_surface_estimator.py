@@ -111,8 +111,8 @@ class TimeSurfaceConfig:
                      "max_hold", "hold_fit_rms_px", "behind_depth", "window_px"):
             if not float(getattr(self, name)) >= 0:
                 problems.append(f"{name}: expected a number >= 0, got {getattr(self, name)!r}")
-        if not 0 < float(self.max_turn) <= 180:
-            problems.append(f"max_turn: expected degrees in (0, 180], got {self.max_turn!r}")
+        if not 1 <= float(self.max_turn) <= 180:
+            problems.append(f"max_turn: expected degrees from 1 to 180, got {self.max_turn!r}")
         if not float(self.burst_ratio) >= 1:
             problems.append(f"burst_ratio: expected a number >= 1, got {self.burst_ratio!r}")
         if not int(self.timestep_us) >= 1:

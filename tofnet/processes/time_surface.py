@@ -100,7 +100,7 @@ class TimeSurfaceProcess(Process):
               "sets the pixel's hold: a worse one, e.g. in noise, measured no crossing time", minimum=0.0),
         Param("max_turn", "float", 45.0, unit="deg", doc="coordinates travel: no point from before the image motion "
               "at the event's pixel turned by more than this from its direction now (90: back to a reversal only)",
-              minimum=1e-9, maximum=180.0),
+              minimum=1.0, maximum=180.0),
         Param("behind_depth", "length", 10.0, unit="m", doc="fit a first event only when the two pixels just "
               "behind it along the motion fired, in either order, within the travel (coordinates travel; else the "
               "time) a surface this deep takes to move that far (an edge crossed them; noise did not; 0: off)", minimum=0.0),
