@@ -36,7 +36,7 @@ from motion_sweep import parse_settings, parse_variants  # noqa: E402
 from time_surface_runs import config_for, trajectory_rows  # noqa: E402
 
 from tofnet.kernels import time_surface as ts  # noqa: E402
-from tofnet.kernels.time_surface_estimator import TimeSurfaceEstimator  # noqa: E402
+from tofnet.kernels.time_surface_estimator import TimeSurfaceEstimator, cos_turn  # noqa: E402
 from tofnet.kernels.time_surface_fit import (FIT_ILL_CONDITIONED, FIT_OK, FIT_OVER_RMS, FIT_TOO_FEW, N_L,  # noqa: E402
                                            fit_rows)
 from tofnet.kernels.time_surface_gather import behind_steps, gather  # noqa: E402
@@ -91,21 +91,28 @@ def replay(est: TimeSurfaceEstimator, ev: np.ndarray, i: int, rows) -> dict:
     # all of the window since the last change of the velocity: the kernel fits in time (section 7a)
     linear_from = t0 + state[S_CHANGE] * dt if state[S_CHANGE] != state[S_FIRST] else ts.NEVER
     linear = reach < speed * 1e-6 * (t - linear_from)
+    across = (fx * fv, -fy * fu, (y - cy) * fu - (x - cx) * fv)  # Aᵀf⊥ (pinhole): the image motion across f
     window = int(math.floor(reach / (speed * 1e-6))) if linear else since_reversal(
-        ring, k, t, t0, dt, int(state[S_FIRST]), *g, 0.0, 0.0, 0.0, reach)
+        ring, k, t, t0, dt, int(state[S_FIRST]), *g, 0.0, 0.0, 0.0, reach, *across, cos_turn(c.max_turn))
     size = 2 * (2 * r + 1) ** 2 + 1
     ps_, pw, pt, pg = np.zeros(size), np.zeros(size), np.zeros(size), np.zeros(size, np.int64)
     middle = 2 * r + 1
     n = gather(flat, at_cell, row, r, t, window, fu, fv, c.ahead_px, middle, ps_, pw, pt, pg)
     z_guess = suggested if suggested < math.inf else c.window_depth
-    across = (fx * fv, -fy * fu, (y - cy) * fu - (x - cx) * fv)  # Aᵀf⊥ (pinhole): the image motion across f
-    n = to_travel(ring, ps_, pw, pt, pg, n, t, t0, dt, *g, 0.0, 0.0, 0.0, z_guess, reach, *across)
-    points = []
-    for m in range(n):  # the pixel of each point, and its time
-        du, dv = ps_[m] * fu - pw[m] * fv, ps_[m] * fv + pw[m] * fu
+    raw = [(ps_[m], pw[m]) for m in range(n)]  # where each point's pixel is (to_travel moves them)
+    points, kept = [], 0
+    for m, (s_raw, w_raw) in enumerate(raw):  # one at a time: which ones ``to_travel`` keeps, and where
+        one = [np.array([v]) for v in (ps_[m], pw[m], pt[m])] + [np.array([pg[m]])]
+        if not linear and not to_travel(ring, *one, 1, t, t0, dt, *g, 0.0, 0.0, 0.0, z_guess, reach, *across,
+                                        0.0, 0.0, 0.0, middle):
+            continue
+        du, dv = s_raw * fu - w_raw * fv, s_raw * fv + w_raw * fu
         pu, pv = x + int(round(du)), y + int(round(dv))
-        points.append((ps_[m], pt[m], int(pg[m]), pu, pv, int(flat[p * surface.shape[1] + (pv + r) * row + pu + r]),
-                       pw[m]))
+        ps_[kept], pw[kept], pt[kept], pg[kept] = one[0][0], one[1][0], one[2][0], one[3][0]
+        points.append((ps_[kept], pt[kept], int(pg[kept]), pu, pv,
+                       int(flat[p * surface.shape[1] + (pv + r) * row + pu + r]), pw[kept]))
+        kept += 1
+    n = kept
     out["points"] = points
     out["fit"] = fit_rows(ps_.copy(), pw.copy(), pt.copy(), pg.copy(), n, c.min_points, c.min_spread, c.outlier_px, c.iterations,
                           np.zeros((4 * r + 3, N_L)), np.zeros(4 * r + 3, np.int64))

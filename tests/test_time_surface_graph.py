@@ -281,8 +281,8 @@ def test_the_conformance_cases_exercise_what_they_are_named_for():
         scene = get_case(name).build()
         result = ReferenceBackend().run(scene.network, scene.recording)
         counts = result.counts["time_surface"]
-        # (the rotation's first 100 ms are travel fits, a few per cent low: docs/time_surface.md, section 7a)
+        # (with a rotation every fit is a travel fit, net of it: 2.6 % low here, docs/time_surface.md, 7a, 7h)
         assert len(result.depth) > 400 and abs(np.median(result.depth["z"]) - 1.0) < 0.04, name
-        assert counts["burst"] > 500 and counts["bad_fit"] > 50, name
+        assert counts["burst"] > 500 and counts["bad_fit"] > 20, name
         assert counts["nothing_behind"] + counts["too_few_points"] > 300, name
     assert counts["rotation_dominated"] > 0 and "angular_velocity" in result.counts  # eq. 7 in the second

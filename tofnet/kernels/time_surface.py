@@ -222,7 +222,8 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
                 if rotation:  # where the edge was, net of the rotation's image motion (px along f)
                     h0, h1, h2 = _turn_gains(x, y, fu, fv, rfx, rfy, rcx, rcy)
                     turn_rate = h0 * velocity[j, 3] + h1 * velocity[j, 4] + h2 * velocity[j, 5]  # px/s
-                if t - max(age1, age2) >= linear_from:  # as in time (eq. 7 holds exactly while nothing changes)
+                # as in time while nothing changed; with a rotation always in travel, net of its image motion
+                if not rotation and t - max(age1, age2) >= linear_from:
                     travel1, travel2 = rate * age1, rate * age2
                 else:
                     g0, g1, g2 = _gains(x, y, sample, per_pixel, pinhole, sample_of, points, fu, fv, fx, fy, cx, cy)
@@ -249,9 +250,11 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
         else:
             # 2. Gather the recent first events of the pixels the edge has crossed: at most
             # ``ahead_px`` along the motion (the pixels ahead still hold an older edge's times).
-            # the rows fit's slope across the motion within its lines (``fit_rows``); not with a rotation: where its
-            # image motion runs across f the lines along f are not the edges' tracks (pan: docs/time_surface.md 7d)
-            slanted = not rotation and abs(fu) > 1e-6 and abs(fv) > 1e-6  # (along an axis a line's w is one)
+            # the rows fit's slope across the motion within its lines (``fit_rows``): where the lines' w are not
+            # whole pixels (along an axis they are). In time not with a rotation: where its image motion runs across
+            # f the lines along f are not the edges' tracks (pan: docs/time_surface.md 7d); in travel coordinates
+            # the points' positions are net of it (``to_travel``), and the lines follow the tracks
+            slanted = abs(fu) > 1e-6 and abs(fv) > 1e-6 and not (rotation and not travel)
             if travel:
                 # the travel a surface at ``window_depth`` makes over ``radius`` px, nor more than ``window_px``
                 # crossings at the edge's pace; in time, back to where the image motion along f reversed
@@ -261,30 +264,29 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
                 z_guess = suggested if suggested < math.inf else window_depth
                 if window_px > 0.0:
                     reach = min(reach, window_px * suggested)
-                linear = reach < rate * (t - linear_from)  # all of it since the last change: time will do
+                # all of it since the last change: time will do (not with a rotation: there the points' positions
+                # are taken net of its image motion, across f too, which the ring gives)
+                linear = not rotation and reach < rate * (t - linear_from)
                 if linear:
                     window = np.int64(math.floor(reach / rate))
                     n = gather(flat_surface, at_cell, row, radius, t, window, fu, fv, ahead_px, middle, ps_, pw, pt,
                                pg)
-                    # each point's own image speed (``to_travel`` takes it below); not net of a rotation
-                    expand(ps_, pt, n, 0.0 if rotation else tz / speed)
+                    expand(ps_, pt, n, tz / speed)  # each point's own image speed (``to_travel`` takes it below)
                 else:
                     g0, g1, g2 = _gains(x, y, sample, per_pixel, pinhole, sample_of, points, fu, fv, fx, fy, cx, cy)
-                    # Aᵀf⊥ and Bᵀf⊥ (f⊥ = (-fv, fu)): the image motion across f, where the window stops once the
-                    # motion turned by max_turn, and where the velocity turned, the points moved across f too
+                    # Aᵀf⊥ and Bᵀf⊥ (f⊥ = (-fv, fu)): the image motion across f. The window stops once the
+                    # translation's turned by max_turn; the points' positions across are taken net of both
                     q0, q1, q2 = _gains(x, y, sample, per_pixel, pinhole, sample_of, points, -fv, fu, fx, fy, cx, cy)
                     k0 = k1 = k2 = 0.0
                     if rotation:
                         k0, k1, k2 = _turn_gains(x, y, -fv, fu, rfx, rfy, rcx, rcy)
                     window = since_reversal(ring, k, t, t0, dt, np.int64(ring_state[S_FIRST]), g0, g1, g2,
-                                            z_guess * h0, z_guess * h1, z_guess * h2, reach, q0, q1, q2,
-                                            z_guess * k0, z_guess * k1, z_guess * k2, cos_turn)
+                                            z_guess * h0, z_guess * h1, z_guess * h2, reach, q0, q1, q2, cos_turn)
                     n = gather(flat_surface, at_cell, row, radius, t, window, fu, fv, ahead_px, middle, ps_, pw, pt,
                                pg)
-                    if not slanted:
-                        q0 = q1 = q2 = 0.0
                     n = to_travel(ring, ps_, pw, pt, pg, n, t, t0, dt, g0, g1, g2, h0, h1, h2, z_guess, reach, q0, q1,
-                                  q2)
+                                  q2, k0, k1, k2, middle)
+                    slanted = True  # net of the motion since, the points' w are not whole pixels
             else:
                 window = time_window(window_us, window_depth, radius, speed, turn, t, motion[M_SINCE], window_px,
                                       du1, dv1, du2, dv2, fu, fv, age1, age2)
@@ -296,7 +298,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
             # 3. Fit and check. Net of a rotation, a point's position is the translation's share of the image
             # motion: the limits in image pixels are that share of them there
             share = 1.0
-            if travel and rotation and not linear and speed + z_guess * turn_rate > 0.0:
+            if travel and rotation and speed + z_guess * turn_rate > 0.0:
                 share = speed / (speed + z_guess * turn_rate)
             if rows_model:
                 fit, tau_s, tau_w, c, kept, rms = fit_rows(ps_, pw, pt, pg, n, min_points, min_spread * share * share,

@@ -77,7 +77,7 @@ class TimeSurfaceConfig:
     min_depth: float = 0.05
     max_depth: float = 20.0
     min_denominator: float = 0.1
-    max_turn: float = 45.0
+    max_turn: float = 60.0
     burst_surfaces: int = 1
     burst_fit: str = "emitted"
     timestep_us: int = 1000

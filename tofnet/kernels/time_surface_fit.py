@@ -16,6 +16,10 @@ import numpy as np
 from numba import njit
 
 FIT_OK, FIT_TOO_FEW, FIT_ILL_CONDITIONED, FIT_OVER_RMS = range(4)
+#: Least variance of ``w`` within the lines (px², per point) for ``fit_rows`` to fit ``β``: below it (rms 0.1 px) the
+#: points are on their lines' centres and ``β`` would fit their noise (a rotation's small shift across the motion
+#: made it take the depth's place: docs/time_surface.md, 7h).
+MIN_W_SPREAD = 0.01
 # Per line of a ``fit_rows`` fit: raw sums (count, s, t, s², s t, w), means of s, t and w, centred sums of s.
 # (The sums of w², s w and w t are the fit's, over all points: a line's centred ones are those less its
 # mean of w times its sums, so a point adds one sum of w to its line's row, not four.)
@@ -208,7 +212,7 @@ def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, 
         if across:
             sww, ssw, swy = qww - tww, qsw - tsw, qwt - twt
             det = sxx * sww - ssw * ssw
-            slant = (sww > 1e-6 * kept) & (det > min_spread * kept * sww)
+            slant = (sww > MIN_W_SPREAD * kept) & (det > min_spread * kept * sww)
         if slant:
             tau_s, beta = (sxy * sww - swy * ssw) / det, (swy * sxx - sxy * ssw) / det
         else:

@@ -82,13 +82,14 @@ def travel_at(ring, t: int, t0: int, dt: int, inverse_dt: float, g0: float, g1: 
 @njit(cache=True)
 def since_reversal(ring, k: int, t: int, t0: int, dt: int, first_step: int, g0: float, g1: float, g2: float,
                    z0: float, z1: float, z2: float, reach: float, c0: float = 0.0, c1: float = 0.0, c2: float = 0.0,
-                   y0: float = 0.0, y1: float = 0.0, y2: float = 0.0, cos_turn: float = 0.0) -> int:
+                   cos_turn: float = 0.0) -> int:
     """The age (µs) of the oldest first event the fit may use: back from time ``t`` (step ``k``) while the
     image motion along the event's ``f`` keeps its sign (``g·v + z·ω > 0``, ``z`` the rotation's gains
-    times the depth the pixels behind suggest: a pixel behind still holds this pass's edge) and its
-    direction stays within the turn whose cosine is ``cos_turn`` of ``f`` (``c·v + y·ω`` across ``f``, ``c``
-    and ``y`` as ``g`` and ``z`` for ``f⊥``; ``cos_turn`` 0: reversals only), and the travel (with ``z·Θ``:
-    the depth times the image motion) stays within ``reach`` px·m; never past the ring or its first step."""
+    times the depth the pixels behind suggest: a pixel behind still holds this pass's edge) and the
+    translation's image motion stays within the turn whose cosine is ``cos_turn`` of ``f`` (``c·v`` across
+    ``f``, ``c = Aᵀf⊥``; net of the rotation a point moves with the translation alone: that is the track its
+    line follows; ``cos_turn`` 0: back to where it reversed), and the travel (with ``z·Θ``: the depth times
+    the image motion) stays within ``reach`` px·m; never past the ring or its first step."""
     start = t0 + k * dt
     r = k & MASK
     travelled = (g0 * ring[r, R_VX] + g1 * ring[r, R_VY] + g2 * ring[r, R_VZ] + z0 * ring[r, R_WX]
@@ -98,11 +99,10 @@ def since_reversal(ring, k: int, t: int, t0: int, dt: int, first_step: int, g0: 
     dt_s = dt * 1e-6
     while travelled < reach and m >= oldest:
         r = m & MASK
-        along = (g0 * ring[r, R_VX] + g1 * ring[r, R_VY] + g2 * ring[r, R_VZ] + z0 * ring[r, R_WX] + z1 * ring[r, R_WY]
-                 + z2 * ring[r, R_WZ])
-        across = (c0 * ring[r, R_VX] + c1 * ring[r, R_VY] + c2 * ring[r, R_VZ] + y0 * ring[r, R_WX] + y1 * ring[r, R_WY]
-                  + y2 * ring[r, R_WZ])
-        if along <= cos_turn * math.sqrt(along * along + across * across):
+        moved = g0 * ring[r, R_VX] + g1 * ring[r, R_VY] + g2 * ring[r, R_VZ]  # the translation's, along f
+        along = moved + z0 * ring[r, R_WX] + z1 * ring[r, R_WY] + z2 * ring[r, R_WZ]
+        across = c0 * ring[r, R_VX] + c1 * ring[r, R_VY] + c2 * ring[r, R_VZ]
+        if along <= 0.0 or moved <= cos_turn * math.sqrt(moved * moved + across * across):
             break
         travelled += along * dt_s
         start -= dt
@@ -112,37 +112,42 @@ def since_reversal(ring, k: int, t: int, t0: int, dt: int, first_step: int, g0: 
 
 @njit(cache=True)
 def to_travel(ring, ps_, pw, pt, pg, n: int, t: int, t0: int, dt: int, g0: float, g1: float, g2: float, h0: float,
-              h1: float, h2: float, z: float, reach: float, q0: float = 0.0, q1: float = 0.0,
-              q2: float = 0.0) -> int:
+              h1: float, h2: float, z: float, reach: float, q0: float, q1: float, q2: float, k0: float, k1: float,
+              k2: float, middle: int) -> int:
     """Turn the gathered points' times (``pt``, µs before ``t``) into travel before the event's
-    (px·m, negative behind) and their positions along the motion (``ps_``) into where the edge
-    was, net of the rotation's image motion since (``h`` = ``(B ω)·f`` per rad/s: ``s + h·(Θ(t) − Θ(t_q))``),
-    and keep those within ``reach`` px·m of it (the travel plus ``z`` m times the rotation's image motion: a
-    depth times the image motion; compacted in place; the event itself always stays). Their positions across
-    the motion (``pw``) likewise, net of the translation's image motion across ``f`` since (``q = Aᵀf⊥``:
-    ``w + q·(P(t) − P(t_q)) / z``, ``z`` the depth the pixels behind suggest; ``q = 0``: as gathered): where the
-    velocity turned, an edge oblique to the motion crossed them there. Each point's travel and shift across
-    are taken with its own pixel's gains (``Aᵀf`` there is ``g + (0, 0, s)``, ``Aᵀf⊥`` is ``q + (0, 0, w)``):
-    for a pinhole camera the travel is then exactly ``Z s`` under any translation, where the event's gains
-    alone leave it curved by the motion along the optical axis (docs/time_surface.md, 7g). Returns the
-    points kept."""
+    (px·m, negative behind) and their positions into where they are now net of the motion since
+    (compacted in place; the event itself always stays; returns the points kept):
+
+    - along the motion (``ps_``), net of the rotation's image motion (``h = Bᵀf`` per rad:
+      ``s + h·(Θ(t) − Θ(t_q))``); kept within ``reach`` px·m of the event (the travel plus ``z`` m
+      times the rotation's image motion: a depth times the image motion);
+    - across it (``pw``), net of the rotation's (``k = Bᵀf⊥``) and of the translation's (``q = Aᵀf⊥``,
+      over ``z``, the depth the pixels behind suggest): ``w + k·ΔΘ + q·ΔP / z``; each point goes to the
+      line (``pg``) that position rounds to (the event's is ``middle``; past the lines ``1 .. 2 middle``
+      it is dropped). Net of the motion since, a point has moved along ``f`` only: its line is its track
+      where the velocity turned or the camera rotated (docs/time_surface.md, 7h).
+
+    Each point's travel and shift across are taken with its own pixel's gains (``Aᵀf`` there is
+    ``g + (0, 0, s)``, ``Aᵀf⊥`` is ``q + (0, 0, w)``): for a pinhole camera the travel is then exactly ``Z s``
+    under any translation (docs/time_surface.md, 7g)."""
     inverse_dt = 1.0 / dt
     here, turned = travel_at(ring, t, t0, dt, inverse_dt, g0, g1, g2, h0, h1, h2)
-    across = travel_at(ring, t, t0, dt, inverse_dt, q0, q1, q2, 0.0, 0.0, 0.0)[0]
-    slanted = q0 != 0.0 or q1 != 0.0 or q2 != 0.0
+    across, turned_across = travel_at(ring, t, t0, dt, inverse_dt, q0, q1, q2, k0, k1, k2)
     inverse_z = 1.0 / z if z > 0.0 else 0.0  # no depth suggested (the pixels behind fired with no travel): no shift
     forward = travel_at(ring, t, t0, dt, inverse_dt, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)[0]  # P_z (m)
     m = 0
     for i in range(n):
         t_q = t + np.int64(pt[i])
         travel, turned_q = travel_at(ring, t_q, t0, dt, inverse_dt, g0, g1, g2, h0, h1, h2)
-        across_q = travel_at(ring, t_q, t0, dt, inverse_dt, q0, q1, q2, 0.0, 0.0, 0.0)[0]
+        across_q, turned_across_q = travel_at(ring, t_q, t0, dt, inverse_dt, q0, q1, q2, k0, k1, k2)
         forward_q = travel_at(ring, t_q, t0, dt, inverse_dt, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)[0]
         travel += ps_[i] * (forward_q - forward) - here
         shift = turned - turned_q
-        ps_[m], pt[m], pg[m] = ps_[i] + shift, travel, pg[i]
-        pw[m] = pw[i] + (across - across_q + (pw[i] * (forward - forward_q) if slanted else 0.0)) * inverse_z
-        m += np.int64(travel - z * shift >= -reach)
+        w = (pw[i] + turned_across - turned_across_q
+             + (across - across_q + pw[i] * (forward - forward_q)) * inverse_z)
+        line = middle + np.int64(math.floor(w + 0.5))
+        ps_[m], pw[m], pt[m], pg[m] = ps_[i] + shift, w, travel, line
+        m += np.int64((travel - z * shift >= -reach) & (1 <= line) & (line <= 2 * middle))
     return m
 
 

@@ -98,8 +98,9 @@ class TimeSurfaceProcess(Process):
               minimum=1.0),
         Param("hold_fit_rms_px", "float", 0.5, unit="px", doc="only a fit at most this far (rms) from its points "
               "sets the pixel's hold: a worse one, e.g. in noise, measured no crossing time", minimum=0.0),
-        Param("max_turn", "float", 45.0, unit="deg", doc="coordinates travel: no point from before the image motion "
-              "at the event's pixel turned by more than this from its direction now (90: back to a reversal only)",
+        Param("max_turn", "float", 60.0, unit="deg", doc="coordinates travel: no point from before the translation's "
+              "image motion at the event's pixel turned by more than this from its direction now (90: back to a "
+              "reversal only)",
               minimum=1.0, maximum=180.0),
         Param("behind_depth", "length", 10.0, unit="m", doc="fit a first event only when the two pixels just "
               "behind it along the motion fired, in either order, within the travel (coordinates travel; else the "
