@@ -39,7 +39,7 @@ from tofnet.kernels import time_surface as ts  # noqa: E402
 from tofnet.kernels.time_surface_estimator import TimeSurfaceEstimator, cos_turn  # noqa: E402
 from tofnet.kernels.time_surface_fit import (FIT_ILL_CONDITIONED, FIT_OK, FIT_OVER_RMS, FIT_TOO_FEW, N_L,  # noqa: E402
                                            fit_rows)
-from tofnet.kernels.time_surface_gather import behind_steps, gather  # noqa: E402
+from tofnet.kernels.time_surface_gather import behind_steps, expand, gather  # noqa: E402
 from tofnet.kernels.time_surface_travel import (RING, S_CHANGE, S_FIRST, advance, pace, since_reversal,  # noqa: E402
                                                 to_travel, travel_at)
 from tofnet.kernels.velocity import velocity_term  # noqa: E402
@@ -98,6 +98,8 @@ def replay(est: TimeSurfaceEstimator, ev: np.ndarray, i: int, rows) -> dict:
     ps_, pw, pt, pg = np.zeros(size), np.zeros(size), np.zeros(size), np.zeros(size, np.int64)
     middle = 2 * r + 1
     n = gather(flat, at_cell, row, r, t, window, fu, fv, c.ahead_px, middle, ps_, pw, pt, pg)
+    if linear:
+        expand(ps_, pt, n, v[2] / speed)  # each point's own image speed, as the kernel's time path
     z_guess = suggested if suggested < math.inf else c.window_depth
     raw = [(ps_[m], pw[m]) for m in range(n)]  # where each point's pixel is (to_travel moves them)
     points, kept = [], 0
