@@ -59,6 +59,28 @@ def test_later_burst_events_are_fitted_on_their_own_surfaces():
     assert three.first_events == 3 * len(events) // 4
 
 
+def test_a_later_event_where_its_pixel_already_emitted_in_the_step_is_not_fitted():
+    """Its estimate would end ``same_step`` whatever its fit (a later event's fit sets no hold): it is counted
+    so at once, with no points; later events in steps of their own are fitted as before."""
+    events, velocity = burst_edge(gap_us=300)  # a burst's events 0.3 ms apart: often in one 1 ms step
+    depth, quality, estimator = run(events, velocity, burst_surfaces=3, burst_fit="all", record_rejected=True)
+    emitted = set()
+    repeats = fitted = 0
+    for d, q in zip(depth, quality):
+        key = (int(d["x"]), int(d["y"]), int(d["step"]))
+        if q["burst"] > 0 and key in emitted:
+            assert q["reason"] == ts.SAME_STEP and q["points"] == 0
+            repeats += 1
+        elif q["burst"] > 0:
+            assert q["reason"] != ts.SAME_STEP or q["points"] > 0
+            fitted += q["points"] > 0
+        if q["reason"] == ts.EMITTED:
+            emitted.add(key)
+    assert repeats > 100 and fitted > 100
+    assert estimator.counts["same_step"] == repeats + np.count_nonzero((quality["reason"] == ts.SAME_STEP)
+                                                                       & (quality["points"] > 0))
+
+
 @pytest.mark.parametrize("which", ["fitted", "emitted"])
 def test_fitted_or_emitted_only_fits_fewer_later_events(which):
     events, velocity = burst_edge()

@@ -204,6 +204,12 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
             counts[NO_MOTION] += 1
             continue
         fu, fv = at_x / speed, at_y / speed
+        # A burst's later event where its pixel already emitted in this step would end ``same_step`` whatever its
+        # fit, which sets no hold: not fitted (on edges that fire twice per crossing, most of the later events)
+        repeat = layered and at_cell >= 2 * plane_size and last_step[up] == step
+        if repeat and not record_rejected:
+            counts[SAME_STEP] += 1
+            continue
         # An edge crossed the two pixels just behind this one along the motion, each about a
         # crossing time per pixel ago; in noise they fired at unrelated times. Their ages also
         # give the edge's own time per pixel, which bounds the window (``window_px``).
@@ -244,9 +250,9 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
         if not supported and not record_rejected:  # nothing to fit, nothing to record
             counts[NOTHING_BEHIND] += 1
             continue
-        if not supported:
+        if repeat or not supported:
             fit, tau_s, tau_w, c, kept, rms = FIT_TOO_FEW, 0.0, 0.0, 0.0, 0, 0.0
-            slot = NOTHING_BEHIND
+            slot = SAME_STEP if repeat else NOTHING_BEHIND
         else:
             # 2. Gather the recent first events of the pixels the edge has crossed: at most
             # ``ahead_px`` along the motion (the pixels ahead still hold an older edge's times).
