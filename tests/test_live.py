@@ -322,6 +322,7 @@ def test_cli_live_takes_what_run_takes_a_window_and_the_sensor_size(tmp_path, ca
 @pytest.mark.skipif(not (REAL / "evt2.raw").is_file(),
                     reason="needs the real EVT2 recording, not distributed with tofnet (shared/real/ beside the checkout)")
 def test_cli_live_sizes_a_file_without_its_geometry_by_its_events_as_run_does(capsys):
+    optional("faery")
     camera = ["--velocity", "0.5,0,0", "--intrinsics", "500,500,320,240"]
     assert main(["live", "--replay", str(REAL / "evt2.raw"), "--no-view", "--speed", "8", *camera]) == 0
     out = capsys.readouterr().out

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import errno
+import importlib.util
 import os
 
 import numpy as np
@@ -205,7 +206,10 @@ def test_simulate_never_writes_its_summary_over_its_recording_nor_keeps_an_older
     err = one_line_error(capsys, ["simulate", "slider", str(out), "--duration", "0.02", "--quiet",
                                   "--json", str(out / "events.txt")])
     assert "inside OUT_DIR" in err and not out.exists()
-    for name, clash in (("r.npz", "r.npz"), ("r.npz", "r_depth.npy"), ("r.aedat4", "calib.txt")):
+    cases = [("r.npz", "r.npz"), ("r.npz", "r_depth.npy")]
+    if importlib.util.find_spec("faery") is not None:  # writing .aedat4 needs the formats extra
+        cases.append(("r.aedat4", "calib.txt"))
+    for name, clash in cases:
         err = one_line_error(capsys, ["simulate", "slider", str(tmp_path / name), "--duration", "0.02", "--quiet",
                                       "--json", str(tmp_path / clash)])
         assert "the simulated recording writes" in err and not (tmp_path / name).exists()
