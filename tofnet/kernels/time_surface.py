@@ -306,10 +306,13 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
             share = 1.0
             if travel and rotation and speed + z_guess * turn_rate > 0.0:
                 share = speed / (speed + z_guess * turn_rate)
+            # with a rotation a point's timing error moves its travel and its position net of the rotation
+            # together: the rows fit takes the slope with what that error leaves alone (docs/time_surface.md, 7i)
+            instrument = turn_rate / speed if travel and rotation else 0.0
             if rows_model:
                 fit, tau_s, tau_w, c, kept, rms = fit_rows(ps_, pw, pt, pg, n, min_points, min_spread * share * share,
                                                             outlier_px * share, iterations, lines, used,
-                                                            give_up_rms * share, slanted)
+                                                            give_up_rms * share, slanted, instrument)
             else:
                 fit, tau_s, tau_w, c, kept, rms = fit_plane(ps_, pw, pt, n, min_points, min_spread * share * share,
                                                             outlier_px * share, iterations)

@@ -136,7 +136,7 @@ def _rms(sq, kept, slope):
 
 @njit(cache=True, _nrt=False)  # no reference counts of its arrays (two atomic operations each per fit)
 def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, lines, used, give_up_rms=math.inf,
-             across=True):
+             across=True, instrument=0.0):
     """Time per pixel along the image motion from lines of pixels parallel to it, robustly.
 
     Fits ``t = c_line + τ_s s + β w``: each line (``pg``: index of the point's line across the
@@ -155,7 +155,12 @@ def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, 
     offsets across the motion and ``c`` the offset of the event's line. A last pass above
     ``give_up_rms`` px rms returns ``FIT_OVER_RMS`` at once (with its ``τ_s`` and rms). ``across``
     False: no ``β`` (``pw`` is not read; the caller knows a line's ``w`` is one, or the lines are not
-    the edges' tracks).
+    the edges' tracks). ``instrument`` ``r`` (1/m; 0: ordinary least squares): for travel fits under a
+    rotation, the rotation's image motion along the motion over the translation's (px/s over px·m/s).
+    A point's timing error then moves its net position ``s`` and its travel ``t`` together, along
+    ``(−r, 1)``, and least squares of ``t`` on ``s`` would be pulled low; the slope is taken with
+    ``s + r t``, which that error leaves alone, as the instrument (docs/time_surface.md, 7i): the
+    outliers are the least-squares fit's, the slope is the instrument's on the points kept.
     """
     middle = (lines.shape[0] - 1) // 2
     n_used = 0
@@ -271,6 +276,21 @@ def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, 
         last = np.uint64(k)  # >= 0 (a point was the worst): unsigned spares the negative-index fix-ups
         ps[worst], pw[worst], pt[worst], pg[worst] = ps[last], pw[last], pt[last], pg[last]
         ps[last], pw[last], pt[last], pg[last] = s, w, t, np.int64(g)
+    if code == FIT_OK and instrument != 0.0:  # Σ u t / Σ u s with u = s + r t, within the lines (and β's w)
+        syy = 0.0
+        for i in range(k):
+            d = pt[i] - lines[np.uint64(pg[i]), L_MEAN_T]
+            syy += d * d if d == d else 0.0
+        ux, uy = sxx + instrument * sxy, sxy + instrument * syy
+        sww = ssw = swy = 0.0
+        if across:
+            sww, ssw, swy = qww - tww, qsw - tsw, qwt - twt
+        uw = ssw + instrument * swy
+        det = ux * sww - uw * ssw
+        if across and (sww > MIN_W_SPREAD * kept) & (sxx * sww - ssw * ssw > min_spread * kept * sww):
+            tau_s = (uy * sww - uw * swy) / det
+        else:
+            tau_s = uy / ux
     if code == FIT_OK:
         # The lines' offsets against their position across the motion: τ_w (weighted by points).
         sw = so = sww = swo = total = 0.0
