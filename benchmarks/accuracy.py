@@ -332,6 +332,15 @@ def markdown_table(header: list[str], rows: list[list[str]]) -> str:
     return "\n".join(lines)
 
 
+def print_tables(header: list[str], rows: list[list[str]], title: str | None = None, blank_after: bool = True) -> None:
+    """Print ``title`` (if given) and a blank line, the table as text, a blank line, the table as markdown and,
+    if ``blank_after``, a blank line: how the benchmarks print their tables."""
+    if title is not None:
+        print(title + "\n")
+    print(text_table(header, rows) + "\n")
+    print(markdown_table(header, rows) + ("\n" if blank_after else ""))
+
+
 def parse_size(text: str) -> tuple[int, int]:
     w, h = text.lower().split("x")
     return int(w), int(h)
@@ -433,10 +442,7 @@ def main(argv: list[str] | None = None) -> int:
                                        fmt(100 * row["rel_times_share"])])
             split_rows.append([label, "rejected rotation_dominated", fmt(dominated), "", "", "", ""])
         header_split = ["run", "true r", "estimates", "median r", "median |rel| %", "bias %", "|rel|*r %"]
-        print(text_table(header_split, split_rows))
-        print()
-        print(markdown_table(header_split, split_rows))
-        print()
+        print_tables(header_split, split_rows)
     cmd = ["python benchmarks/accuracy.py"]
     if args.scenarios != ",".join(ALL_SCENARIOS):
         cmd.append(f"--scenarios {args.scenarios}")

@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from accuracy import (as_written, default_backend, default_cache, fmt, log, markdown_table,  # noqa: E402
-                      recording_for, run_improved, run_network, text_table)
+from accuracy import (as_written, default_backend, default_cache, fmt, log, print_tables,  # noqa: E402
+                      recording_for, run_improved, run_network)
 
 from tofnet.eval.breakdown import DEPTH_BANDS, PHASES, band_label, motion_phase  # noqa: E402
 from tofnet.sim.motion import MOTIONS  # noqa: E402
@@ -143,13 +143,8 @@ def main(argv: list[str] | None = None) -> int:
         rows.append([motion, estimator, fmt(pool.coverage("all")), fmt(pool.median("all")), fmt(pool.bias("all"))]
                     + [fmt(pool.coverage(b)) for b in BANDS] + [fmt(pool.median(b)) for b in BANDS]
                     + [fmt(pool.coverage(p)) for p in PHASES] + [fmt(pool.median(p)) for p in PHASES])
-    print(f"Random scenes, variants {args.variants}, {args.duration:g} s each, backend {backend}, "
-          f"time surface {settings or 'defaults'}; pooled per motion class")
-    print()
-    print(text_table(header, rows))
-    print()
-    print(markdown_table(header, rows))
-    print()
+    print_tables(header, rows, f"Random scenes, variants {args.variants}, {args.duration:g} s each, backend {backend}, "
+                 f"time surface {settings or 'defaults'}; pooled per motion class")
     cmd = ["python benchmarks/motion_sweep.py", f"--variants {args.variants}"]
     if args.duration != 1.0:
         cmd.append(f"--duration {args.duration:g}")

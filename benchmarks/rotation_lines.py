@@ -18,7 +18,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from accuracy import default_cache, fmt, log, markdown_table, recording_for, run_improved, text_table  # noqa: E402
+from accuracy import default_cache, fmt, log, print_tables, recording_for, run_improved  # noqa: E402
 from motion_sweep import parse_settings  # noqa: E402
 
 from tofnet.sim.camera import DEFAULT_INTRINSICS, constant  # noqa: E402
@@ -64,12 +64,8 @@ def main(argv: list[str] | None = None) -> int:
         log(f"{label}: {m['events']:,} events, coverage {m['coverage_pct']:.1f} %, median {m['median_rel_pct']:.2f} %")
         rows.append([label, f"{m['events']:,}", fmt(m["coverage_pct"]), fmt(m["median_rel_pct"], 2),
                      fmt(m["bias_pct"], 2), f"{counts['bad_fit']:,}", f"{counts['too_near']:,}"])
-    print(f"Constant rotation, wall at {DEPTH:g} m, slide {SPEED:g} m/s, {DURATION:g} s, no noise, no mismatch; "
-          f"time surface {settings or 'defaults'}")
-    print()
-    print(text_table(header, rows))
-    print()
-    print(markdown_table(header, rows))
+    print_tables(header, rows, f"Constant rotation, wall at {DEPTH:g} m, slide {SPEED:g} m/s, {DURATION:g} s, "
+                 f"no noise, no mismatch; time surface {settings or 'defaults'}", blank_after=False)
     return 0
 
 

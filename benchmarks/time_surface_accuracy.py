@@ -23,7 +23,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from accuracy import ALL_SCENARIOS, default_cache, fmt, log, markdown_table, text_table  # noqa: E402
+from accuracy import ALL_SCENARIOS, default_cache, fmt, log, markdown_table, print_tables  # noqa: E402
 from tofnet.sim.scenarios import ROTATION_SCENARIOS  # noqa: E402
 from time_surface_runs import paper_metrics, run_time_surface, scenario_recording  # noqa: E402
 from time_surface_sweep import parse_assignments  # noqa: E402
@@ -69,9 +69,7 @@ def main(argv: list[str] | None = None) -> int:
         verdicts.append((f"{name}: median not above the paper network's", f"{ratio:.2f}", ratio <= 1.0))
     title = (f"Time-surface estimator (defaults{' + ' + args.set if changes else ''}) beside the paper's network, "
              f"{args.duration:g} s per scenario, seed {args.seed}")
-    print(title + "\n")
-    print(text_table(header, rows) + "\n")
-    print(markdown_table(header, rows) + "\n")
+    print_tables(header, rows, title)
     print(markdown_table(["target", "measured", "verdict"],
                          [[what, value, "PASS" if ok else "FAIL"] for what, value, ok in verdicts]) + "\n")
     cmd = "python benchmarks/time_surface_accuracy.py"

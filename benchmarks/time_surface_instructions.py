@@ -26,7 +26,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from accuracy import markdown_table, text_table  # noqa: E402
+from accuracy import print_tables  # noqa: E402
 from time_surface_speed import estimator_for, recording_of  # noqa: E402
 from time_surface_sweep import parse_assignments  # noqa: E402
 
@@ -82,9 +82,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  {spec} ...", file=sys.stderr, flush=True)
         ir, missed = counted(spec, args.events, args.set)
         rows.append([spec, f"{args.events:,}", f"{ir:.1f}", f"{missed:.2f}"])
-    print(f"Time-surface kernel under callgrind ({args.set or 'defaults'})\n")
-    print(text_table(header, rows) + "\n")
-    print(markdown_table(header, rows))
+    print_tables(header, rows, f"Time-surface kernel under callgrind ({args.set or 'defaults'})", blank_after=False)
     return 0
 
 

@@ -28,7 +28,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import streams  # noqa: E402
-from accuracy import fmt, log, markdown_table, text_table  # noqa: E402
+from accuracy import fmt, log, print_tables  # noqa: E402
 from performance import bulk_once, machine, network, packets  # noqa: E402
 from time_surface_runs import config_for, trajectory_rows  # noqa: E402
 from time_surface_sweep import parse_assignments  # noqa: E402
@@ -118,9 +118,8 @@ def main(argv: list[str] | None = None) -> int:
         if before:
             rows[-1] += [fmt(100 * b["old_first"] / n), fmt(100 * b["old_emitted"] / n), fmt(n / b["old_cpu"] / 1e6),
                          fmt(b["old_cpu"] / b["cpu"], 2)]
-    print(f"Time-surface estimator speed (defaults), best of {args.rounds} rounds, CPU time; {machine()}\n")
-    print(text_table(header, rows) + "\n")
-    print(markdown_table(header, rows) + "\n")
+    print_tables(header, rows, f"Time-surface estimator speed (defaults), best of {args.rounds} rounds, CPU time; "
+                 f"{machine()}")
     print("reproduce: python benchmarks/time_surface_speed.py" + (f" --streams {args.streams}"
                                                                    if args.streams != STREAMS else "")
           + (f" --before '{args.before}'" if args.before != "hold_fit_rms_px=inf" else ""))

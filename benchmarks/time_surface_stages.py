@@ -29,7 +29,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from accuracy import fmt, log, markdown_table, text_table  # noqa: E402
+from accuracy import fmt, log, print_tables  # noqa: E402
 from performance import machine  # noqa: E402
 from time_surface_speed import estimator_for, recording_of  # noqa: E402
 
@@ -69,9 +69,7 @@ def main(argv: list[str] | None = None) -> int:
             base = cpu if base is None else base
             extra = fmt((cpu - base) / fitted * 1e9, 0) if fitted and name != "no fit" else "-"
             rows.append([spec, name, fmt(cpu / n * 1e9, 1), fmt(n / cpu / 1e6), fmt(100 * fitted / n), extra])
-    print(f"Time-surface estimator by stage, best of {args.rounds} rounds, CPU time; {machine()}\n")
-    print(text_table(header, rows) + "\n")
-    print(markdown_table(header, rows) + "\n")
+    print_tables(header, rows, f"Time-surface estimator by stage, best of {args.rounds} rounds, CPU time; {machine()}")
     print("reproduce: python benchmarks/time_surface_stages.py" +
           (f" --streams {args.streams}" if args.streams != parser.get_default("streams") else ""))
     return 0

@@ -33,7 +33,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from accuracy import ALL_SCENARIOS, default_cache, fmt, log, markdown_table, text_table  # noqa: E402
+from accuracy import ALL_SCENARIOS, default_cache, fmt, log, print_tables  # noqa: E402
 from time_surface_runs import paper_metrics, run_time_surface, scenario_recording  # noqa: E402
 from tofnet.sim.scenarios import ROTATION_SCENARIOS  # noqa: E402
 
@@ -144,15 +144,10 @@ def main(argv: list[str] | None = None) -> int:
                fmt(s["coverage"]), fmt(s["mevs"])] + [cell(results[n]) for n in names]
         rows.append(row)
     paper_row = ["paper's network", "", "", "", "1.00", "", "", ""] + [cell(paper[n]) for n in names]
-    print(f"Time-surface sweep: {args.duration:g} s per scenario, seed {args.seed}"
-          f"{'; turning scenarios with eq. 7' if any(eq7.values()) else ''}; cells: median rel % / bias % / "
-          f"coverage %; summary over the scenarios with realistic pixels (ratio over all); "
-          f"{time.perf_counter() - start:.0f} s")
-    print()
-    print(text_table(header, rows + [paper_row]))
-    print()
-    print(markdown_table(header, rows + [paper_row]))
-    print()
+    print_tables(header, rows + [paper_row], f"Time-surface sweep: {args.duration:g} s per scenario, seed {args.seed}"
+                 f"{'; turning scenarios with eq. 7' if any(eq7.values()) else ''}; cells: median rel % / bias % / "
+                 f"coverage %; summary over the scenarios with realistic pixels (ratio over all); "
+                 f"{time.perf_counter() - start:.0f} s")
     cmd = "python benchmarks/time_surface_sweep.py"
     for flag, value in (("--factors", args.factors), ("--values", args.values), ("--base", args.base)):
         if value:

@@ -34,7 +34,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from accuracy import default_cache, fmt, log, markdown_table, recording_for, scenario_config, text_table  # noqa: E402
+from accuracy import default_cache, fmt, log, print_tables, recording_for, scenario_config  # noqa: E402
 from tofnet.api import run  # noqa: E402
 from tofnet.eval.metrics import evaluate  # noqa: E402
 from tofnet.eval.undistorted import undistorted_recording  # noqa: E402
@@ -104,13 +104,8 @@ def main(argv: list[str] | None = None) -> int:
     table = [[n, lens, how, fmt(m["estimates"]), fmt(m["coverage_pct"]), fmt(m["median_rel_pct"]),
               fmt(m["mean_rel_pct"]), f"{m['bias_pct']:+.1f}", fmt(m["left_image"]), fmt(m["merged"])]
              for n, lens, how, m in rows]
-    print(f"Depth accuracy behind a distorted lens, {args.duration:g} s per scenario, seed {args.seed}, 240x180, "
-          "1 ms steps, 8-bit counters, default refractory, A t per 30 px patch")
-    print()
-    print(text_table(header, table))
-    print()
-    print(markdown_table(header, table))
-    print()
+    print_tables(header, table, f"Depth accuracy behind a distorted lens, {args.duration:g} s per scenario, seed "
+                 f"{args.seed}, 240x180, 1 ms steps, 8-bit counters, default refractory, A t per 30 px patch")
 
     # Speed: what the undistort process costs on the fixed backend (it runs the graph model by model).
     from tofnet.backends.event_driven import FixedBackend
@@ -132,10 +127,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{with_undistort / fused:.1f}"]]
     speed_header = ["fixed backend, slider " + lenses[0], "wall s (best of 3)", "M events/s", "x fused"]
     print(f"Speed on slider through {lenses[0]}, {n:,} events, {args.duration:g} s:")
-    print(text_table(speed_header, speed))
-    print()
-    print(markdown_table(speed_header, speed))
-    print()
+    print_tables(speed_header, speed)
     cmd = ["python benchmarks/undistort_accuracy.py"]
     for flag, value, default in (("--scenarios", args.scenarios, SCENARIOS),
                                  ("--lenses", args.lenses, ",".join(LENSES)),
