@@ -341,6 +341,13 @@ def print_tables(header: list[str], rows: list[list[str]], title: str | None = N
     print(markdown_table(header, rows) + ("\n" if blank_after else ""))
 
 
+def reproduce(script: str, options: list[tuple]) -> str:
+    """``reproduce: python benchmarks/<script>`` and ``flag value`` for each ``(flag, value, default[, format
+    spec])`` of ``options`` whose value is not its default: the line that ends a benchmark's output."""
+    return " ".join([f"reproduce: python benchmarks/{script}"]
+                    + [f"{flag} {format(value, *spec)}" for flag, value, default, *spec in options if value != default])
+
+
 def parse_size(text: str) -> tuple[int, int]:
     w, h = text.lower().split("x")
     return int(w), int(h)
@@ -443,17 +450,10 @@ def main(argv: list[str] | None = None) -> int:
             split_rows.append([label, "rejected rotation_dominated", fmt(dominated), "", "", "", ""])
         header_split = ["run", "true r", "estimates", "median r", "median |rel| %", "bias %", "|rel|*r %"]
         print_tables(header_split, split_rows)
-    cmd = ["python benchmarks/accuracy.py"]
-    if args.scenarios != ",".join(ALL_SCENARIOS):
-        cmd.append(f"--scenarios {args.scenarios}")
-    for flag, value, default in (("--duration", args.duration, 1.0), ("--seed", args.seed, 0),
-                                 ("--size", args.size, "240x180"), ("--refractory", args.refractory, None),
-                                 ("--pixels", args.pixels, "default")):
-        if value != default:
-            cmd.append(f"{flag} {value}")
-    if args.backend:
-        cmd.append(f"--backend {args.backend}")
-    print("reproduce: " + " ".join(cmd))
+    print(reproduce("accuracy.py", [("--scenarios", args.scenarios, ",".join(ALL_SCENARIOS)),
+                                    ("--duration", args.duration, 1.0), ("--seed", args.seed, 0),
+                                    ("--size", args.size, "240x180"), ("--refractory", args.refractory, None),
+                                    ("--pixels", args.pixels, "default"), ("--backend", args.backend or None, None)]))
     return 0
 
 

@@ -46,7 +46,7 @@ from numba import njit
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from accuracy import (attribution, binned, default_backend, default_cache, discretisation_floor,  # noqa: E402
-                      fmt, log, markdown_table, recording_for, run_network, scenario_config)
+                      fmt, log, markdown_table, recording_for, reproduce, run_network, scenario_config)
 import tofnet.sim.engine as sim_engine  # noqa: E402
 from tofnet.processes.input import DEFAULT_REFRACTORY  # noqa: E402
 from tofnet.sim import Plane, Scene, SimConfig, Texture, constant  # noqa: E402
@@ -405,12 +405,8 @@ def main(argv: list[str] | None = None) -> int:
         globals()[f"section_{s}"](args)
         sys.stdout.flush()
         log(f"section {s}: {time.perf_counter() - start:.0f} s")
-    cmd = "python benchmarks/accuracy_decomposition.py"
-    if args.only != ",".join(SECTIONS):
-        cmd += f" --only {args.only}"
-    if args.refractory != DEFAULT_REFRACTORY:
-        cmd += f" --refractory {args.refractory}"
-    print("reproduce: " + cmd)
+    print(reproduce("accuracy_decomposition.py", [("--only", args.only, ",".join(SECTIONS)),
+                                                  ("--refractory", args.refractory, DEFAULT_REFRACTORY)]))
     return 0
 
 

@@ -27,7 +27,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from accuracy import (as_written, default_backend, default_cache, fmt, log, print_tables,  # noqa: E402
-                      recording_for, run_improved, run_network)
+                      recording_for, reproduce, run_improved, run_network)
 
 from tofnet.eval.breakdown import DEPTH_BANDS, PHASES, band_label, motion_phase  # noqa: E402
 from tofnet.sim.motion import MOTIONS  # noqa: E402
@@ -145,14 +145,8 @@ def main(argv: list[str] | None = None) -> int:
                     + [fmt(pool.coverage(p)) for p in PHASES] + [fmt(pool.median(p)) for p in PHASES])
     print_tables(header, rows, f"Random scenes, variants {args.variants}, {args.duration:g} s each, backend {backend}, "
                  f"time surface {settings or 'defaults'}; pooled per motion class")
-    cmd = ["python benchmarks/motion_sweep.py", f"--variants {args.variants}"]
-    if args.duration != 1.0:
-        cmd.append(f"--duration {args.duration:g}")
-    if args.motions != ",".join(MOTIONS):
-        cmd.append(f"--motions {args.motions}")
-    if args.set:
-        cmd.append(f"--set {args.set}")
-    print("reproduce: " + " ".join(cmd))
+    print(reproduce(f"motion_sweep.py --variants {args.variants}", [("--duration", args.duration, 1.0, "g"),
+                    ("--motions", args.motions, ",".join(MOTIONS)), ("--set", args.set, "")]))
     return 0
 
 

@@ -23,7 +23,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from accuracy import (ALL_SCENARIOS, default_backend, default_cache, fmt, log, markdown_table, parse_size,  # noqa: E402
-                      recording_for, run_network, scenario_config, text_table)
+                      recording_for, reproduce, run_network, scenario_config, text_table)
 from tofnet.processes.input import DEFAULT_REFRACTORY  # noqa: E402
 
 VALUES_MS = "0,1,2,5,10,15,20,30,40,50,60,75,100"
@@ -115,17 +115,11 @@ def main(argv: list[str] | None = None) -> int:
         print()
     print(markdown_table(header, rows))
     print()
-    cmd = "python benchmarks/refractory_sweep.py"
-    for flag, value, default in (("--values", args.values, VALUES_MS), ("--scenarios", args.scenarios,
-                                 ",".join(ALL_SCENARIOS)), ("--duration", args.duration, 1.0),
-                                 ("--seed", args.seed, 0), ("--size", args.size, "240x180")):
-        if value != default:
-            cmd += f" {flag} {value}"
-    if args.per_polarity:
-        cmd += " --per-polarity"
-    if args.backend:
-        cmd += f" --backend {args.backend}"
-    print("reproduce: " + cmd)
+    cmd = reproduce("refractory_sweep.py", [("--values", args.values, VALUES_MS),
+                                            ("--scenarios", args.scenarios, ",".join(ALL_SCENARIOS)),
+                                            ("--duration", args.duration, 1.0), ("--seed", args.seed, 0),
+                                            ("--size", args.size, "240x180")])
+    print(cmd + " --per-polarity" * args.per_polarity + (f" --backend {args.backend}" if args.backend else ""))
     return 0
 
 

@@ -25,7 +25,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from accuracy import default_cache, fmt, log, parse_size, recording_for, scenario_config, text_table  # noqa: E402
+from accuracy import (default_cache, fmt, log, parse_size, recording_for, reproduce, scenario_config,  # noqa: E402
+                      text_table)
 
 from tofnet.api import run  # noqa: E402
 from tofnet.eval.match import match_estimates  # noqa: E402
@@ -192,15 +193,12 @@ def main(argv: list[str] | None = None) -> int:
           "(what min_share filters on)")
     print(text_table(header, filter_rows))
     print()
-    cmd = "python benchmarks/rotation_study.py"
-    for flag, value, default in (("--scenarios", args.scenarios, "slider,wobble_slider,tracking_slider,pan"),
-                                 ("--duration", args.duration, 1.0), ("--seed", args.seed, 0),
-                                 ("--size", args.size, "240x180"), ("--pixels", args.pixels, "default"),
-                                 ("--gyro-noise", args.gyro_noise, 1.5e-4),
-                                 ("--gyro-bias", args.gyro_bias, 0.005)):
-        if value != default:
-            cmd += f" {flag} {value}"
-    print(f"reproduce: {cmd}   ({time.perf_counter() - start:.0f} s)")
+    cmd = reproduce("rotation_study.py", [("--scenarios", args.scenarios, "slider,wobble_slider,tracking_slider,pan"),
+                                          ("--duration", args.duration, 1.0), ("--seed", args.seed, 0),
+                                          ("--size", args.size, "240x180"), ("--pixels", args.pixels, "default"),
+                                          ("--gyro-noise", args.gyro_noise, 1.5e-4),
+                                          ("--gyro-bias", args.gyro_bias, 0.005)])
+    print(f"{cmd}   ({time.perf_counter() - start:.0f} s)")
     return 0
 
 

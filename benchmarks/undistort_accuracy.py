@@ -34,7 +34,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from accuracy import default_cache, fmt, log, print_tables, recording_for, scenario_config  # noqa: E402
+from accuracy import default_cache, fmt, log, print_tables, recording_for, reproduce, scenario_config  # noqa: E402
 from tofnet.api import run  # noqa: E402
 from tofnet.eval.metrics import evaluate  # noqa: E402
 from tofnet.eval.undistorted import undistorted_recording  # noqa: E402
@@ -128,13 +128,9 @@ def main(argv: list[str] | None = None) -> int:
     speed_header = ["fixed backend, slider " + lenses[0], "wall s (best of 3)", "M events/s", "x fused"]
     print(f"Speed on slider through {lenses[0]}, {n:,} events, {args.duration:g} s:")
     print_tables(speed_header, speed)
-    cmd = ["python benchmarks/undistort_accuracy.py"]
-    for flag, value, default in (("--scenarios", args.scenarios, SCENARIOS),
-                                 ("--lenses", args.lenses, ",".join(LENSES)),
-                                 ("--duration", args.duration, 1.0), ("--seed", args.seed, 0)):
-        if value != default:
-            cmd.append(f"{flag} {value}")
-    print("reproduce: " + " ".join(cmd))
+    print(reproduce("undistort_accuracy.py", [("--scenarios", args.scenarios, SCENARIOS),
+                                              ("--lenses", args.lenses, ",".join(LENSES)),
+                                              ("--duration", args.duration, 1.0), ("--seed", args.seed, 0)]))
     return 0
 
 

@@ -30,7 +30,8 @@ import numpy as np
 from numba import njit
 
 sys.path.insert(0, str(Path(__file__).parent))
-from accuracy import default_cache, fmt, log, parse_size, recording_for, scenario_config, text_table  # noqa: E402
+from accuracy import (default_cache, fmt, log, parse_size, recording_for, reproduce, scenario_config,  # noqa: E402
+                      text_table)
 
 from tofnet.api import run  # noqa: E402
 from tofnet.eval.match import match_estimates  # noqa: E402
@@ -292,13 +293,10 @@ def main(argv: list[str] | None = None) -> int:
     print("\n5. Rules (network's 1 ms counts): reject an axis count above a limit, or a minor-axis term |f td| above a"
           " limit\n   with f = A t / z + B w from the neuron's own depth z (share %: of all the scenario's estimates)")
     print(text_table(base[:1] + ["rule"] + base[1:], all_tables["rule"]))
-    cmd = "python benchmarks/wobble_study.py"
-    for flag, value, default in (("--scenarios", args.scenarios, "slider,wobble_slider"),
-                                 ("--duration", args.duration, 1.0), ("--seed", args.seed, 0),
-                                 ("--size", args.size, "240x180"), ("--pixels", args.pixels, "esim")):
-        if value != default:
-            cmd += f" {flag} {value}"
-    print(f"\nreproduce: {cmd}   ({time.perf_counter() - start:.0f} s)")
+    cmd = reproduce("wobble_study.py", [("--scenarios", args.scenarios, "slider,wobble_slider"),
+                                        ("--duration", args.duration, 1.0), ("--seed", args.seed, 0),
+                                        ("--size", args.size, "240x180"), ("--pixels", args.pixels, "esim")])
+    print(f"\n{cmd}   ({time.perf_counter() - start:.0f} s)")
     return 0
 
 
