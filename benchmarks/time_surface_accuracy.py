@@ -23,10 +23,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from accuracy import ALL_SCENARIOS, default_cache, fmt, log, markdown_table, print_tables  # noqa: E402
+from accuracy import ALL_SCENARIOS, fmt, log, markdown_table, print_tables  # noqa: E402
 from tofnet.sim.scenarios import ROTATION_SCENARIOS  # noqa: E402
 from time_surface_runs import paper_metrics, run_time_surface, scenario_recording  # noqa: E402
-from time_surface_sweep import parse_assignments  # noqa: E402
+from time_surface_sweep import add_run_options, parse_assignments  # noqa: E402
 
 TARGET_SCENARIOS = ("slider", "all_axes")
 #: The scenarios of this table: the camera does not turn (the estimator computes eq. 8 here).
@@ -37,11 +37,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenarios", default=",".join(SCENARIOS))
     parser.add_argument("--set", default="", help="'name=value;...': estimator defaults to change")
-    parser.add_argument("--duration", type=float, default=1.0)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--cache", default=str(default_cache()))
-    parser.add_argument("--eq7", action="store_true",
-                        help="turning scenarios: compensate the rotation (eq. 7, ω from the poses) in both")
+    add_run_options(parser)
     args = parser.parse_args(argv)
     names = [s for s in args.scenarios.split(",") if s]
     cache = Path(args.cache) if args.cache else None

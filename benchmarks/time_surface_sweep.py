@@ -91,6 +91,15 @@ def summary(results: dict, paper: dict, names: list[str]) -> dict:
             "mevs": events / cpu / 1e6 if cpu > 0 else float("nan")}
 
 
+def add_run_options(parser: argparse.ArgumentParser) -> None:
+    """``--duration``, ``--seed``, ``--cache`` and ``--eq7``: the options shared with ``time_surface_accuracy.py``."""
+    parser.add_argument("--duration", type=float, default=1.0)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--cache", default=str(default_cache()))
+    parser.add_argument("--eq7", action="store_true",
+                        help="turning scenarios: compensate the rotation (eq. 7, ω from the poses) in both")
+
+
 def cell(m: dict) -> str:
     return f"{m['median_rel_pct']:.1f} / {m['bias_pct']:+.1f} / {m['coverage_pct']:.1f}"
 
@@ -101,11 +110,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--values", default="", help="'name=v1,v2;other=...' instead of FACTORS' values")
     parser.add_argument("--base", default="", help="'name=value;...': defaults changed for every run")
     parser.add_argument("--scenarios", default=",".join(ALL_SCENARIOS))
-    parser.add_argument("--duration", type=float, default=1.0)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--cache", default=str(default_cache()))
-    parser.add_argument("--eq7", action="store_true",
-                        help="turning scenarios: compensate the rotation (eq. 7, ω from the poses) in both")
+    add_run_options(parser)
     args = parser.parse_args(argv)
     names = [s for s in args.scenarios.split(",") if s]
     cache = Path(args.cache) if args.cache else None
