@@ -23,7 +23,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from accuracy import ALL_SCENARIOS, fmt, log, markdown_table, print_tables  # noqa: E402
+from accuracy import ALL_SCENARIOS, fmt, log, markdown_table, print_tables, reproduce  # noqa: E402
 from tofnet.sim.scenarios import ROTATION_SCENARIOS  # noqa: E402
 from time_surface_runs import paper_metrics, run_time_surface, scenario_recording  # noqa: E402
 from time_surface_sweep import add_run_options, parse_assignments  # noqa: E402
@@ -68,14 +68,8 @@ def main(argv: list[str] | None = None) -> int:
     print_tables(header, rows, title)
     print(markdown_table(["target", "measured", "verdict"],
                          [[what, value, "PASS" if ok else "FAIL"] for what, value, ok in verdicts]) + "\n")
-    cmd = "python benchmarks/time_surface_accuracy.py"
-    if args.scenarios != ",".join(SCENARIOS):
-        cmd += f" --scenarios {args.scenarios}"
-    if args.set:
-        cmd += f" --set '{args.set}'"
-    if args.eq7:
-        cmd += " --eq7"
-    print("reproduce: " + cmd)
+    print(reproduce("time_surface_accuracy.py", [("--scenarios", args.scenarios, ",".join(SCENARIOS)),
+                                                 ("--set", f"'{args.set}'", "''")]) + " --eq7" * args.eq7)
     return 0
 
 

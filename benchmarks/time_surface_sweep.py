@@ -33,7 +33,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from accuracy import ALL_SCENARIOS, default_cache, fmt, log, print_tables  # noqa: E402
+from accuracy import ALL_SCENARIOS, default_cache, fmt, log, print_tables, reproduce  # noqa: E402
 from time_surface_runs import paper_metrics, run_time_surface, scenario_recording  # noqa: E402
 from tofnet.sim.scenarios import ROTATION_SCENARIOS  # noqa: E402
 
@@ -153,15 +153,10 @@ def main(argv: list[str] | None = None) -> int:
                  f"{'; turning scenarios with eq. 7' if any(eq7.values()) else ''}; cells: median rel % / bias % / "
                  f"coverage %; summary over the scenarios with realistic pixels (ratio over all); "
                  f"{time.perf_counter() - start:.0f} s")
-    cmd = "python benchmarks/time_surface_sweep.py"
-    for flag, value in (("--factors", args.factors), ("--values", args.values), ("--base", args.base)):
-        if value:
-            cmd += f" {flag} '{value}'"
-    if args.scenarios != ",".join(ALL_SCENARIOS):
-        cmd += f" --scenarios {args.scenarios}"
-    if args.eq7:
-        cmd += " --eq7"
-    print("reproduce: " + cmd)
+    quoted = [(flag, f"'{value}'", "''") for flag, value in (("--factors", args.factors), ("--values", args.values),
+                                                              ("--base", args.base))]
+    print(reproduce("time_surface_sweep.py", quoted + [("--scenarios", args.scenarios, ",".join(ALL_SCENARIOS))])
+          + " --eq7" * args.eq7)
     return 0
 
 
