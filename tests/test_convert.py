@@ -143,3 +143,28 @@ def test_convert_says_what_of_an_hdf5_it_does_not_write(tmp_path, original, caps
     assert main(["convert", str(path), str(tmp_path / "out.npz"), "--quiet"]) == 0
     out = capsys.readouterr().out
     assert "not written: images (tofnet reads only the events, camera, poses and IMU of dsec.h5)" in out, out
+
+
+def test_a_side_file_of_another_recording_beside_the_output_is_refused_before_any_work(tmp_path, original, capsys):
+    """A file that keeps its camera beside it (``.dat``: ``calib.txt``) would be read with a stranger's: refused in
+    one line, nothing written; ``--force`` replaces it; the input's own side file is its camera and stays."""
+    optional("faery")
+    out = tmp_path / "other"
+    out.mkdir()
+    (out / "calib.txt").write_text("100 100 50 50\n")  # another recording's camera
+    assert main(["convert", str(original[1]), str(out / "rec.dat")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "calib.txt" in err and "--force" in err and "Traceback" not in err
+    assert sorted(p.name for p in out.iterdir()) == ["calib.txt"]
+    assert (out / "calib.txt").read_text() == "100 100 50 50\n"
+    assert main(["convert", str(original[1]), str(out / "rec.dat"), "--force"]) == 0
+    assert read_recording(out / "rec.dat").intrinsics == original[0].intrinsics
+    # converting within the input's folder: its calib.txt is its own camera (an input), kept as it is
+    mine = tmp_path / "mine"
+    assert main(["convert", str(original[1]), str(mine)]) == 0  # an ECD folder with calib.txt
+    before = (mine / "calib.txt").read_bytes()
+    capsys.readouterr()
+    assert main(["convert", str(mine), str(mine / "rec.dat")]) == 0
+    assert f"NOT written: {mine / 'calib.txt'} is an input of this conversion" in capsys.readouterr().out
+    assert (mine / "calib.txt").read_bytes() == before
+    assert read_recording(mine / "rec.dat").intrinsics == original[0].intrinsics

@@ -12,6 +12,7 @@ memory); those two need the whole recording in memory.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from tofnet.errors import DataError, located
@@ -65,9 +66,15 @@ def check_convert_output(out: str | Path, input_path: str | Path, *, force: bool
     check_output(out, force=force, inputs=inputs, what="output", folder=kind == "ecd")
     if gt_depth and kind == "npz":
         check_output(_depth_path(out), force=force, inputs=inputs, what="true depth output")
-    for side in written_paths(out)[1:] if kind in _WITH_SIDE_FILES else ():  # written only when there is room:
-        if side.is_dir() and not side.is_symlink():  # an existing file is kept and said, a folder cannot be written
+    from tofnet.io.guard import input_among
+
+    for side in written_paths(out)[1:] if kind in _WITH_SIDE_FILES else ():
+        if side.is_dir() and not side.is_symlink():
             raise DataError(located(side, None, "side file for the camera or poses: exists and is a folder"))
+        # another recording's side file would be read with OUT as its camera or poses (an input's is its own)
+        if os.path.lexists(side) and not force and input_among(side, inputs) is None:
+            raise DataError(located(side, None, f"exists, and {out.name} beside it would be read with it as its "
+                                                "camera or poses: convert into another folder, or --force to replace it"))
     if kind in _WRITERS_NEED:  # the writer's library, before anything is read or simulated
         from tofnet.io.extras import require
         require(_WRITERS_NEED[kind], out, f"writing {kind.upper()}")
@@ -181,9 +188,6 @@ def _side_files(folder: Path, meta, messages: list[str], force: bool, input_path
     for name, write in writes:
         if input_among(folder / name, inputs) is not None:
             messages.append(f"NOT written: {folder / name} is an input of this conversion")
-            continue
-        if (folder / name).exists() and not force:
-            messages.append(f"NOT written: {folder / name} exists (use --force to replace it)")
             continue
         write(folder / name)
         messages.append(f"{name.split('.')[0]} -> {folder / name} (read back as a side file)")
