@@ -211,3 +211,22 @@ def test_the_workers_line_says_bands_and_threads_apart():
         "2 bands of rows on 2 threads; run whole: input, velocity"
     assert workers_line({"threads": 1, "bands": 1, "whole": ["time_surface"], "unit": "processes"}) == \
         "1 band of rows on 1 process; run whole: time_surface"
+
+
+def test_a_value_that_starts_with_a_minus_is_the_options_value(tmp_path, capsys):
+    """``--velocity -0.5,0,0`` is a velocity (argparse alone reads ``-0.5,0,0`` as an option and says
+    ``--velocity`` expected one argument); ``--start -1s`` gets the window's own error."""
+    from tofnet.testing import moving_pattern
+
+    recording = tmp_path / "rec.npy"
+    np.save(recording, moving_pattern((64, 48), (-100.0, 0.0), 200_000))
+    camera = ["--intrinsics", "200,200,32,24", "--sensor-size", "64x48", "--quiet"]
+    assert main(["run", str(recording), "--velocity", "-0.5,0,0", *camera, "--out", str(tmp_path / "a.npz")]) == 0
+    assert main(["run", str(recording), "--velocity=-0.5,0,0", *camera, "--out", str(tmp_path / "b.npz")]) == 0
+    assert (tmp_path / "a.npz").read_bytes() == (tmp_path / "b.npz").read_bytes()
+    capsys.readouterr()
+    assert main(["run", str(recording), "--start", "-1s", *camera]) == 2
+    assert "--start: -1 s is before the first event" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exited:  # a flag takes no value: still refused, by argparse
+        main(["run", str(recording), "--quiet", "-1"])
+    assert exited.value.code == 2 and "unrecognized arguments: -1" in capsys.readouterr().err

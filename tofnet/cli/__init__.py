@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import sys
 
 from tofnet.errors import TofnetError
@@ -11,6 +12,8 @@ from tofnet.errors import TofnetError
 #: Subcommand modules, in the order ``tofnet --help`` lists them.
 SUBCOMMANDS = ("demo", "run", "simulate", "eval", "plot", "compile", "conformance", "info", "convert", "export",
                "batch", "warmup", "live")
+#: A value that argparse would take for an option: a minus, then a digit or a point (``-0.5,0,0``, ``-1s``).
+_NEGATIVE_VALUE = re.compile(r"-\.?\d")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -22,10 +25,12 @@ class _Parser(argparse.ArgumentParser):
     def parse_args(self, args=None, namespace=None):
         """As argparse's, but unknown options are said by the subcommand's parser (``tofnet run: error: ...
         (see 'tofnet run --help')``), with the closest option of that subcommand when one is close."""
-        parsed, extras = self.parse_known_args(args, namespace)
+        commands = {name: sub for action in self._actions if isinstance(action, argparse._SubParsersAction)
+                    for name, sub in action.choices.items()}
+        args = list(sys.argv[1:] if args is None else args)
+        parsed, extras = self.parse_known_args(_negative_values_joined(args, commands.get(args[0] if args else None,
+                                                                                         self)), namespace)
         if extras:
-            commands = {name: sub for action in self._actions if isinstance(action, argparse._SubParsersAction)
-                        for name, sub in action.choices.items()}
             parser = commands.get(getattr(parsed, "command", None), self)
             parser.error(f"unrecognized arguments: {' '.join(extras)}{parser.did_you_mean(extras)}")
         return parsed
@@ -41,6 +46,19 @@ class _Parser(argparse.ArgumentParser):
                 if close:
                     return f"; did you mean {close[0]}?"
         return ""
+
+
+def _negative_values_joined(args: list[str], parser: argparse.ArgumentParser) -> list[str]:
+    """``--velocity -0.5,0,0`` as ``--velocity=-0.5,0,0``: argparse takes a value that starts with a minus, unless
+    it is a plain number, for an option, and says the option expected one argument."""
+    takes_value = {option for action in parser._actions if action.nargs != 0 for option in action.option_strings}
+    joined: list[str] = []
+    for token in args:
+        if joined and joined[-1] in takes_value and _NEGATIVE_VALUE.match(token):
+            joined[-1] = f"{joined[-1]}={token}"
+        else:
+            joined.append(token)
+    return joined
 
 
 def build_parser() -> argparse.ArgumentParser:
