@@ -230,3 +230,15 @@ def test_a_value_that_starts_with_a_minus_is_the_options_value(tmp_path, capsys)
     with pytest.raises(SystemExit) as exited:  # a flag takes no value: still refused, by argparse
         main(["run", str(recording), "--quiet", "-1"])
     assert exited.value.code == 2 and "unrecognized arguments: -1" in capsys.readouterr().err
+
+
+def test_a_velocity_without_translation_is_said_beside_the_empty_depth(tmp_path, capsys):
+    from tofnet.testing import moving_pattern
+
+    np.save(tmp_path / "rec.npy", moving_pattern((64, 48), (-100.0, 0.0), 200_000))
+    argv = ["run", str(tmp_path / "rec.npy"), "--intrinsics", "200,200,32,24", "--sensor-size", "64x48"]
+    assert main([*argv, "--velocity", "0,0,0", "--out", str(tmp_path / "zero.npz")]) == 0
+    out = capsys.readouterr().out
+    assert "depth out                 0" in out and "note           --velocity 0,0,0: no translation, so no depth" in out
+    assert main([*argv, "--velocity", "0.5,0,0", "--out", str(tmp_path / "moving.npz")]) == 0
+    assert "no translation" not in capsys.readouterr().out

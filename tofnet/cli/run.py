@@ -236,6 +236,9 @@ def handle(args) -> int:
     summary["undistortion"] = undistortion_of(network, recording, result, str(args.recording),
                                               no_undistort=getattr(args, "no_undistort", False))
     summary["notes"] = list(recording.notes)
+    if args.velocity and not any(float(v) for v in args.velocity.split(",")):  # parsed by constant_velocity
+        summary["notes"].append(f"--velocity {args.velocity}: no translation, so no depth (depth from event timing "
+                                "needs the camera to translate)")
     summary["camera"] = camera_of(run_intrinsics(network, recording))
     summary["total_time_s"] = time.perf_counter() - clock.started
     summary["compile_time_s"], summary["kernels_compiled"] = clock.compile_seconds, clock.compiled
