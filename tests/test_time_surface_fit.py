@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from tofnet.kernels.time_surface_fit import FIT_OK, L_M, L_SS, L_ST, L_S, L_T, L_W, N_L, fit_rows
+from tofnet.kernels.time_surface_fit import FIT_ILL_CONDITIONED, FIT_OK, L_M, L_SS, L_ST, L_S, L_T, L_W, N_L, fit_rows
 
 RADIUS = 5
 LINES = 4 * RADIUS + 3  # as the estimator's table: line 0 is never used
@@ -52,3 +52,13 @@ def test_without_a_rotation_the_rows_fit_is_least_squares():
     centred = [(s[g == k] - s[g == k].mean(), t[g == k] - t[g == k].mean()) for k in np.unique(g)]
     expected = sum((a * b).sum() for a, b in centred) / sum((a * a).sum() for a, _ in centred)
     assert slope(s, t, g, 0.0) == pytest.approx(expected, rel=1e-12)
+
+
+def test_an_instrument_that_says_the_image_stands_still_is_ill_conditioned():
+    """``r = -1 / Z``: the rotation cancels the translation's image motion, ``s + r t`` is constant."""
+    s, t, g = travel_points(0, 2.0, 0.0, 0.0)
+    table, used = np.zeros((LINES, N_L)), np.zeros(LINES, np.int64)
+    for instrument, code in ((-0.5, FIT_ILL_CONDITIONED), (-0.6, FIT_ILL_CONDITIONED), (0.3, FIT_OK)):
+        got = fit_rows(s.copy(), np.zeros_like(s), t.copy(), np.append(g, 0), len(s), 3, 0.01, 1e9, 0, table, used,
+                       np.inf, False, instrument)
+        assert got[0] == code, (instrument, got)

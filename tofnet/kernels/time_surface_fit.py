@@ -291,6 +291,9 @@ def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, 
             tau_s = (uy * sww - uw * swy) / det
         else:
             tau_s = uy / ux
+        # Σ u s = (1 + r Z) Σ s², 1 + r Z the image motion over the translation's: the image must move along f
+        if not (ux > 1e-6 * sxx and abs(tau_s) < math.inf):
+            code = FIT_ILL_CONDITIONED
     if code == FIT_OK:
         # The lines' offsets against their position across the motion: τ_w (weighted by points).
         sw = so = sww = swo = total = 0.0
