@@ -68,7 +68,7 @@ def main() -> None:
         w, h = recording.sensor_size
         print(f"\nslider {w}x{h}, {len(recording.events):,} events, {args.duration * 1e3:.0f} ms")
         print(f"{'backend':<16} {'median s':>9} {'ms/step':>8} {'x fixed':>8}  first round")
-        rows, fixed_s, depths = [], None, {}
+        fixed_s, depths = None, {}
         for name, options in BACKENDS:
             label = name + ("" if not options else " fuse=False")
             try:

@@ -24,7 +24,7 @@ import numpy as np
 import streams
 from tofnet.events import EVENT_DTYPE
 from tofnet.io.hdf5 import write_hdf5
-from tofnet.io.recording import ConstantVelocity, Intrinsics, Recording
+from tofnet.io.recording import Intrinsics, Recording
 from tofnet.io.source import open_recording
 from tofnet.networks import depth_network
 

@@ -69,7 +69,8 @@ def main(argv: list[str] | None = None) -> int:
     print(markdown_table(["target", "measured", "verdict"],
                          [[what, value, "PASS" if ok else "FAIL"] for what, value, ok in verdicts]) + "\n")
     print(reproduce("time_surface_accuracy.py", [("--scenarios", args.scenarios, ",".join(SCENARIOS)),
-                                                 ("--set", f"'{args.set}'", "''")]) + " --eq7" * args.eq7)
+                                                 ("--set", f"'{args.set}'", "''"), ("--duration", args.duration, 1.0, "g"),
+                                                 ("--seed", args.seed, 0)]) + " --eq7" * args.eq7)
     return 0
 
 

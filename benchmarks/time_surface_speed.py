@@ -45,6 +45,10 @@ def recording_of(spec: str):
     return streams.scenario(spec, 1.0, log)
 
 
+#: The configuration the speeds are compared with unless ``--before`` says another.
+BEFORE = "window_px=0;iterations=3"
+
+
 def estimator_for(recording, **changes):
     config = config_for(recording, **changes)
     t0 = int(recording.events["t"][0])
@@ -75,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--streams", default=STREAMS)
     parser.add_argument("--rounds", type=int, default=3)
-    parser.add_argument("--before", default="window_px=0;iterations=3",
+    parser.add_argument("--before", default=BEFORE,
                         help="'name=value;...': the configuration to compare with ('' for none)")
     args = parser.parse_args(argv)
     before = parse_assignments(args.before)
@@ -122,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
                  f"{machine()}")
     print("reproduce: python benchmarks/time_surface_speed.py" + (f" --streams {args.streams}"
                                                                    if args.streams != STREAMS else "")
-          + (f" --before '{args.before}'" if args.before != "hold_fit_rms_px=inf" else ""))
+          + (f" --before '{args.before}'" if args.before != BEFORE else ""))
     return 0
 
 

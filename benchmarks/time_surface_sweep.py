@@ -155,7 +155,8 @@ def main(argv: list[str] | None = None) -> int:
                  f"{time.perf_counter() - start:.0f} s")
     quoted = [(flag, f"'{value}'", "''") for flag, value in (("--factors", args.factors), ("--values", args.values),
                                                               ("--base", args.base))]
-    print(reproduce("time_surface_sweep.py", quoted + [("--scenarios", args.scenarios, ",".join(ALL_SCENARIOS))])
+    print(reproduce("time_surface_sweep.py", quoted + [("--scenarios", args.scenarios, ",".join(ALL_SCENARIOS)),
+                                                       ("--duration", args.duration, 1.0, "g"), ("--seed", args.seed, 0)])
           + " --eq7" * args.eq7)
     return 0
 
