@@ -74,3 +74,22 @@ def test_eval_of_a_csv_needs_the_timing(files, capsys):
 def test_eval_refuses_options_that_contradict_the_file(files, capsys):
     assert main(["eval", str(files / "rec"), str(files / "depth.npz"), "--latency-steps", "1"]) == 2
     assert "latency_steps = 2" in capsys.readouterr().err
+
+
+def test_eval_and_plot_say_when_the_depth_was_run_on_other_events(files, capsys):
+    """A depth file's summary names the events its run read: another count (no window on either side) gets
+    one warning line; the scores are still printed."""
+    depth = np.empty(3, DEPTH_DTYPE)
+    depth["step"], depth["t"], depth["x"], depth["y"], depth["z"] = 2, 13_000, [0, 1, 2], 0, [1.1, 1.8, 4.0]
+    write_depth(files / "own.npz", depth, **META, summary={"recording": "rec", "events_in": 4})
+    write_depth(files / "other.npz", depth, **META, summary={"recording": "elsewhere", "events_in": 5000})
+    write_depth(files / "windowed.npz", depth, **META,
+                summary={"recording": "rec", "events_in": 5000, "notes": ["time window 0.1 s .. (...)"]})
+    for name, warned in (("own.npz", False), ("other.npz", True), ("windowed.npz", False), ("depth.npz", False)):
+        assert main(["eval", str(files / "rec"), str(files / name), "--json", "-"]) == 0, name
+        err = capsys.readouterr().err
+        assert ("was run on 5,000 events ('elsewhere'), this recording has 4: is it this recording's depth?"
+                in err) == warned, (name, err)
+    assert main(["plot", "depthmap", str(files / "rec"), str(files / "other.npz"), "--out",
+                 str(files / "map.png")]) == 0
+    assert "was run on 5,000 events" in capsys.readouterr().err

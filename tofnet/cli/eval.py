@@ -93,7 +93,21 @@ def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = 
         meta["t0_us"] = _t0_from_stamps(depth, int(meta["timestep_us"]), recording, depth_path)
     if bounds is not None:
         depth = _estimates_in_window(depth, meta, *bounds, depth_path)
+    elif mismatch := _run_on_another_recording(meta.get("summary") or {}, len(recording.events)):
+        import logging
+        logging.getLogger("tofnet.cli").warning(f"warning: {depth_path} {mismatch}")
     return recording, depth, meta
+
+
+def _run_on_another_recording(summary: dict, events: int) -> str | None:
+    """What says a depth file's run read other events than ``events`` (its whole recording's, no window on either
+    side), or None."""
+    ran_on, events_in = summary.get("recording"), summary.get("events_in")
+    notes = summary.get("notes") if isinstance(summary.get("notes"), list) else []
+    if type(events_in) is not int or events_in == events or any("time window" in str(n) for n in notes):
+        return None
+    return (f"was run on {events_in:,} events ({str(ran_on)!r}), this recording has {events:,}: "
+            "is it this recording's depth?")
 
 
 def _estimates_in_window(depth: np.ndarray, meta: dict, start: int, stop: int | None, depth_path: str) -> np.ndarray:
