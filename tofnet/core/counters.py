@@ -49,6 +49,6 @@ def reader_counts(accepted: str) -> tuple[Count, ...]:
     return (Count("events_in", "read", "events of the recording"),
             Count("accepted", "accepted", accepted),
             Count("out_of_bounds", "dropped", "outside sensor_size",
-                  warning="events lay outside the {width}x{height} sensor; pass --sensor-size if the "
-                          "recording is larger"),
+                  warning="events lay outside the {width}x{height} sensor (if the recording is larger, "
+                          "--sensor-size says how large)"),
             Count("before_t0", "dropped", "before the start of step 0"))
