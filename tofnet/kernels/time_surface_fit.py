@@ -129,6 +129,13 @@ def _add_point(lines, used, n_used, g, s, t):
 
 
 @njit(cache=True, inline="always")
+def _fits_beta(sww, det, kept, min_spread):
+    """Whether the lines' ``w`` spread (by ``MIN_W_SPREAD`` px² per point, not rounding's) and leave ``s`` a spread
+    net of ``w`` (``det / sww >= min_spread`` per point): then ``β`` is fitted beside the slope."""
+    return (sww > MIN_W_SPREAD * kept) & (det > min_spread * kept * sww)
+
+
+@njit(cache=True, inline="always")
 def _rms(sq, kept, slope):
     """rms distance (px) of ``kept`` points with sum of squared time residuals ``sq`` (µs²) from a slope (µs/px)."""
     return math.sqrt(sq / kept) / slope if slope > 0.0 else math.inf
@@ -217,7 +224,7 @@ def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, 
         if across:
             sww, ssw, swy = qww - tww, qsw - tsw, qwt - twt
             det = sxx * sww - ssw * ssw
-            slant = (sww > MIN_W_SPREAD * kept) & (det > min_spread * kept * sww)
+            slant = _fits_beta(sww, det, kept, min_spread)
         if slant:
             tau_s, beta = (sxy * sww - swy * ssw) / det, (swy * sxx - sxy * ssw) / det
         else:
@@ -287,7 +294,7 @@ def fit_rows(ps, pw, pt, pg, n, min_points, min_spread, outlier_px, iterations, 
             sww, ssw, swy = qww - tww, qsw - tsw, qwt - twt
         uw = ssw + instrument * swy
         det = ux * sww - uw * ssw
-        if across and (sww > MIN_W_SPREAD * kept) & (sxx * sww - ssw * ssw > min_spread * kept * sww):
+        if across and _fits_beta(sww, sxx * sww - ssw * ssw, kept, min_spread):
             tau_s = (uy * sww - uw * swy) / det
         else:
             tau_s = uy / ux
