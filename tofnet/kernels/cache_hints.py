@@ -1,6 +1,7 @@
 """CPU cache hints the event loops share (a numba ``@intrinsic``: LLVM's prefetch)."""
 from __future__ import annotations
 
+import numpy as np
 from llvmlite import ir
 from numba import types
 from numba.core import cgutils
@@ -26,3 +27,16 @@ def prefetch(typingctx, array, index):
         return context.get_dummy_value()
 
     return types.void(array, index), codegen
+
+
+#: Bytes per cache line on the CPUs tofnet runs on (x86-64, most ARM cores).
+CACHE_LINE = 64
+
+
+def line_aligned_full(size: int, value: int, dtype=np.int64) -> np.ndarray:
+    """``np.full(size, value, dtype)`` starting on a cache line: numpy's large arrays start 16 bytes past one,
+    so state rows of 32 or 64 bytes would straddle two lines in turn."""
+    itemsize = np.dtype(dtype).itemsize
+    spare = np.full(size + CACHE_LINE // itemsize, value, dtype)
+    skip = (-spare.ctypes.data % CACHE_LINE) // itemsize
+    return spare[skip:skip + size]

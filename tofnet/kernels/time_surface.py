@@ -22,7 +22,8 @@ from numba import njit
 
 from tofnet.kernels.cache_hints import prefetch
 from tofnet.kernels.rotation import rotational_flow
-from tofnet.kernels.time_surface_first import B_EMITTED, B_HOLD, N_B, NEVER, first_event, index_slot, later_event
+from tofnet.kernels.time_surface_first import (B_EMITTED, B_HOLD, B_INDEX, N_B, N_B_LAYERED, NEVER, first_event,
+                                              later_event)
 from tofnet.kernels.time_surface_fit import FIT_ILL_CONDITIONED, FIT_OVER_RMS, FIT_TOO_FEW, fit_plane, fit_rows
 from tofnet.kernels.time_surface_motion import (M_SINCE, M_UPDATE, M_VX, M_VY, M_VZ, N_MOTION,  # noqa: F401
                                                 _gains, _turn_gains, _velocity_term_at, follow_motion)
@@ -76,7 +77,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
     it as a first event is on ``surface[0, p]`` (``I_BURST_FIT``: which are; ``later_event``);
     ``bursts[y * w + x, p]`` the first-event rule's state
     (``time_surface_first``), with the measured hold (``B_HOLD`` µs, 0 = none yet) in the same row
-    (and, with K > 1, a flat array: those rows, then a word per pixel and polarity, ``index_slot``);
+    (with K > 1 rows of ``N_B_LAYERED`` words, the burst index ``B_INDEX`` in them);
     ``prev[y * w + x]`` the pixel's last estimate (z, t) for the consistency rule;
     ``last_step[y * w + x]`` the output step of its last estimate (at most one per pixel and step);
     ``ring`` the camera's displacement per input step and ``ring_state`` (``time_surface_travel``, with ``I_TRAVEL``).
@@ -115,6 +116,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
     # it: without them the dead branches below fold away and the loop's machine code is the one-surface kernel's)
     layered = surface.ndim == 3
     planes = np.int64(surface.shape[0]) if layered else np.int64(1)
+    row_words = np.int64(N_B_LAYERED if layered else N_B)  # a pixel and polarity's row of the first-event rule
     behind_depth = behind_reach * 1e-6  # m: travel coordinates compare travel (px·m) with it
     # a fit this far off its points is rejected (bad_fit) and sets no hold: unless it is recorded, the fit may stop
     give_up_rms = math.inf if record_rejected else max(max_rms, hold_rms) if hold_px > 0.0 else max_rms
@@ -134,7 +136,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
             xq = min(np.int64(xs[i + PREFETCH]), width - 1)
             yq = min(max(np.int64(ys[i + PREFETCH]) - row0, 0), np.int64(rows) - 1)
             pq = 1 if ps[i + PREFETCH] != 0 else 0
-            prefetch(flat_bursts, N_B * (2 * (yq * width + xq) + pq))
+            prefetch(flat_bursts, row_words * (2 * (yq * width + xq) + pq))
             top = pq * plane_size + yq * row + xq + radius  # the square's first row
             if radius == 3:  # the default, unrolled: a counter and a branch per row were most of this block
                 for dq in range(7):
@@ -188,7 +190,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
                                        cy)
         speed2 = at_x * at_x + at_y * at_y
         at_cell = polarity * plane_size + cell  # in the flat surface: no view of the plane (a refcount per event)
-        state = np.int64(N_B) * (2 * pixel + polarity)
+        state = row_words * (2 * pixel + polarity)
         edge, fitted = first_event(flat_bursts, state, t, burst_ratio, refractory_us, refractory_reach, speed2)
         if layered:  # a burst's later event k < K writes surface k and is fitted there, as a first event on 0
             at_cell, edge, fitted = later_event(flat_bursts, flat_surface, state, at_cell, plane_size, edge, fitted,
@@ -369,7 +371,7 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
             else:
                 last_step[up] = step
                 if layered and at_cell < 2 * plane_size:  # a first event: its burst may ask (``later_event``)
-                    flat_bursts[index_slot(flat_bursts, state)] = B_EMITTED
+                    flat_bursts[np.uint64(state + B_INDEX)] = B_EMITTED
         counts[slot] += 1
         if slot != EMITTED:
             if not record_rejected:

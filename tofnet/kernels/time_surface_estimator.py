@@ -17,8 +17,9 @@ import numpy as np
 
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE
+from tofnet.kernels.cache_hints import line_aligned_full
 from tofnet.kernels import time_surface as ts
-from tofnet.kernels.time_surface_first import B_FITTED, B_HOLD, B_LAST, N_B
+from tofnet.kernels.time_surface_first import B_FITTED, B_HOLD, B_LAST, N_B, N_B_LAYERED
 from tofnet.kernels.time_surface_fit import N_L
 from tofnet.kernels.time_surface_travel import N_R, N_S, NOT_YET, RING
 from tofnet.kernels.kernel_config import microseconds
@@ -154,7 +155,7 @@ class TimeSurfaceEstimator:
     least the first event of every step within the sensor (they move its clock: the travel ring and
     the motion epochs; ``tofnet.kernels.bands.clocked_columns``), or every event (quality's ``index``
     counts the events it was fed).
-    Memory is fixed by the rows held (about 96 B per pixel; with ``burst_surfaces`` K > 1, 16 (K - 1) + 16 B
+    Memory is fixed by the rows held (about 96 B per pixel; with ``burst_surfaces`` K > 1, 16 (K - 1) + 64 B
     more) plus output buffers as large as the largest packet.
     """
 
@@ -189,15 +190,13 @@ class TimeSurfaceEstimator:
         # [p] only: the kernel compiled for that type has no burst-index code at all
         shape = (planes, 2) if planes > 1 else (2,)
         self._surface = np.full(shape + ((height + 2 * r) * (width + 2 * r),), ts.NEVER, np.int64)
-        # the first-event rule's rows, the holds in them (0: none yet); with K > 1 a flat array of those rows and
-        # then a word per pixel and polarity, the burst index (``time_surface_first.index_slot``)
-        rows = pixels * 2 * N_B
-        self._burst_state = np.zeros(rows + (pixels * 2 if planes > 1 else 0), np.int64)
-        self._bursts = self._burst_state[:rows].reshape(pixels, 2, N_B)
-        self._bursts[:, :, [B_LAST, B_FITTED]] = ts.NEVER
-        self._burst_state[rows:] = planes  # no edge yet: beyond the surfaces
-        if planes == 1:
-            self._burst_state = self._bursts  # the kernel compiled for rows alone
+        # the first-event rule's rows, the holds in them (0: none yet); with K > 1 a row is a cache line with the
+        # burst index in it (``time_surface_first.B_INDEX``)
+        row_words = N_B_LAYERED if planes > 1 else N_B
+        self._burst_state = line_aligned_full(pixels * 2 * row_words, 0).reshape(pixels, 2, row_words)  # one line
+        self._burst_state[:, :, [B_LAST, B_FITTED]] = ts.NEVER
+        self._burst_state[:, :, N_B:] = planes  # no edge yet: beyond the surfaces
+        self._bursts = self._burst_state[:, :, :N_B]
         self._prev = np.zeros((pixels if c.consistency > 0 else 1, 2), np.float64)
         self._last_step = np.full(pixels, ts.NEVER, np.int64)
         self._motion = np.zeros(ts.N_MOTION)

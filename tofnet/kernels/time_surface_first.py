@@ -6,7 +6,7 @@ against the pace of the events before (``ratio``) or at least the refractory per
 fitted when the pixel's hold (from its last fit) has passed. Reading nothing from other pixels
 keeps a band of rows plus the fit's ``radius`` exact. The rule and why: docs/time_surface.md,
 section 1a. State per pixel and polarity: one 32-byte row of ``bursts`` (``B_*``, int64 µs,
-the hold beside them), so an event touches one cache line of state.
+the hold beside them; 64 bytes with the burst index, ``B_INDEX``), so an event touches one cache line of state.
 """
 
 from __future__ import annotations
@@ -20,19 +20,12 @@ NEVER = -(1 << 62)
 #: ``bursts[y * w + x, p]``: the pixel's last event, the silence before it (negative when it
 #: continued a burst), its last fitted event, its hold (µs; 0: none yet, set by ``time_surface``'s fits).
 B_LAST, B_GAP, B_FITTED, B_HOLD, N_B = range(5)
-#: With burst-index surfaces (``burst_surfaces`` K > 1) the flat state holds, after the rows (whose length
-#: and the kernel's loop stay as they are), one word per pixel and polarity (``index_slot``): the index of
-#: the pixel's last event in its edge's burst (0: it started the edge; K: beyond the surfaces, or no edge yet).
+#: With burst-index surfaces (``burst_surfaces`` K > 1) a row is ``N_B_LAYERED`` words, a cache line: its words
+#: ``B_*``, then ``B_INDEX``, the index of the pixel's last event in its edge's burst (0: it started the edge; K:
+#: beyond the surfaces, or no edge yet), so that an event reads and writes one line of state as with K = 1.
+B_INDEX, N_B_LAYERED = N_B, 8
 #: A flag beside the index there: the edge's first event was emitted.
 B_EMITTED = 1 << 8
-
-
-@njit(cache=True, inline="always")
-def index_slot(flat_bursts, at: int) -> np.uint64:
-    """Where the burst index of the pixel and polarity whose row starts at ``at`` is: the state is
-    ``pairs`` rows of ``N_B`` words, then ``pairs`` words."""
-    pairs = flat_bursts.shape[0] // (N_B + 1)
-    return np.uint64(pairs * N_B + at // N_B)
 
 
 @njit(cache=True, inline="always")
@@ -73,10 +66,10 @@ def later_event(flat_bursts, flat_surface, at: int, at_cell: int, plane_size: in
     """With ``planes`` = K > 1 burst-index surfaces: ``(at_cell, writes, fitted)`` for an event whose first-event
     rule said ``(edge, fitted)``, at a pixel whose state row is at ``at`` and whose cell on surface 0 of its
     polarity is ``at_cell``. Its index k in its edge's burst (0 when it starts an edge, else one more than the
-    pixel's last, at most K; ``index_slot``, from the pixel's own events) picks its surface, ``at_cell + 2 k
+    pixel's last, at most K; ``B_INDEX``, from the pixel's own events) picks its surface, ``at_cell + 2 k
     plane_size``; an event of 0 < k < K writes it and is fitted there when ``which`` says (0: all; 1: its edge's
     first event was fitted; 2: it was emitted, the ``B_EMITTED`` flag the kernel leaves beside the index)."""
-    slot = index_slot(flat_bursts, at)
+    slot = np.uint64(at + B_INDEX)
     kept = flat_bursts[slot]
     index = 0 if edge else min((kept & (B_EMITTED - 1)) + 1, planes)
     flat_bursts[slot] = index if edge else index | (kept & B_EMITTED)
