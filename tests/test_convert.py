@@ -168,3 +168,22 @@ def test_a_side_file_of_another_recording_beside_the_output_is_refused_before_an
     assert f"NOT written: {mine / 'calib.txt'} is an input of this conversion" in capsys.readouterr().out
     assert (mine / "calib.txt").read_bytes() == before
     assert read_recording(mine / "rec.dat").intrinsics == original[0].intrinsics
+
+
+def test_forcing_past_another_recordings_side_file_with_a_camera_less_input_says_it_stays(tmp_path, original,
+                                                                                         capsys):
+    """``--force`` with an input that has no camera: nothing replaces the stranger's ``calib.txt``, which is not
+    removed (tofnet did not write it) but named in a NOTE, since the output will be read with it."""
+    from dataclasses import replace
+
+    optional("faery")
+    bare = tmp_path / "bare.npz"
+    write_npz_recording(bare, replace(original[0], intrinsics=None, trajectory=None))
+    out = tmp_path / "other"
+    out.mkdir()
+    (out / "calib.txt").write_text("100 100 50 50\n")
+    assert main(["convert", str(bare), str(out / "rec.dat"), "--force"]) == 0
+    printed = capsys.readouterr().out
+    assert f"NOTE: {out / 'calib.txt'} is not this input's (it has no camera) and stays" in printed, printed
+    assert "groundtruth.txt" not in printed  # none there: nothing to say
+    assert (out / "calib.txt").read_text() == "100 100 50 50\n"

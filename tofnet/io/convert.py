@@ -191,6 +191,12 @@ def _side_files(folder: Path, meta, messages: list[str], force: bool, input_path
             continue
         write(folder / name)
         messages.append(f"{name.split('.')[0]} -> {folder / name} (read back as a side file)")
+    written = {name for name, _ in writes}
+    for name, what in (("calib.txt", "camera"), ("groundtruth.txt", "poses")):
+        # with --force another recording's side file passed the check; nothing of the input's replaced it
+        if name not in written and os.path.lexists(folder / name) and input_among(folder / name, inputs) is None:
+            messages.append(f"NOTE: {folder / name} is not this input's (it has no {what}) and stays: it will be "
+                            f"read as the {what} of what was written beside it; move it away if it is not")
 
 
 def _extent(source: EventSource) -> tuple[int, int]:
