@@ -190,6 +190,6 @@ def test_warmup_tells_a_kernel_picking_number_from_other_numbers():
     from tofnet.conformance import get_case
     from tofnet.warmup import _code_path
 
-    texture, bursts = (_code_path(get_case(name).build()) for name in ("time-surface-texture", "time-surface-bursts"))
-    assert texture != bursts
+    texture, one = (_code_path(get_case(name).build()) for name in ("time-surface-texture", "time-surface-one-surface"))
+    assert texture != one
     assert _code_path(get_case("patch-d1").build()) == _code_path(get_case("patch-d2").build())

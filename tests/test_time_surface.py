@@ -113,7 +113,7 @@ def test_every_event_is_counted_once_by_reason():
     events, velocity = edge_events((1, 0), speed=50.0, depth=2.0, burst=3)
     stray = make_events([events["t"][-1] + 1, events["t"][-1] + 2], [SENSOR[0], 3], [0, SENSOR[1] + 5], [1, 0])
     events = np.concatenate([events, stray])
-    depth, _, estimator = run(events, velocity)
+    depth, _, estimator = run(events, velocity, burst_surfaces=1)
     counts = estimator.counts
     assert sum(counts.values()) == estimator.events_in == len(events)
     assert counts["out_of_bounds"] == 2

@@ -37,7 +37,7 @@ def burst_edge(seed=0, bursts=4, gap_us=1500, jitter_us=40, speed=100.0, sensor=
 
 def test_later_burst_events_are_fitted_on_their_own_surfaces():
     events, velocity = burst_edge()
-    depth1, quality1, one = run(events, velocity)
+    depth1, quality1, one = run(events, velocity, burst_surfaces=1)
     depth3, quality3, three = run(events, velocity, burst_surfaces=3, burst_fit="all")
     assert (quality1["burst"] == 0).all() and one.counts["burst"] == 3 * len(events) // 4
     k = quality3["burst"]
@@ -93,9 +93,9 @@ def test_fitted_or_emitted_only_fits_fewer_later_events(which):
 
 
 def test_one_surface_is_the_estimator_before_burst_surfaces():
-    """``burst_surfaces`` 1 (the default) gives the bytes of the estimator before it (digests taken at 3e6206d)."""
+    """``burst_surfaces`` 1 gives the bytes of the estimator before burst surfaces (digests taken at 3e6206d)."""
     events, velocity = noisy_stream()
-    depth, quality, estimator = run(events, velocity, record_rejected=True)
+    depth, quality, estimator = run(events, velocity, burst_surfaces=1, record_rejected=True)
     fields = [name for name in quality.dtype.names if name != "burst"]
     digest = hashlib.sha256(depth.tobytes() + b"".join(np.ascontiguousarray(quality[n]).tobytes() for n in fields))
     assert (len(depth), estimator.counts["emitted"]) == (EXPECTED_ROWS, EXPECTED_EMITTED)
@@ -137,7 +137,8 @@ def test_bands_equal_one_band_with_burst_surfaces(bands, burst_fit):
     one = FixedBackend().run(band_network(burst_fit), recording)
     banded = with_bands(FixedBackend, bands).run(band_network(burst_fit), recording)
     assert first_difference(banded, one) == ""
-    single = FixedBackend().run(improved_network(BAND_SENSOR, time_surface={"t0": 0}, velocity=VELOCITY), recording)
+    single = FixedBackend().run(improved_network(BAND_SENSOR, time_surface={"t0": 0, "burst_surfaces": 1},
+                                                 velocity=VELOCITY), recording)
     assert one.counts["time_surface"]["emitted"] > single.counts["time_surface"]["emitted"]
 
 

@@ -165,7 +165,7 @@ def test_the_surface_is_a_variable_read_and_set_between_runs():
         _, _, estimator = standalone(EVENTS[EVENTS["t"] < 59_000], constant_velocity(VELOCITY))
         width, height = SENSOR
         r = estimator.config.radius
-        expected = estimator._surface.reshape(2, height + 2 * r, width + 2 * r)[:, r:-r, r:-r]
+        expected = estimator._surface.reshape(-1, 2, height + 2 * r, width + 2 * r)[0, :, r:-r, r:-r]  # surface 0
         assert surface.shape == (2, height, width) and np.array_equal(surface, expected)
         assert np.array_equal(hold, np.moveaxis(estimator._hold.reshape(height, width, 2), 2, 0))
         assert (surface > 0).sum() > 100 and (hold > 0).sum() > 50

@@ -298,11 +298,11 @@ def _time_surface_texture() -> Scene:
     return Scene(network, rec(events))
 
 
-@case("time-surface-bursts", "the time-surface estimator with burst-index surfaces (a burst's later events fitted "
-      "on surfaces of their own), on the texture of time-surface-texture")
-def _time_surface_bursts() -> Scene:
+@case("time-surface-one-surface", "the time-surface estimator with one surface per pixel and polarity "
+      "(burst_surfaces 1: a burst's later events not fitted), on the texture of time-surface-texture")
+def _time_surface_one_surface() -> Scene:
     size, flow = (28, 20), (250.0, -120.0)
-    network = improved_network(size, time_surface={"t0": 0, "burst_surfaces": 4}, velocity=_constant(camera_for(flow)))
+    network = improved_network(size, time_surface={"t0": 0, "burst_surfaces": 1}, velocity=_constant(camera_for(flow)))
     return Scene(network, _time_surface_texture().recording)
 
 

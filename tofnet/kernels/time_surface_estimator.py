@@ -79,7 +79,7 @@ class TimeSurfaceConfig:
     max_depth: float = 20.0
     min_denominator: float = 0.1
     max_turn: float = 60.0
-    burst_surfaces: int = 1
+    burst_surfaces: int = 4
     burst_fit: str = "emitted"
     timestep_us: int = 1000
     latency_steps: int = 1
