@@ -35,7 +35,8 @@ class TimeSurfaceProcess(Process):
     pixel's hold after its last fitted one, is part of a burst (dropped); else the recent
     first events of the same polarity within ``radius`` px that the edge has crossed are
     fitted (lines along the image motion, or a plane), outliers dropped, and the fit checked
-    (points, spread, rms). A host process (off-chip): it reads the events itself, like the
+    (points, spread, rms). A burst's k-th later event (0 < k < ``burst_surfaces``, 4 by default) is
+    fitted the same way on surface k, where its edge's first event was emitted. A host process (off-chip): it reads the events itself, like the
     input process, and answers in the step after each event (latency 1).
     ``A t`` comes from ``a_t`` as the sender samples it (per pixel or per patch); the
     defaults were chosen by sweeps over every built-in scenario (docs/time_surface.md).
