@@ -25,6 +25,10 @@ OUTPUTS = {"": "ecd", ".npz": "npz", ".h5": "hdf5", ".hdf5": "hdf5", ".aedat4": 
 _WITH_SIDE_FILES = ("aedat4", "evt3", "dat", "es")
 
 
+#: The ECD side files written beside a file that cannot hold the camera or poses, and what each holds.
+SIDE_FILES = {"calib.txt": "camera", "groundtruth.txt": "poses"}
+
+
 def written_paths(out: str | Path) -> list[Path]:
     """Every path converting to ``out`` may write: the output, an ``.npz``'s true depth beside it,
     the side files beside a single file that cannot hold the camera or poses (an ECD folder: itself)."""
@@ -34,7 +38,7 @@ def written_paths(out: str | Path) -> list[Path]:
     if kind == "npz":
         paths.append(_depth_path(out))
     if kind in _WITH_SIDE_FILES:
-        paths += [out.parent / "calib.txt", out.parent / "groundtruth.txt"]
+        paths += [out.parent / name for name in SIDE_FILES]
     return paths
 
 
@@ -192,7 +196,7 @@ def _side_files(folder: Path, meta, messages: list[str], force: bool, input_path
         write(folder / name)
         messages.append(f"{name.split('.')[0]} -> {folder / name} (read back as a side file)")
     written = {name for name, _ in writes}
-    for name, what in (("calib.txt", "camera"), ("groundtruth.txt", "poses")):
+    for name, what in SIDE_FILES.items():
         # with --force another recording's side file passed the check; nothing of the input's replaced it
         if name not in written and os.path.lexists(folder / name) and input_among(folder / name, inputs) is None:
             messages.append(f"NOTE: {folder / name} is not this input's (it has no {what}) and stays: it will be "
