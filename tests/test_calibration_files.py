@@ -156,6 +156,31 @@ def test_errors_name_the_file_and_the_key(tmp_path):
         read_camera_file(tmp_path / "broken.json")
 
 
+def test_intrinsics_no_camera_has_are_refused_naming_the_file(tmp_path):
+    cases = {  # file: (content, what the one line says)
+        "info.yaml": (ROS.replace("data: [226.38, 0, 173.65, 0, 226.15", "data: [0, 0, 173.65, 0, -226.15"),
+                      "focal lengths must be positive .pixels., got fx 0, fy -226.15"),
+        "zeros.yaml": (ROS.replace("data: [226.38, 0, 173.65, 0, 226.15, 133.73, 0, 0, 1]", "data: [0, 0, 0, 0, 0, 0, 0, 0, 0]"),
+                       "the camera matrix is all zeros .an uncalibrated camera.; give the calibration with --calib"),
+        "cam_to_cam.yaml": (DSEC.replace("[553.47, 553.26, 346.65, 216.52]", "[553.47, 553.26, .nan, 216.52]"),
+                            "cx is nan; expected a finite number of pixels"),
+        "camchain.yaml": (KALIBR.replace("[-0.048, 0.0113, -0.0493, 0.0194]", "[-0.048, .inf, -0.0493, 0.0194]"),
+                          "distortion coefficients must be finite, got -0.048, inf"),
+        "calibration.json": (json.dumps(_tumvie()).replace('"fx": 740.0', '"fx": -740.0'),
+                             "focal lengths must be positive .pixels., got fx -740"),
+    }
+    for name, (content, message) in cases.items():
+        (tmp_path / name).write_text(content)
+        with pytest.raises(DataError, match=f"^{tmp_path / name}: {message}"):
+            read_camera_file(tmp_path / name)
+    recording = tmp_path / "rec.npz"
+    np.savez(recording, x=np.zeros(1, np.uint16), y=np.zeros(1, np.uint16), t=np.zeros(1, np.int64),
+             p=np.ones(1, np.int8), intrinsics=np.array([200.0, 0.0, 120.0, 90.0]))
+    from tofnet.io import read_recording
+    with pytest.raises(DataError, match=r"rec.npz\[intrinsics\]: focal lengths must be positive .*fy 0"):
+        read_recording(recording)
+
+
 def test_aedat4_without_calib_runs_with_intrinsics_and_velocity(tmp_path, capsys):
     optional("faery")
     from tofnet.io.aedat import write_aedat4

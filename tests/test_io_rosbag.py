@@ -23,7 +23,7 @@ def _time(store, seconds_or_us, *, us=False):
     return store.types["builtin_interfaces/msg/Time"](sec=total_ns // 10**9, nanosec=total_ns % 10**9)
 
 
-def write_bag(path, recording, *, event_topics=("/dvs/events",), per_message=500, camera_info=True):
+def write_bag(path, recording, *, event_topics=("/dvs/events",), per_message=500, camera_info=True, k_matrix=None):
     """ECD's slider_depth.bag layout: EventArray, CameraInfo (plumb_bob), Imu, PoseStamped."""
     from rosbags.rosbag1 import Writer
 
@@ -50,7 +50,8 @@ def write_bag(path, recording, *, event_topics=("/dvs/events",), per_message=500
             info = types["sensor_msgs/msg/CameraInfo"](
                 header=header(seq=0, stamp=_time(store, events["t"][0], us=True), frame_id="dvs"),
                 height=SENSOR[1], width=SENSOR[0], distortion_model="plumb_bob", D=np.array(k.distortion),
-                K=np.array([k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1.0]), R=np.eye(3).ravel(),
+                K=np.array(k_matrix if k_matrix is not None else [k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1.0],
+                           dtype=np.float64), R=np.eye(3).ravel(),
                 P=np.zeros(12), binning_x=0, binning_y=0,
                 roi=types["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0,
                                                               do_rectify=False))
@@ -92,6 +93,19 @@ def test_ecd_bag_layout_reads_events_calibration_poses_imu(bag, recording):
     assert np.allclose(read.trajectory.positions, recording.trajectory.positions)
     assert np.allclose(read.trajectory.times, recording.trajectory.times, rtol=0, atol=1e-6)
     assert np.allclose(read.imu[:, 1:], recording.imu[:, 1:])
+
+
+def test_uncalibrated_camera_info_gives_no_intrinsics_and_says_so(tmp_path, recording):
+    path = tmp_path / "uncalibrated.bag"
+    write_bag(path, recording, k_matrix=np.zeros(9))  # ROS's convention for a camera not calibrated
+    source = open_recording(path)
+    read = source.read()
+    assert read.intrinsics is None and read.sensor_size == SENSOR
+    assert any("/dvs/camera_info: the camera matrix is all zeros" in note for note in source.notes)
+    broken = tmp_path / "broken.bag"
+    write_bag(broken, recording, k_matrix=[-200.0, 0, 120, 0, 200, 90, 0, 0, 1])
+    with pytest.raises(DataError, match=r"broken.bag: '/dvs/camera_info': focal lengths must be positive .*fx -200"):
+        open_recording(broken).read()
 
 
 def test_bag_and_events_txt_give_the_same_microseconds(tmp_path, bag, recording):

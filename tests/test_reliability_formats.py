@@ -135,7 +135,7 @@ def _dsec(path, events, **extra):
 @pytest.mark.parametrize("extra, message", [
     ({"calib/resolution": np.array([70000, 10])}, "sensor size: each side must be at most 65536"),
     ({"calib/resolution": np.array([5000, 5000])}, "at most 16,777,216 pixels"),
-    ({"calib/intrinsics": np.array([np.nan, 1.0, 2.0, 3.0])}, "intrinsics: expected finite numbers"),
+    ({"calib/intrinsics": np.array([np.nan, 1.0, 2.0, 3.0])}, "calib: fx is nan; expected a finite number of pixels"),
     ({"calib/intrinsics": np.array([-5.0, 1.0, 2.0, 3.0])}, "focal lengths must be positive"),
     ({"imu/t": np.array([1.0, 0.5]), "imu/accel": np.zeros((2, 3)), "imu/gyro": np.zeros((2, 3))},
      "IMU sample 1: time goes back"),

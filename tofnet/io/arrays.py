@@ -19,6 +19,7 @@ import numpy as np
 
 from tofnet.errors import DataError, located, quote
 from tofnet.events import EVENT_DTYPE, MAX_TIME_US
+from tofnet.io.calibration import check_intrinsics
 from tofnet.io.npy import load_npy, load_npz, numpy_kind, write_npy, write_npz
 
 COLUMNS = ("t", "x", "y", "p")
@@ -143,6 +144,10 @@ def apply_npz_metadata(recording, path: Path) -> None:
                 raise DataError(located(f"{path}[distortion_model]", None, "expected 'radtan' or 'equidistant'"))
             model = str(raw)
         fx, fy, cx, cy = (float(v) for v in values)
+        try:
+            check_intrinsics(fx, fy, cx, cy)
+        except ValueError as err:
+            raise DataError(located(f"{path}[intrinsics]", None, str(err))) from None
         recording.intrinsics = Intrinsics(fx, fy, cx, cy, distortion=distortion, distortion_model=model)
     if "sensor_size" in arrays:
         size = numbers("sensor_size", "(2,)")

@@ -110,6 +110,8 @@ def read_camera_file(path: str | Path, camera: str | None = None,
         data = read_yaml_file(path, "calibration")
     try:
         return _camera_from(data, camera, sensor_size)
+    except IntrinsicsError as err:
+        raise DataError(located(path, None, str(err))) from None
     except (KeyError, IndexError, TypeError, ValueError, AttributeError, OverflowError) as err:
         raise DataError(located(path, None, f"{_reason(err)}; expected a calib.txt, a Kalibr/DSEC camera YAML, "
                                             "a TUM-VIE calibration JSON or a ROS camera_info YAML")) from None
@@ -150,8 +152,28 @@ def intrinsics_from(matrix, coefficients, model: str) -> Intrinsics:
     if not any(coefficients):
         coefficients = ()
     fx, fy, cx, cy = (float(v) for v in np.ravel(matrix)[:4])
+    check_intrinsics(fx, fy, cx, cy, coefficients)
     return Intrinsics(fx, fy, cx, cy, distortion=coefficients,
                       distortion_model=model_name if coefficients else "radtan")
+
+
+class IntrinsicsError(ValueError):
+    """Intrinsics no camera has, in a file whose layout was understood."""
+
+
+def check_intrinsics(fx: float, fy: float, cx: float, cy: float, coefficients: tuple[float, ...] = ()) -> None:
+    """Refuse what no camera has (``IntrinsicsError``, one line): focal lengths not positive (pixels), a
+    principal point or a distortion coefficient not finite. All zeros is ROS's uncalibrated camera."""
+    if fx == fy == cx == cy == 0.0:
+        raise IntrinsicsError("the camera matrix is all zeros (an uncalibrated camera); give the calibration "
+                         "with --calib FILE or --intrinsics fx,fy,cx,cy")
+    for name, value in (("fx", fx), ("fy", fy), ("cx", cx), ("cy", cy)):
+        if not math.isfinite(value):
+            raise IntrinsicsError(f"{name} is {value}; expected a finite number of pixels")
+    if fx <= 0.0 or fy <= 0.0:
+        raise IntrinsicsError(f"focal lengths must be positive (pixels), got fx {fx:g}, fy {fy:g}")
+    if not all(math.isfinite(c) for c in coefficients):
+        raise IntrinsicsError(f"distortion coefficients must be finite, got {', '.join(f'{c:g}' for c in coefficients)}")
 
 def is_number(field: str) -> bool:
     """Whether ``field`` reads as a float."""

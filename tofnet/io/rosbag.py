@@ -164,6 +164,12 @@ class RosbagSource(EventSource):
 
         k = np.asarray(info.K if hasattr(info, "K") else info.k, dtype=np.float64)
         coefficients = np.asarray(info.D if hasattr(info, "D") else info.d, dtype=np.float64)
+        if k.size == 9 and not k.any():  # ROS's convention for a camera not calibrated: no intrinsics, say so
+            self.notes.append(f"{self.topics['camera_info']}: the camera matrix is all zeros (not calibrated); "
+                              "give the calibration with --calib FILE or --intrinsics fx,fy,cx,cy")
+            if info.width and info.height:
+                self.sensor_size = (int(info.width), int(info.height))
+            return
         try:
             self.intrinsics = intrinsics_from([k[0], k[4], k[2], k[5]], coefficients, info.distortion_model or "radtan")
         except ValueError as err:
