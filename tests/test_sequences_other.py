@@ -24,17 +24,19 @@ VELOCITY = np.array([-0.5, 0.0, 0.0])
 @pytest.fixture(scope="module")
 def folders(tmp_path_factory):
     root = tmp_path_factory.mktemp("datasets")
-    names = {"dsec": "zurich_city_00_a", "mvsec": "indoor_flying1", "tumvie": "mocap-desk2", "m3ed": "car_urban_day_1"}
+    names = {"dsec": "zurich_city_00_a", "mvsec": "indoor_flying1", "tumvie": "mocap-desk2", "m3ed": "car_urban_day_1",
+             "evimo2": "scene13_dyn_test_00_000000"}
     return {kind: make(root / names[kind], duration_s=2.2) for kind, make in MAKERS.items()}
 
 
 @pytest.mark.parametrize("kind, name", [("mvsec", "indoor_flying1"), ("tumvie", "mocap-desk2"),
-                                        ("m3ed", "car_urban_day_1")])
+                                        ("m3ed", "car_urban_day_1"), ("evimo2", "scene13_dyn_test_00_000000")])
 def test_each_folder_is_a_recording_with_its_calibration_and_poses(folders, kind, name):
     folder = folders[kind]
     assert detect_format(folder) == kind and sequence_name(folder) == name
-    events_file = next(p for p in folder.iterdir() if p.name.endswith(("_data.hdf5", "_data.h5", "-events_left.h5")))
-    assert sequence_name(events_file) == name
+    if kind != "evimo2":  # EVIMO2's events are three arrays of the folder, not a file named after the sequence
+        events_file = next(p for p in folder.iterdir() if p.name.endswith(("_data.hdf5", "_data.h5", "-events_left.h5")))
+        assert sequence_name(events_file) == name
     recording = read_recording(folder)
     assert recording.intrinsics.fx == INTRINSICS.fx and recording.sensor_size == SIZE
     t = recording.events["t"][len(recording.events) // 2: len(recording.events) // 2 + 1] * 1e-6
@@ -110,7 +112,7 @@ def test_a_folder_with_two_sequences_is_refused(folders, tmp_path):
         read_recording(folder)
 
 
-@pytest.mark.parametrize("kind", ["dsec", "mvsec", "tumvie", "m3ed"])
+@pytest.mark.parametrize("kind", ["dsec", "mvsec", "tumvie", "m3ed", "evimo2"])
 @pytest.mark.parametrize("estimator", ["paper", "improved"])
 def test_one_command_per_dataset_runs_a_2s_window_and_eval_scores_it(folders, kind, estimator, tmp_path, capsys):
     out = tmp_path / "depth.npz"
@@ -157,7 +159,7 @@ def test_the_worked_commands_of_formats_md_datasets_run_as_written(tmp_path):
         assert "Traceback" not in done.stderr
         outputs[line] = done.stdout
     evals = [out for line, out in outputs.items() if line.startswith("tofnet eval")]
-    assert len(evals) == 3
+    assert len(evals) == 4
     for out in evals:
         mean = float(re.search(r"abs error \[m\]\s+([\d.]+)", out).group(1))
         assert "ground truth" in out and mean < 0.1  # the plane is 2 m away

@@ -22,7 +22,8 @@ from tofnet.errors import DataError  # noqa: E402
 from tofnet.io import detect_format, open_recording, read_recording  # noqa: E402
 from tofnet.testing_datasets import MAKERS  # noqa: E402
 
-NAMES = {"dsec": "zurich_city_00_a", "mvsec": "indoor_flying1", "tumvie": "mocap-desk2", "m3ed": "car_urban_day_1"}
+NAMES = {"dsec": "zurich_city_00_a", "mvsec": "indoor_flying1", "tumvie": "mocap-desk2", "m3ed": "car_urban_day_1",
+         "evimo2": "scene13_dyn_test_00_000000"}
 FIFO = "is a FIFO (named pipe), expected"
 FOLDER = "is a folder, expected"
 
@@ -66,6 +67,9 @@ SIDE_FILES = [
     ("mvsec", "indoor_flying1_data.hdf5", "a regular file (*_data.hdf5: a sequence's events)"),
     ("m3ed", "car_urban_day_1_data.h5", "a regular file (*_data.h5: a sequence's events)"),
     ("tumvie", "mocap-desk2-events_left.h5", "a regular file (*-events_left.h5: a sequence's events)"),
+    ("evimo2", "dataset_depth.npz", "the EVIMO2 depth frames"),
+    ("evimo2", "dataset_info.npz", "a file of the EVIMO2 sequence"),
+    ("evimo2", "dataset_events_xy.npy", "a file of the EVIMO2 sequence"),
 ]
 
 
@@ -125,6 +129,9 @@ def test_absent_side_files_stay_optional(copy):
     assert recording.imu is None and recording.trajectory is not None
     shutil.rmtree(tumvie / "mocap-desk2-vi_gt_data")
     assert read_recording(tumvie).trajectory is None
+    evimo2 = copy("evimo2")
+    (evimo2 / "dataset_depth.npz").unlink()
+    assert read_recording(evimo2).frame_gt is None
 
 
 def test_a_symlink_to_nothing_is_named_not_missing(copy):

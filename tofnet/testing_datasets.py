@@ -1,4 +1,4 @@
-"""Small dataset sequence folders in the published layouts (DSEC, MVSEC, TUM-VIE, M3ED), for tests and docs.
+"""Small dataset sequence folders in the published layouts (DSEC, MVSEC, TUM-VIE, M3ED, EVIMO2), for tests and docs.
 
 Each ``make_*`` writes a folder with a textured plane at ``depth_m`` seen by a camera moving
 at ``velocity`` (m/s, camera frame; ``tofnet.testing.flowing_pattern``), the dataset's
@@ -196,8 +196,64 @@ def make_m3ed(folder: str | Path, *, name: str = "car_urban_day_1", depth_m: flo
     return folder
 
 
+def evimo2_camera(k: Intrinsics, size: tuple[int, int]) -> dict:
+    """The camera as EVIMO2's ``meta['meta']`` holds it (``dist_model`` with ``k1..k4 p1 p2``)."""
+    model = k.distortion_model if k.distortion else "radtan"
+    values = dict(zip(("k1", "k2", "p1", "p2", "k3"), k.distortion or (0.0,) * 5)) if model == "radtan" else \
+        {**dict(zip(("k1", "k2", "k3", "k4"), k.distortion)), "p1": 0.0, "p2": 0.0}
+    return {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy, "dist_model": model, "k4": 0.0, **values,
+            "res_x": size[0], "res_y": size[1], "ros_time_offset": 1606265321.445115}
+
+
+def write_evimo2(folder: str | Path, events: np.ndarray, t_s: np.ndarray, camera: dict, poses, depth, *,
+                 column_arrays: bool = False, lost: tuple[int, ...] = ()) -> Path:
+    """An EVIMO2 v2 sequence folder as the dataset's packaging writes it (``np.save``, ``np.savez`` with the
+    metadata dictionary pickled). ``t_s`` the events' times (s, float32 or float64), ``poses`` ``(times s,
+    positions, quaternions qx qy qz qw)`` camera to world, ``depth`` ``(times s, images uint16 mm)``; ``lost``
+    pose samples carry no camera (Vicon lost it); ``column_arrays`` writes ``t`` and ``p`` as ``(n, 1)``."""
+    folder = Path(folder)
+    folder.mkdir(parents=True)
+    p = events["p"].astype(np.uint8)
+    np.save(folder / "dataset_events_t.npy", t_s[:, None] if column_arrays else t_s)
+    np.save(folder / "dataset_events_xy.npy", np.column_stack([events["x"], events["y"]]).astype(np.uint16))
+    np.save(folder / "dataset_events_p.npy", p[:, None] if column_arrays else p)
+
+    def pose(ts, position, q):
+        return {"ts": float(ts), "pos": {"t": dict(zip("xyz", map(float, position))),
+                                         "q": dict(zip("xyzw", map(float, q))), "rpy": {"r": 0.0, "p": 0.0, "y": 0.0}}}
+
+    full = [{"ts": float(ts), "cam": pose(ts, position, q)} for ts, position, q in zip(*poses)]
+    for k in lost:
+        full[k] = {"ts": full[k]["ts"], "5": full[k]["cam"]}  # an object's pose only
+    frame_times, images = depth
+    frames = [{"id": k, "ts": float(ts), "gt_frame": f"depth_mask_{k}.png", "cam": full[0]["cam"]}
+              for k, ts in enumerate(frame_times)]
+    meta = {"frames": frames, "full_trajectory": full, "meta": camera,
+            "imu": {"/prophesee/left/imu": [{"ts": float(t_s[0]), "angular_velocity": {"x": 0.0, "y": 0.0, "z": 0.0},
+                                              "linear_acceleration": {"x": 0.0, "y": 0.0, "z": 9.81}}]}}
+    k_matrix = [[camera["fx"], 0.0, camera["cx"]], [0.0, camera["fy"], camera["cy"]], [0.0, 0.0, 1.0]]
+    np.savez(folder / "dataset_info.npz", K=np.array(k_matrix), D=np.zeros(4), discretization=np.float64(0.01),
+             index=np.zeros(len(frames), np.int64), meta=meta)
+    np.savez_compressed(folder / "dataset_depth.npz", **{f"depth_{k:010d}": image for k, image in enumerate(images)})
+    np.savez_compressed(folder / "dataset_mask.npz", **{f"mask_{k:010d}": np.zeros_like(image)
+                                                        for k, image in enumerate(images)})
+    return folder
+
+
+def make_evimo2(folder: str | Path, *, depth_m: float = 2.0, velocity=(-0.5, 0.0, 0.0), duration_s: float = 2.2,
+                rate_hz: float = 60.0) -> Path:
+    """An EVIMO2 v2 sequence folder (events, ``dataset_info.npz``, ``dataset_depth.npz``) of a plane."""
+    events = plane_events(depth_m, velocity, duration_s)
+    times = np.arange(0, duration_s + 0.05, 0.005)  # Vicon at 200 Hz
+    quaternions = np.tile([0.0, 0.0, 0.0, 1.0], (len(times), 1))
+    images, frame_times = depth_frames(depth_m, duration_s, rate_hz)
+    millimetres = np.nan_to_num(images * 1000.0, nan=0.0).round().astype(np.uint16)  # 0: unknown
+    return write_evimo2(folder, events, events["t"] * 1e-6, evimo2_camera(INTRINSICS, SIZE),
+                        (times, camera_poses(velocity, times)[:, :3, 3], quaternions), (frame_times, millimetres))
+
+
 #: Each layout's fixture maker.
-MAKERS = {"dsec": make_dsec, "mvsec": make_mvsec, "tumvie": make_tumvie, "m3ed": make_m3ed}
+MAKERS = {"dsec": make_dsec, "mvsec": make_mvsec, "tumvie": make_tumvie, "m3ed": make_m3ed, "evimo2": make_evimo2}
 
 __all__ = ["SIZE", "INTRINSICS", "BASELINE_M", "MAKERS", "plane_events", "make_dsec", "make_mvsec", "make_tumvie",
-           "make_m3ed", "depth_frames", "camera_poses"]
+           "make_m3ed", "make_evimo2", "write_evimo2", "evimo2_camera", "depth_frames", "camera_poses"]

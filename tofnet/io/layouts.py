@@ -1,4 +1,4 @@
-"""Which dataset sequence layout a folder is in (DSEC, MVSEC, TUM-VIE, M3ED), from the files it holds,
+"""Which dataset sequence layout a folder is in (DSEC, MVSEC, TUM-VIE, M3ED, EVIMO2), from the files it holds,
 and the sequence's name; reading them is ``tofnet.io.sequences``'s."""
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ SEQUENCE_FORMATS = {
     "mvsec": "MVSEC sequence folder (*_data.hdf5, *_gt.hdf5, *_calib/camchain-imucam-*.yaml)",
     "tumvie": "TUM-VIE sequence folder (*-events_left.h5, calibration JSON, mocap_data.txt)",
     "m3ed": "M3ED sequence folder (*_data.h5, *_depth_gt.h5)",
+    "evimo2": "EVIMO2 v2 sequence folder (dataset_events_{t,xy,p}.npy, dataset_info.npz, dataset_depth.npz)",
 }
 SIDES = ("left", "right")
 
@@ -63,7 +64,9 @@ PATTERNS = {"mvsec": "*_data.hdf5", "m3ed": "*_data.h5", "tumvie": "*-events_lef
 
 
 def other_kind(folder: Path) -> str | None:
-    """``mvsec``, ``tumvie`` or ``m3ed`` for a folder of that layout, else ``None``."""
+    """``mvsec``, ``tumvie``, ``m3ed`` or ``evimo2`` for a folder of that layout, else ``None``."""
+    if (folder / "dataset_events_t.npy").exists() or (folder / "dataset_info.npz").exists():
+        return "evimo2"
     for kind, pattern in PATTERNS.items():
         if matches(folder, pattern) or (kind == "tumvie" and matches(folder, "*-events_right.h5")):
             return kind

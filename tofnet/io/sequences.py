@@ -1,4 +1,4 @@
-"""Dataset sequence folders as recordings: DSEC, MVSEC, TUM-VIE and M3ED, as the datasets ship them.
+"""Dataset sequence folders as recordings: DSEC, MVSEC, TUM-VIE, M3ED and EVIMO2, as the datasets ship them.
 
 A folder is recognised by its layout (``sequence_kind``) and opened as one recording with
 what the dataset ships beside the events (``open_sequence``):
@@ -11,7 +11,7 @@ what the dataset ships beside the events (``open_sequence``):
   rectified focal length, b the stereo baseline). ``rectify=True`` moves the events through the
   rectification map (to the nearest pixel; the camera becomes ``camRect0``/``camRect3``, without
   distortion); without it the ground truth is looked up through the map instead.
-- **MVSEC**, **TUM-VIE**, **M3ED**: ``tofnet.io.sequences_other``.
+- **MVSEC**, **TUM-VIE**, **M3ED**: ``tofnet.io.sequences_other``; **EVIMO2** v2: ``tofnet.io.evimo``.
 
 The layouts are told apart by ``tofnet.io.layouts``. The recording's name (batch plans) is the
 sequence folder's (``tofnet.io.layouts.sequence_name``), also for a
@@ -41,6 +41,12 @@ def open_sequence(folder: Path, kind: str, *, side: str | None = None, rectify: 
     if rectify:
         raise DataError(located(folder, None, "--rectify applies to DSEC sequences (rectify_map.h5); "
                                               f"this is a {kind.upper()} folder"))
+    if kind == "evimo2":
+        if side is not None:
+            raise DataError(located(folder, None, "--side: an EVIMO2 sequence folder holds one camera's events "
+                                                  "(its camera is the folder: samsung_mono, left_camera, right_camera)"))
+        from tofnet.io.evimo import open_evimo2
+        return open_evimo2(folder)
     from tofnet.io.sequences_other import open_other
     return open_other(folder, kind, side or "left", allow_external)
 

@@ -1,0 +1,154 @@
+"""EVIMO2 v2 sequence folders (NPZ layout): events, camera, poses, depth frames; the pickled metadata read
+without running anything from the file."""
+
+import os
+
+import numpy as np
+import pytest
+
+from tofnet.cli import main
+from tofnet.errors import DataError
+from tofnet.io.detect import detect_format
+from tofnet.io.source import open_recording
+
+from tofnet.io.recording import Intrinsics
+from tofnet.testing_datasets import evimo2_camera
+from tofnet.testing_datasets import write_evimo2 as write_evimo2_folder
+
+from formats_helpers import INTRINSICS, SENSOR, T0_US, pattern_recording
+
+START_US = 500_000  # EVIMO2's times are seconds from the sequence's start
+
+
+@pytest.fixture(scope="module")
+def recording():
+    return pattern_recording(duration_us=200_000)
+
+
+def write_evimo2(folder, recording, *, float32=False, column_arrays=False, lost=(), model="radtan"):
+    """The recording (events, camera, poses) as an EVIMO2 sequence, with depth frames of 1.5 m at 60 Hz (0,
+    unknown, in the first 8 columns) from 0.52 s; its times start at ``START_US``."""
+    events = recording.events
+    t = (events["t"] - T0_US + START_US) * 1e-6
+    intrinsics = INTRINSICS if model == "radtan" else \
+        Intrinsics(INTRINSICS.fx, INTRINSICS.fy, INTRINSICS.cx, INTRINSICS.cy, (0.1, -0.01, 0.002, -0.0003), model)
+    traj = recording.trajectory
+    depth = np.full((11, SENSOR[1], SENSOR[0]), 1500, dtype=np.uint16)
+    depth[:, :, :8] = 0
+    return write_evimo2_folder(folder, events, t.astype(np.float32) if float32 else t, evimo2_camera(intrinsics, SENSOR),
+                               (traj.times - (T0_US - START_US) * 1e-6, traj.positions, traj.quaternions),
+                               (0.52 + np.arange(11) / 60, depth), column_arrays=column_arrays, lost=lost)
+
+
+def _expected_events(recording):
+    events = recording.events.copy()
+    events["t"] = events["t"] - T0_US + START_US
+    return events
+
+
+def test_folder_reads_events_camera_poses_and_true_depth(tmp_path, recording):
+    folder = write_evimo2(tmp_path / "samsung_mono" / "imo" / "eval" / "scene13_dyn_test_00_000000", recording,
+                          lost=(3, 4))
+    assert detect_format(folder) == "evimo2"
+    source = open_recording(folder)
+    read = source.read()
+    assert np.array_equal(read.events, _expected_events(recording))
+    assert read.intrinsics == INTRINSICS and read.sensor_size == SENSOR
+    assert source.detail == "EVIMO2 v2 sequence, samsung_mono"
+    traj = recording.trajectory
+    assert len(read.trajectory.times) == len(traj.times) - 2  # the two samples without the camera
+    assert np.allclose(read.trajectory.positions, np.delete(traj.positions, [3, 4], axis=0))
+    assert any("2 of 41 pose samples without the camera" in note for note in source.notes)
+    # true depth: 1.5 m where the frames know it (not the first 8 columns), near a frame in time
+    t_s = read.events["t"] * 1e-6
+    known = (read.events["x"] >= 8) & (t_s >= 0.52 - 0.05) & (t_s <= 0.52 + 10 / 60 + 0.05)
+    assert known.any() and (~known).any()
+    assert np.allclose(read.gt_depth[known], 1.5) and np.isnan(read.gt_depth[~known]).all()
+    assert {"dataset_mask.npz", "dataset_classical.npz"} & set(source.streams) == {"dataset_mask.npz"}
+    assert "imu" in source.streams
+
+
+def test_float32_column_arrays_and_equidistant_lens(tmp_path, recording):
+    folder = write_evimo2(tmp_path / "seq", recording, float32=True, column_arrays=True, model="equidistant")
+    read = open_recording(folder).read()
+    expected = _expected_events(recording)
+    # float32 seconds hold these times (< 1 s) to well under a microsecond
+    assert np.array_equal(read.events["t"], expected["t"]) and np.array_equal(read.events["x"], expected["x"])
+    assert read.intrinsics.distortion_model == "equidistant"
+    assert read.intrinsics.distortion == (0.1, -0.01, 0.002, -0.0003)
+
+
+def test_time_window_reads_only_its_events(tmp_path, recording):
+    folder = write_evimo2(tmp_path / "seq", recording)
+    from tofnet.io.window import parse_window
+
+    source = open_recording(folder)
+    source.set_window(parse_window("50ms", "50ms"))
+    read = source.read()
+    expected = _expected_events(recording)
+    first = expected["t"][0]
+    keep = (expected["t"] >= first + 50_000) & (expected["t"] < first + 100_000)
+    assert np.array_equal(read.events, expected[keep]) and source.n_events == int(keep.sum())
+    assert len(read.gt_depth) == len(read.events)
+
+
+def test_pickled_metadata_cannot_run_code(tmp_path, recording):
+    folder = write_evimo2(tmp_path / "seq", recording)
+    marker = tmp_path / "ran"
+
+    class Payload:
+        def __reduce__(self):
+            return (os.system, (f"touch {marker}",))
+
+    meta = np.empty((), dtype=object)
+    meta[()] = {"meta": Payload()}
+    np.savez(folder / "dataset_info.npz", meta=meta)
+    with pytest.raises(DataError, match=r"dataset_info.npz\[meta\]: not a readable object array: refers to "
+                                         r"(posix|os)\.system: not read"):
+        open_recording(folder)
+    assert not marker.exists()
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda f: (f / "dataset_events_p.npy").unlink(), r"dataset_events_p.npy: missing: a file of the EVIMO2"),
+    (lambda f: np.save(f / "dataset_events_xy.npy", np.zeros((3, 2), np.uint16)), r"the event arrays do not match"),
+    (lambda f: np.savez(f / "dataset_info.npz", K=np.eye(3)), r"dataset_info.npz: no array 'meta'"),
+    (lambda f: np.savez(f / "dataset_info.npz", meta={"meta": {"fx": "x"}}),
+     r"dataset_info.npz\[meta\].meta.fx: expected a finite number, got 'x'"),
+    (lambda f: np.savez(f / "dataset_info.npz", meta={"meta": {"fx": 0.0, "fy": 1.0, "cx": 1.0, "cy": 1.0,
+                                                              "res_x": 4, "res_y": 4}}),
+     r"\[meta\].meta: focal lengths must be positive"),
+])
+def test_broken_folders_are_one_line_errors(tmp_path, recording, change, message):
+    folder = write_evimo2(tmp_path / "seq", recording)
+    change(folder)
+    with pytest.raises(DataError, match=message):
+        open_recording(folder).read()
+
+
+def test_run_and_eval_on_the_folder(tmp_path, recording, capsys):
+    import json
+
+    folder = write_evimo2(tmp_path / "seq", recording)
+    out = tmp_path / "depth.npz"
+    assert main(["run", str(folder), "--out", str(out), "--quiet"]) == 0
+    assert main(["info", str(folder)]) == 0
+    text = capsys.readouterr().out
+    assert "EVIMO2 v2 sequence" in text and "dataset_mask.npz" in text
+    assert main(["eval", str(folder), str(out), "--json", "-"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert "EVIMO2 depth frames" in data["ground_truth"] and data["matched"] > 0
+
+
+def test_depth_images_not_keyed_by_frame_id_are_taken_in_order(tmp_path, recording):
+    folder = write_evimo2(tmp_path / "seq", recording)
+    depth = np.full((SENSOR[1], SENSOR[0]), 2500, dtype=np.uint16)
+    np.savez_compressed(folder / "dataset_depth.npz", **{f"depth_{k + 7:010d}": depth for k in range(11)})
+    source = open_recording(folder)
+    read = source.read()
+    assert any("not keyed by frame id: taken in order" in note for note in source.notes)
+    known = np.isfinite(read.gt_depth)
+    assert known.any() and np.allclose(read.gt_depth[known], 2.5)
+    np.savez_compressed(folder / "dataset_depth.npz", **{f"depth_{k:010d}": depth for k in range(3)})  # 3 of 11
+    source = open_recording(folder)
+    assert any("8 ground-truth frames of the metadata have no depth image" in note for note in source.notes)
