@@ -13,6 +13,7 @@ from tofnet.io.source import open_recording
 
 from tofnet.io.recording import Intrinsics
 from tofnet.testing_datasets import evimo2_camera
+from tofnet.testing_datasets import make_evimo2, write_evimo_npz
 from tofnet.testing_datasets import write_evimo2 as write_evimo2_folder
 
 from formats_helpers import INTRINSICS, SENSOR, T0_US, pattern_recording
@@ -152,3 +153,36 @@ def test_depth_images_not_keyed_by_frame_id_are_taken_in_order(tmp_path, recordi
     np.savez_compressed(folder / "dataset_depth.npz", **{f"depth_{k:010d}": depth for k in range(3)})  # 3 of 11
     source = open_recording(folder)
     assert any("8 ground-truth frames of the metadata have no depth image" in note for note in source.notes)
+
+
+def test_an_evimo_v1_sequence_file_gives_its_camera_poses_and_depth_frames(tmp_path, capsys):
+    import json
+
+    from tofnet.io import read_recording
+
+    plane = read_recording(make_evimo2(tmp_path / "v2", duration_s=1.0))  # a plane 2 m away, as a v2 folder
+    v1 = write_evimo_npz(tmp_path / "scene15_dyn_test_01.npz", plane.events, plane.events["t"] * 1e-6,
+                         evimo2_camera(plane.intrinsics, plane.sensor_size),
+                         (plane.trajectory.times, plane.trajectory.positions, plane.trajectory.quaternions),
+                         (plane.frame_gt.times_us * 1e-6, (2000 * np.ones((len(plane.frame_gt), 32, 48))).astype(np.uint16)))
+    source = open_recording(v1)
+    read = source.read()
+    assert np.array_equal(read.events, plane.events) and read.intrinsics == plane.intrinsics
+    assert read.sensor_size == plane.sensor_size and len(read.trajectory.times) == len(plane.trajectory.times)
+    assert np.allclose(read.gt_depth[np.isfinite(read.gt_depth)], 2.0) and np.isfinite(read.gt_depth).mean() > 0.9
+    assert any(note == "not read: arrays mask, index, discretization of scene15_dyn_test_01.npz" for note in source.notes)
+    out = tmp_path / "depth.npz"
+    assert main(["run", str(v1), "--out", str(out), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["eval", str(v1), str(out), "--json", "-"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert "EVIMO depth frames" in data["ground_truth"]
+    assert data["matched"] > 1000 and data["median_rel_pct"] < 5.0  # the plane at 2 m, the camera's own poses
+
+
+def test_an_npz_says_which_arrays_it_does_not_read(tmp_path):
+    path = tmp_path / "events.npz"
+    np.savez(path, t=np.arange(5, dtype=np.int64), x=np.zeros(5, np.uint16), y=np.zeros(5, np.uint16),
+             p=np.ones(5, np.int8), frames=np.zeros((2, 4, 4)))
+    source = open_recording(path)
+    assert "not read: array frames of events.npz" in source.notes

@@ -217,7 +217,31 @@ def write_evimo2(folder: str | Path, events: np.ndarray, t_s: np.ndarray, camera
     np.save(folder / "dataset_events_t.npy", t_s[:, None] if column_arrays else t_s)
     np.save(folder / "dataset_events_xy.npy", np.column_stack([events["x"], events["y"]]).astype(np.uint16))
     np.save(folder / "dataset_events_p.npy", p[:, None] if column_arrays else p)
+    meta = _evimo_meta(float(t_s[0]), camera, poses, depth[0], lost)
+    k_matrix = [[camera["fx"], 0.0, camera["cx"]], [0.0, camera["fy"], camera["cy"]], [0.0, 0.0, 1.0]]
+    np.savez(folder / "dataset_info.npz", K=np.array(k_matrix), D=np.zeros(4), discretization=np.float64(0.01),
+             index=np.zeros(len(depth[0]), np.int64), meta=meta)
+    images = depth[1]
+    np.savez_compressed(folder / "dataset_depth.npz", **{f"depth_{k:010d}": image for k, image in enumerate(images)})
+    np.savez_compressed(folder / "dataset_mask.npz", **{f"mask_{k:010d}": np.zeros_like(image)
+                                                        for k, image in enumerate(images)})
+    return folder
 
+
+def write_evimo_npz(path: str | Path, events: np.ndarray, t_s: np.ndarray, camera: dict, poses, depth) -> Path:
+    """An EVIMO / EVIMO2 v1 sequence file: ``events`` ``(n, 4)`` (t s, x, y, p), ``depth`` ``(frames, H, W)`` mm,
+    ``meta`` (pickled), ``K``, ``D``, ``index``, ``discretization`` (arguments as ``write_evimo2``)."""
+    path = Path(path)
+    rows = np.column_stack([t_s, events["x"], events["y"], events["p"]]).astype(np.float64)
+    k_matrix = [[camera["fx"], 0.0, camera["cx"]], [0.0, camera["fy"], camera["cy"]], [0.0, 0.0, 1.0]]
+    np.savez_compressed(path, events=rows, depth=np.asarray(depth[1]), mask=np.zeros_like(depth[1]),
+                        meta=_evimo_meta(float(t_s[0]), camera, poses, depth[0], ()), K=np.array(k_matrix),
+                        D=np.zeros(4), index=np.zeros(len(depth[0]), np.int64), discretization=np.float64(0.01))
+    return path
+
+
+def _evimo_meta(t0_s: float, camera: dict, poses, frame_times, lost) -> dict:
+    """EVIMO's metadata dictionary: the camera, its Vicon poses (``lost``: samples without it), the frames."""
     def pose(ts, position, q):
         return {"ts": float(ts), "pos": {"t": dict(zip("xyz", map(float, position))),
                                          "q": dict(zip("xyzw", map(float, q))), "rpy": {"r": 0.0, "p": 0.0, "y": 0.0}}}
@@ -225,19 +249,11 @@ def write_evimo2(folder: str | Path, events: np.ndarray, t_s: np.ndarray, camera
     full = [{"ts": float(ts), "cam": pose(ts, position, q)} for ts, position, q in zip(*poses)]
     for k in lost:
         full[k] = {"ts": full[k]["ts"], "5": full[k]["cam"]}  # an object's pose only
-    frame_times, images = depth
     frames = [{"id": k, "ts": float(ts), "gt_frame": f"depth_mask_{k}.png", "cam": full[0]["cam"]}
               for k, ts in enumerate(frame_times)]
-    meta = {"frames": frames, "full_trajectory": full, "meta": camera,
-            "imu": {"/prophesee/left/imu": [{"ts": float(t_s[0]), "angular_velocity": {"x": 0.0, "y": 0.0, "z": 0.0},
-                                              "linear_acceleration": {"x": 0.0, "y": 0.0, "z": 9.81}}]}}
-    k_matrix = [[camera["fx"], 0.0, camera["cx"]], [0.0, camera["fy"], camera["cy"]], [0.0, 0.0, 1.0]]
-    np.savez(folder / "dataset_info.npz", K=np.array(k_matrix), D=np.zeros(4), discretization=np.float64(0.01),
-             index=np.zeros(len(frames), np.int64), meta=meta)
-    np.savez_compressed(folder / "dataset_depth.npz", **{f"depth_{k:010d}": image for k, image in enumerate(images)})
-    np.savez_compressed(folder / "dataset_mask.npz", **{f"mask_{k:010d}": np.zeros_like(image)
-                                                        for k, image in enumerate(images)})
-    return folder
+    return {"frames": frames, "full_trajectory": full, "meta": camera,
+            "imu": {"/prophesee/left/imu": [{"ts": t0_s, "angular_velocity": {"x": 0.0, "y": 0.0, "z": 0.0},
+                                             "linear_acceleration": {"x": 0.0, "y": 0.0, "z": 9.81}}]}}
 
 
 def make_evimo2(folder: str | Path, *, depth_m: float = 2.0, velocity=(-0.5, 0.0, 0.0), duration_s: float = 2.2,
@@ -256,4 +272,4 @@ def make_evimo2(folder: str | Path, *, depth_m: float = 2.0, velocity=(-0.5, 0.0
 MAKERS = {"dsec": make_dsec, "mvsec": make_mvsec, "tumvie": make_tumvie, "m3ed": make_m3ed, "evimo2": make_evimo2}
 
 __all__ = ["SIZE", "INTRINSICS", "BASELINE_M", "MAKERS", "plane_events", "make_dsec", "make_mvsec", "make_tumvie",
-           "make_m3ed", "make_evimo2", "write_evimo2", "evimo2_camera", "depth_frames", "camera_poses"]
+           "make_m3ed", "make_evimo2", "write_evimo2", "write_evimo_npz", "evimo2_camera", "depth_frames", "camera_poses"]

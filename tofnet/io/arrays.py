@@ -105,6 +105,14 @@ def npz_columns(path: object, columns: str | tuple[str, ...] | None = None) -> d
                                         f"(or N-ImageNet's 'event_data'); found {_names(keys) or 'nothing'}"))
 
 
+def npz_unread(path: object, keys: list[str]) -> list[str]:
+    """The arrays of an events ``.npz`` (its ``keys``) that neither ``npz_columns`` nor ``apply_npz_metadata`` reads."""
+    used = set(METADATA_KEYS)
+    event_key = next((key for key in ARRAY_KEYS if key in keys), None)
+    used |= {event_key} if event_key else {_time_name(keys), _polarity_name(keys), "x", "y"}
+    return [key for key in keys if key not in used]
+
+
 #: The camera metadata keys ``write_npz_recording`` adds beside the events.
 METADATA_KEYS = ("intrinsics", "distortion", "distortion_model", "sensor_size", "poses", "imu")
 

@@ -1,4 +1,4 @@
-"""EVIMO2 v2 sequence folders (NPZ layout), as the dataset ships them.
+"""EVIMO2 v2 sequence folders (NPZ layout), and EVIMO / EVIMO2 v1 sequence files, as the datasets ship them.
 
 ``<camera>/<category>/<subcategory>/<sequence>/`` holds, per event camera (``samsung_mono``,
 ``left_camera``, ``right_camera``):
@@ -14,11 +14,14 @@
 
 Masks, classical frames and the IMU samples are not read (a note says so). The Samsung sensor's
 polarity is the opposite of Prophesee's (the dataset's documentation); events keep the file's.
+
+EVIMO and EVIMO2 v1 ship a sequence as one ``.npz``: ``events`` ``(n, 4)`` (t s, x, y, p), ``depth``
+``(frames, H, W)`` mm, ``meta`` as above (one frame per depth image, in order), ``K``, ``D``. The events are
+read as any ``.npz``'s; ``apply_evimo_npz`` adds the camera, poses and depth frames.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -26,6 +29,7 @@ import numpy as np
 
 from tofnet.errors import DataError, located
 from tofnet.io.event_source import EventSource
+from tofnet.io.evimo_meta import camera, ground_truth_frames, poses, read_meta
 from tofnet.io.files import present
 
 #: The files that make a folder an EVIMO2 v2 sequence (``tofnet.io.layouts``).
@@ -33,6 +37,10 @@ EVENT_FILES = ("dataset_events_t.npy", "dataset_events_xy.npy", "dataset_events_
 INFO_FILE = "dataset_info.npz"
 #: EVIMO2's event cameras (the folder three levels up).
 CAMERAS = ("samsung_mono", "left_camera", "right_camera")
+#: The arrays of an EVIMO / EVIMO2 v1 sequence file ``apply_evimo_npz`` reads (with ``events``), and those that
+#: tell one (``K`` and ``D`` repeat ``meta``'s camera).
+NPZ_READ = ("meta", "depth", "K", "D")
+NPZ_SIGNATURE = ("events", "meta", "depth", "K")
 #: An event further than this from every depth frame gets no true depth (s); frames come at 60 Hz.
 MAX_DEPTH_GAP_S = 0.05
 
@@ -57,13 +65,13 @@ class Evimo2Source(EventSource):
                                                      f"p {p.shape}; expected (n,) or (n, 1), (n, 2), (n,) or (n, 1)"))
         self.xy, self.n_events, self._total = xy, n, n  # n_events becomes a window's count (set_window)
         parents = self.path.resolve().parents  # <camera>/<category>/<subcategory>/<sequence>
-        camera = parents[2].name if len(parents) > 2 and parents[2].name in CAMERAS else ""
-        self.detail = "EVIMO2 v2 sequence" + (f", {camera}" if camera else "")
-        meta = _mapping(_read_meta(self.path / INFO_FILE), f"{self.path / INFO_FILE}[meta]")
+        name = parents[2].name if len(parents) > 2 and parents[2].name in CAMERAS else ""
+        self.detail = "EVIMO2 v2 sequence" + (f", {name}" if name else "")
         where = f"{self.path / INFO_FILE}[meta]"
-        self.intrinsics, self.sensor_size = _camera(_mapping(meta.get("meta"), f"{where}.meta"), f"{where}.meta")
-        self.trajectory = self._poses(meta.get("full_trajectory"), f"{where}.full_trajectory")
-        self._depth_frames(meta.get("frames"), f"{where}.frames")
+        meta = read_meta(self.path / INFO_FILE)
+        self.intrinsics, self.sensor_size = camera(meta, where)
+        self.trajectory = poses(meta, where, self.notes)
+        self._depth_frames(meta, where)
         for name, what in (("dataset_mask.npz", "object masks"), ("dataset_classical.npz", "classical frames")):
             if (self.path / name).exists():
                 self.not_read(name, what)
@@ -111,30 +119,7 @@ class Evimo2Source(EventSource):
     def last_time(self) -> int | None:
         return int(self._times(self._total - 1, self._total)[0]) if self._total else None
 
-    def _poses(self, samples, where: str):
-        from tofnet.io.groundtruth import Trajectory
-
-        if samples is None:
-            self.notes.append("no full_trajectory in the metadata: no poses")
-            return None
-        rows, lost = [], 0
-        for k, sample in enumerate(_sequence(samples, where)):
-            cam = _mapping(sample, f"{where}[{k}]").get("cam")
-            if cam is None:
-                lost += 1  # Vicon lost the camera here
-                continue
-            pos = _mapping(_mapping(cam, f"{where}[{k}].cam").get("pos"), f"{where}[{k}].cam.pos")
-            t, q = (_mapping(pos.get(key), f"{where}[{k}].cam.pos.{key}") for key in ("t", "q"))
-            rows.append([_number(sample.get("ts", cam.get("ts")), f"{where}[{k}].ts")]
-                        + [_number(t.get(a), f"{where}[{k}].cam.pos.t.{a}") for a in "xyz"]
-                        + [_number(q.get(a), f"{where}[{k}].cam.pos.q.{a}") for a in "xyzw"])
-        if lost:
-            self.notes.append(f"{lost:,} of {lost + len(rows):,} pose samples without the camera (Vicon lost it): "
-                              "the poses are interpolated across them")
-        table = np.asarray(rows, dtype=np.float64).reshape(-1, 8)
-        return Trajectory(table[:, 0], table[:, 1:4], table[:, 4:8], where)
-
-    def _depth_frames(self, frames, where: str) -> None:
+    def _depth_frames(self, meta: dict, where: str) -> None:
         from tofnet.io.frames import FrameDepth
         from tofnet.io.npy import load_npz
 
@@ -144,19 +129,18 @@ class Evimo2Source(EventSource):
             return
         keys, _ = load_npz(depth_file, wanted=())
         by_id = {int(key[6:]): key for key in keys if key.startswith("depth_") and key[6:].isdigit()}
-        gt_frames = [(k, frame) for k, frame in enumerate(_sequence(frames if frames is not None else [], where))
-                     if "gt_frame" in _mapping(frame, f"{where}[{k}]")]
-        ids = [int(_number(frame.get("id"), f"{where}[{k}].id")) for k, frame in gt_frames]
+        gt_frames = ground_truth_frames(meta, where)
+        ids = [frame_id for frame_id, _ in gt_frames]
         if any(i not in by_id for i in ids) and len(gt_frames) == len(by_id):
             # not keyed by id: in order, as EVIMO2's own viewer pairs them (sorted keys, frames in order)
             self.notes.append(f"the depth images of {depth_file.name} are not keyed by frame id: taken in order")
             ids = sorted(by_id)
         times, names, missing = [], [], 0
-        for (k, frame), frame_id in zip(gt_frames, ids):
+        for (_, ts), frame_id in zip(gt_frames, ids):
             if frame_id not in by_id:
                 missing += 1
                 continue
-            times.append(_number(frame.get("ts"), f"{where}[{k}].ts"))
+            times.append(ts)
             names.append(by_id[frame_id])
         if missing:
             self.notes.append(f"{missing:,} ground-truth frames of the metadata have no depth image in "
@@ -164,11 +148,7 @@ class Evimo2Source(EventSource):
         if not names:
             self.notes.append(f"no depth frame of {depth_file.name} is in the metadata's frames: no true depth")
             return
-        order = np.argsort(times, kind="stable")
-        times_us = np.round(np.asarray(times)[order] * 1e6).astype(np.int64)
-        names = [names[i] for i in order]
-        if np.any(np.diff(times_us) <= 0):
-            raise DataError(located(where, None, "the depth frames' times must increase"))
+        times_us = _increasing_us(times, f"{where}.frames")
 
         def read_frame(k: int) -> np.ndarray:
             _, arrays = load_npz(depth_file, wanted=(names[k],))
@@ -194,40 +174,37 @@ def open_evimo2(folder: Path):
     return source
 
 
-def _read_meta(path: Path):
-    from tofnet.io.npz_object import read_npz_object
-    return read_npz_object(path, "meta")
+def apply_evimo_npz(recording, path: Path) -> None:
+    """Give ``recording`` (the events of an EVIMO / EVIMO2 v1 ``.npz``) the camera, poses and depth frames of
+    its ``meta`` and ``depth`` (module docstring); the file's wins over side files."""
+    from tofnet.io.frames import FrameDepth
+    from tofnet.io.npy import load_npz, npz_shape
+
+    where = f"{path}[meta]"
+    meta = read_meta(path)
+    recording.intrinsics, recording.sensor_size = camera(meta, where)
+    recording.trajectory = poses(meta, where, recording.notes)
+    frames = ground_truth_frames(meta, where)
+    shape, _ = npz_shape(path, "depth", "EVIMO sequence file")
+    if len(shape) != 3 or shape[0] != len(frames):
+        raise DataError(located(f"{path}[depth]", None, f"expected one depth image per frame of the metadata "
+                                                        f"({len(frames)}, H, W), got shape {shape}"))
+    cache: dict[str, np.ndarray] = {}
+
+    def depth() -> np.ndarray:  # the whole array, read once when the ground truth is first asked for
+        if "depth" not in cache:
+            cache["depth"] = load_npz(path, ("depth",), "EVIMO sequence file")[1]["depth"]
+        return cache["depth"]
+
+    if len(frames):
+        recording.frame_gt = FrameDepth(_increasing_us([ts for _, ts in frames], f"{where}.frames"),
+                                        lambda k: depth()[k].astype(np.float64) * 1e-3, shape[1:], path,
+                                        max_gap_s=MAX_DEPTH_GAP_S, what="EVIMO depth frames")
+        recording.notes.append(f"true depth from {len(frames):,} depth frames of {path.name}")
 
 
-def _camera(camera: dict, where: str):
-    from tofnet.io.calibration import intrinsics_from
-
-    model = str(camera.get("dist_model", "radtan"))
-    names = ("k1", "k2", "k3", "k4") if model in ("equidistant", "fisheye", "kb4") else ("k1", "k2", "p1", "p2", "k3")
-    values = [_number(camera.get(key), f"{where}.{key}") for key in ("fx", "fy", "cx", "cy")]
-    coefficients = [_number(camera.get(key, 0.0), f"{where}.{key}") for key in names]
-    try:
-        intrinsics = intrinsics_from(values, coefficients, model)
-    except ValueError as err:
-        raise DataError(located(where, None, str(err))) from None
-    size = tuple(int(_number(camera.get(key), f"{where}.{key}")) for key in ("res_x", "res_y"))
-    return intrinsics, size
-
-
-def _mapping(value, where: str) -> dict:
-    if not isinstance(value, dict):
-        raise DataError(located(where, None, f"expected a dictionary, got {type(value).__name__}"))
-    return value
-
-
-def _sequence(value, where: str) -> list:
-    if not isinstance(value, (list, tuple)):
-        raise DataError(located(where, None, f"expected a list, got {type(value).__name__}"))
-    return list(value)
-
-
-def _number(value, where: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
-            or not math.isfinite(float(value)):
-        raise DataError(located(where, None, f"expected a finite number, got {str(value)[:40]!r}"))
-    return float(value)
+def _increasing_us(times_s: list[float], where: str) -> np.ndarray:
+    times_us = np.round(np.asarray(times_s, dtype=np.float64) * 1e6).astype(np.int64)
+    if np.any(np.diff(times_us) <= 0):
+        raise DataError(located(where, None, "the depth frames' times must increase"))
+    return times_us

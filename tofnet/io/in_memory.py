@@ -30,7 +30,8 @@ class RecordingSource(EventSource):
         self.trajectory = recording.trajectory
         self.imu = recording.imu
         self.n_events = len(recording.events)
-        self.has_depth = recording.gt_depth is not None
+        self.frame_gt = recording.frame_gt
+        self.has_depth = recording.gt_depth is not None or recording.frame_gt is not None
         self.notes = list(recording.notes)
 
     def _packets(self, size_hint: int) -> Iterable[np.ndarray]:
@@ -39,6 +40,8 @@ class RecordingSource(EventSource):
             yield events[start:start + size_hint]
 
     def _depth(self, events: np.ndarray, first_index: int) -> np.ndarray | None:
+        if self.recording.gt_depth is None:  # ground truth as frames (an EVIMO sequence file)
+            return super()._depth(events, first_index)
         return self.recording.gt_depth[first_index:first_index + len(events)]
 
     def first_time(self) -> int | None:
@@ -65,7 +68,8 @@ class RecordingSource(EventSource):
         self.recording = Recording(events=recording.events[lo:hi], intrinsics=recording.intrinsics,
                                    trajectory=recording.trajectory, sensor_size=recording.sensor_size,
                                    gt_depth=None if recording.gt_depth is None else recording.gt_depth[lo:hi],
-                                   imu=recording.imu, source=recording.source, notes=recording.notes)
+                                   imu=recording.imu, source=recording.source, notes=recording.notes,
+                                   frame_gt=recording.frame_gt)
         self.n_events = hi - lo
 
     def _window_packets(self, size_hint: int, start: int, stop: int | None) -> Iterable[np.ndarray]:
@@ -77,6 +81,8 @@ class RecordingSource(EventSource):
         recording.sensor_size, recording.intrinsics = self.sensor_size, self.intrinsics
         recording.trajectory, recording.imu = self.trajectory, self.imu
         recording.notes = list(self.notes)  # the file's (rounded times) and any added since
+        if recording.gt_depth is None and self.frame_gt is not None:  # per event, as every reader's read() gives
+            recording.gt_depth = self.frame_gt.at_events(recording.events)
         if progress is not None:
             progress(len(recording.events), len(recording.events))
         return recording
@@ -120,8 +126,18 @@ def read_in_memory(path: Path, kind: str, columns, window=None) -> tuple[Recordi
             total = len(map_npy(path, "events file"))
             recording.gt_depth = read_gt_depth(path.parent / f"{path.stem}_depth.npy", total)[lo:hi]
         if kind == "npz":
-            from tofnet.io.arrays import apply_npz_metadata
+            from tofnet.io.arrays import apply_npz_metadata, npz_unread
+            from tofnet.io.evimo import NPZ_READ, NPZ_SIGNATURE, apply_evimo_npz
+            from tofnet.io.npy import load_npz
             apply_npz_metadata(recording, path)
+            keys, _ = load_npz(path, (), "events file")
+            unread = npz_unread(path, keys)
+            if set(NPZ_SIGNATURE) <= set(keys):  # an EVIMO / EVIMO2 v1 sequence file
+                apply_evimo_npz(recording, path)
+                unread = [key for key in unread if key not in NPZ_READ]
+            if unread:  # nothing dropped unsaid
+                recording.notes.append(f"not read: array{'s' if len(unread) > 1 else ''} {', '.join(unread)} of "
+                                       f"{path.name}")
             if recording.intrinsics is None:
                 recording.notes.append(NO_CALIBRATION)
     if len(recording.events) == 0 and span is None:

@@ -167,6 +167,22 @@ def load_npz(path: str | Path, wanted: Iterable[str] | None = None,
     return keys, arrays
 
 
+def npz_shape(path: str | Path, key: str, what: str = ".npz file") -> tuple[tuple[int, ...], np.dtype]:
+    """Shape and dtype of the array ``key`` of a ``.npz`` file, from its header alone (nothing else is inflated)."""
+    path = Path(path)
+    with open_regular(path, what) as handle:
+        try:
+            with zipfile.ZipFile(handle) as archive:
+                info = next((i for i in archive.infolist() if i.filename == f"{key}.npy"), None)
+                if info is None:
+                    raise DataError(located(path, None, f"no array {key!r}"))
+                with archive.open(info) as stream:
+                    shape, _, dtype, _ = _read_header(stream, f"{path}[{key}]")
+        except _ERRORS as err:
+            raise DataError(located(path, None, f"not a readable .npz (zip) file, or truncated ({reason(err)})")) from None
+    return shape, dtype
+
+
 def _read_member(archive: zipfile.ZipFile, info: zipfile.ZipInfo, source: str) -> np.ndarray:
     limit = max(MAX_INFLATED_BYTES, MAX_INFLATE_RATIO * info.compress_size)
     if info.file_size > limit:
