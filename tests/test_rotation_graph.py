@@ -181,7 +181,7 @@ def test_tofnet_run_compensates_rotation_from_poses_or_a_gyro_and_says_so(events
     assert main(["run", str(folder), "--out", str(out), "--refractory", "0", "--velocity-per", "pixel", "--quiet",
                  *velocity]) == 0
     printed = capsys.readouterr().out
-    assert ("ω from the ground-truth poses" if kind == "poses" else "ω from the gyroscope (the recording's IMU)") in printed
+    assert ("ω from the ground-truth poses" if kind == "poses" else "ω from the gyroscope (the recording's IMU; its axes taken as the camera's, rad/s") in printed
     assert "rotation dominated" in printed
     depth, meta = read_depth(out)
     assert np.median(depth["z"]) == pytest.approx(DEPTH_M, rel=0.05)
@@ -208,7 +208,7 @@ def test_a_spec_with_rotation_runs_and_no_rotation_refuses_it(tmp_path, events, 
     spec.write_text(text.replace("[240, 180]", f"[{SIZE[0]}, {SIZE[1]}]").replace("refractory: 60ms", "refractory: 0"))
     out = tmp_path / "depth.npz"
     assert main(["run", str(tmp_path / "rec"), "--spec", str(spec), "--out", str(out), "--quiet"]) == 0
-    assert "ω from the gyroscope (the recording's IMU) with its camera-IMU rotation" in capsys.readouterr().out
+    assert "ω from the gyroscope (the recording's IMU with its camera-IMU rotation)" in capsys.readouterr().out
     assert main(["run", str(tmp_path / "rec"), "--spec", "examples/paper_240x180.yaml", "--sensor-size", "40x24",
                  "--out", str(out), "--quiet", "--force"]) == 0
     assert "not compensated (eq. 8: the spec has no angular velocity process)" in capsys.readouterr().out

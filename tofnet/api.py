@@ -103,9 +103,10 @@ def _rotation_source_text(process: AngularVelocityProcess) -> str:
     if process.source == "groundtruth":
         return "the ground-truth poses"
     if process.source == "gyro":
-        turned = " with its camera-IMU rotation" if process.rotation_cam_imu is not None else ""
+        turned = (" with its camera-IMU rotation" if process.rotation_cam_imu is not None
+                  else "; its axes taken as the camera's, rad/s: rotation_cam_imu sets the IMU's")
         imu = process.imu or "the recording's IMU"
-        return f"the gyroscope ({imu}){turned}"
+        return f"the gyroscope ({imu}{turned})"
     if process.source == "samples":
         return f"samples ({process.samples})"
     return f"a constant ω = {list(process.omega)} rad/s"
