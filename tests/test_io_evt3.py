@@ -84,3 +84,16 @@ def test_the_reader_gives_the_specifications_time_and_notes_the_clamped_event(tm
         with evt.Decoder(path, None, None) as decoder:
             theirs = np.concatenate([packet["events"] for packet in decoder if "events" in packet])
         assert list(theirs["t"][:5] - BASE_US - 1000) == [790, 811, 811, 811, 811]
+
+
+def test_a_file_cut_inside_a_word_is_read_to_its_last_whole_word_and_noted(tmp_path):
+    optional("faery")
+    from tofnet.io.source import open_recording
+
+    whole = open_recording(_file(tmp_path, WORDS)).read()
+    path = tmp_path / "cut.raw"
+    path.write_bytes(_file(tmp_path, WORDS).read_bytes() + b"\x01")  # one byte of a word more
+    with open_recording(path) as source:
+        recording = source.read()
+    assert np.array_equal(recording.events, whole.events)
+    assert "the file ends with 1 byte of a partial 2-byte word (not read): truncated?" in recording.notes

@@ -228,6 +228,19 @@ def seconds_to_us(t: np.ndarray) -> np.ndarray:
     return np.sign(scaled) * np.floor(np.abs(scaled) + 0.5)
 
 
+#: A float time column whose precision at its largest time is coarser than this (s) is refused.
+MAX_FLOAT_STEP_S = 1e-3
+
+
+def float_time_step(t: np.ndarray) -> float:
+    """The step (s) between neighbouring values of a float32/float16 time column at its largest magnitude; 0 for
+    float64 and integers (which hold µs exactly where tofnet accepts times)."""
+    t = np.asarray(t)
+    if t.dtype.kind != "f" or t.dtype.itemsize >= 8 or t.size == 0:
+        return 0.0
+    return float(np.spacing(np.max(np.abs(t)).astype(t.dtype)))
+
+
 def times_us_for_search(t: np.ndarray) -> np.ndarray:
     """A slice of a ``t`` column as the µs ``events_from_columns`` makes of it, for binary searches
     (float seconds rounded; integers as they are, unsigned ones beyond int64 clipped: refused later)."""
@@ -291,6 +304,11 @@ def events_from_columns(columns: dict[str, np.ndarray], source: object = "<memor
                 raise fail(name, int(bad[0]), f"expected a finite number, got {a[bad[0]]}")
     t = arrays["t"]
     limit = MAX_TIME_US
+    step = float_time_step(t)
+    if step > MAX_FLOAT_STEP_S:
+        raise DataError(located(source, None, f"field 't': {t.dtype} seconds step by {step:g} s at "
+                                              f"{float(np.max(np.abs(t))):g} s, coarser than a 1 ms step: the times "
+                                              "are lost; store seconds as float64 or µs as integers"))
     if t.dtype.kind == "f":
         t_us = seconds_to_us(t)
         bad = np.flatnonzero(np.abs(t_us) >= limit)

@@ -10,16 +10,18 @@ import numpy as np
 from tofnet.errors import DataError, located, quote
 from tofnet.io.files import write_text_atomic
 from tofnet.io.groundtruth import finite_number, read_text
-from tofnet.io.recording import Intrinsics
+from tofnet.io.recording import Intrinsics, focal_problem
 
 _NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
+#: The note of a recording without a camera (an ECD folder or file without ``calib.txt``).
+NO_CALIBRATION = "no calib.txt: intrinsics unknown"
 
 
 def read_calibration(path: str | Path) -> Intrinsics:
     """Read ECD ``calib.txt``: one line ``fx fy cx cy [k1 k2 p1 p2 k3]`` (pixels; distortion unitless).
 
     Blank lines and ``#`` comments are allowed around the line. Four numbers give no
-    distortion; nine give ``distortion = (k1, k2, p1, p2, k3)``.
+    distortion; nine give ``distortion = (k1, k2, p1, p2, k3)``; eight, ``k3 = 0``.
     """
     path = Path(path)
     data = [(n, line.strip()) for n, line in enumerate(read_text(path).splitlines(), start=1)
@@ -30,13 +32,16 @@ def read_calibration(path: str | Path) -> Intrinsics:
         raise DataError(located(path, data[1][0], "expected one line 'fx fy cx cy k1 k2 p1 p2 k3', found another"))
     number, line = data[0]
     fields = line.split()
-    if len(fields) not in (4, 9):
-        raise DataError(located(path, number, f"expected 4 numbers 'fx fy cx cy' or 9 'fx fy cx cy k1 k2 p1 p2 k3', "
-                                              f"found {len(fields)}"))
+    if len(fields) not in (4, 8, 9):
+        raise DataError(located(path, number, f"expected 4 numbers 'fx fy cx cy' or 9 'fx fy cx cy k1 k2 p1 p2 k3' "
+                                              f"(8: k3 = 0), found {len(fields)}"))
     values = [finite_number(path, number, f"'{name}'", field) for name, field in zip(_NAMES, fields)]
+    values += [0.0] if len(values) == 8 else []
     for name, value in zip(("fx", "fy"), values[:2]):
         if value <= 0:
             raise DataError(located(path, number, f"'{name}': focal length must be positive (pixels), got {value:g}"))
+    if focal_problem(*values[:2]):
+        raise DataError(located(path, number, focal_problem(*values[:2])))
     return Intrinsics(*values[:4], distortion=tuple(values[4:]))
 
 
@@ -70,6 +75,8 @@ def parse_intrinsics(text: str, what: str = "--intrinsics") -> Intrinsics:
         values.append(value)
     if values[0] <= 0 or values[1] <= 0:
         raise TofnetError(f"{what}: fx and fy must be positive (pixels), got {values[0]:g}, {values[1]:g}")
+    if focal_problem(values[0], values[1]):
+        raise TofnetError(f"{what}: {focal_problem(values[0], values[1])}")
     distortion = tuple(values[4:]) + ((0.0,) if len(values) == 8 else ())
     return Intrinsics(*values[:4], distortion=distortion if any(distortion) else ())
 
@@ -131,6 +138,7 @@ def _looks_like_calib_txt(text: str) -> bool:
 
 #: Distortion model names as datasets write them -> tofnet's (``Intrinsics.distortion_model``).
 MODEL_NAMES = {"radtan": "radtan", "plumb_bob": "radtan", "radial-tangential": "radtan", "pinhole": "radtan",
+               "none": "radtan",
                "equidistant": "equidistant", "fisheye": "equidistant", "kb4": "equidistant"}
 
 
@@ -144,6 +152,10 @@ def intrinsics_from(matrix, coefficients, model: str) -> Intrinsics:
         raise ValueError(f"unknown distortion model {quote(str(model), 20)}; expected one of "
                          f"{', '.join(sorted(MODEL_NAMES))}")
     coefficients = tuple(float(c) for c in np.ravel(coefficients))
+    if str(model).lower().strip() == "none":  # Kalibr's and others' word for a lens without distortion
+        if any(coefficients):
+            raise ValueError(f"distortion model 'none' with coefficients {', '.join(f'{c:g}' for c in coefficients)}")
+        coefficients = ()
     if model_name == "radtan" and len(coefficients) == 4:
         coefficients = coefficients + (0.0,)
     expected = 5 if model_name == "radtan" else 4
@@ -151,7 +163,10 @@ def intrinsics_from(matrix, coefficients, model: str) -> Intrinsics:
         raise ValueError(f"{model_name} distortion needs {expected} coefficients, got {len(coefficients)}")
     if not any(coefficients):
         coefficients = ()
-    fx, fy, cx, cy = (float(v) for v in np.ravel(matrix)[:4])
+    matrix = np.ravel(np.asarray(matrix, dtype=np.float64))
+    if matrix.size != 4:
+        raise ValueError(f"expected 4 numbers fx fy cx cy, got {matrix.size}")
+    fx, fy, cx, cy = (float(v) for v in matrix)
     check_intrinsics(fx, fy, cx, cy, coefficients)
     return Intrinsics(fx, fy, cx, cy, distortion=coefficients,
                       distortion_model=model_name if coefficients else "radtan")
@@ -170,8 +185,8 @@ def check_intrinsics(fx: float, fy: float, cx: float, cy: float, coefficients: t
     for name, value in (("fx", fx), ("fy", fy), ("cx", cx), ("cy", cy)):
         if not math.isfinite(value):
             raise IntrinsicsError(f"{name} is {value}; expected a finite number of pixels")
-    if fx <= 0.0 or fy <= 0.0:
-        raise IntrinsicsError(f"focal lengths must be positive (pixels), got fx {fx:g}, fy {fy:g}")
+    if focal_problem(fx, fy):
+        raise IntrinsicsError(focal_problem(fx, fy))
     if not all(math.isfinite(c) for c in coefficients):
         raise IntrinsicsError(f"distortion coefficients must be finite, got {', '.join(f'{c:g}' for c in coefficients)}")
 
@@ -273,8 +288,13 @@ def set_camera(source, intrinsics: Intrinsics | None, calib: str | Path | None,
         if source.sensor_size is None and size is not None:
             source.sensor_size = size
             source.notes.append(f"sensor size {size[0]}x{size[1]} from {calib}")
+        elif size is not None and tuple(size) != tuple(source.sensor_size):
+            source.notes.append(f"{calib} ({what}) is a {size[0]}x{size[1]} camera's calibration, the recording's "
+                                f"sensor is {source.sensor_size[0]}x{source.sensor_size[1]}: another camera? (--camera "
+                                "picks one)")
         used = f"{calib} ({what})"
     else:
         used = "--intrinsics"
     source.intrinsics = intrinsics
+    source.notes = [note for note in source.notes if note != NO_CALIBRATION]  # the camera is known now
     source.notes.append(f"intrinsics from {used}" + (", instead of the recording's" if had else ""))

@@ -1,7 +1,7 @@
 """The checks every reader shares (docs/reliability.md), made once in ``tofnet.io.source``.
 
 - ``check_metadata``: what a file declares — sensor size within ``MAX_SENSOR_SIDE`` and
-  ``MAX_SENSOR_PIXELS``, finite intrinsics with ``fx``, ``fy`` > 0, IMU rows;
+  ``MAX_SENSOR_PIXELS``, finite intrinsics with ``fx``, ``fy`` >= 1 px, IMU rows;
 - ``check_packet``: every event a reader returns — ``|t| < MAX_TIME_US``, whole
   coordinates 0..65535 — before it is copied into a chunk;
 - ``decode_errors``: which exceptions of a decoding library (h5py, faery, rosbags) mean
@@ -18,6 +18,7 @@ import numpy as np
 
 from tofnet.errors import DataError, located, quote
 from tofnet.events import MAX_TIME_US, sensor_size_problem
+from tofnet.io.recording import focal_problem
 
 
 #: What decoding libraries raise on a bad file (h5py: OSError, KeyError, ValueError,
@@ -95,7 +96,7 @@ def check_packet(packet: np.ndarray, first_index: int, path: object) -> None:
 def check_metadata(source, path: object) -> None:
     """The checks on what a file declares, shared by every reader (``source`` is an
     ``EventSource`` or a ``Recording``): the sensor size (``sensor_size_problem``), the
-    intrinsics (finite, ``fx``, ``fy`` > 0, 5 radtan or 4 equidistant coefficients or
+    intrinsics (finite, ``fx``, ``fy`` >= 1 px, 5 radtan or 4 equidistant coefficients or
     none) and the IMU (``(n, 7)`` finite rows, times in range and not decreasing)."""
     size = source.sensor_size
     if size is not None:
@@ -113,9 +114,9 @@ def check_metadata(source, path: object) -> None:
         values = (intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy, *intrinsics.distortion)
         if not all(isinstance(v, (int, float, np.floating, np.integer)) and math.isfinite(v) for v in values):
             raise DataError(located(path, None, "intrinsics: expected finite numbers fx fy cx cy and distortion"))
-        if intrinsics.fx <= 0 or intrinsics.fy <= 0:
-            raise DataError(located(path, None, f"intrinsics: focal lengths must be positive (pixels), got "
-                                                f"fx={intrinsics.fx:g}, fy={intrinsics.fy:g}"))
+        problem = focal_problem(intrinsics.fx, intrinsics.fy)
+        if problem:
+            raise DataError(located(path, None, f"intrinsics: {problem}"))
         expected = {"radtan": 5, "equidistant": 4}.get(intrinsics.distortion_model)
         if expected is None or len(intrinsics.distortion) not in (0, expected):
             raise DataError(located(path, None, f"intrinsics: {len(intrinsics.distortion)} distortion coefficients "

@@ -14,7 +14,7 @@ import numpy as np
 
 from tofnet.errors import DataError, located
 from tofnet.events import sensor_size_problem
-from tofnet.io.calibration import read_calibration, write_calibration
+from tofnet.io.calibration import NO_CALIBRATION, read_calibration, write_calibration
 from tofnet.io.files import write_text_atomic
 from tofnet.io.npy import load_npy, write_npy
 from tofnet.io.events import read_events_txt, write_events_txt
@@ -67,10 +67,6 @@ def read_gt_depth(path: str | Path, n_events: int) -> np.ndarray:
         raise DataError(located(path, None, f"event {int(bad[0])}: true depth {depth[bad[0]]:g} m; expected a "
                                             "finite depth > 0 (or NaN where unknown)"))
     return depth
-
-
-#: The note of a recording whose camera is not known (no ``calib.txt``, nor intrinsics in the file).
-NO_CALIBRATION = f"no {CALIBRATION}: intrinsics unknown"
 
 
 def attach_sidecars(recording: Recording, folder: Path, gt_depth_name: str | None = GT_DEPTH,

@@ -64,6 +64,11 @@ class Evimo2Source(EventSource):
             raise DataError(located(self.path, None, f"the event arrays do not match: t {t.shape}, xy {xy.shape}, "
                                                      f"p {p.shape}; expected (n,) or (n, 1), (n, 2), (n,) or (n, 1)"))
         self.xy, self.n_events, self._total = xy, n, n  # n_events becomes a window's count (set_window)
+        if n and self.t.dtype.kind == "f" and self.t.dtype.itemsize < 8:
+            from tofnet.io.arrays import float_time_step
+            step = float_time_step(np.asarray(self.t[n - 1:n]))  # sorted: the last is the largest
+            if step > 1e-6:
+                self.notes.append(f"times are {self.t.dtype} seconds: {step * 1e6:.3g} µs apart at the last event")
         parents = self.path.resolve().parents  # <camera>/<category>/<subcategory>/<sequence>
         name = parents[2].name if len(parents) > 2 and parents[2].name in CAMERAS else ""
         self.detail = "EVIMO2 v2 sequence" + (f", {name}" if name else "")

@@ -25,6 +25,7 @@ import numpy as np
 from numba import njit
 
 import tofnet.numba_cache  # noqa: F401 - before any cached kernel: numba picks its cache key at decoration
+from tofnet.errors import DataError, located
 from tofnet.events import EVENT_DTYPE
 
 #: Words decoded per block (about 4 ms of decoding, which a live replay waits for): at most 12 events a
@@ -45,7 +46,11 @@ def header_of(path: Path) -> tuple[int, int]:
                 break
             length += len(line)
             words = line[1:].replace(b";", b" ").split()
-            if len(words) > 1 and words[0] in (b"t0", b"T0") and words[1].isdigit():
+            if words and words[0] in (b"t0", b"T0"):
+                if len(words) < 2 or not words[1].isdigit() or len(words[1]) > 18:
+                    value = words[1][:20].decode("latin1") if len(words) > 1 else ""
+                    raise DataError(located(path, None, f"header line '% t0': expected the time base in whole µs "
+                                                        f"(0 or more), got {value!r}"))
                 t0 = int(words[1])
     return length, t0
 

@@ -136,10 +136,10 @@ def read_bytes(path: str | Path, what: str = "file", limit: int | None = None) -
 
 
 def read_text(path: str | Path, what: str = "file", limit: int | None = None) -> str:
-    """UTF-8 text of a regular file (see ``read_bytes``)."""
+    """UTF-8 text of a regular file (see ``read_bytes``); a leading byte-order mark (Windows editors) is dropped."""
     data = read_bytes(path, what, limit)
     try:
-        return data.decode("utf-8")
+        return data.decode("utf-8-sig")
     except UnicodeDecodeError as err:
         raise DataError(located(path, None, f"not a text file (byte {err.start} is not UTF-8)")) from None
 

@@ -135,10 +135,14 @@ class DsecSource(ColumnsSource):
         self.intrinsics, self.sensor_size = read_calib_group(h5, "calib", path)
         if "poses" in h5:
             from tofnet.io.groundtruth import Trajectory
-            self.trajectory = Trajectory(h5.value("poses/t"), h5.value("poses/position"),
-                                         h5.value("poses/quaternion"), source=f"{path}:poses")
+            t, position, quaternion = _group(h5, "poses", ("t", "position", "quaternion"), path)
+            self.trajectory = Trajectory(t, position, quaternion, source=f"{path}:poses")
         if "imu" in h5:
-            self.imu = np.column_stack([h5.value("imu/t"), h5.value("imu/accel"), h5.value("imu/gyro")])
+            t, accel, gyro = _group(h5, "imu", ("t", "accel", "gyro"), path)
+            if not len(t) == len(accel) == len(gyro):
+                raise DataError(located(path, None, f"imu: t, accel and gyro hold {len(t)}, {len(accel)} and "
+                                                    f"{len(gyro)} samples; expected one count"))
+            self.imu = np.column_stack([t, accel, gyro])
         if self.intrinsics is None:
             self._dsec_calibration()
         for key in sorted(set(h5.keys()) - {"events", "ms_to_idx", "t_offset", "calib", "poses", "imu"}):
@@ -158,16 +162,34 @@ class DsecSource(ColumnsSource):
 
 def read_calib_group(h5: H5File, group: str, path: object) -> tuple[Intrinsics | None, tuple[int, int] | None]:
     """``{group}/{intrinsics,distortion_coeffs,distortion_model,resolution}`` (M3ED, tofnet)."""
+    size = _resolution(scalar(h5, f"{group}/resolution"), f"{group}/resolution", path)
     if f"{group}/intrinsics" not in h5:
-        size = scalar(h5, f"{group}/resolution")
-        return None, (tuple(int(v) for v in size) if size is not None else None)
+        return None, size
     try:
         intrinsics = intrinsics_from(h5.value(f"{group}/intrinsics"), scalar(h5, f"{group}/distortion_coeffs", ()),
                                      scalar(h5, f"{group}/distortion_model", "radtan"))
     except ValueError as err:
         raise DataError(located(path, None, f"{group}: {err}")) from None
-    size = scalar(h5, f"{group}/resolution")
-    return intrinsics, (tuple(int(v) for v in size) if size is not None else None)
+    return intrinsics, size
+
+
+def _resolution(value, name: str, path: object) -> tuple[int, int] | None:
+    if value is None:
+        return None
+    values = np.ravel(np.asarray(value))
+    if values.size != 2 or values.dtype.kind not in "iuf" or not np.all(np.isfinite(values)) \
+            or np.any(values != np.floor(values)):
+        raise DataError(located(path, None, f"{name}: expected two whole numbers (width, height) in pixels, got "
+                                            f"{values.dtype} of shape {np.shape(value)}"))
+    return int(values[0]), int(values[1])
+
+
+def _group(h5: H5File, group: str, names: tuple[str, ...], path: object) -> list:
+    """The datasets ``group/name`` for each of ``names``; a missing one is one line naming it."""
+    for name in names:
+        if f"{group}/{name}" not in h5:
+            raise DataError(located(path, None, f"{group}/{name}: missing ({group} needs {', '.join(names)})"))
+    return [h5.value(f"{group}/{name}") for name in names]
 
 
 def _t_offset(h5: H5File) -> int:

@@ -90,7 +90,8 @@ class RecordingSource(EventSource):
 
 def read_in_memory(path: Path, kind: str, columns, window=None) -> tuple[Recording, tuple[int, int] | None]:
     """The recording, and for a ``.npy`` read through a time window, the file's (first, last) event µs."""
-    from tofnet.io.ecd import NO_CALIBRATION, attach_sidecars, read_ecd
+    from tofnet.io.calibration import NO_CALIBRATION
+    from tofnet.io.ecd import attach_sidecars, read_ecd
     from tofnet.io.events import read_events_npy, read_events_txt
 
     from tofnet.io.ecd import EVENTS, GT_DEPTH

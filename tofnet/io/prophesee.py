@@ -73,6 +73,10 @@ class FaerySource(EventSource):
                 with evt.Decoder(self.path, fallback, None) as decoder:
                     self.detail = decoder.version.upper()
         self._fallback = fallback
+        if kind == "evt":  # EVT3 is read in 2-byte words, EVT2 and EVT2.1 in 4-byte words
+            from tofnet.io.evt3 import header_of
+            unit = 2 if self.detail == "EVT3" else 4
+            self._note_partial((self.path.stat().st_size - header_of(self.path)[0]) % unit, unit)
 
     def _dat_count(self) -> int | None:
         # A DAT file is a '%' text header, one type byte, one size byte, then 8 bytes per event.
@@ -83,7 +87,14 @@ class FaerySource(EventSource):
                     break
                 header += len(line)
         size = self.path.stat().st_size - header - 2
+        self._note_partial(size % _DAT_EVENT_BYTES if size >= 0 else 0, _DAT_EVENT_BYTES)
         return size // _DAT_EVENT_BYTES if size >= 0 and size % _DAT_EVENT_BYTES == 0 else None
+
+    def _note_partial(self, extra: int, unit: int) -> None:
+        """A file whose data does not end on a whole event or word was cut short: the decoders skip the tail."""
+        if extra:
+            self.notes.append(f"the file ends with {extra} byte{'s' if extra > 1 else ''} of a partial "
+                              f"{unit}-byte {'event' if self.format == 'dat' else 'word'} (not read): truncated?")
 
     def _packets(self, size_hint: int) -> Iterable[np.ndarray]:
         import faery

@@ -11,6 +11,19 @@ from tofnet.errors import DataError
 from tofnet.events import EVENT_DTYPE
 
 
+#: Below this focal length (px) no lens images a sensor: the values are normalised intrinsics, not pixels.
+MIN_FOCAL_PX = 1.0
+
+
+def focal_problem(fx: float, fy: float) -> str | None:
+    """What is wrong with focal lengths ``fx``, ``fy`` (pixels), or None; for one-line errors."""
+    if fx <= 0 or fy <= 0:
+        return f"focal lengths must be positive (pixels), got fx {fx:g}, fy {fy:g}"
+    if fx < MIN_FOCAL_PX or fy < MIN_FOCAL_PX:
+        return f"focal lengths of fx {fx:g}, fy {fy:g} px are below 1 px: normalised intrinsics? (expected pixels)"
+    return None
+
+
 @dataclass(frozen=True)
 class Intrinsics:
     """Pinhole intrinsics in pixels and the lens distortion (OpenCV conventions).

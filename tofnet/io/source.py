@@ -10,7 +10,7 @@ holding at most about one chunk in memory, and ``read()`` loads everything into 
 
 The checks of docs/reliability.md are made here once for every format: what a file
 declares (``check_metadata``: sensor size within ``MAX_SENSOR_SIDE``/``MAX_SENSOR_PIXELS``,
-finite intrinsics with ``fx``, ``fy`` > 0, IMU rows) when it is opened and once more
+finite intrinsics with ``fx``, ``fy`` >= 1 px, IMU rows) when it is opened and once more
 after ``read()``; every event a reader returns (``check_packet``: ``|t| < MAX_TIME_US``,
 coordinates 0..65535) before it is copied into a chunk; and errors of the decoding
 libraries (h5py, faery, rosbags) become one-line ``DataError``s.
@@ -124,6 +124,9 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
             from tofnet.io.calibration import set_camera
             set_camera(source, intrinsics, calib, camera)
         check_metadata(source, path)
+        from tofnet.io.plausible import plausibility_notes
+        source.doubts = plausibility_notes(source)  # another clock, unit or camera? (before a window cuts poses)
+        source.notes.extend(source.doubts)
         if window is not None:
             source.set_window(window)
     except BaseException as err:
