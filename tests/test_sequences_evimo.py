@@ -147,7 +147,7 @@ def test_depth_images_not_keyed_by_frame_id_are_taken_in_order(tmp_path, recordi
     np.savez_compressed(folder / "dataset_depth.npz", **{f"depth_{k + 7:010d}": depth for k in range(11)})
     source = open_recording(folder)
     read = source.read()
-    assert any("not keyed by frame id: taken in order" in note for note in source.notes)
+    assert any("named after neither the frames' positions nor their ids: taken in order" in note for note in source.notes)
     known = np.isfinite(read.gt_depth)
     assert known.any() and np.allclose(read.gt_depth[known], 2.5)
     np.savez_compressed(folder / "dataset_depth.npz", **{f"depth_{k:010d}": depth for k in range(3)})  # 3 of 11

@@ -135,13 +135,17 @@ class Evimo2Source(EventSource):
         keys, _ = load_npz(depth_file, wanted=())
         by_id = {int(key[6:]): key for key in keys if key.startswith("depth_") and key[6:].isdigit()}
         gt_frames = ground_truth_frames(meta, where)
-        ids = [frame_id for frame_id, _ in gt_frames]
-        if any(i not in by_id for i in ids) and len(gt_frames) == len(by_id):
-            # not keyed by id: in order, as EVIMO2's own viewer pairs them (sorted keys, frames in order)
-            self.notes.append(f"the depth images of {depth_file.name} are not keyed by frame id: taken in order")
-            ids = sorted(by_id)
+        # EVIMO's packaging names depth_<i> after the frame's position in meta['frames'] (pydvs evimo-gen.py); by
+        # its id if the positions do not match; in order, as EVIMO2's viewer pairs them, if neither does
+        keys = [position for position, _, _ in gt_frames]
+        if any(k not in by_id for k in keys):
+            keys = [frame_id for _, frame_id, _ in gt_frames]
+        if any(k not in by_id for k in keys) and len(gt_frames) == len(by_id):
+            self.notes.append(f"the depth images of {depth_file.name} are named after neither the frames' positions "
+                              "nor their ids: taken in order")
+            keys = sorted(by_id)
         times, names, missing = [], [], 0
-        for (_, ts), frame_id in zip(gt_frames, ids):
+        for (_, _, ts), frame_id in zip(gt_frames, keys):
             if frame_id not in by_id:
                 missing += 1
                 continue
@@ -189,11 +193,12 @@ def apply_evimo_npz(recording, path: Path) -> None:
     meta = read_meta(path)
     recording.intrinsics, recording.sensor_size = camera(meta, where)
     recording.trajectory = poses(meta, where, recording.notes)
-    frames = ground_truth_frames(meta, where)
+    frames = [(position, ts) for position, _, ts in ground_truth_frames(meta, where)]
     shape, _ = npz_shape(path, "depth", "EVIMO sequence file")
-    if len(shape) != 3 or shape[0] != len(frames):
+    count = len(meta.get("frames") or [])  # one image per frame of the metadata, in its order (pydvs evimo-gen.py)
+    if len(shape) != 3 or shape[0] != count:
         raise DataError(located(f"{path}[depth]", None, f"expected one depth image per frame of the metadata "
-                                                        f"({len(frames)}, H, W), got shape {shape}"))
+                                                        f"({count}, H, W), got shape {shape}"))
     cache: dict[str, np.ndarray] = {}
 
     def depth() -> np.ndarray:  # the whole array, read once when the ground truth is first asked for
@@ -203,7 +208,7 @@ def apply_evimo_npz(recording, path: Path) -> None:
 
     if len(frames):
         recording.frame_gt = FrameDepth(_increasing_us([ts for _, ts in frames], f"{where}.frames"),
-                                        lambda k: depth()[k].astype(np.float64) * 1e-3, shape[1:], path,
+                                        lambda k: depth()[frames[k][0]].astype(np.float64) * 1e-3, shape[1:], path,
                                         max_gap_s=MAX_DEPTH_GAP_S, what="EVIMO depth frames")
         recording.notes.append(f"true depth from {len(frames):,} depth frames of {path.name}")
 

@@ -69,13 +69,13 @@ def poses(meta: dict, where: str, notes: list[str]):
     return Trajectory(table[:, 0], table[:, 1:4], table[:, 4:8], where)
 
 
-def ground_truth_frames(meta: dict, where: str) -> list[tuple[int, float]]:
-    """``(id, time s)`` of the frames of ``meta['frames']`` that have ground truth (``gt_frame``; every frame when
-    none says), in their order (an ``id`` absent: the frame's index)."""
+def ground_truth_frames(meta: dict, where: str) -> list[tuple[int, int, float]]:
+    """``(position in meta['frames'], id, time s)`` of the frames that have ground truth (``gt_frame``; every frame
+    when none says), in their order (an ``id`` absent: the position)."""
     frames, where = meta.get("frames"), f"{where}.frames"
     frames = [mapping(frame, f"{where}[{k}]") for k, frame in enumerate(sequence(frames or [], where))]
     marked = any("gt_frame" in frame for frame in frames)
-    return [(int(number(frame.get("id", k), f"{where}[{k}].id")), number(frame.get("ts"), f"{where}[{k}].ts"))
+    return [(k, int(number(frame.get("id", k), f"{where}[{k}].id")), number(frame.get("ts"), f"{where}[{k}].ts"))
             for k, frame in enumerate(frames) if "gt_frame" in frame or not marked]
 
 
