@@ -186,3 +186,14 @@ def test_an_npz_says_which_arrays_it_does_not_read(tmp_path):
              p=np.ones(5, np.int8), frames=np.zeros((2, 4, 4)))
     source = open_recording(path)
     assert "not read: array frames of events.npz" in source.notes
+
+
+def test_evimo_txt_metadata_beside_events_txt_is_named_as_not_read(tmp_path, recording):
+    from tofnet.io.ecd import write_ecd
+
+    folder = tmp_path / "txt"
+    write_ecd(folder, recording.events, intrinsics=INTRINSICS)
+    (folder / "meta.txt").write_text("{'frames': [], 'full_trajectory': []}\n")
+    for options in ({}, {"window": __import__("tofnet.io.window", fromlist=["x"]).parse_window("0s", "50ms")}):
+        notes = open_recording(folder, **options).notes
+        assert any(note.startswith("not read: meta.txt, EVIMO's poses and depth frames") for note in notes)

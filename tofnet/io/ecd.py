@@ -96,6 +96,17 @@ def _present(path: Path) -> bool:
     return path.exists() or path.is_symlink()
 
 
+#: Files that datasets ship beside events.txt and tofnet does not read, and what they hold.
+NOT_READ = {"images.txt": "the list of the APS frames (images/)",
+            "meta.txt": "EVIMO's poses and depth frames (its TXT layout; tofnet reads EVIMO's NPZ release)"}
+
+
+def note_unread(recording: Recording, folder: Path) -> Recording:
+    """Name the files of ``NOT_READ`` in an ECD-like ``folder``: nothing a dataset ships is passed over unsaid."""
+    recording.notes.extend(f"not read: {name}, {what}" for name, what in NOT_READ.items() if _present(folder / name))
+    return recording
+
+
 def read_ecd(folder: str | Path) -> Recording:
     """Read an ECD recording folder (``events.txt`` required, the rest optional)."""
     folder = Path(folder)
@@ -107,7 +118,7 @@ def read_ecd(folder: str | Path) -> Recording:
     notes: list[str] = []
     events = read_events_txt(folder / EVENTS, notes)
     recording = Recording(events=events, source=str(folder), notes=notes)
-    return attach_sidecars(recording, folder)
+    return note_unread(attach_sidecars(recording, folder), folder)
 
 
 def write_ecd(folder: str | Path, events: np.ndarray, *, intrinsics: Intrinsics | None,
