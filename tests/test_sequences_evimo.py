@@ -26,7 +26,7 @@ def recording():
     return pattern_recording(duration_us=200_000)
 
 
-def write_evimo2(folder, recording, *, float32=False, column_arrays=False, lost=(), model="radtan"):
+def write_evimo2(folder, recording, *, float32=False, column_arrays=False, lost=(), model="radtan", first_id=0):
     """The recording (events, camera, poses) as an EVIMO2 sequence, with depth frames of 1.5 m at 60 Hz (0,
     unknown, in the first 8 columns) from 0.52 s; its times start at ``START_US``."""
     events = recording.events
@@ -38,7 +38,8 @@ def write_evimo2(folder, recording, *, float32=False, column_arrays=False, lost=
     depth[:, :, :8] = 0
     return write_evimo2_folder(folder, events, t.astype(np.float32) if float32 else t, evimo2_camera(intrinsics, SENSOR),
                                (traj.times - (T0_US - START_US) * 1e-6, traj.positions, traj.quaternions),
-                               (0.52 + np.arange(11) / 60, depth), column_arrays=column_arrays, lost=lost)
+                               (0.52 + np.arange(11) / 60, depth), column_arrays=column_arrays, lost=lost,
+                               first_id=first_id)
 
 
 def _expected_events(recording):
@@ -59,7 +60,8 @@ def test_folder_reads_events_camera_poses_and_true_depth(tmp_path, recording):
     traj = recording.trajectory
     assert len(read.trajectory.times) == len(traj.times) - 2  # the two samples without the camera
     assert np.allclose(read.trajectory.positions, np.delete(traj.positions, [3, 4], axis=0))
-    assert any("2 of 41 pose samples without the camera" in note for note in source.notes)
+    assert any("2 of 41 pose samples without the camera's pose" in note for note in source.notes)
+    assert any(note.startswith("samsung_mono: the polarity is the opposite") for note in source.notes)
     # true depth: 1.5 m where the frames know it (not the first 8 columns), near a frame in time
     t_s = read.events["t"] * 1e-6
     known = (read.events["x"] >= 8) & (t_s >= 0.52 - 0.05) & (t_s <= 0.52 + 10 / 60 + 0.05)
@@ -170,7 +172,7 @@ def test_an_evimo_v1_sequence_file_gives_its_camera_poses_and_depth_frames(tmp_p
     assert np.array_equal(read.events, plane.events) and read.intrinsics == plane.intrinsics
     assert read.sensor_size == plane.sensor_size and len(read.trajectory.times) == len(plane.trajectory.times)
     assert np.allclose(read.gt_depth[np.isfinite(read.gt_depth)], 2.0) and np.isfinite(read.gt_depth).mean() > 0.9
-    assert any(note == "not read: arrays mask, index, discretization of scene15_dyn_test_01.npz" for note in source.notes)
+    assert any(note == "not read: arrays mask, classical, index, discretization of scene15_dyn_test_01.npz" for note in source.notes)
     out = tmp_path / "depth.npz"
     assert main(["run", str(v1), "--out", str(out), "--quiet"]) == 0
     capsys.readouterr()
@@ -197,3 +199,18 @@ def test_evimo_txt_metadata_beside_events_txt_is_named_as_not_read(tmp_path, rec
     for options in ({}, {"window": __import__("tofnet.io.window", fromlist=["x"]).parse_window("0s", "50ms")}):
         notes = open_recording(folder, **options).notes
         assert any(note.startswith("not read: meta.txt, EVIMO's poses and depth frames") for note in notes)
+
+
+def test_a_later_sub_sequence_pairs_its_depth_images_by_position_not_id(tmp_path, recording):
+    folder = write_evimo2(tmp_path / "seq", recording, first_id=1234)  # ids 1234..., images depth_0000000000...
+    images = dict(np.load(folder / "dataset_depth.npz"))
+    images["depth_0000000003"] = np.full_like(images["depth_0000000003"], 2500)  # frame 3 (id 1237) is another depth
+    del images["depth_0000000010"]  # and the last frame's image is missing
+    np.savez_compressed(folder / "dataset_depth.npz", **images)
+    source = open_recording(folder)
+    read = source.read()
+    frame_of = np.rint((read.events["t"] * 1e-6 - 0.52) * 60).astype(int)  # the nearest frame of each event
+    near = (np.abs(read.events["t"] * 1e-6 - (0.52 + frame_of / 60)) < 0.008) & (read.events["x"] >= 8)
+    assert np.allclose(read.gt_depth[near & (frame_of == 3)], 2.5)
+    assert np.allclose(read.gt_depth[near & (frame_of >= 0) & (frame_of <= 9) & (frame_of != 3)], 1.5)
+    assert any("1 ground-truth frames of the metadata have no depth image" in note for note in source.notes)

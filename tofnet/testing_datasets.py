@@ -206,18 +206,19 @@ def evimo2_camera(k: Intrinsics, size: tuple[int, int]) -> dict:
 
 
 def write_evimo2(folder: str | Path, events: np.ndarray, t_s: np.ndarray, camera: dict, poses, depth, *,
-                 column_arrays: bool = False, lost: tuple[int, ...] = ()) -> Path:
+                 column_arrays: bool = False, lost: tuple[int, ...] = (), first_id: int = 0) -> Path:
     """An EVIMO2 v2 sequence folder as the dataset's packaging writes it (``np.save``, ``np.savez`` with the
     metadata dictionary pickled). ``t_s`` the events' times (s, float32 or float64), ``poses`` ``(times s,
     positions, quaternions qx qy qz qw)`` camera to world, ``depth`` ``(times s, images uint16 mm)``; ``lost``
-    pose samples carry no camera (Vicon lost it); ``column_arrays`` writes ``t`` and ``p`` as ``(n, 1)``."""
+    pose samples carry no camera pose; ``column_arrays`` writes ``t`` and ``p`` as ``(n, 1)``; the frames' ids start
+    at ``first_id`` (a sub-sequence after the first) while the depth images are numbered from 0, as EVIMO's are."""
     folder = Path(folder)
     folder.mkdir(parents=True)
     p = events["p"].astype(np.uint8)
     np.save(folder / "dataset_events_t.npy", t_s[:, None] if column_arrays else t_s)
     np.save(folder / "dataset_events_xy.npy", np.column_stack([events["x"], events["y"]]).astype(np.uint16))
     np.save(folder / "dataset_events_p.npy", p[:, None] if column_arrays else p)
-    meta = _evimo_meta(float(t_s[0]), camera, poses, depth[0], lost)
+    meta = _evimo_meta(float(t_s[0]), camera, poses, depth[0], lost, first_id)
     k_matrix = [[camera["fx"], 0.0, camera["cx"]], [0.0, camera["fy"], camera["cy"]], [0.0, 0.0, 1.0]]
     np.savez(folder / "dataset_info.npz", K=np.array(k_matrix), D=np.zeros(4), discretization=np.float64(0.01),
              index=np.zeros(len(depth[0]), np.int64), meta=meta)
@@ -232,15 +233,15 @@ def write_evimo_npz(path: str | Path, events: np.ndarray, t_s: np.ndarray, camer
     """An EVIMO / EVIMO2 v1 sequence file: ``events`` ``(n, 4)`` (t s, x, y, p), ``depth`` ``(frames, H, W)`` mm,
     ``meta`` (pickled), ``K``, ``D``, ``index``, ``discretization`` (arguments as ``write_evimo2``)."""
     path = Path(path)
-    rows = np.column_stack([t_s, events["x"], events["y"], events["p"]]).astype(np.float64)
+    rows = np.column_stack([t_s, events["x"], events["y"], events["p"]]).astype(np.float32)  # as pydvs writes them
     k_matrix = [[camera["fx"], 0.0, camera["cx"]], [0.0, camera["fy"], camera["cy"]], [0.0, 0.0, 1.0]]
-    np.savez_compressed(path, events=rows, depth=np.asarray(depth[1]), mask=np.zeros_like(depth[1]),
+    np.savez_compressed(path, events=rows, depth=np.asarray(depth[1]), mask=np.zeros_like(depth[1]), classical=None,
                         meta=_evimo_meta(float(t_s[0]), camera, poses, depth[0], ()), K=np.array(k_matrix),
                         D=np.zeros(4), index=np.zeros(len(depth[0]), np.int64), discretization=np.float64(0.01))
     return path
 
 
-def _evimo_meta(t0_s: float, camera: dict, poses, frame_times, lost) -> dict:
+def _evimo_meta(t0_s: float, camera: dict, poses, frame_times, lost, first_id: int = 0) -> dict:
     """EVIMO's metadata dictionary: the camera, its Vicon poses (``lost``: samples without it), the frames."""
     def pose(ts, position, q):
         return {"ts": float(ts), "pos": {"t": dict(zip("xyz", map(float, position))),
@@ -248,9 +249,9 @@ def _evimo_meta(t0_s: float, camera: dict, poses, frame_times, lost) -> dict:
 
     full = [{"ts": float(ts), "cam": pose(ts, position, q)} for ts, position, q in zip(*poses)]
     for k in lost:
-        full[k] = {"ts": full[k]["ts"], "5": full[k]["cam"]}  # an object's pose only
-    frames = [{"id": k, "ts": float(ts), "gt_frame": f"depth_mask_{k}.png", "cam": full[0]["cam"]}
-              for k, ts in enumerate(frame_times)]
+        full[k] = {"ts": full[k]["ts"], "5": full[k]["cam"]}  # an object's pose only (EVIMO itself always writes 'cam')
+    frames = [{"id": first_id + k, "ts": float(ts), "gt_frame": f"depth_mask_{first_id + k}.png",
+               "cam": full[0]["cam"]} for k, ts in enumerate(frame_times)]
     return {"frames": frames, "full_trajectory": full, "meta": camera,
             "imu": {"/prophesee/left/imu": [{"ts": t0_s, "angular_velocity": {"x": 0.0, "y": 0.0, "z": 0.0},
                                              "linear_acceleration": {"x": 0.0, "y": 0.0, "z": 9.81}}]}}

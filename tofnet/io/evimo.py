@@ -7,9 +7,10 @@
   ``dataset_events_p.npy`` (0/1), read as memory maps: time windows read only their rows;
 - ``dataset_info.npz``: ``meta``, a pickled dictionary (read by ``tofnet.io.npz_object``, which runs
   nothing from the file): ``meta.meta`` the camera (``fx fy cx cy``, ``dist_model`` with ``k1..k4 p1 p2``,
-  ``res_x res_y``), ``full_trajectory`` the camera's Vicon poses (camera to world, 200 Hz; samples where
-  Vicon lost the camera are left out and counted), ``frames`` the ground-truth frames' times and ids;
-- ``dataset_depth.npz``: depth images ``depth_<id>`` (uint16 mm, 0 unknown), the true depth of each event
+  ``res_x res_y``), ``full_trajectory`` the camera's Vicon poses (camera to the recording's first camera
+  frame, 200 Hz), ``frames`` the ground-truth frames' times and ids;
+- ``dataset_depth.npz``: depth images ``depth_<i>`` for the frame at position ``i`` of ``meta['frames']`` (uint16
+  mm, Z, 0 unknown; EVIMO's packaging numbers them so, from 0 in every sub-sequence), the true depth of each event
   from the frame nearest in time (``tofnet.io.frames.FrameDepth``).
 
 Masks, classical frames and the IMU samples are not read (a note says so). The Samsung sensor's
@@ -70,8 +71,8 @@ class Evimo2Source(EventSource):
             if step > 1e-6:
                 self.notes.append(f"times are {self.t.dtype} seconds: {step * 1e6:.3g} µs apart at the last event")
         parents = self.path.resolve().parents  # <camera>/<category>/<subcategory>/<sequence>
-        name = parents[2].name if len(parents) > 2 and parents[2].name in CAMERAS else ""
-        self.detail = "EVIMO2 v2 sequence" + (f", {name}" if name else "")
+        camera_name = parents[2].name if len(parents) > 2 and parents[2].name in CAMERAS else ""
+        self.detail = "EVIMO2 v2 sequence" + (f", {camera_name}" if camera_name else "")
         where = f"{self.path / INFO_FILE}[meta]"
         meta = read_meta(self.path / INFO_FILE)
         self.intrinsics, self.sensor_size = camera(meta, where)
@@ -80,6 +81,9 @@ class Evimo2Source(EventSource):
         for name, what in (("dataset_mask.npz", "object masks"), ("dataset_classical.npz", "classical frames")):
             if (self.path / name).exists():
                 self.not_read(name, what)
+        if camera_name == "samsung_mono":  # EVIMO2's documentation: its polarity is the opposite of Prophesee's
+            self.notes.append("samsung_mono: the polarity is the opposite of the Prophesee cameras' (EVIMO2's "
+                              "documentation); kept as the file has it")
         if meta.get("imu"):
             topics = len(meta["imu"])
             self.not_read("imu", f"IMU of {topics} topic{'s' if topics != 1 else ''} in {INFO_FILE} (the poses give the rotation)")
@@ -136,11 +140,14 @@ class Evimo2Source(EventSource):
         by_id = {int(key[6:]): key for key in keys if key.startswith("depth_") and key[6:].isdigit()}
         gt_frames = ground_truth_frames(meta, where)
         # EVIMO's packaging names depth_<i> after the frame's position in meta['frames'] (pydvs evimo-gen.py); by
-        # its id if the positions do not match; in order, as EVIMO2's viewer pairs them, if neither does
-        keys = [position for position, _, _ in gt_frames]
-        if any(k not in by_id for k in keys):
-            keys = [frame_id for _, frame_id, _ in gt_frames]
-        if any(k not in by_id for k in keys) and len(gt_frames) == len(by_id):
+        # its id where that matches more; in order (EVIMO2's viewer) when there is one image per frame named otherwise
+        positions, ids = [k for k, _, _ in gt_frames], [frame_id for _, frame_id, _ in gt_frames]
+
+        def matched(numbers: list[int]) -> int:
+            return sum(number in by_id for number in numbers)
+
+        keys = positions if matched(positions) >= matched(ids) else ids
+        if matched(keys) < len(gt_frames) and len(gt_frames) == len(by_id):  # one image each, named otherwise
             self.notes.append(f"the depth images of {depth_file.name} are named after neither the frames' positions "
                               "nor their ids: taken in order")
             keys = sorted(by_id)

@@ -43,8 +43,9 @@ def camera(meta: dict, where: str) -> tuple[Intrinsics, tuple[int, int]]:
 
 
 def poses(meta: dict, where: str, notes: list[str]):
-    """The camera's poses (``tofnet.io.groundtruth.Trajectory``, camera to world) from ``meta['full_trajectory']``;
-    ``None`` (noted) without it. Samples without the camera (Vicon lost it) are left out and counted in ``notes``."""
+    """The camera's poses (``tofnet.io.groundtruth.Trajectory``, camera to EVIMO's world: the recording's first
+    camera frame) from ``meta['full_trajectory']``; ``None`` (noted) without it. Samples without a camera pose
+    (EVIMO writes one in every sample; a file that does not) are left out and counted in ``notes``."""
     from tofnet.io.groundtruth import Trajectory
 
     samples, where = meta.get("full_trajectory"), f"{where}.full_trajectory"
@@ -55,7 +56,7 @@ def poses(meta: dict, where: str, notes: list[str]):
     for k, sample in enumerate(sequence(samples, where)):
         cam = mapping(sample, f"{where}[{k}]").get("cam")
         if cam is None:
-            lost += 1  # Vicon lost the camera here
+            lost += 1
             continue
         pos = mapping(mapping(cam, f"{where}[{k}].cam").get("pos"), f"{where}[{k}].cam.pos")
         t, q = (mapping(pos.get(key), f"{where}[{k}].cam.pos.{key}") for key in ("t", "q"))
@@ -63,8 +64,8 @@ def poses(meta: dict, where: str, notes: list[str]):
                     + [number(t.get(a), f"{where}[{k}].cam.pos.t.{a}") for a in "xyz"]
                     + [number(q.get(a), f"{where}[{k}].cam.pos.q.{a}") for a in "xyzw"])
     if lost:
-        notes.append(f"{lost:,} of {lost + len(rows):,} pose samples without the camera (Vicon lost it): "
-                     "the poses are interpolated across them")
+        notes.append(f"{lost:,} of {lost + len(rows):,} pose samples without the camera's pose: the poses are "
+                     "interpolated across them")
     table = np.asarray(rows, dtype=np.float64).reshape(-1, 8)
     return Trajectory(table[:, 0], table[:, 1:4], table[:, 4:8], where)
 
