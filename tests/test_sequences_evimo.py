@@ -116,6 +116,8 @@ def test_pickled_metadata_cannot_run_code(tmp_path, recording):
     (lambda f: (f / "dataset_events_p.npy").unlink(), r"dataset_events_p.npy: missing: a file of the EVIMO2"),
     (lambda f: np.save(f / "dataset_events_xy.npy", np.zeros((3, 2), np.uint16)), r"the event arrays do not match"),
     (lambda f: np.savez(f / "dataset_info.npz", K=np.eye(3)), r"dataset_info.npz: no array 'meta'"),
+    (lambda f: np.save(f / "dataset_events_p.npy", (np.load(f / "dataset_events_t.npy") * 10).astype(np.uint8)),
+     r"dataset_events_p.npy: polarities up to 7; expected 0/1 \(EVIMO2's first NPZ release wrote the time there"),
     (lambda f: np.savez(f / "dataset_info.npz", meta={"meta": {"fx": "x"}}),
      r"dataset_info.npz\[meta\].meta.fx: expected a finite number, got 'x'"),
     (lambda f: np.savez(f / "dataset_info.npz", meta={"meta": {"fx": 0.0, "fy": 1.0, "cx": 1.0, "cy": 1.0,

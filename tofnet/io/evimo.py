@@ -65,6 +65,10 @@ class Evimo2Source(EventSource):
             raise DataError(located(self.path, None, f"the event arrays do not match: t {t.shape}, xy {xy.shape}, "
                                                      f"p {p.shape}; expected (n,) or (n, 1), (n, 2), (n,) or (n, 1)"))
         self.xy, self.n_events, self._total = xy, n, n  # n_events becomes a window's count (set_window)
+        if n and self.p.dtype.kind in "iu" and int(self.p.max()) > 1:  # one pass over n bytes, so no window hides it
+            raise DataError(located(self.path / EVENT_FILES[2], None, f"polarities up to {int(self.p.max())}; expected "
+                                    "0/1 (EVIMO2's first NPZ release wrote the time there; it was regenerated in 2022: "
+                                    "download the sequence again)"))
         if n and self.t.dtype.kind == "f" and self.t.dtype.itemsize < 8:
             from tofnet.io.arrays import float_time_step
             step = float_time_step(np.asarray(self.t[n - 1:n]))  # sorted: the last is the largest
