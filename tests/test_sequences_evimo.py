@@ -52,6 +52,8 @@ def test_folder_reads_events_camera_poses_and_true_depth(tmp_path, recording):
     folder = write_evimo2(tmp_path / "samsung_mono" / "imo" / "eval" / "scene13_dyn_test_00_000000", recording,
                           lost=(3, 4))
     assert detect_format(folder) == "evimo2"
+    from tofnet.io.layouts import sequence_name
+    assert sequence_name(folder) == "scene13_dyn_test_00_000000-samsung_mono"  # EVIMO2's cameras share seq names
     source = open_recording(folder)
     read = source.read()
     assert np.array_equal(read.events, _expected_events(recording))

@@ -32,12 +32,11 @@ from tofnet.errors import DataError, located
 from tofnet.io.event_source import EventSource
 from tofnet.io.evimo_meta import camera, ground_truth_frames, poses, read_meta
 from tofnet.io.files import present
+from tofnet.io.layouts import EVIMO2_CAMERAS
 
 #: The files that make a folder an EVIMO2 v2 sequence (``tofnet.io.layouts``).
 EVENT_FILES = ("dataset_events_t.npy", "dataset_events_xy.npy", "dataset_events_p.npy")
 INFO_FILE = "dataset_info.npz"
-#: EVIMO2's event cameras (the folder three levels up).
-CAMERAS = ("samsung_mono", "left_camera", "right_camera")
 #: The arrays of an EVIMO / EVIMO2 v1 sequence file ``apply_evimo_npz`` reads (with ``events``), and those that
 #: tell one (``K`` and ``D`` repeat ``meta``'s camera).
 NPZ_READ = ("meta", "depth", "K", "D")
@@ -75,7 +74,7 @@ class Evimo2Source(EventSource):
             if step > 1e-6:
                 self.notes.append(f"times are {self.t.dtype} seconds: {step * 1e6:.3g} µs apart at the last event")
         parents = self.path.resolve().parents  # <camera>/<category>/<subcategory>/<sequence>
-        camera_name = parents[2].name if len(parents) > 2 and parents[2].name in CAMERAS else ""
+        camera_name = parents[2].name if len(parents) > 2 and parents[2].name in EVIMO2_CAMERAS else ""
         self.detail = "EVIMO2 v2 sequence" + (f", {camera_name}" if camera_name else "")
         where = f"{self.path / INFO_FILE}[meta]"
         meta = read_meta(self.path / INFO_FILE)

@@ -16,6 +16,8 @@ SEQUENCE_FORMATS = {
     "evimo2": "EVIMO2 v2 sequence folder (dataset_events_{t,xy,p}.npy, dataset_info.npz, dataset_depth.npz)",
 }
 SIDES = ("left", "right")
+#: EVIMO2's event cameras: the folder three levels above a sequence's.
+EVIMO2_CAMERAS = ("samsung_mono", "left_camera", "right_camera")
 
 
 def sequence_kind(folder: Path) -> str | None:
@@ -33,7 +35,8 @@ def sequence_name(path: str | Path) -> str | None:
     """The sequence a folder or events file belongs to (its folder's name), ``None`` for other paths.
 
     ``<seq>/events/left/events.h5`` -> ``seq`` (``seq-right`` for the right camera);
-    ``<seq>_data.hdf5`` (MVSEC), ``<seq>_data.h5`` (M3ED), ``<seq>-events_left.h5`` (TUM-VIE) -> ``seq``.
+    ``<seq>_data.hdf5`` (MVSEC), ``<seq>_data.h5`` (M3ED), ``<seq>-events_left.h5`` (TUM-VIE) -> ``seq``;
+    EVIMO2's ``<camera>/<category>/<subcategory>/<seq>/`` -> ``seq-camera`` (its three cameras share sequence names).
     """
     path = Path(path)
     if path.name == "events.h5" and path.parent.name in SIDES and path.parent.parent.name == "events":
@@ -43,7 +46,11 @@ def sequence_name(path: str | Path) -> str | None:
         if path.name.endswith(ending) and len(path.name) > len(ending):
             return path.name[:-len(ending)]
     if path.is_dir():
-        return path.resolve().name
+        folder = path.resolve()
+        camera = folder.parents[2].name if len(folder.parents) > 2 else ""
+        if camera in EVIMO2_CAMERAS and (folder / "dataset_info.npz").exists():
+            return f"{folder.name}-{camera}"
+        return folder.name
     return None
 
 
