@@ -194,15 +194,25 @@ def test_an_npz_says_which_arrays_it_does_not_read(tmp_path):
     assert "not read: array frames of events.npz" in source.notes
 
 
-def test_evimo_txt_metadata_beside_events_txt_is_named_as_not_read(tmp_path, recording):
-    from tofnet.io.ecd import write_ecd
+def test_evimo_txt_layout_gives_the_camera_and_poses_of_its_meta_txt(tmp_path, recording):
+    from tofnet.io.calibration import write_calibration
+    from tofnet.io.window import parse_window
+    from tofnet.testing_datasets import write_evimo_txt
 
-    folder = tmp_path / "txt"
-    write_ecd(folder, recording.events, intrinsics=INTRINSICS)
-    (folder / "meta.txt").write_text("{'frames': [], 'full_trajectory': []}\n")
-    for options in ({}, {"window": __import__("tofnet.io.window", fromlist=["x"]).parse_window("0s", "50ms")}):
-        notes = open_recording(folder, **options).notes
-        assert any(note.startswith("not read: meta.txt, EVIMO's poses and depth frames") for note in notes)
+    traj = recording.trajectory
+    folder = write_evimo_txt(tmp_path / "txt", recording.events, evimo2_camera(INTRINSICS, SENSOR),
+                             (traj.times, traj.positions, traj.quaternions), [0.5])
+    write_calibration(folder / "calib.txt", Intrinsics(1.0e3, 1.0e3, 1.0, 1.0))  # meta.txt's camera wins over it
+    for options in ({}, {"window": parse_window("0s", "50ms")}):
+        source = open_recording(folder, **options)
+        assert source.intrinsics == INTRINSICS and source.sensor_size == SENSOR
+        assert options or np.allclose(source.trajectory.positions, traj.positions)  # a window cuts the poses
+        assert "camera and poses from meta.txt (EVIMO's TXT layout)" in source.notes
+        assert any(note.startswith("not read: img, EVIMO's depth and mask frames") for note in source.notes)
+    (folder / "meta.txt").write_text("{'meta': __import__('os').system('true')}")
+    with pytest.raises(DataError, match=r"meta.txt: not a Python literal \(EVIMO's metadata dictionary\)"):
+        open_recording(folder)
+
 
 
 def test_a_later_sub_sequence_pairs_its_depth_images_by_position_not_id(tmp_path, recording):

@@ -241,6 +241,18 @@ def write_evimo_npz(path: str | Path, events: np.ndarray, t_s: np.ndarray, camer
     return path
 
 
+def write_evimo_txt(folder: str | Path, events: np.ndarray, camera: dict, poses, frame_times) -> Path:
+    """EVIMO's TXT layout: ``events.txt`` (``t x y p``, seconds), ``meta.txt`` (the metadata as a Python literal) and
+    an ``img/`` folder (its depth PNGs are not written: tofnet does not read them)."""
+    from tofnet.io.events import write_events_txt
+
+    folder = Path(folder)
+    (folder / "img").mkdir(parents=True)
+    write_events_txt(folder / "events.txt", events)
+    (folder / "meta.txt").write_text(repr(_evimo_meta(float(events["t"][0]) * 1e-6, camera, poses, frame_times, ())))
+    return folder
+
+
 def _evimo_meta(t0_s: float, camera: dict, poses, frame_times, lost, first_id: int = 0) -> dict:
     """EVIMO's metadata dictionary: the camera, its Vicon poses (``lost``: samples without it), the frames."""
     def pose(ts, position, q):
@@ -273,4 +285,4 @@ def make_evimo2(folder: str | Path, *, depth_m: float = 2.0, velocity=(-0.5, 0.0
 MAKERS = {"dsec": make_dsec, "mvsec": make_mvsec, "tumvie": make_tumvie, "m3ed": make_m3ed, "evimo2": make_evimo2}
 
 __all__ = ["SIZE", "INTRINSICS", "BASELINE_M", "MAKERS", "plane_events", "make_dsec", "make_mvsec", "make_tumvie",
-           "make_m3ed", "make_evimo2", "write_evimo2", "write_evimo_npz", "evimo2_camera", "depth_frames", "camera_poses"]
+           "make_m3ed", "make_evimo2", "write_evimo2", "write_evimo_npz", "write_evimo_txt", "evimo2_camera", "depth_frames", "camera_poses"]

@@ -98,11 +98,23 @@ def _present(path: Path) -> bool:
 
 #: Files that datasets ship beside events.txt and tofnet does not read, and what they hold.
 NOT_READ = {"images.txt": "the list of the APS frames (images/)",
-            "meta.txt": "EVIMO's poses and depth frames (its TXT layout; tofnet reads EVIMO's NPZ release)"}
+            "img": "EVIMO's depth and mask frames (16-bit colour PNGs; EVIMO's NPZ release holds them as arrays)"}
+#: EVIMO's TXT layout: its metadata beside events.txt (camera, Vicon poses, frames).
+EVIMO_META = "meta.txt"
 
 
 def note_unread(recording: Recording, folder: Path) -> Recording:
-    """Name the files of ``NOT_READ`` in an ECD-like ``folder``: nothing a dataset ships is passed over unsaid."""
+    """Name the files of ``NOT_READ`` in an ECD-like ``folder`` (nothing a dataset ships is passed over unsaid),
+    and take the camera and poses of EVIMO's ``meta.txt`` when there is one (they win over ``calib.txt``)."""
+    if _present(folder / EVIMO_META):
+        from tofnet.io.evimo_meta import camera, poses, read_meta_text
+
+        meta, where = read_meta_text(folder / EVIMO_META), str(folder / EVIMO_META)
+        recording.intrinsics, size = camera(meta, where)
+        recording.sensor_size = recording.sensor_size or size
+        recording.trajectory = poses(meta, where, recording.notes) or recording.trajectory
+        recording.notes = [note for note in recording.notes if note != NO_CALIBRATION]
+        recording.notes.append(f"camera and poses from {EVIMO_META} (EVIMO's TXT layout)")
     recording.notes.extend(f"not read: {name}, {what}" for name, what in NOT_READ.items() if _present(folder / name))
     return recording
 

@@ -1,5 +1,5 @@
 """EVIMO's metadata dictionary (``meta`` of ``dataset_info.npz`` in EVIMO2 v2, of the sequence's ``.npz`` in
-EVIMO and EVIMO2 v1): the camera, the camera's Vicon poses and the ground-truth frames' times.
+EVIMO and EVIMO2 v1, ``meta.txt`` in the TXT layout): the camera, its Vicon poses and the ground-truth frames' times.
 
 The dictionary is pickled; ``tofnet.io.npz_object`` reads it without running anything from the file.
 Every value is checked here: a wrong type or a number that is not finite is one line naming its key
@@ -21,6 +21,25 @@ def read_meta(path: Path) -> dict:
     """The metadata dictionary stored as ``meta`` in the ``.npz`` file ``path``."""
     from tofnet.io.npz_object import read_npz_object
     return mapping(read_npz_object(path, "meta"), f"{path}[meta]")
+
+
+#: The largest ``meta.txt`` read (bytes): EVIMO2's hold every Vicon sample of every object, a few MB.
+MAX_META_TEXT_BYTES = 256 * 2**20
+
+
+def read_meta_text(path: Path) -> dict:
+    """The metadata dictionary of EVIMO's TXT layout (``meta.txt``, a Python literal), read as a literal only."""
+    import ast
+
+    from tofnet.io.files import read_text
+
+    text = read_text(path, "EVIMO metadata (meta.txt)", limit=MAX_META_TEXT_BYTES)
+    try:
+        value = ast.literal_eval(text)
+    except (ValueError, SyntaxError, TypeError, MemoryError, RecursionError) as err:
+        raise DataError(located(path, None, f"not a Python literal (EVIMO's metadata dictionary): "
+                                            f"{type(err).__name__}")) from None
+    return mapping(value, str(path))
 
 
 def camera(meta: dict, where: str) -> tuple[Intrinsics, tuple[int, int]]:
