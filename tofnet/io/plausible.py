@@ -14,6 +14,8 @@ import numpy as np
 
 #: Poses covering less of the events' time span than this share are noted.
 POSE_COVER = 0.99
+#: Poses further apart (median) than this many times the events' span (at least 1 s) are noted.
+POSE_SPACING = 100.0
 #: A mean rate below this (events/s) over more than ``MIN_EVENTS`` events is noted.
 MIN_RATE = 1.0
 MIN_EVENTS = 1000
@@ -55,9 +57,9 @@ def _pose_spacing(trajectory, first: float, last: float | None) -> str | None:
     if times is None or len(times) < 2 or last is None:
         return None
     spacing = float(np.median(np.diff(np.asarray(times, dtype=np.float64))))
-    if spacing > max(last - first, 1.0):
-        return (f"the poses are {spacing:g} s apart (median), longer than the events' {last - first:g} s: pose "
-                "times in other units? (seconds)")
+    if spacing > POSE_SPACING * max(last - first, 1.0):  # µs read as seconds: a million times; sparse samples: not
+        return (f"the poses are {spacing:g} s apart (median), against the events' {last - first:g} s: pose times "
+                "in other units? (seconds)")
     return None
 
 
