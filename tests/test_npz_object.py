@@ -81,3 +81,45 @@ def test_edited_pickles_end_in_plain_data_or_a_one_line_error(tmp_path):
             assert "\n" not in str(err)
             outcomes["refused"] += 1
     assert outcomes["refused"] > 100  # the edits reached the unpickler, which refused what was not plain data
+
+
+class _Reduce:
+    """Pickles as ``function(*args)`` with an optional BUILD ``state``: forged numpy objects."""
+
+    def __init__(self, function, args, state=None):
+        self.function, self.args, self.state = function, args, state
+
+    def __reduce__(self):
+        return (self.function, self.args) if self.state is None else (self.function, self.args, self.state)
+
+
+def _wrapped(obj) -> bytes:
+    """The 0-d object array numpy pickles, holding ``obj`` (which may be forged)."""
+    from numpy._core.multiarray import _reconstruct
+    return pickle.dumps(_Reduce(_reconstruct, (np.ndarray, (0,), b"b"), (1, (), np.dtype("O"), False, [obj])),
+                        protocol=3)
+
+
+def _forged_dtype(flags):  # a structured dtype with an object field whose flags say it holds none
+    return _Reduce(np.dtype, ("V8", False, True), (3, "|", None, ("a",), {"a": (np.dtype("O"), 0)}, 8, 1, flags))
+
+
+@pytest.mark.parametrize("forged, what", [
+    (_Reduce(np.ndarray, ((1,), _forged_dtype(0), b"A" * 8)), "dtype 'V8'"),  # raw bytes read as a pointer
+    (_Reduce(np.ndarray, ((2**28,), np.dtype("O"))), "not callable"),  # 362 bytes allocating 2 GB
+    (_Reduce(np.dtype, ("O8", False, True), (3, "|", None, None, None, -1, -1, 0)), "a dtype state other than"),
+    (_Reduce(__import__("numpy._core.multiarray", fromlist=["x"])._reconstruct, (np.ndarray, (0,), b"b"),
+             (1, (1,), np.dtype("O"), False, [1])), "an array other than one object"),
+])
+def test_numpy_objects_forged_from_allowed_names_are_refused(tmp_path, forged, what):
+    """The names an object array needs, used to build other numpy objects: a forged dtype or array could point
+    numpy at memory the file chooses or allocate what it declares (found in review: a segmentation fault)."""
+    _npz_with_pickle(tmp_path / "info.npz", _wrapped({"meta": {"fx": forged}}))
+    with pytest.raises(DataError, match=f"info.npz\\[meta\\]: not a readable object array: .*{what}"):
+        read_npz_object(tmp_path / "info.npz", "meta")
+
+
+def test_numpy_scalars_in_the_dictionary_are_read_as_numbers(tmp_path):
+    _npz_with_pickle(tmp_path / "info.npz", _wrapped({"fx": np.float64(200.5), "n": np.int32(7), "ok": np.bool_(True)}))
+    value = read_npz_object(tmp_path / "info.npz", "meta")
+    assert value == {"fx": 200.5, "n": 7, "ok": True} and type(value["fx"]) is float

@@ -72,6 +72,9 @@ def test_a_run_says_its_doubts_before_it_starts(tmp_path, recording, capsys):
     assert main(["run", str(folder), "--out", str(tmp_path / "d.npz"), "--duration", "20ms"]) == 0
     err = capsys.readouterr().err
     assert "tofnet run: note: the poses (" in err and "do not overlap the events" in err
+    out = tmp_path / "v.npz"
+    assert main(["run", str(folder), "--out", str(out), "--duration", "20ms", "--velocity", "0.5,0,0"]) == 0
+    assert "tofnet run: note: the poses" not in capsys.readouterr().err  # --velocity: the poses are not used
 
 
 def test_a_principal_point_outside_the_sensor_and_w_first_quaternions_are_noted(tmp_path, recording):

@@ -228,3 +228,19 @@ def test_a_later_sub_sequence_pairs_its_depth_images_by_position_not_id(tmp_path
     assert np.allclose(read.gt_depth[near & (frame_of == 3)], 2.5)
     assert np.allclose(read.gt_depth[near & (frame_of >= 0) & (frame_of <= 9) & (frame_of != 3)], 1.5)
     assert any("1 ground-truth frames of the metadata have no depth image" in note for note in source.notes)
+
+
+def test_meta_txt_is_parsed_as_a_literal_only():
+    import ast
+
+    from tofnet.io.evimo_meta import camera, parse_literal
+
+    for text in ("{'a': 1, 'b': [1, 2.5, -3e-2, 18446744073709551615], 'c': {'d': None, 'e': True}, 'f': (1, 2)}",
+                 "[(1, 2), (3,)]", "{'s': 'it\\'s', \"t\": \"x\"}", "{}"):
+        assert parse_literal(text, "m") == ast.literal_eval(text)
+    for text, why in (("{'a': __import__('os')}", "unexpected text"), ("[" * 100 + "]" * 100, "nested more than 64"),
+                      ("{'a' 1}", "expected a colon"), ("[1, 2", "the text ends inside a bracket"), ("1 2", "a second value")):
+        with pytest.raises(DataError, match=f"m: not a Python literal .* at character [0-9,]+: {why}"):
+            parse_literal(text, "m")
+    with pytest.raises(DataError, match=r"w.meta.fx: expected a finite number, got int"):
+        camera(parse_literal("{'meta': {'fx': 1" + "0" * 400 + "}}", "m"), "w")

@@ -210,8 +210,9 @@ def handle(args) -> int:
     check_run_outputs(args)
     monitors = [Monitor.parse(text, args.monitor_every) for text in args.monitor]
     with open_recording(args.recording, **input_options(args)) as source:
-        for doubt in [] if args.quiet else source.doubts:  # before a run that may be long because of it
-            print(f"tofnet run: note: {doubt}", file=sys.stderr)
+        for topic, doubt in [] if args.quiet else source.doubts:  # before a run that may be long because of it
+            if not (topic == "poses" and args.velocity):  # --velocity: the poses are not used
+                print(f"tofnet run: note: {doubt}", file=sys.stderr)
         if source.sensor_size is None and args.sensor_size:  # the file does not say: --sensor-size is its size,
             from tofnet.core.params import parse_size        # not the events' extent (nor a note that it is)
             source.sensor_size = parse_size(args.sensor_size, "--sensor-size")

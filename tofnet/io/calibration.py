@@ -177,11 +177,11 @@ class IntrinsicsError(ValueError):
 
 
 def check_intrinsics(fx: float, fy: float, cx: float, cy: float, coefficients: tuple[float, ...] = ()) -> None:
-    """Refuse what no camera has (``IntrinsicsError``, one line): focal lengths not positive (pixels), a
+    """Refuse what no camera has (``IntrinsicsError``, one line): focal lengths below 1 px (``focal_problem``), a
     principal point or a distortion coefficient not finite. All zeros is ROS's uncalibrated camera."""
     if fx == fy == cx == cy == 0.0:
         raise IntrinsicsError("the camera matrix is all zeros (an uncalibrated camera); give the calibration "
-                         "with --calib FILE or --intrinsics fx,fy,cx,cy")
+                              "with --calib FILE or --intrinsics fx,fy,cx,cy")
     for name, value in (("fx", fx), ("fy", fy), ("cx", cx), ("cy", cy)):
         if not math.isfinite(value):
             raise IntrinsicsError(f"{name} is {value}; expected a finite number of pixels")
@@ -189,6 +189,7 @@ def check_intrinsics(fx: float, fy: float, cx: float, cy: float, coefficients: t
         raise IntrinsicsError(focal_problem(fx, fy))
     if not all(math.isfinite(c) for c in coefficients):
         raise IntrinsicsError(f"distortion coefficients must be finite, got {', '.join(f'{c:g}' for c in coefficients)}")
+
 
 def is_number(field: str) -> bool:
     """Whether ``field`` reads as a float."""

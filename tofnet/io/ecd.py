@@ -97,8 +97,10 @@ def _present(path: Path) -> bool:
 
 
 #: Files that datasets ship beside events.txt and tofnet does not read, and what they hold.
-NOT_READ = {"images.txt": "the list of the APS frames (images/)",
-            "img": "EVIMO's depth and mask frames (16-bit colour PNGs; EVIMO's NPZ release holds them as arrays)"}
+NOT_READ = {"images.txt": "the list of the APS frames (images/)"}
+#: Beside EVIMO's ``meta.txt``: its depth and mask frames.
+EVIMO_NOT_READ = {"img": "EVIMO's depth and mask frames (16-bit colour PNGs; EVIMO's NPZ release holds them as "
+                         "arrays)"}
 #: EVIMO's TXT layout: its metadata beside events.txt (camera, Vicon poses, frames).
 EVIMO_META = "meta.txt"
 
@@ -115,7 +117,8 @@ def note_unread(recording: Recording, folder: Path) -> Recording:
         recording.trajectory = poses(meta, where, recording.notes) or recording.trajectory
         recording.notes = [note for note in recording.notes if note != NO_CALIBRATION]
         recording.notes.append(f"camera and poses from {EVIMO_META} (EVIMO's TXT layout)")
-    recording.notes.extend(f"not read: {name}, {what}" for name, what in NOT_READ.items() if _present(folder / name))
+    unread = {**NOT_READ, **(EVIMO_NOT_READ if _present(folder / EVIMO_META) else {})}
+    recording.notes.extend(f"not read: {name}, {what}" for name, what in unread.items() if _present(folder / name))
     return recording
 
 

@@ -49,7 +49,7 @@ class EventSource:
         self.streams: dict[str, str] = {}  # other streams in the file: name -> what
         self.unread: list[str] = []  # those of them tofnet does not read ("name, what"): convert says so
         self.notes: list[str] = []
-        self.doubts: list[str] = []  # notes that usually mean a mistake (tofnet.io.plausible): said before a run too
+        self.doubts: list[tuple[str, str]] = []  # (topic, note) that usually mean a mistake (tofnet.io.plausible)
         self.window: tuple[int, int | None] | None = None  # [start, stop) µs on the file's clock (set_window)
         self._origin_us = 0  # the file's first event, which relative window times count from
         self._first_index = 0  # file index of the first event in the window (for _depth)

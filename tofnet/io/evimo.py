@@ -32,7 +32,8 @@ from tofnet.errors import DataError, located
 from tofnet.io.event_source import EventSource
 from tofnet.io.evimo_meta import camera, ground_truth_frames, poses, read_meta
 from tofnet.io.files import present
-from tofnet.io.layouts import EVIMO2_CAMERAS
+from tofnet.io.layouts import evimo2_camera
+from tofnet.io.recording import Recording
 
 #: The files that make a folder an EVIMO2 v2 sequence (``tofnet.io.layouts``).
 EVENT_FILES = ("dataset_events_t.npy", "dataset_events_xy.npy", "dataset_events_p.npy")
@@ -73,8 +74,7 @@ class Evimo2Source(EventSource):
             step = float_time_step(np.asarray(self.t[n - 1:n]))  # sorted: the last is the largest
             if step > 1e-6:
                 self.notes.append(f"times are {self.t.dtype} seconds: {step * 1e6:.3g} µs apart at the last event")
-        parents = self.path.resolve().parents  # <camera>/<category>/<subcategory>/<sequence>
-        camera_name = parents[2].name if len(parents) > 2 and parents[2].name in EVIMO2_CAMERAS else ""
+        camera_name = evimo2_camera(self.path)
         self.detail = "EVIMO2 v2 sequence" + (f", {camera_name}" if camera_name else "")
         where = f"{self.path / INFO_FILE}[meta]"
         meta = read_meta(self.path / INFO_FILE)
@@ -87,7 +87,7 @@ class Evimo2Source(EventSource):
         if camera_name == "samsung_mono":  # EVIMO2's documentation: its polarity is the opposite of Prophesee's
             self.notes.append("samsung_mono: the polarity is the opposite of the Prophesee cameras' (EVIMO2's "
                               "documentation); kept as the file has it")
-        if meta.get("imu"):
+        if isinstance(meta.get("imu"), dict) and meta["imu"]:
             topics = len(meta["imu"])
             self.not_read("imu", f"IMU of {topics} topic{'s' if topics != 1 else ''} in {INFO_FILE} (the poses give the rotation)")
 
@@ -183,7 +183,7 @@ class Evimo2Source(EventSource):
         self.notes.append(f"true depth from {len(names):,} depth frames of {depth_file.name}")
 
 
-def open_evimo2(folder: Path):
+def open_evimo2(folder: Path) -> Evimo2Source:
     """The ``EventSource`` of an EVIMO2 v2 sequence folder, its ground truth checked against its events."""
     from tofnet.io.frames import check_overlap
 
@@ -193,7 +193,7 @@ def open_evimo2(folder: Path):
     return source
 
 
-def apply_evimo_npz(recording, path: Path) -> None:
+def apply_evimo_npz(recording: Recording, path: Path) -> None:
     """Give ``recording`` (the events of an EVIMO / EVIMO2 v1 ``.npz``) the camera, poses and depth frames of
     its ``meta`` and ``depth`` (module docstring); the file's wins over side files."""
     from tofnet.io.frames import FrameDepth

@@ -9,12 +9,17 @@ Every value is checked here: a wrong type or a number that is not finite is one 
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from tofnet.errors import DataError, located
 from tofnet.io.recording import Intrinsics
+
+if TYPE_CHECKING:
+    from tofnet.io.groundtruth import Trajectory
 
 
 def read_meta(path: Path) -> dict:
@@ -23,23 +28,99 @@ def read_meta(path: Path) -> dict:
     return mapping(read_npz_object(path, "meta"), f"{path}[meta]")
 
 
-#: The largest ``meta.txt`` read (bytes): EVIMO2's hold every Vicon sample of every object, a few MB.
+#: The largest ``meta.txt`` read (bytes): EVIMO2's hold every Vicon sample of every object (~25 MB a minute).
 MAX_META_TEXT_BYTES = 256 * 2**20
+#: The deepest nesting of a ``meta.txt`` literal (EVIMO's is 5 deep).
+MAX_NESTING = 64
+_TOKEN = re.compile(r"""\s*(?:(?P<str>'(?:[^'\\\n]|\\.)*'|"(?:[^"\\\n]|\\.)*")"""
+                    r"|(?P<num>[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)"
+                    r"|(?P<word>True|False|None)|(?P<punct>[{}\[\](),:]))")
+_OPEN = {"{": "}", "[": "]", "(": ")"}
 
 
 def read_meta_text(path: Path) -> dict:
-    """The metadata dictionary of EVIMO's TXT layout (``meta.txt``, a Python literal), read as a literal only."""
-    import ast
-
+    """The metadata dictionary of EVIMO's TXT layout (``meta.txt``, a Python literal of dicts, lists, strings and
+    numbers), parsed token by token (``ast.literal_eval`` takes ~180 bytes of memory per byte of text)."""
     from tofnet.io.files import read_text
 
     text = read_text(path, "EVIMO metadata (meta.txt)", limit=MAX_META_TEXT_BYTES)
-    try:
-        value = ast.literal_eval(text)
-    except (ValueError, SyntaxError, TypeError, MemoryError, RecursionError) as err:
-        raise DataError(located(path, None, f"not a Python literal (EVIMO's metadata dictionary): "
-                                            f"{type(err).__name__}")) from None
-    return mapping(value, str(path))
+    return mapping(parse_literal(text, str(path)), str(path))
+
+
+def parse_literal(text: str, where: str) -> object:
+    """The value of a Python literal of dicts, lists, tuples, strings, numbers, True, False and None; a one-line
+    ``DataError`` naming ``where`` and the character where it stops being one."""
+    import ast
+
+    stack: list[list] = []  # [container, key or _NO_KEY, what comes next: "value", "colon" or "separator"]
+    root, pos, end = _NO_KEY, 0, len(text)
+
+    def fail(why: str) -> DataError:
+        return DataError(located(where, None, f"not a Python literal (EVIMO's metadata dictionary) at character "
+                                              f"{pos:,}: {why}"))
+
+    def add(value) -> None:
+        nonlocal root
+        if not stack:
+            if root is not _NO_KEY:
+                raise fail("a second value after the first")
+            root = value
+            return
+        top = stack[-1]
+        if top[2] != "value":
+            raise fail(f"expected {'a colon' if top[2] == 'colon' else 'a comma or a closing bracket'}")
+        if isinstance(top[0], dict) and top[1] is _NO_KEY:
+            top[1], top[2] = value, "colon"
+        elif isinstance(top[0], dict):
+            top[0][top[1]], top[1], top[2] = value, _NO_KEY, "separator"
+        else:
+            top[0].append(value)
+            top[2] = "separator"
+
+    while True:
+        match = _TOKEN.match(text, pos)
+        if match is None:
+            if text[pos:].strip():
+                raise fail("unexpected text")
+            break
+        pos = match.end()
+        kind, token = match.lastgroup, match.group(match.lastgroup)
+        try:
+            if kind == "str":
+                add(ast.literal_eval(token) if "\\" in token else token[1:-1])
+            elif kind == "num":
+                add(float(token) if any(c in token for c in ".eE") else int(token))
+            elif kind == "word":
+                add({"True": True, "False": False, "None": None}[token])
+            elif token in _OPEN:
+                if len(stack) >= MAX_NESTING:
+                    raise fail(f"nested more than {MAX_NESTING} deep")
+                container = {} if token == "{" else []
+                add(container)
+                stack.append([container, _NO_KEY, "value", _OPEN[token]])
+            elif token == ":" and stack and stack[-1][2] == "colon":
+                stack[-1][2] = "value"
+            elif token == "," and stack and stack[-1][2] == "separator":
+                stack[-1][2] = "value"
+            elif stack and token == stack[-1][3] and (stack[-1][2] == "separator" or stack[-1][1] is _NO_KEY):
+                container = stack.pop()[0]
+                if token == ")" and stack:  # a tuple: the list its parent holds becomes one
+                    parent = stack[-1][0]
+                    if isinstance(parent, dict):
+                        key = next(k for k in reversed(parent) if parent[k] is container)
+                        parent[key] = tuple(container)
+                    else:
+                        parent[-1] = tuple(container)
+            else:
+                raise fail(f"unexpected {token!r}")
+        except (ValueError, SyntaxError, TypeError, MemoryError) as err:  # a number, string or key Python does not take
+            raise fail(f"{type(err).__name__}") from None
+    if stack or root is _NO_KEY:
+        raise fail("the text ends inside a bracket" if stack else "no value")
+    return tuple(root) if isinstance(root, list) and text.lstrip().startswith("(") else root
+
+
+_NO_KEY = object()
 
 
 def camera(meta: dict, where: str) -> tuple[Intrinsics, tuple[int, int]]:
@@ -57,11 +138,11 @@ def camera(meta: dict, where: str) -> tuple[Intrinsics, tuple[int, int]]:
         intrinsics = intrinsics_from(values, coefficients, model)
     except ValueError as err:
         raise DataError(located(where, None, str(err))) from None
-    width, height = (int(number(cam.get(key), f"{where}.{key}")) for key in ("res_x", "res_y"))
+    width, height = (whole(cam.get(key), f"{where}.{key}") for key in ("res_x", "res_y"))
     return intrinsics, (width, height)
 
 
-def poses(meta: dict, where: str, notes: list[str]):
+def poses(meta: dict, where: str, notes: list[str]) -> Trajectory | None:
     """The camera's poses (``tofnet.io.groundtruth.Trajectory``, camera to EVIMO's world: the recording's first
     camera frame) from ``meta['full_trajectory']``; ``None`` (noted) without it. Samples without a camera pose
     (EVIMO writes one in every sample; a file that does not) are left out and counted in ``notes``."""
@@ -99,23 +180,37 @@ def ground_truth_frames(meta: dict, where: str) -> list[tuple[int, int, float]]:
             for k, frame in enumerate(frames) if "gt_frame" in frame or not marked]
 
 
-def mapping(value, where: str) -> dict:
+def mapping(value: object, where: str) -> dict:
     """``value`` when it is a dictionary, else a one-line ``DataError`` naming ``where``."""
     if not isinstance(value, dict):
         raise DataError(located(where, None, f"expected a dictionary, got {type(value).__name__}"))
     return value
 
 
-def sequence(value, where: str) -> list:
+def sequence(value: object, where: str) -> list:
     """``value`` as a list when it is one (or a tuple), else a one-line ``DataError`` naming ``where``."""
     if not isinstance(value, (list, tuple)):
         raise DataError(located(where, None, f"expected a list, got {type(value).__name__}"))
     return list(value)
 
 
-def number(value, where: str) -> float:
+def number(value: object, where: str) -> float:
     """``value`` as a finite float (not a bool), else a one-line ``DataError`` naming ``where``."""
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
-            or not math.isfinite(float(value)):
-        raise DataError(located(where, None, f"expected a finite number, got {str(value)[:40]!r}"))
+    try:
+        finite = (not isinstance(value, bool) and isinstance(value, (int, float, np.integer, np.floating))
+                  and math.isfinite(float(value)))
+    except OverflowError:  # an int beyond any float
+        finite = False
+    if not finite:
+        plain = isinstance(value, (float, str, bool, type(None))) or (isinstance(value, int) and value.bit_length() < 64)
+        shown = repr(value[:40] if isinstance(value, str) else value) if plain else type(value).__name__
+        raise DataError(located(where, None, f"expected a finite number, got {shown}"))
     return float(value)
+
+
+def whole(value: object, where: str) -> int:
+    """``value`` as a whole number (pixels), else a one-line ``DataError`` naming ``where``."""
+    number_ = number(value, where)
+    if number_ != math.floor(number_):
+        raise DataError(located(where, None, f"expected a whole number, got {number_:g}"))
+    return int(number_)

@@ -45,6 +45,8 @@ def header_of(path: Path) -> tuple[int, int]:
             if not line.startswith(b"%"):
                 break
             length += len(line)
+            if line.rstrip() == b"% end":  # Prophesee's last header line: the data may start with '%' (0x25)
+                break
             words = line[1:].replace(b";", b" ").split()
             if words and words[0] in (b"t0", b"T0"):
                 if len(words) < 2 or not words[1].isdigit() or len(words[1]) > 18:

@@ -47,11 +47,16 @@ def sequence_name(path: str | Path) -> str | None:
             return path.name[:-len(ending)]
     if path.is_dir():
         folder = path.resolve()
-        camera = folder.parents[2].name if len(folder.parents) > 2 else ""
-        if camera in EVIMO2_CAMERAS and (folder / "dataset_info.npz").exists():
-            return f"{folder.name}-{camera}"
-        return folder.name
+        camera = evimo2_camera(folder) if (folder / "dataset_info.npz").exists() else ""
+        return f"{folder.name}-{camera}" if camera else folder.name
     return None
+
+
+def evimo2_camera(folder: Path) -> str:
+    """The EVIMO2 camera of a sequence folder (``<camera>/<category>/<subcategory>/<seq>``), "" when it is not under
+    one of ``EVIMO2_CAMERAS``."""
+    parents = Path(folder).resolve().parents
+    return parents[2].name if len(parents) > 2 and parents[2].name in EVIMO2_CAMERAS else ""
 
 
 def dsec_sequence_of(path: Path) -> tuple[Path, str] | None:

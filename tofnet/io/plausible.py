@@ -5,15 +5,17 @@ can hold, but that usually come from a mistake which would otherwise give wrong 
 (docs/reliability.md, "Plausible"): poses whose times do not cover the events', a mean event rate
 below one per second (times in µs read as seconds), a principal point outside the sensor, every
 pose's ``qw`` near 0 (quaternions written w first). Each is one note, made once when a recording is
-opened (``tofnet.io.source``), before a time window cuts the poses.
+opened (``tofnet.io.source``), before a time window cuts the poses; those that rarely fit a correct file are
+also the source's ``doubts``, which ``tofnet run`` says before it starts.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-#: Poses covering less of the events' time span than this share are noted.
+#: Poses covering less of the events' time span than this share are noted; less than ``LOUD_COVER``, said before a run.
 POSE_COVER = 0.99
+LOUD_COVER = 0.5
 #: Poses further apart (median) than this many times the events' span (at least 1 s) are noted.
 POSE_SPACING = 100.0
 #: A mean rate below this (events/s) over more than ``MIN_EVENTS`` events is noted.
@@ -21,19 +23,22 @@ MIN_RATE = 1.0
 MIN_EVENTS = 1000
 
 
-def plausibility_notes(source) -> list[str]:
-    """The notes for ``source`` (an ``EventSource``); reads only what is known without decoding the events."""
+def plausibility_notes(source) -> list[tuple[str, str, bool]]:
+    """``(topic, note, loud)`` for ``source`` (an ``EventSource``): ``topic`` ``poses``, ``times`` or ``camera``;
+    ``loud`` when it usually means a mistake worth saying before a run. Decodes at most the first packet (for the
+    first event's time: readers with an index do not)."""
     first = source.first_time()
     if first is None:
         return []
     last = source._window_end_us()
     events = (first * 1e-6, None if last is None else last * 1e-6)
-    return [note for note in (_poses_cover(source.trajectory, *events), _pose_spacing(source.trajectory, *events),
-                              _event_rate(source.n_events, *events), _principal_point(source),
-                              _quaternion_order(source.trajectory)) if note]
+    found = [("poses", _poses_cover(source.trajectory, *events)), ("poses", _pose_spacing(source.trajectory, *events)),
+             ("times", _event_rate(source.n_events, *events)), ("camera", _principal_point(source)),
+             ("poses", _quaternion_order(source.trajectory))]
+    return [(topic, *said) for topic, said in found if said]
 
 
-def _poses_cover(trajectory, first: float, last: float | None) -> str | None:
+def _poses_cover(trajectory, first: float, last: float | None) -> tuple[str, bool] | None:
     times = getattr(trajectory, "times", None)
     if times is None or len(times) < 2:
         return None
@@ -42,55 +47,56 @@ def _poses_cover(trajectory, first: float, last: float | None) -> str | None:
     if end < first or (last is not None and start > last):
         return (f"the poses ({start:.6f}..{end:.6f} s) do not overlap the events ({events}): every velocity is "
                 "extrapolated from the nearest poses. Poses on another clock, or in other units? (seconds, on the "
-                "events' clock; --velocity replaces them)")
+                "events' clock; --velocity replaces them)", True)
     if last is None or last <= first:
         return None
     covered = (min(end, last) - max(start, first)) / (last - first)
-    if covered < POSE_COVER:
+    if covered < POSE_COVER:  # said before a run only when most of the events are outside (mocap starts late)
         return (f"the poses ({start:.6f}..{end:.6f} s) cover {100 * covered:.0f} % of the events' time span "
-                f"({events}): outside it the velocity is extrapolated from the nearest poses")
+                f"({events}): outside it the velocity is extrapolated from the nearest poses", covered < LOUD_COVER)
     return None
 
 
-def _pose_spacing(trajectory, first: float, last: float | None) -> str | None:
+def _pose_spacing(trajectory, first: float, last: float | None) -> tuple[str, bool] | None:
     times = getattr(trajectory, "times", None)
     if times is None or len(times) < 2 or last is None:
         return None
     spacing = float(np.median(np.diff(np.asarray(times, dtype=np.float64))))
     if spacing > POSE_SPACING * max(last - first, 1.0):  # µs read as seconds: a million times; sparse samples: not
         return (f"the poses are {spacing:g} s apart (median), against the events' {last - first:g} s: pose times "
-                "in other units? (seconds)")
+                "in other units? (seconds)", True)
     return None
 
 
-def _event_rate(n_events: int | None, first: float, last: float | None) -> str | None:
+def _event_rate(n_events: int | None, first: float, last: float | None) -> tuple[str, bool] | None:
     if not n_events or n_events <= MIN_EVENTS or last is None or last <= first:
         return None
     rate = n_events / (last - first)
     if rate < MIN_RATE:
         return (f"{n_events:,} events over {last - first:g} s ({rate:.3g} events/s): times in other units? "
-                "(text and float arrays hold seconds, integer arrays and binary formats µs)")
+                "(text and float arrays hold seconds, integer arrays and binary formats µs)", True)
     return None
 
 
-def _principal_point(source) -> str | None:
+def _principal_point(source) -> tuple[str, bool] | None:
     intrinsics, size = source.intrinsics, source.sensor_size
     if intrinsics is None or size is None:
         return None
     width, height = size
     if not (0.0 <= intrinsics.cx <= width and 0.0 <= intrinsics.cy <= height):
         return (f"the principal point ({intrinsics.cx:g}, {intrinsics.cy:g}) px is outside the {width}x{height} "
-                "sensor: the calibration of another camera or resolution?")
+                "sensor: the calibration of another camera or resolution?", True)
     return None
 
 
-def _quaternion_order(trajectory) -> str | None:
+def _quaternion_order(trajectory) -> tuple[str, bool] | None:
     quaternions = getattr(trajectory, "quaternions", None)
     if quaternions is None or len(quaternions) == 0:
         return None
     q = np.asarray(quaternions, dtype=np.float64)
     norms = np.linalg.norm(q, axis=1)
     if np.all(np.abs(q[:, 3]) < 0.1 * norms):
-        return ("every pose's qw is near 0 (the camera turned half a turn from the world's axes throughout): "
-                "quaternions written w first? (the poses hold qx qy qz qw)")
+        return ("every pose's qw is near 0 (the camera turned half a turn from the world's axes throughout, as one "
+                "looking straight down in a z-up world does): quaternions written w first? (the poses hold qx qy qz "
+                "qw)", False)
     return None

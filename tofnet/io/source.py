@@ -125,8 +125,9 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
             set_camera(source, intrinsics, calib, camera)
         check_metadata(source, path)
         from tofnet.io.plausible import plausibility_notes
-        source.doubts = plausibility_notes(source)  # another clock, unit or camera? (before a window cuts poses)
-        source.notes.extend(source.doubts)
+        found = plausibility_notes(source)  # another clock, unit or camera? (before a window cuts the poses)
+        source.notes.extend(note for _, note, _ in found)
+        source.doubts = [(topic, note) for topic, note, loud in found if loud]
         if window is not None:
             source.set_window(window)
     except BaseException as err:
