@@ -10,7 +10,6 @@
 
 from __future__ import annotations
 
-import math
 import struct
 import zlib
 
@@ -18,7 +17,7 @@ import numpy as np
 
 from tofnet.errors import DataError, located, quote
 from tofnet.events import MAX_TIME_US, sensor_size_problem
-from tofnet.io.recording import focal_problem
+from tofnet.io.calibration import IntrinsicsError, check_intrinsics
 
 
 #: What decoding libraries raise on a bad file (h5py: OSError, KeyError, ValueError,
@@ -112,11 +111,12 @@ def check_metadata(source, path: object) -> None:
     intrinsics = source.intrinsics
     if intrinsics is not None:
         values = (intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy, *intrinsics.distortion)
-        if not all(isinstance(v, (int, float, np.floating, np.integer)) and math.isfinite(v) for v in values):
-            raise DataError(located(path, None, "intrinsics: expected finite numbers fx fy cx cy and distortion"))
-        problem = focal_problem(intrinsics.fx, intrinsics.fy)
-        if problem:
-            raise DataError(located(path, None, f"intrinsics: {problem}"))
+        if not all(isinstance(v, (int, float, np.floating, np.integer)) for v in values):
+            raise DataError(located(path, None, "intrinsics: expected numbers fx fy cx cy and distortion"))
+        try:  # the one rule for what no camera has, as every camera file is read with
+            check_intrinsics(*values[:4], tuple(values[4:]))
+        except IntrinsicsError as err:
+            raise DataError(located(path, None, f"intrinsics: {err}")) from None
         expected = {"radtan": 5, "equidistant": 4}.get(intrinsics.distortion_model)
         if expected is None or len(intrinsics.distortion) not in (0, expected):
             raise DataError(located(path, None, f"intrinsics: {len(intrinsics.distortion)} distortion coefficients "

@@ -105,9 +105,9 @@ EVIMO_NOT_READ = {"img": "EVIMO's depth and mask frames (16-bit colour PNGs; EVI
 EVIMO_META = "meta.txt"
 
 
-def note_unread(recording: Recording, folder: Path) -> Recording:
-    """Name the files of ``NOT_READ`` in an ECD-like ``folder`` (nothing a dataset ships is passed over unsaid),
-    and take the camera and poses of EVIMO's ``meta.txt`` when there is one (they win over ``calib.txt``)."""
+def attach_dataset_files(recording: Recording, folder: Path) -> Recording:
+    """Take the camera and poses of EVIMO's ``meta.txt`` in an ECD-like ``folder`` when there is one (they win over
+    ``calib.txt``), and name the dataset files tofnet does not read (nothing a dataset ships is passed over unsaid)."""
     if _present(folder / EVIMO_META):
         from tofnet.io.evimo_meta import camera, poses, read_meta_text
 
@@ -133,7 +133,7 @@ def read_ecd(folder: str | Path) -> Recording:
     notes: list[str] = []
     events = read_events_txt(folder / EVENTS, notes)
     recording = Recording(events=events, source=str(folder), notes=notes)
-    return note_unread(attach_sidecars(recording, folder), folder)
+    return attach_dataset_files(attach_sidecars(recording, folder), folder)
 
 
 def write_ecd(folder: str | Path, events: np.ndarray, *, intrinsics: Intrinsics | None,

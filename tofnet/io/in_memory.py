@@ -91,7 +91,7 @@ class RecordingSource(EventSource):
 def read_in_memory(path: Path, kind: str, columns, window=None) -> tuple[Recording, tuple[int, int] | None]:
     """The recording, and for a ``.npy`` read through a time window, the file's (first, last) event µs."""
     from tofnet.io.calibration import NO_CALIBRATION
-    from tofnet.io.ecd import attach_sidecars, note_unread, read_ecd
+    from tofnet.io.ecd import attach_dataset_files, attach_sidecars, read_ecd
     from tofnet.io.events import read_events_npy, read_events_txt
 
     from tofnet.io.ecd import EVENTS, GT_DEPTH
@@ -102,7 +102,8 @@ def read_in_memory(path: Path, kind: str, columns, window=None) -> tuple[Recordi
         # Only the window's bytes of events.txt are parsed (true depth per event needs the whole file).
         from tofnet.io.text_window import read_text_window
         events, *span = read_text_window(path / EVENTS, window, notes)
-        recording = note_unread(attach_sidecars(Recording(events=events, source=str(path), notes=notes), path), path)
+        recording = attach_sidecars(Recording(events=events, source=str(path), notes=notes), path)
+        recording = attach_dataset_files(recording, path)
     elif kind == "ecd":
         recording = read_ecd(path)
     else:
