@@ -97,7 +97,7 @@ def test_intrinsics_text():
     assert parse_intrinsics("200,201,120,90") == Intrinsics(200, 201, 120, 90)
     assert parse_intrinsics("200,201,120,90,-0.3,0.1,0.001,0.002").distortion == (-0.3, 0.1, 0.001, 0.002, 0.0)
     assert parse_intrinsics("200,201,120,90,-0.3,0.1,0,0,0.05").distortion == (-0.3, 0.1, 0.0, 0.0, 0.05)
-    for bad, what in (("1,2,3", "got 3 numbers"), ("0,1,2,3", "fx and fy must be positive"),
+    for bad, what in (("1,2,3", "got 3 numbers"), ("0,1,2,3", "focal lengths must be positive"),
                       ("1,1,nan,2", "'cx' is not a finite number"), ("1,1,a,2", "'cx' is not a finite number")):
         with pytest.raises(TofnetError, match=f"^--intrinsics: .*{what}"):
             parse_intrinsics(bad)

@@ -149,7 +149,7 @@ def test_calibration_round_trip(tmp_path, intrinsics):
     ("200 200 120 90 1\n", ":1: expected 4 numbers"),
     ("200 abc 120 90\n", ":1: 'fy': expected a number"),
     ("200 200 nan 90\n", ":1: 'cx': expected a finite number"),
-    ("-200 200 120 90\n", ":1: 'fx': focal length must be positive"),
+    ("-200 200 120 90\n", ":1: focal lengths must be positive"),
     ("200 200 120 90\n1 1 1 1\n", ":2: expected one line"),
     ("", ": empty calibration"),
 ])

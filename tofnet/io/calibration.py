@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tofnet.errors import DataError, located, quote
+from tofnet.errors import DataError, TofnetError, located, quote
 from tofnet.io.files import write_text_atomic
 from tofnet.io.groundtruth import finite_number, read_text
 from tofnet.io.recording import Intrinsics, focal_problem
@@ -37,9 +37,6 @@ def read_calibration(path: str | Path) -> Intrinsics:
                                               f"(8: k3 = 0), found {len(fields)}"))
     values = [finite_number(path, number, f"'{name}'", field) for name, field in zip(_NAMES, fields)]
     values += [0.0] if len(values) == 8 else []
-    for name, value in zip(("fx", "fy"), values[:2]):
-        if value <= 0:
-            raise DataError(located(path, number, f"'{name}': focal length must be positive (pixels), got {value:g}"))
     if focal_problem(*values[:2]):
         raise DataError(located(path, number, focal_problem(*values[:2])))
     return Intrinsics(*values[:4], distortion=tuple(values[4:]))
@@ -58,8 +55,6 @@ def write_calibration(path: str | Path, intrinsics: Intrinsics) -> None:
 
 def parse_intrinsics(text: str, what: str = "--intrinsics") -> Intrinsics:
     """``fx,fy,cx,cy[,k1,k2,p1,p2[,k3]]`` (pixels; radtan coefficients, k3 = 0 when absent)."""
-    from tofnet.errors import TofnetError, quote
-
     fields = [f.strip() for f in str(text).replace(" ", ",").split(",") if f.strip()]
     if len(fields) not in (4, 8, 9):
         raise TofnetError(f"{what}: expected fx,fy,cx,cy or fx,fy,cx,cy,k1,k2,p1,p2[,k3] (pixels), "
@@ -73,8 +68,6 @@ def parse_intrinsics(text: str, what: str = "--intrinsics") -> Intrinsics:
         if not math.isfinite(value):
             raise TofnetError(f"{what}: '{name}' is not a finite number: {quote(field)}")
         values.append(value)
-    if values[0] <= 0 or values[1] <= 0:
-        raise TofnetError(f"{what}: fx and fy must be positive (pixels), got {values[0]:g}, {values[1]:g}")
     if focal_problem(values[0], values[1]):
         raise TofnetError(f"{what}: {focal_problem(values[0], values[1])}")
     distortion = tuple(values[4:]) + ((0.0,) if len(values) == 8 else ())
