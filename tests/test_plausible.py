@@ -131,3 +131,25 @@ def test_an_evt3_header_with_a_malformed_t0_is_refused(tmp_path, capsys):
     path.write_bytes(b"% evt 3.0\n% geometry 64x48\n% t0 1.5\n" + np.zeros(4, dtype="<u2").tobytes())
     assert main(["info", str(path)]) == 2
     assert "header line '% t0': expected the time base in whole µs (0 or more), got '1.5'" in capsys.readouterr().err
+
+
+def test_nanoseconds_of_a_microsecond_clock_are_noted_and_a_millisecond_clock_is_not(tmp_path, recording):
+    from tofnet.io.arrays import write_npz_recording
+    from tofnet.io.recording import Recording
+
+    def notes_of(times, name):
+        events = recording.events.copy()
+        events["t"] = times
+        path = tmp_path / name
+        write_npz_recording(path, Recording(events=events, sensor_size=SENSOR, intrinsics=recording.intrinsics))
+        return " | ".join(_notes(path))
+
+    t = recording.events["t"][0] + 30 * np.arange(len(recording.events), dtype=np.int64)  # one event per µs time
+    assert "modulo 1000" not in notes_of(t, "us.npz")  # a µs clock: every residue
+    in_ns = notes_of(t * 1000 + 417, "ns.npz")  # ns of a µs clock, with an offset in ns
+    assert "event times are all 417 modulo 1000 µs" in in_ns and "nanoseconds of a µs clock?" in in_ns
+    assert "read as µs it lasts 201 s, in ns 0.201 s" in in_ns
+    whole_ms = notes_of(t // 1000 * 1000, "ms.npz")  # a clock of whole ms: many events per time, a coarse clock
+    assert "modulo 1000" not in whole_ms
+    folder = _folder(tmp_path, recording, events=recording.events)
+    assert "modulo 1000" not in " | ".join(_notes(folder))

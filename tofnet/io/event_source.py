@@ -80,6 +80,17 @@ class EventSource:
         finally:
             getattr(packets, "close", lambda: None)()
 
+    def first_times(self, count: int = 1 << 16) -> np.ndarray:
+        """The times (µs, int64) of the file's first events: its first packet's, at most ``count``."""
+        packets = iter(self._packets(count))
+        try:
+            for packet in packets:
+                if len(packet):
+                    return np.asarray(packet[packet.dtype.names[0]][:count], dtype=np.int64)
+            return np.empty(0, np.int64)
+        finally:
+            getattr(packets, "close", lambda: None)()
+
     def _window_packets(self, size_hint: int, start: int, stop: int | None) -> Iterable[np.ndarray]:
         """The events of ``[start, stop)``. The default decodes from the beginning, skips whole packets
         before ``start`` uncopied and stops at the first packet past ``stop``; readers with an index

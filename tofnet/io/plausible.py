@@ -3,8 +3,9 @@
 ``check_metadata`` refuses what no file can mean (a focal length of 0); these are values a real file
 can hold, but that usually come from a mistake which would otherwise give wrong depth without a sign
 (docs/reliability.md, "Plausible"): poses whose times do not cover the events', a mean event rate
-below one per second (times in µs read as seconds), a principal point outside the sensor, every
-pose's ``qw`` near 0 (quaternions written w first). Each is one note, made once when a recording is
+below one per second (times in µs read as seconds), event times all alike modulo 1000 µs with about
+one event per time (ns of a µs clock read as µs), a principal point outside the sensor, every pose's
+``qw`` near 0 (quaternions written w first). Each is one note, made once when a recording is
 opened (``tofnet.io.source``), before a time window cuts the poses; those that rarely fit a correct file are
 also the source's ``doubts``, which ``tofnet run`` says before it starts.
 """
@@ -21,19 +22,24 @@ POSE_SPACING = 100.0
 #: A mean rate below this (events/s) over more than ``MIN_EVENTS`` events is noted.
 MIN_RATE = 1.0
 MIN_EVENTS = 1000
+#: Of the first events, at least this many distinct times all alike modulo 1000 µs, with fewer events per time than
+#: ``MAX_PER_TIME``, are noted: a µs clock's times in ns (a clock of whole ms has many events per time).
+MIN_TIMES = 100
+MAX_PER_TIME = 4.0
 
 
 def plausibility_notes(source) -> list[tuple[str, str, bool]]:
     """``(topic, note, loud)`` for ``source`` (an ``EventSource``): ``topic`` ``poses``, ``times`` or ``camera``;
-    ``loud`` when it usually means a mistake worth saying before a run. Decodes at most the first packet (for the
-    first event's time: readers with an index do not)."""
+    ``loud`` when it usually means a mistake worth saying before a run. Decodes the first packet, for the first
+    events' times (``EventSource.first_times``)."""
     first = source.first_time()
     if first is None:
         return []
     last = source._window_end_us()
     events = (first * 1e-6, None if last is None else last * 1e-6)
     found = [("poses", _poses_cover(source.trajectory, *events)), ("poses", _pose_spacing(source.trajectory, *events)),
-             ("times", _event_rate(source.n_events, *events)), ("camera", _principal_point(source)),
+             ("times", _event_rate(source.n_events, *events)), ("times", _time_grain(source.first_times(), *events)),
+             ("camera", _principal_point(source)),
              ("poses", _quaternion_order(source.trajectory))]
     return [(topic, *said) for topic, said in found if said]
 
@@ -76,6 +82,17 @@ def _event_rate(n_events: int | None, first: float, last: float | None) -> tuple
         return (f"{n_events:,} events over {last - first:g} s ({rate:.3g} events/s): times in other units? "
                 "(text and float arrays hold seconds, integer arrays and binary formats µs)", True)
     return None
+
+
+def _time_grain(times: np.ndarray, first: float, last: float | None) -> tuple[str, bool] | None:
+    distinct = np.unique(times)
+    if len(distinct) < MIN_TIMES or np.any(distinct % 1000 != distinct[0] % 1000):
+        return None
+    if len(times) / len(distinct) >= MAX_PER_TIME:  # whole milliseconds: a coarse clock, not another unit
+        return None
+    lasts = "" if last is None else f"; read as µs it lasts {last - first:.3g} s, in ns {(last - first) / 1000:.3g} s"
+    return (f"the first {len(distinct):,} event times are all {distinct[0] % 1000} modulo 1000 µs, about one event "
+            f"each: nanoseconds of a µs clock? (integer arrays and binary formats hold µs{lasts})", True)
 
 
 def _principal_point(source) -> tuple[str, bool] | None:
