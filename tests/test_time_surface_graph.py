@@ -203,6 +203,9 @@ def test_the_improved_network_and_the_estimator_option():
     spec_net, _, _, _ = load_network("examples/improved.yaml")
     defaults = TimeSurfaceProcess(name="d")
     assert spec_net.process("time_surface").values == {**defaults.values, "sensor_size": (240, 180)}
+    import yaml  # the file writes out every parameter but t0 (the first event's time), as its header says
+    written = set(yaml.safe_load(open("examples/improved.yaml"))["processes"]["time_surface"]) - {"type"}
+    assert written == {param.name for param in TimeSurfaceProcess.params} - {"t0"}
 
 
 def test_a_bad_parameter_is_one_line_naming_it():
