@@ -153,3 +153,27 @@ def test_integer_backends_write_byte_identical_depth_files(tmp_path, suffix):
         assert main(["run", str(folder), "--backend", backend, "--out", str(out), "--quiet"]) == 0
         files.append(out.read_bytes())
     assert len(files[0]) > 1000 and files[0] == files[1]
+
+
+def test_a_header_that_states_too_small_a_sensor_is_read_at_the_size_given(edge_folder, tmp_path, capsys):
+    """An EVT3 header's geometry smaller than its events: refused with the byte and what to do; --sensor-size (run,
+    export, info) reads it at the given size, and the events outside a smaller network are counted."""
+    from optional import optional
+    optional("faery")
+    assert main(["convert", str(edge_folder), str(tmp_path / "rec.raw"), "--quiet"]) == 0
+    data = (tmp_path / "rec.raw").read_bytes()
+    assert b"geometry 240x180" in data or b"width=240;height=180" in data
+    small = data.replace(b"geometry 240x180", b"geometry 200x180").replace(b"width=240;height=180",
+                                                                         b"width=200;height=180")
+    (tmp_path / "small.raw").write_bytes(small)
+    common = ["run", str(tmp_path / "small.raw"), "--velocity", "0.5,0,0", "--intrinsics", "200,200,119.5,89.5",
+              "--quiet", "--force", "--out", str(tmp_path / "d.npz")]
+    assert main(common) == 2
+    err = capsys.readouterr().err
+    assert "outside the header's 200x180 geometry at byte " in err and "give the sensor's: --sensor-size WxH" in err
+    assert main(common + ["--sensor-size", "240x180"]) == 0
+    whole, _ = read_depth(tmp_path / "d.npz")
+    assert main(["run", str(edge_folder), "--out", str(tmp_path / "e.npz"), "--quiet"]) == 0
+    assert len(whole) == len(read_depth(tmp_path / "e.npz")[0]) > 0
+    assert main(["export", str(tmp_path / "d.npz"), "--recording", str(tmp_path / "small.raw"), "--sensor-size",
+                 "240x180", "--maps", str(tmp_path / "maps")]) == 0

@@ -55,9 +55,9 @@ def test_blocks_carry_the_state():
 
 
 def test_coordinates_outside_the_geometry_are_refused():
-    with pytest.raises(ValueError, match="y outside the header's 64x48"):
+    with pytest.raises(ValueError, match="y 48 outside the header.s 64x48 geometry at word 1 of the block"):
         _decode([HIGH | 1, Y | 48, X | 1])
-    with pytest.raises(ValueError, match="x outside"):
+    with pytest.raises(ValueError, match="x 64 outside"):
         _decode([HIGH | 1, Y | 1, X | 64])
 
 

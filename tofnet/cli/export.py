@@ -39,7 +39,7 @@ def register(subparsers) -> None:
 
 
 def handle(args) -> int:
-    from tofnet.cli.inputs import camera_options, window_option
+    from tofnet.cli.inputs import camera_options, sensor_size_option, window_option
     from tofnet.core.params import parse_size
     from tofnet.io.depth import read_depth
     from tofnet.units import microseconds, seconds
@@ -57,7 +57,7 @@ def handle(args) -> int:
         from tofnet.io.source import open_recording
         try:
             with open_recording(recording_path, window=window, allow_external=args.allow_external,
-                                **camera_options(args)) as source:
+                                sensor_size=sensor_size_option(args), **camera_options(args)) as source:
                 # The camera only; the events only when the sensor size must come from their extent.
                 recording = source.metadata(imu=False) if source.sensor_size is not None else source.read()
                 bounds = source.window

@@ -86,6 +86,12 @@ def window_option(args):
     return parse_window(getattr(args, "start", None), getattr(args, "duration", None), getattr(args, "until", None))
 
 
+def sensor_size_option(args) -> tuple[int, int] | None:
+    """``--sensor-size WxH`` (pixels) as ``open_recording``'s ``sensor_size``, None when not given."""
+    from tofnet.core.params import parse_size
+    return parse_size(args.sensor_size, "--sensor-size") if getattr(args, "sensor_size", None) else None
+
+
 def input_options(args) -> dict:
     """Keyword arguments for ``read_recording``/``open_recording`` from the parsed options."""
     topics = {}

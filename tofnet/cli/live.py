@@ -51,7 +51,7 @@ def register(subparsers) -> None:
 
 def handle(args) -> int:
     from tofnet.api import DEFAULT_BACKEND
-    from tofnet.cli.inputs import camera_options, input_options
+    from tofnet.cli.inputs import camera_options, input_options, sensor_size_option
     from tofnet.backends.runtime import clock_of
     from tofnet.cli.run import backend_choice, build_network, reader_lines, workers_line
     from tofnet.io.files import atomic_path, write_text_atomic
@@ -66,7 +66,7 @@ def handle(args) -> int:
     opened = None
     if args.replay:
         from tofnet.io.source import open_recording
-        opened = open_recording(args.replay, **input_options(args))
+        opened = open_recording(args.replay, sensor_size=sensor_size_option(args), **input_options(args))
         meta = opened.metadata()
         origin = str(args.replay)
         if meta.sensor_size is None and not args.sensor_size:

@@ -199,7 +199,7 @@ def build_network(args, recording_sensor_size, recording=None):
 
 def handle(args) -> int:
     from tofnet.api import DEFAULT_BACKEND, rotation_line, run, run_source, undistortion_of
-    from tofnet.cli.inputs import input_options
+    from tofnet.cli.inputs import input_options, sensor_size_option
     from tofnet.cli.outputs import check_more_outputs, check_run_outputs
     from tofnet.cli.progress import Progress
     from tofnet.io.source import open_recording
@@ -209,13 +209,12 @@ def handle(args) -> int:
     clock = Stopwatch()
     check_run_outputs(args)
     monitors = [Monitor.parse(text, args.monitor_every) for text in args.monitor]
-    with open_recording(args.recording, **input_options(args)) as source:
+    # --sensor-size is the sensor's: where the file does not say its size, not the events' extent (nor a note that
+    # it is); where the file says another, a header's too small geometry is read at the given one
+    with open_recording(args.recording, sensor_size=sensor_size_option(args), **input_options(args)) as source:
         for topic, doubt in [] if args.quiet else source.doubts:  # before a run that may be long because of it
             if not (topic == "poses" and args.velocity):  # --velocity: the poses are not used
                 print(f"tofnet run: note: {doubt}", file=sys.stderr)
-        if source.sensor_size is None and args.sensor_size:  # the file does not say: --sensor-size is its size,
-            from tofnet.core.params import parse_size        # not the events' extent (nor a note that it is)
-            source.sensor_size = parse_size(args.sensor_size, "--sensor-size")
         # A file that says its sensor size (or given one) streams through the network in chunks (events
         # never all in memory); otherwise the size comes from the events' extent, which needs them all.
         streaming = source.sensor_size is not None and not monitors

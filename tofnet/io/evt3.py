@@ -61,9 +61,11 @@ def new_state() -> np.ndarray:
     return np.zeros(_STATE_SIZE, dtype=np.int64)
 
 
-def decode_words(words: np.ndarray, width: int, height: int, t0: int, state: np.ndarray) -> np.ndarray:
+def decode_words(words: np.ndarray, width: int, height: int, t0: int, state: np.ndarray,
+                 first_byte: int | None = None) -> np.ndarray:
     """The CD events of ``words`` (uint16, in file order) as ``EVENT_DTYPE`` records (``t`` µs); ``state`` carries the time base, coordinates and counters to the next call.
-    Raises ``ValueError`` naming the word when a coordinate is outside ``width`` x ``height``."""
+    Raises ``ValueError`` naming the word (its byte in the file, given ``first_byte``, the block's) when a
+    coordinate is outside ``width`` x ``height``."""
     if len(words) == 0:
         return np.empty(0, dtype=EVENT_DTYPE)
     # One kernel signature for every caller: the words read-only (a file's block is np.frombuffer of
@@ -75,9 +77,9 @@ def decode_words(words: np.ndarray, width: int, height: int, t0: int, state: np.
     out = np.empty(12 * len(words), dtype=EVENT_DTYPE)  # pages are touched only where events are written
     count = _decode(words, width, height, t0, state, out["t"], out["x"], out["y"], out["p"])
     if state[_BAD]:
-        kind = {1: "x", 2: "y"}[int(state[_BAD])]
-        raise ValueError(f"{kind} outside the header's {width}x{height} geometry at word {int(state[_BAD_AT])} "
-                         "of the block")
+        kind, at = {1: "x", 2: "y"}[int(state[_BAD])], int(state[_BAD_AT])
+        where = f"word {at} of the block" if first_byte is None else f"byte {first_byte + 2 * at:,}"
+        raise ValueError(f"{kind} {int(words[at]) & 0x7FF} outside the header's {width}x{height} geometry at {where}")
     return out[:count]
 
 
@@ -152,11 +154,12 @@ def decode_file(path: Path, width: int, height: int, block_words: int = BLOCK_WO
     with open(path, "rb") as handle:
         handle.seek(length)
         while True:
+            first_byte = handle.tell()
             data = handle.read(2 * block_words)
             if len(data) < 2:
                 return
             words = np.frombuffer(data[:len(data) // 2 * 2], dtype="<u2")
-            events = decode_words(words, width, height, t0, state)
+            events = decode_words(words, width, height, t0, state, first_byte)
             if len(events):
                 yield events
 

@@ -72,6 +72,9 @@ class ColumnsSource(EventSource):
     def first_time(self) -> int | None:
         return int(self._times(0, 1)[0]) if self.n_rows else None
 
+    def first_times(self, count: int = 1 << 12) -> np.ndarray:
+        return self._times(0, min(count, self.n_rows))  # the time column's first rows only
+
     def _window_end_us(self) -> int | None:
         return int(self._times(self.n_rows - 1, self.n_rows)[0]) if self.n_rows else None
 

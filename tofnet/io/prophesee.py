@@ -73,6 +73,7 @@ class FaerySource(EventSource):
                 with evt.Decoder(self.path, fallback, None) as decoder:
                     self.detail = decoder.version.upper()
         self._fallback = fallback
+        self._geometry = self.sensor_size  # the header's (a sensor size given later widens what EVT3 decodes)
         if kind == "evt":  # EVT3 is read in 2-byte words, EVT2 and EVT2.1 in 4-byte words
             from tofnet.io.evt3 import header_of
             unit = 2 if self.detail == "EVT3" else 4
@@ -123,12 +124,14 @@ class FaerySource(EventSource):
         stamped with their predecessor's time because the stream went back."""
         from tofnet.io.evt3 import clamped_of, decode_file, new_state
 
-        width, height = self._fallback or self.sensor_size
+        # the header's geometry, widened to a sensor size given over it (a header that states too small a sensor)
+        width, height = (max(a, b) for a, b in zip(self._fallback or self._geometry, self.sensor_size or (0, 0)))
         state = new_state()
         try:
             yield from decode_file(self.path, width, height, state=state)
         except ValueError as err:
-            raise DataError(located(self.path, None, f"cannot decode ({err})")) from None
+            hint = "" if self._fallback else "; if the header's size is wrong, give the sensor's: --sensor-size WxH"
+            raise DataError(located(self.path, None, f"cannot decode ({err}){hint}")) from None
         clamped = clamped_of(state)
         if clamped:
             self.notes.append(f"{clamped:,} EVT3 events were stamped earlier than the event before them "
