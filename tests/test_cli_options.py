@@ -242,3 +242,24 @@ def test_a_velocity_without_translation_is_said_beside_the_empty_depth(tmp_path,
     assert "depth out                 0" in out and "note           --velocity 0,0,0: no translation, so no depth" in out
     assert main([*argv, "--velocity", "0.5,0,0", "--out", str(tmp_path / "moving.npz")]) == 0
     assert "no translation" not in capsys.readouterr().out
+
+
+def test_ctrl_c_inside_a_compiled_kernel_is_an_interruption_not_a_traceback(monkeypatch, capsys):
+    """numba's dispatcher can wrap a KeyboardInterrupt in a SystemError ('returned a result with an exception
+    set'): the command says it was interrupted and exits 130; any other SystemError is not swallowed."""
+    import tofnet.cli.info
+
+    def interrupted(args):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as err:
+            raise SystemError("CPUDispatcher(<function k>) returned a result with an exception set") from err
+    monkeypatch.setattr(tofnet.cli.info, "handle", interrupted)
+    assert main(["info", "whatever"]) == 130
+    assert capsys.readouterr().err.strip() == "tofnet info: interrupted"
+
+    def broken(args):
+        raise SystemError("a real bug")
+    monkeypatch.setattr(tofnet.cli.info, "handle", broken)
+    with pytest.raises(SystemError, match="a real bug"):
+        main(["info", "whatever"])
