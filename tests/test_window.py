@@ -194,6 +194,46 @@ def test_eval_and_export_window_the_estimates(tmp_path, capsys):
     assert int(index[1].split(",")[4]) > 0
 
 
+def test_eval_and_plot_of_a_windowed_run_read_its_window(tmp_path, capsys):
+    """A run on a time window records it (absolute µs): eval and plot read those events, not the whole
+    recording's (coverage over the run's events; a figure of the run's length), unless given another."""
+    import json
+
+    rec = tmp_path / "sim"
+    assert main(["simulate", "slider", str(rec), "--duration", "0.3"]) == 0
+    window = ["--start", "100ms", "--duration", "100ms"]
+    assert main(["run", str(rec), "--quiet", "--out", str(tmp_path / "d.npz"), *window]) == 0
+    capsys.readouterr()
+    assert main(["eval", str(rec), str(tmp_path / "d.npz"), "--json", "-"]) == 0
+    own = json.loads(capsys.readouterr().out)
+    assert main(["eval", str(rec), str(tmp_path / "d.npz"), "--json", "-", *window]) == 0
+    asked = json.loads(capsys.readouterr().out)
+    assert own == asked and 0 < own["estimates"]
+    assert main(["run", str(rec), "--quiet", "--out", str(tmp_path / "whole.npz")]) == 0
+    capsys.readouterr()
+    assert main(["eval", str(rec), str(tmp_path / "whole.npz"), "--json", "-"]) == 0
+    assert json.loads(capsys.readouterr().out)["events_in"] > 2 * own["events_in"]
+    from tofnet.eval.views import time_span_us
+    from tofnet.cli.eval import load_inputs
+    recording, depth, meta = load_inputs(str(rec), str(tmp_path / "d.npz"))
+    start, end = time_span_us(recording.events, depth, meta["t0_us"])
+    assert 0.1 <= (end - start) * 1e-6 < 0.11  # the figures' "whole run": the window's 100 ms
+
+
+def test_a_depth_file_of_another_sensor_is_refused(tmp_path, capsys):
+    rec, small = tmp_path / "sim", tmp_path / "small"
+    assert main(["simulate", "slider", str(rec), "--duration", "0.1"]) == 0
+    assert main(["simulate", "slider", str(small), "--duration", "0.1", "--sensor-size", "48x36"]) == 0
+    assert main(["run", str(rec), "--quiet", "--out", str(tmp_path / "d.npz")]) == 0
+    capsys.readouterr()
+    for command in (["eval", str(small), str(tmp_path / "d.npz")],
+                    ["plot", "depthmap", str(small), str(tmp_path / "d.npz"), "--out", str(tmp_path / "f.png")]):
+        assert main(command) == 2
+        err = capsys.readouterr().err
+        assert "estimates lie outside" in err and "48x36 sensor: is it this recording's depth?" in err
+    assert not (tmp_path / "f.png").exists()
+
+
 def test_mvsec_rows_and_a_windowed_convert(tmp_path, recording):
     h5py = optional("h5py")
     events = recording.events

@@ -69,12 +69,20 @@ def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = 
     from tofnet.io.source import open_recording
     from tofnet.units import microseconds, seconds
 
+    depth, meta = read_depth(depth_path)
+    meta = dict(meta)
+    if window is None:  # the run's own time window, when it had one: its events, not the whole recording's
+        window = _window_of_run(meta.get("summary") or {})
     with open_recording(recording_path, window=window, allow_external=allow_external, side=side,
                         rectify=rectify, **camera) as source:
         recording = source.read()
         bounds = source.window
-    depth, meta = read_depth(depth_path)
-    meta = dict(meta)
+    if recording.sensor_size is not None and len(depth):
+        width, height = recording.sensor_size
+        outside = (depth["x"] >= width) | (depth["y"] >= height)
+        if np.any(outside):
+            raise DataError(f"{depth_path}: {int(outside.sum()):,} of its {len(depth):,} estimates lie outside "
+                            f"{recording_path}'s {width}x{height} sensor: is it this recording's depth?")
     given = {}
     from tofnet.processes.input import MAX_PERIOD_S
     if timestep is not None:
@@ -97,6 +105,17 @@ def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = 
         import logging
         logging.getLogger("tofnet.cli").warning(f"warning: {depth_path} {mismatch}")
     return recording, depth, meta
+
+
+def _window_of_run(summary: dict):
+    """The time window (absolute µs on the file's clock) a depth file's ``tofnet run`` read, else None."""
+    from tofnet.io.window import parse_window
+    bounds = summary.get("window_us")
+    if not (isinstance(bounds, list) and len(bounds) == 2 and type(bounds[0]) is int
+            and (bounds[1] is None or type(bounds[1]) is int)):
+        return None
+    start, stop = bounds
+    return parse_window(start=f"@{start}us", until=None if stop is None else f"@{stop}us")
 
 
 def _run_on_another_recording(summary: dict, events: int) -> str | None:

@@ -235,6 +235,8 @@ def handle(args) -> int:
     out = Path(args.out)
     summary = result.summary()
     summary["recording"] = str(args.recording)
+    if source.window is not None:  # absolute µs: eval and plot read the same events (tofnet.cli.eval.load_inputs)
+        summary["window_us"] = list(source.window)
     summary["rotation"] = rotation_line(network, recording, no_rotation=getattr(args, "no_rotation", False))
     summary["undistortion"] = undistortion_of(network, recording, result, str(args.recording),
                                               no_undistort=getattr(args, "no_undistort", False))
@@ -309,6 +311,7 @@ def write_outputs(out: Path, result, summary: dict, record_tot: bool, check=None
             write_depth(path, records, t0_us=result.t0_us, timestep_us=result.timestep_us,
                         latency_steps=result.latency[name],
                         summary={**result.facts(), "recording": summary["recording"], "notes": summary["notes"],
+                                 **({"window_us": summary["window_us"]} if "window_us" in summary else {}),
                                  "undistortion": lens_of_run(summary.get("undistortion")),
                                  "camera": summary.get("camera")})
         else:
