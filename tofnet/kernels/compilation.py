@@ -17,7 +17,7 @@ from typing import Callable, ContextManager, Iterator
 
 from numba.core import event
 
-__all__ = ["COMPILING", "Stopwatch", "compile_seconds", "kernels", "kernels_compiled"]
+__all__ = ["COMPILING", "Stopwatch", "announce_compiling", "compile_seconds", "kernels", "kernels_compiled"]
 
 #: What the log says when a process starts compiling its first kernel.
 COMPILING = "compiling kernels, first run only (20-60 s; numba caches them; 'tofnet warmup' does it ahead) ..."
@@ -62,6 +62,12 @@ class _Watch(event.Listener):
 
 
 _said: list[bool] = []
+
+
+def announce_compiling(announced: bool = True) -> None:
+    """Say (or not) ``COMPILING`` at this process's first compile: a command that says its own wait passes False."""
+    if not announced and not _said:
+        _said.append(True)
 
 
 def _first_compile() -> None:
