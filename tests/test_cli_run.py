@@ -177,3 +177,9 @@ def test_a_header_that_states_too_small_a_sensor_is_read_at_the_size_given(edge_
     assert len(whole) == len(read_depth(tmp_path / "e.npz")[0]) > 0
     assert main(["export", str(tmp_path / "d.npz"), "--recording", str(tmp_path / "small.raw"), "--sensor-size",
                  "240x180", "--maps", str(tmp_path / "maps")]) == 0
+    from tofnet.io.source import open_recording
+    (tmp_path / "big.raw").write_bytes(data.replace(b"geometry 240x180", b"geometry 99999x180")
+                                       .replace(b"width=240;height=180", b"width=99999;height=180"))
+    with open_recording(tmp_path / "big.raw") as source:  # a size the decoder cannot read: unknown, and said so
+        assert source.sensor_size is None
+        assert "is not a sensor size (width, height; at most 65535 px a side)" in " | ".join(source.notes)

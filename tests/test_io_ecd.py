@@ -127,3 +127,12 @@ def test_read_recording_errors(tmp_path, slider):
     (slider / "events.txt").write_text("# no events here\n")
     with pytest.raises(DataError, match="events.txt: no events"):
         read_recording(slider)
+
+
+def test_a_folder_of_event_files_is_not_a_recording_and_the_message_names_them(tmp_path):
+    from tofnet.io import read_recording
+    for name in ("b.raw", "a.aedat4", "notes.md"):
+        (tmp_path / name).write_bytes(b"")
+    with pytest.raises(DataError, match=r"no events.txt; .* it holds event files \('a.aedat4', 'b.raw'\): give one "
+                                        r"of them \(tofnet batch runs many\)"):
+        read_recording(tmp_path)

@@ -56,11 +56,13 @@ def one_line_error(capsys, argv) -> str:
     ("--sensor-size", "100000x100000", "--sensor-size: each side must be at most 65536 px"),
     ("--sensor-size", "65536x65536", "--sensor-size: at most 16,777,216 pixels"),
     ("--velocity", "1e400,0,0", "velocity.velocity: expected a finite number"),
+    ("--velocity", "0.5,0", "velocity.velocity: expected three numbers"),
+    ("--workers", "-1", "expected a whole number of workers >= 0"),
     ("--patch", "0x5", "--patch"),
 ])
 def test_cli_values_out_of_range_are_one_line(folder, tmp_path, capsys, option, value, expected):
     err = one_line_error(capsys, ["run", str(folder), "--out", str(tmp_path / "d.npz"), option, value, "--quiet"])
-    assert expected in err
+    assert expected in err and f"tofnet run: error: {option}: " in err  # named by the option typed
     assert not (tmp_path / "d.npz").exists()
 
 

@@ -190,6 +190,9 @@ def test_eval_and_export_window_the_estimates(tmp_path, capsys):
                  "--start", "100ms", "--duration", "100ms", "--no-png"]) == 0
     index = (tmp_path / "maps" / "index.csv").read_text().splitlines()
     assert len(index) == 1 + 2  # two 50 ms maps in the 100 ms window
+    capsys.readouterr()
+    assert main(["export", str(tmp_path / "d.npz"), "--maps", str(tmp_path / "none"), "--window", "0ms"]) == 2
+    assert "--window: expected a positive duration" in capsys.readouterr().err and not (tmp_path / "none").exists()
     depth, meta = read_depth(tmp_path / "d.npz")
     assert int(index[1].split(",")[4]) > 0
 

@@ -89,6 +89,8 @@ def handle(args) -> int:
     if args.maps:
         from tofnet.io.maps import depth_maps, write_depth_maps
         window_us = microseconds(seconds(args.window, "--window"))
+        if window_us <= 0:
+            raise TofnetError(f"--window: expected a positive duration (one map per window), got {args.window!r}")
         max_age_us = microseconds(seconds(args.max_age, "--max-age")) if args.max_age else None
         done = write_depth_maps(depth_maps(depth, sensor, window_us, t0_us=meta.get("t0_us"),
                                            max_age_us=max_age_us), args.maps, png=not args.no_png)

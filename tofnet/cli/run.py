@@ -68,6 +68,8 @@ def workers_option(text: str) -> int | str:
         value = int(text)
     except ValueError:
         raise BackendError(f"--workers: expected a whole number of workers or auto, got {text!r}") from None
+    if value < 0:
+        raise BackendError(f"--workers: expected a whole number of workers >= 0 (0 or auto: one per CPU), got {value}")
     if value > cpu_count():
         logging.getLogger("tofnet.cli").warning(f"warning: --workers: {value} workers on this machine's {cpu_count()} "
                                                 f"CPUs: at most {cpu_count()} run at once")
@@ -185,11 +187,18 @@ def build_network(args, recording_sensor_size, recording=None):
         undistort=not getattr(args, "no_undistort", False), estimator=getattr(args, "estimator", None),
         allow_import=args.allow_import, replaced=[_setting(item) for item in getattr(args, "set_params", None) or ()]
         + (["VelocityProcess.samples"] if args.velocity else []))  # --velocity makes every velocity constant
-    apply_overrides(network, timestep=args.timestep, refractory=args.refractory, distance=args.distance,
-                    counter_bits=args.counter_bits, velocity_per=args.velocity_per,
-                    update_every=args.update_every)
-    if args.velocity:
-        constant_velocity(network, args.velocity)
+    from tofnet.errors import NetworkError
+    options = dict(timestep=args.timestep, refractory=args.refractory, distance=args.distance,
+                   counter_bits=args.counter_bits, velocity_per=args.velocity_per, update_every=args.update_every)
+    for option, value in [*options.items(), ("velocity", args.velocity)]:  # each error names the option typed
+        try:
+            if option == "velocity" and value:
+                constant_velocity(network, value)
+            elif option != "velocity":
+                apply_overrides(network, **{option: value})
+        except NetworkError as err:
+            flag = f"--{option.replace('_', '-')}"
+            raise NetworkError(str(err) if str(err).startswith(flag) else f"{flag}: {err}") from None
     for item in getattr(args, "set_params", None) or ():
         set_parameter(network, item)
     if args.patch:

@@ -128,8 +128,14 @@ def read_ecd(folder: str | Path) -> Recording:
     if not folder.is_dir():
         raise DataError(located(folder, None, "not a folder; an ECD recording is a folder holding events.txt"))
     if not _present(folder / EVENTS):
+        from tofnet.errors import quote
+        from tofnet.io.detect import event_files_in
+        found = event_files_in(folder)
+        held = "" if not found else (f"; it holds event files ({', '.join(quote(n, 40) for n in found[:4])}"
+                                     f"{f' and {len(found) - 4} more' if len(found) > 4 else ''}): give one of them "
+                                     "(tofnet batch runs many)")
         raise DataError(located(folder, None, f"no {EVENTS}; an ECD recording folder needs {EVENTS} "
-                                              "(lines 't x y p': seconds, column, row, polarity)"))
+                                              f"(lines 't x y p': seconds, column, row, polarity){held}"))
     notes: list[str] = []
     events = read_events_txt(folder / EVENTS, notes)
     recording = Recording(events=events, source=str(folder), notes=notes)

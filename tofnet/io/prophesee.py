@@ -36,6 +36,18 @@ def open_faery(path: Path, kind: str) -> EventSource:
     return FaerySource(path, kind)
 
 
+def _geometry_line(path: Path) -> str | None:
+    """The header line that states the sensor size (``% geometry WxH`` or ``% format ...;width=..``), if any."""
+    with open(path, "rb") as handle:
+        for _ in range(1000):
+            line = handle.readline(4096)
+            if not line.startswith(b"%") or line.rstrip() == b"% end":
+                return None
+            if b"geometry" in line or b"width=" in line:
+                return line.rstrip().decode("latin1")
+    return None
+
+
 class FaerySource(EventSource):
     """EVT2/EVT2.1/EVT3 RAW, DAT and Event Stream files."""
 
@@ -68,7 +80,10 @@ class FaerySource(EventSource):
             if "size" not in str(err) or kind == "es":
                 raise DataError(located(self.path, None, f"not a readable {kind.upper()} file ({reason(err)})")) from None
             fallback = _NO_GEOMETRY
-            self.notes.append("the header gives no sensor size (width, height)")
+            stated = _geometry_line(self.path)
+            self.notes.append("the header gives no sensor size (width, height)" if stated is None else
+                              f"the header's {quote(stated, 60)} is not a sensor size (width, height; at most 65535 "
+                              "px a side): taken as unknown")
             if kind == "evt":
                 with evt.Decoder(self.path, fallback, None) as decoder:
                     self.detail = decoder.version.upper()
