@@ -161,3 +161,13 @@ def test_an_interrupted_run_keeps_the_whole_frames_it_wrote(recording_file, tmp_
     assert "interrupted" in captured.err and "3 PNG frames -> " + str(frames) in captured.out
     assert sorted(os.listdir(frames)) == [MANIFEST, "depth-000001.png", "depth-000002.png", "depth-000003.png"]
     assert not (tmp_path / "s.json").exists() and not leftovers(tmp_path)
+
+
+def test_live_says_where_the_rotation_comes_from_as_run_does(tmp_path, capsys):
+    rec = tmp_path / "wobble"
+    assert main(["simulate", "wobble_slider", str(rec), "--duration", "0.05", "--quiet"]) == 0
+    assert main(["run", str(rec), "--out", str(tmp_path / "d.npz"), "--quiet"]) == 0
+    said = [line for line in capsys.readouterr().out.splitlines() if line.startswith("rotation ")]
+    assert len(said) == 1 and "eq. 7" in said[0]
+    assert main(["live", "--replay", str(rec), "--speed", "100", "--no-view"]) == 0
+    assert [line for line in capsys.readouterr().out.splitlines() if line.startswith("rotation ")] == said

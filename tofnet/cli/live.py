@@ -50,7 +50,7 @@ def register(subparsers) -> None:
 
 
 def handle(args) -> int:
-    from tofnet.api import DEFAULT_BACKEND
+    from tofnet.api import DEFAULT_BACKEND, rotation_line
     from tofnet.cli.inputs import camera_options, input_options, sensor_size_option
     from tofnet.backends.runtime import clock_of
     from tofnet.cli.run import backend_choice, build_network, reader_lines, workers_line
@@ -128,6 +128,9 @@ def handle(args) -> int:
                   f"{step_us / 1000:g} ms)")
             latency = result.latency.get(result.depth_outputs[0], 0) if result.depth_outputs else 0
             print(f"backend        {backend}; depth latency {format_steps(latency)} ({latency * step_us / 1000:g} ms)")
+            rotation = rotation_line(network, meta, no_rotation=getattr(args, "no_rotation", False))
+            if rotation:  # as tofnet run says it: where eq. 7's ω comes from, or why it is not compensated
+                print(f"rotation       {rotation}")
             split = result.summary().get("workers")
             if split:  # how the work was split
                 print(f"workers        {workers_line(split)}")
