@@ -203,3 +203,15 @@ def test_a_folder_where_a_side_file_goes_is_refused_before_anything_is_written(t
     assert main(["convert", str(tmp_path / "rec"), str(tmp_path / "out" / "x.raw"), "--force", "--quiet"]) == 2
     assert "calib.txt: side file for the camera or poses: exists and is a folder" in capsys.readouterr().err
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["calib.txt"]
+
+
+def test_a_side_file_another_recording_reads_is_named_in_the_refusal(camera_clock, tmp_path, capsys):
+    source = camera_clock[1]
+    assert main(["convert", str(source), str(tmp_path / "a.raw"), "--quiet",
+                 "--intrinsics", "200,200,120,90"]) == 0
+    assert (tmp_path / "calib.txt").exists()
+    capsys.readouterr()
+    assert main(["convert", str(source), str(tmp_path / "c.dat"), "--quiet", "--intrinsics", "300,300,120,90"]) == 2
+    assert ("calib.txt: exists, and c.dat beside it would be read with it as its camera or poses; a.raw here reads it "
+            "too, and would with --force read the new one") in capsys.readouterr().err
+    assert read_recording(tmp_path / "a.raw").intrinsics.fx == 200

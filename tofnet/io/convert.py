@@ -77,8 +77,14 @@ def check_convert_output(out: str | Path, input_path: str | Path, *, force: bool
             raise DataError(located(side, None, "side file for the camera or poses: exists and is a folder"))
         # another recording's side file would be read with OUT as its camera or poses (an input's is its own)
         if os.path.lexists(side) and not force and input_among(side, inputs) is None:
+            from tofnet.io.detect import event_files_in
+            others = [name for name in event_files_in(out.parent) if name != out.name]
+            shared = (f"; {', '.join(others[:3])}{' ...' if len(others) > 3 else ''} here read"
+                      f"{'s' if len(others) == 1 else ''} it too, and would with --force read the new one"
+                      if others else "")
             raise DataError(located(side, None, f"exists, and {out.name} beside it would be read with it as its "
-                                                "camera or poses: convert into another folder, or --force to replace it"))
+                                                f"camera or poses{shared}: convert into another folder, or --force "
+                                                "to replace it"))
     if kind in _WRITERS_NEED:  # the writer's library, before anything is read or simulated
         from tofnet.io.extras import require
         require(_WRITERS_NEED[kind], out, f"writing {kind.upper()}")
