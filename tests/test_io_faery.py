@@ -209,3 +209,20 @@ def test_evt_decoder_keeps_times_monotonic(tmp_path, recording):
     assert read["t"][500] == events["t"][499]
     assert any(note.startswith("1 EVT3 events") for note in recording.notes)
     assert np.array_equal(np.delete(read, 500), np.delete(events, 500))
+
+
+def test_an_aedat4_file_cut_short_is_read_up_to_its_last_whole_packet_with_a_note(tmp_path, recording):
+    from tofnet.io.aedat import TRUNCATED, write_aedat4
+    path = tmp_path / "rec.aedat4"
+    packets = [recording.events[i:i + 500] for i in range(0, len(recording.events), 500)]
+    write_aedat4(path, packets, recording)
+    data = path.read_bytes()
+    cut = tmp_path / "cut.aedat4"
+    cut.write_bytes(data[:len(data) // 2])  # an interrupted recording: no index table, a packet cut in two
+    read = read_recording(cut)
+    assert 0 < len(read.events) < len(recording.events) and len(read.events) % 500 == 0
+    assert np.array_equal(read.events, recording.events[:len(read.events)])
+    assert TRUNCATED in read.notes
+    (tmp_path / "bad.aedat4").write_bytes(data[:len(data) // 2] + b"\xff" * 64 + data[len(data) // 2 + 64:])
+    with pytest.raises(DataError):  # garbage inside the file is not a cut: refused
+        read_recording(tmp_path / "bad.aedat4")

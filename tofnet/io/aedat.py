@@ -27,6 +27,15 @@ _ELEMENTS = {"imus": "samples (read as the IMU)", "frame": "frames", "triggers":
 _IMU_FIELDS = ("accelerometer_x", "accelerometer_y", "accelerometer_z", "gyroscope_x", "gyroscope_y", "gyroscope_z")
 
 
+#: The note of a file that ends inside a packet.
+TRUNCATED = "the file ends inside a packet (truncated?): the events of its whole packets were read, the rest is lost"
+
+
+def _cut_short(err: RuntimeError) -> bool:
+    """Whether faery's error is the end of the file inside a packet (Rust's UnexpectedEof)."""
+    return "failed to fill whole buffer" in str(err)
+
+
 class AedatSource(EventSource):
     """An AEDAT4 file; events from its first event track."""
 
@@ -94,7 +103,10 @@ class AedatSource(EventSource):
                         elif track.data_type == "imus" and len(packet):
                             imu.append(imu_to_ecd(packet))
                 except RuntimeError as err:
-                    raise DataError(located(self.path, None, f"cannot decode ({reason(err)})")) from None
+                    if not _cut_short(err):
+                        raise DataError(located(self.path, None, f"cannot decode ({reason(err)})")) from None
+                    # an interrupted recording (the camera unplugged, a copy cut short): what it holds is read
+                    self.notes.append(TRUNCATED)
         finally:  # also when a time window stops reading early: the IMU read so far, cut to the window
             if imu:
                 from tofnet.io.window import window_rows
@@ -124,7 +136,8 @@ class AedatSource(EventSource):
                         if stop_s is not None and parts[-1][-1, 0] >= stop_s:
                             break  # a sample at or after the window's end: the rows that cover it are in
             except RuntimeError as err:
-                raise DataError(located(self.path, None, f"cannot decode ({reason(err)})")) from None
+                if not _cut_short(err):
+                    raise DataError(located(self.path, None, f"cannot decode ({reason(err)})")) from None
         self._imu_read = True
         if parts:
             rows = np.concatenate(parts)
