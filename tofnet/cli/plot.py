@@ -31,7 +31,8 @@ def register(subparsers) -> None:
     p.add_argument("-o", "--out", help="PNG to write (a folder for 'all'); default: next to DEPTH, "
                                        "named <depth>_<kind>.png")
     p.add_argument("--window", metavar="START:END|LENGTH",
-                   help="time span, seconds since the start: '1.2:1.27', '1200ms:1270ms', or a length "
+                   help="time span, seconds since the run's first step (a run on a time window: its start, not "
+                        "the recording's first event): '1.2:1.27', '1200ms:1270ms', or a length "
                         "centred in the run, '70ms' (default: 70ms for depthmap, the whole run otherwise)")
     p.add_argument("--error-window", default=None,
                    help="window of the error-over-time figure's band, e.g. '20ms' (default auto: about 200 "
