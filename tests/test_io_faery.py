@@ -185,6 +185,14 @@ def test_evt_header_without_size_gives_unknown_sensor_then_extent(tmp_path, reco
     extent = (int(recording.events["x"].max()) + 1, int(recording.events["y"].max()) + 1)
     assert read.sensor_size == extent and any("extent" in note for note in read.notes)
     assert read_recording(tmp_path / "bare.raw", sensor_size=SENSOR).sensor_size == SENSOR
+    from tofnet.io.convert import convert
+    extent_text = f"sensor size {extent[0]}x{extent[1]} from the events' extent (the input does not say)"
+    for name, said in (("out.npz", extent_text), ("out.dat", extent_text), ("ecd", extent_text)):
+        assert said in convert(open_recording(tmp_path / "bare.raw"), tmp_path / name)  # said, whatever the output
+    import importlib.util
+    if importlib.util.find_spec("h5py"):  # the hdf5 extra
+        assert "not written: sensor size (the input does not say; read back, the events' extent gives it)" in \
+            convert(open_recording(tmp_path / "bare.raw"), tmp_path / "out.h5")
 
 
 def test_missing_extra_is_one_line_naming_it(tmp_path, recording, monkeypatch):

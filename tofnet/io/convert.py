@@ -131,6 +131,11 @@ def convert(source: EventSource, out: str | Path, *, force: bool = False,
                     messages.append(f"not written: IMU ({len(source.imu):,} samples; {kind} has no place for it)")
             if count == 0:
                 raise DataError(located(source.path, None, "no events"))
+    if source.sensor_size is None:  # the input does not say (RAW, DAT, ES and AEDAT4 took the extent above)
+        size = meta.sensor_size  # npz and ecd: the recording read whole, sized by its events' extent
+        messages.append("not written: sensor size (the input does not say; read back, the events' extent gives it)"
+                        if size is None else f"sensor size {size[0]}x{size[1]} from the events' extent (the input "
+                        "does not say)")
     if kind in _WITH_SIDE_FILES:
         _side_files(out.parent, meta, messages, force, source.path)
     if source.unread:  # streams of the input tofnet does not read (AEDAT4's frames, an HDF5's images, a bag's topics)
