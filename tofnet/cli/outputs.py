@@ -21,7 +21,7 @@ def check_run_outputs(args, network=None) -> None:
     for option, path in outputs.items():
         if path is not None:
             check_output(path, force=args.force, inputs=inputs, what=option)
-    if out.suffix not in (".npz", ".csv"):
+    if out.suffix.lower() not in (".npz", ".csv"):
         raise TofnetError(f"--out: depth output must be a .npz or .csv file, got {quote(out.name)}")
 
 

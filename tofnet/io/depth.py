@@ -58,9 +58,9 @@ def write_depth(path: str | Path, depth: np.ndarray, *, t0_us: int, timestep_us:
     path = Path(path)
     if not isinstance(depth, np.ndarray) or depth.dtype != DEPTH_DTYPE:
         raise TypeError(f"depth must be an array of dtype {DEPTH_DTYPE}, got {getattr(depth, 'dtype', type(depth))}")
-    if path.suffix not in (".npz", ".csv"):
+    if path.suffix.lower() not in (".npz", ".csv"):
         raise DataError(located(path, None, "depth output must be a .npz or .csv file"))
-    if path.suffix == ".npz":
+    if path.suffix.lower() == ".npz":
         try:
             summary_json = json.dumps(summary or {}, default=_jsonable)
         except (TypeError, ValueError) as err:
@@ -94,9 +94,9 @@ def read_depth(path: str | Path) -> tuple[np.ndarray, dict]:
     does not hold them, as in CSV) and ``summary`` (a dict, None for CSV).
     """
     path = Path(path)
-    if path.suffix == ".npz":
+    if path.suffix.lower() == ".npz":
         return _read_npz(path)
-    if path.suffix == ".csv":
+    if path.suffix.lower() == ".csv":
         return _read_csv(path), {**{key: None for key in _META}, "summary": None}
     raise DataError(located(path, None, "expected a .npz or .csv depth file"))
 
