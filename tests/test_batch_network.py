@@ -136,3 +136,25 @@ def test_a_task_with_an_undistort_spec_says_so_and_is_scored_at_the_undistorted_
     scored = json.loads(capsys.readouterr().out)
     assert scored["matched"] == len(alone_depth) > 500 and scored["unmatched"] == 0
     assert (row["matched"], row["median_abs_m"]) == (scored["matched"], pytest.approx(scored["median_abs_m"]))
+
+
+def test_a_task_on_a_time_window_records_it_as_run_does(folder, capsys):
+    """The depth file of a windowed task holds its window (window_us): eval reads the same events as for run's."""
+    (folder / "plan_w.yaml").write_text("name: w\noutput: out_w\nrecordings: [turning]\nstart: 100ms\n"
+                                        "duration: 100ms\ngrid:\n  refractory: [0]\nkeep: [summary, depth]\n")
+    row = run_task(expand(load_plan(folder / "plan_w.yaml"))[0])
+    assert row["status"] == "ok", row["error"]
+    assert main(["run", str(folder / "turning"), "--refractory", "0", "--start", "100ms", "--duration", "100ms",
+                 "--out", str(folder / "alone_w.npz"), "--quiet", "--force"]) == 0
+    batch_meta, alone_meta = read_depth(row["depth_file"])[1], read_depth(folder / "alone_w.npz")[1]
+    assert batch_meta["summary"]["window_us"] == alone_meta["summary"]["window_us"]
+    start, stop = batch_meta["summary"]["window_us"]
+    assert stop - start == 100_000
+    capsys.readouterr()
+    (folder / "bad.npz").write_bytes((folder / "alone_w.npz").read_bytes())
+    from tofnet.io.depth import write_depth
+    depth, meta = read_depth(folder / "alone_w.npz")
+    write_depth(folder / "bad.npz", depth, t0_us=meta["t0_us"], timestep_us=meta["timestep_us"],
+                latency_steps=meta["latency_steps"], summary={**meta["summary"], "window_us": [stop, start]})
+    assert main(["eval", str(folder / "turning"), str(folder / "bad.npz")]) == 2  # a stranger's window: one line
+    assert "bad.npz: its summary's window_us is not [start, stop] in µs" in capsys.readouterr().err

@@ -177,6 +177,12 @@ def test_a_header_that_states_too_small_a_sensor_is_read_at_the_size_given(edge_
     assert len(whole) == len(read_depth(tmp_path / "e.npz")[0]) > 0
     assert main(["export", str(tmp_path / "d.npz"), "--recording", str(tmp_path / "small.raw"), "--sensor-size",
                  "240x180", "--maps", str(tmp_path / "maps")]) == 0
+    assert main(["plot", "depthmap", str(tmp_path / "small.raw"), str(tmp_path / "d.npz"), "--out",
+                 str(tmp_path / "d.png")]) == 0  # read as far as the run read it (its depth file says so)
+    capsys.readouterr()
+    assert main(["run", str(edge_folder), "--intrinsics", "200,200,119.5,89.5", "--sensor-size", "100x80", "--out",
+                 str(tmp_path / "crop.npz")]) == 0  # a crop of a file that says its size: no doubt about the camera
+    assert "principal point" not in capsys.readouterr().err
     from tofnet.io.source import open_recording
     (tmp_path / "big.raw").write_bytes(data.replace(b"geometry 240x180", b"geometry 99999x180")
                                        .replace(b"width=240;height=180", b"width=99999;height=180"))

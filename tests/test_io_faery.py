@@ -234,3 +234,44 @@ def test_an_aedat4_file_cut_short_is_read_up_to_its_last_whole_packet_with_a_not
     (tmp_path / "bad.aedat4").write_bytes(data[:len(data) // 2] + b"\xff" * 64 + data[len(data) // 2 + 64:])
     with pytest.raises(DataError):  # garbage inside the file is not a cut: refused
         read_recording(tmp_path / "bad.aedat4")
+
+
+def test_aedat4_metadata_holds_the_whole_imu_after_the_first_events_were_looked_at(tmp_path, recording):
+    """Opening looks at the first packet's times (the plausibility notes): the IMU samples decoded before it are
+    not taken for the recording's IMU (a streaming run builds its network from the metadata's)."""
+    from faery.extension import aedat
+
+    from tofnet.io import aedat as tofnet_aedat
+    path = tmp_path / "imu_first.aedat4"
+    tracks = [tofnet_aedat._track_node(0, "EVTS", "events", {"sizeX": ("int", SENSOR[0]), "sizeY": ("int", SENSOR[1])}),
+              tofnet_aedat._track_node(1, "IMUS", "imu", {})]
+    description = [aedat.DescriptionNode(name="outInfo", path="/mainloop/Recorder/outInfo/", attributes={},
+                                         nodes=tracks)]
+    events, imu = recording.events, recording.imu
+    with aedat.Encoder(path=path, description=description, compression=aedat.LZ4_DEFAULT) as encoder:
+        for packet in tofnet_aedat._imu_packets(imu[:5]):  # some IMU, then events, then the rest of the IMU
+            encoder.write(1, packet)
+        encoder.write(0, tofnet_aedat.faery_packet(events[:1000]))
+        for packet in tofnet_aedat._imu_packets(imu[5:]):
+            encoder.write(1, packet)
+        encoder.write(0, tofnet_aedat.faery_packet(events[1000:]))
+    source = open_recording(path)
+    assert source.metadata().imu.shape == imu.shape
+
+
+def test_an_indexed_aedat4_file_with_a_corrupt_packet_is_refused(tmp_path, recording):
+    """A file with an index table was closed properly: an end of data inside it is corruption, not a cut."""
+    import struct
+
+    from tofnet.io.aedat import write_aedat4
+    path = tmp_path / "ten.aedat4"
+    write_aedat4(path, np.array_split(recording.events, 10), recording)
+    data = bytearray(path.read_bytes())
+    at = len(b"#!AER-DAT4.0\r\n")
+    at += 4 + struct.unpack_from("<i", data, at)[0]  # past the header
+    for _ in range(3):  # past three packets (stream id, size, data)
+        at += 8 + struct.unpack_from("<ii", data, at)[1]
+    struct.pack_into("<i", data, at + 4, 0x7FFFFF00)  # the fourth's size: past the end of the file
+    (tmp_path / "corrupt.aedat4").write_bytes(bytes(data))
+    with pytest.raises(DataError, match="cannot decode"):
+        read_recording(tmp_path / "corrupt.aedat4")

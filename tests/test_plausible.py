@@ -134,22 +134,27 @@ def test_an_evt3_header_with_a_malformed_t0_is_refused(tmp_path, capsys):
 
 
 def test_nanoseconds_of_a_microsecond_clock_are_noted_and_a_millisecond_clock_is_not(tmp_path, recording):
+    """Times all alike modulo 1000 with about one event each: noted; said before a run (a doubt) only when they
+    are ns since 1970; a busy clock of whole ms (many events per tick) is not noted."""
     from tofnet.io.arrays import write_npz_recording
     from tofnet.io.recording import Recording
 
-    def notes_of(times, name):
+    def opened(times, name):
         events = recording.events.copy()
         events["t"] = times
         path = tmp_path / name
         write_npz_recording(path, Recording(events=events, sensor_size=SENSOR, intrinsics=recording.intrinsics))
-        return " | ".join(_notes(path))
+        source = open_recording(path)
+        return " | ".join(source.notes), " | ".join(note for _, note in source.doubts)
 
     t = recording.events["t"][0] + 30 * np.arange(len(recording.events), dtype=np.int64)  # one event per µs time
-    assert "modulo 1000" not in notes_of(t, "us.npz")  # a µs clock: every residue
-    in_ns = notes_of(t * 1000 + 417, "ns.npz")  # ns of a µs clock, with an offset in ns
-    assert "event times are all 417 modulo 1000 µs" in in_ns and "nanoseconds of a µs clock?" in in_ns
-    assert "read as µs it lasts 201 s, in ns 0.201 s" in in_ns
-    whole_ms = notes_of(t // 1000 * 1000, "ms.npz")  # a clock of whole ms: many events per time, a coarse clock
-    assert "modulo 1000" not in whole_ms
+    assert "modulo 1000" not in opened(t, "us.npz")[0]  # a µs clock: every residue
+    in_ns, doubts = opened(t * 1000 + 417, "ns.npz")  # Unix-epoch ns of a µs clock, with an offset in ns
+    assert "event times are all 417 modulo 1000 µs" in in_ns and "nanoseconds of a µs clock, or a clock" in in_ns
+    assert "read as µs it lasts 201 s, in ns 0.201 s" in in_ns and "modulo 1000" in doubts
+    ticks = t[0] // 1000 + np.arange(len(t), dtype=np.int64) // 2
+    quiet_ms, doubts = opened(ticks * 1000, "quiet.npz")  # a quiet sensor's ms clock: 2 events a tick
+    assert "modulo 1000" in quiet_ms and "modulo 1000" not in doubts  # noted, not said before a run
+    assert "modulo 1000" not in opened(recording.events["t"] // 1000 * 1000, "ms.npz")[0]  # 5 events a tick
     folder = _folder(tmp_path, recording, events=recording.events)
     assert "modulo 1000" not in " | ".join(_notes(folder))

@@ -97,13 +97,15 @@ def run_task(task: Task, recording_path: str | None = None) -> dict[str, Any]:
 
 def _run(task: Task, recording_path: str, folder: Path) -> dict[str, Any]:
     from tofnet.api import DEFAULT_BACKEND, apply_overrides, load_network, run
-    from tofnet.io import read_recording
+    from tofnet.io.source import open_recording
 
     from tofnet.batch.grid import BACKEND_KEYS
     from tofnet.batch.reading import open_options
 
     options = task.recording.options
-    recording = read_recording(recording_path, **open_options(options))
+    with open_recording(recording_path, **open_options(options)) as source:
+        recording = source.read()
+        window = source.window  # absolute µs, recorded for eval and plot of the depth file
     # The same network `tofnet run RECORDING [--spec S | --estimator E] [--refractory R ...] [--velocity V]` builds:
     # the recording decides the default network's rotation (eq. 7 when it turns) and is checked against
     # a spec's lens handling.
@@ -124,6 +126,8 @@ def _run(task: Task, recording_path: str, folder: Path) -> dict[str, Any]:
                     compile_options=compile_options)
     summary = result.summary()
     summary["recording"] = recording_path
+    if window is not None:
+        summary["window_us"] = list(window)
     from tofnet.api import lens_of_run, rotation_line, undistortion_of
 
     summary["rotation"] = rotation_line(network, recording, no_rotation=not task.network.rotation)

@@ -71,14 +71,18 @@ def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = 
 
     depth, meta = read_depth(depth_path)
     meta = dict(meta)
+    summary = meta.get("summary") or {}
     if window is None:  # the run's own time window, when it had one: its events, not the whole recording's
-        window = _window_of_run(meta.get("summary") or {})
+        window = _window_of_run(summary, depth_path)
+    reading = summary.get("reading_size")  # the run's --sensor-size: the file read as far as the run read it
+    reading = tuple(reading) if isinstance(reading, list) and len(reading) == 2 and all(
+        type(v) is int and 0 < v <= 1 << 16 for v in reading) else None
     with open_recording(recording_path, window=window, allow_external=allow_external, side=side,
-                        rectify=rectify, **camera) as source:
+                        rectify=rectify, reading_size=reading, **camera) as source:
         recording = source.read()
         bounds = source.window
     if recording.sensor_size is not None and len(depth):
-        width, height = recording.sensor_size
+        width, height = (max(a, b) for a, b in zip(recording.sensor_size, reading or (0, 0)))
         outside = (depth["x"] >= width) | (depth["y"] >= height)
         if np.any(outside):
             raise DataError(f"{depth_path}: {int(outside.sum()):,} of its {len(depth):,} estimates lie outside "
@@ -107,15 +111,21 @@ def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = 
     return recording, depth, meta
 
 
-def _window_of_run(summary: dict):
+def _window_of_run(summary: dict, depth_path: str):
     """The time window (absolute µs on the file's clock) a depth file's ``tofnet run`` read, else None."""
     from tofnet.io.window import parse_window
-    bounds = summary.get("window_us")
+    if "window_us" not in summary:
+        return None
+    bounds = summary["window_us"]
+    problem = f"{depth_path}: its summary's window_us is not [start, stop] in µs (stop null: the end)"
     if not (isinstance(bounds, list) and len(bounds) == 2 and type(bounds[0]) is int
             and (bounds[1] is None or type(bounds[1]) is int)):
-        return None
+        raise DataError(problem)
     start, stop = bounds
-    return parse_window(start=f"@{start}us", until=None if stop is None else f"@{stop}us")
+    try:
+        return parse_window(start=f"@{start}us", until=None if stop is None else f"@{stop}us")
+    except TofnetError as err:
+        raise DataError(f"{problem}: {err}") from None
 
 
 def _run_on_another_recording(summary: dict, events: int) -> str | None:

@@ -57,7 +57,7 @@ def handle(args) -> int:
         from tofnet.io.source import open_recording
         try:
             with open_recording(recording_path, window=window, allow_external=args.allow_external,
-                                sensor_size=sensor_size_option(args), **camera_options(args)) as source:
+                                reading_size=sensor_size_option(args), **camera_options(args)) as source:
                 # The camera only; the events only when the sensor size must come from their extent.
                 recording = source.metadata(imu=False) if source.sensor_size is not None else source.read()
                 bounds = source.window

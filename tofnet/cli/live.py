@@ -66,7 +66,7 @@ def handle(args) -> int:
     opened = None
     if args.replay:
         from tofnet.io.source import open_recording
-        opened = open_recording(args.replay, sensor_size=sensor_size_option(args), **input_options(args))
+        opened = open_recording(args.replay, reading_size=sensor_size_option(args), **input_options(args))
         meta = opened.metadata()
         origin = str(args.replay)
         if meta.sensor_size is None and not args.sensor_size:

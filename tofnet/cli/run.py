@@ -102,7 +102,9 @@ def add_network_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--estimator", choices=("paper", "improved"), default=None,
                    help="built-in network: paper (the default: the paper's network) or improved (the time-surface "
                         "estimator, beyond the paper: docs/time_surface.md)")
-    g.add_argument("--sensor-size", metavar="WxH", help="sensor size in pixels (default: the recording's, else 240x180)")
+    g.add_argument("--sensor-size", metavar="WxH",
+                   help="sensor size in pixels (default: the recording's, else 240x180); smaller than the recording's: "
+                        "a crop (the events outside are counted); larger: the file's stated size is taken as wrong")
     g.add_argument("--timestep", help="timestep, e.g. 1ms or 0.001 (seconds)")
     g.add_argument("--refractory", help="refractory period, e.g. 5ms; 0 disables")
     g.add_argument("--distance", type=int, help="pixels between facilitating and trigger pixel")
@@ -218,12 +220,16 @@ def handle(args) -> int:
     clock = Stopwatch()
     check_run_outputs(args)
     monitors = [Monitor.parse(text, args.monitor_every) for text in args.monitor]
-    # --sensor-size is the sensor's: where the file does not say its size, not the events' extent (nor a note that
-    # it is); where the file says another, a header's too small geometry is read at the given one
-    with open_recording(args.recording, sensor_size=sensor_size_option(args), **input_options(args)) as source:
+    # --sensor-size is the network's; a header that states a smaller sensor is read up to it (reading_size)
+    given_size = sensor_size_option(args)
+    with open_recording(args.recording, reading_size=given_size, **input_options(args)) as source:
         for topic, doubt in [] if args.quiet else source.doubts:  # before a run that may be long because of it
             if not (topic == "poses" and args.velocity):  # --velocity: the poses are not used
                 print(f"tofnet run: note: {doubt}", file=sys.stderr)
+        # where the file does not say its size, --sensor-size is it (not the events' extent, nor a note that it
+        # is); where the file says a smaller one, its header is wrong; a smaller --sensor-size is a crop
+        if given_size and (source.sensor_size is None or any(g > f for g, f in zip(given_size, source.sensor_size))):
+            source.sensor_size = given_size
         # A file that says its sensor size (or given one) streams through the network in chunks (events
         # never all in memory); otherwise the size comes from the events' extent, which needs them all.
         streaming = source.sensor_size is not None and not monitors
@@ -246,6 +252,8 @@ def handle(args) -> int:
     summary["recording"] = str(args.recording)
     if source.window is not None:  # absolute µs: eval and plot read the same events (tofnet.cli.eval.load_inputs)
         summary["window_us"] = list(source.window)
+    if given_size:  # and read the file as far as this run did
+        summary["reading_size"] = list(given_size)
     summary["rotation"] = rotation_line(network, recording, no_rotation=getattr(args, "no_rotation", False))
     summary["undistortion"] = undistortion_of(network, recording, result, str(args.recording),
                                               no_undistort=getattr(args, "no_undistort", False))
@@ -320,7 +328,7 @@ def write_outputs(out: Path, result, summary: dict, record_tot: bool, check=None
             write_depth(path, records, t0_us=result.t0_us, timestep_us=result.timestep_us,
                         latency_steps=result.latency[name],
                         summary={**result.facts(), "recording": summary["recording"], "notes": summary["notes"],
-                                 **({"window_us": summary["window_us"]} if "window_us" in summary else {}),
+                                 **{key: summary[key] for key in ("window_us", "reading_size") if key in summary},
                                  "undistortion": lens_of_run(summary.get("undistortion")),
                                  "camera": summary.get("camera")})
         else:

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from tofnet.errors import DataError, located, quote, reason
-from tofnet.io.event_source import EventSource
+from tofnet.io.event_source import FIRST_TIMES, EventSource
 from tofnet.io.extras import require
 from tofnet.io.faery_shared import encoder_error, faery_packet
 
@@ -53,7 +53,10 @@ class AedatSource(EventSource):
                     counts: dict[int, int] = {track.id: 0 for track in tracks}  # a track without packets: 0
                     starts: dict[int, int] = {}
                     ends: dict[int, int] = {}
-                    for definition in decoder.file_data_definitions():
+                    definitions = decoder.file_data_definitions()
+                    if not definitions:  # no index table (an interrupted recording): counts unknown
+                        raise RuntimeError("no index table")
+                    for definition in definitions:
                         counts[definition.track_id] = counts.get(definition.track_id, 0) + definition.elements_count
                         if definition.elements_count:
                             starts[definition.track_id] = min(starts.get(definition.track_id, definition.start_t),
@@ -77,6 +80,7 @@ class AedatSource(EventSource):
         # an IMU track with samples (or an unknown count): a track the index table says is empty is not read
         self._imu_track = any(track.data_type == "imus" and counts.get(track.id) != 0 for track in tracks)
         self._imu_read = False  # metadata()'s pass for the IMU is made once
+        self._indexed = bool(counts)  # an index table: the file was closed properly, so it cannot end cut short
         for track in tracks:
             if track.id == self.track_id:
                 continue
@@ -103,15 +107,27 @@ class AedatSource(EventSource):
                         elif track.data_type == "imus" and len(packet):
                             imu.append(imu_to_ecd(packet))
                 except RuntimeError as err:
-                    if not _cut_short(err):
-                        raise DataError(located(self.path, None, f"cannot decode ({reason(err)})")) from None
-                    # an interrupted recording (the camera unplugged, a copy cut short): what it holds is read
-                    self.notes.append(TRUNCATED)
+                    self._cut_short_or_refuse(err)
         finally:  # also when a time window stops reading early: the IMU read so far, cut to the window
             if imu:
                 from tofnet.io.window import window_rows
                 rows = np.concatenate(imu)
                 self.imu = rows if self.window is None else window_rows(rows, *self.window)
+
+    def _cut_short_or_refuse(self, err: RuntimeError) -> None:
+        """A file without an index table that ends inside a packet (an interrupted recording, a copy cut short) is
+        read up to there, with a note; any other decoding error (an indexed file's too: a corrupt packet) refuses it."""
+        if self._indexed or not _cut_short(err):
+            raise DataError(located(self.path, None, f"cannot decode ({reason(err)})")) from None
+        if TRUNCATED not in self.notes:
+            self.notes.append(TRUNCATED)
+
+    def first_times(self, count: int = FIRST_TIMES) -> np.ndarray:
+        imu = self.imu  # decoding the first packet reads the IMU before it: not the recording's whole IMU
+        try:
+            return super().first_times(count)
+        finally:
+            self.imu = imu
 
     def metadata(self, *, imu: bool = True):
         """As ``EventSource.metadata``, with the IMU: the container interleaves it with the events, so a file
@@ -136,8 +152,7 @@ class AedatSource(EventSource):
                         if stop_s is not None and parts[-1][-1, 0] >= stop_s:
                             break  # a sample at or after the window's end: the rows that cover it are in
             except RuntimeError as err:
-                if not _cut_short(err):
-                    raise DataError(located(self.path, None, f"cannot decode ({reason(err)})")) from None
+                self._cut_short_or_refuse(err)
         self._imu_read = True
         if parts:
             rows = np.concatenate(parts)
@@ -147,7 +162,7 @@ class AedatSource(EventSource):
         # The index table gives each packet's first time: no decoding (a file without it is decoded).
         if self._first_t is not None:
             return self._first_t
-        return super().first_time()
+        return int(times[0]) if len(times := self.first_times()) else None
 
     def last_time(self) -> int | None:
         # Likewise the last: each packet's last time is in the index table.

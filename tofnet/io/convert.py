@@ -78,7 +78,10 @@ def check_convert_output(out: str | Path, input_path: str | Path, *, force: bool
         # another recording's side file would be read with OUT as its camera or poses (an input's is its own)
         if os.path.lexists(side) and not force and input_among(side, inputs) is None:
             from tofnet.io.detect import event_files_in
-            others = [name for name in event_files_in(out.parent) if name != out.name]
+            # the formats with no place for a camera or poses: they always read the side files (a .npz may be a
+            # depth file, an .npy a true depth)
+            others = [name for name in event_files_in(out.parent, suffixes=(".raw", ".dat", ".es", ".aedat4"))
+                      if name != out.name]
             shared = (f"; {', '.join(others[:3])}{' ...' if len(others) > 3 else ''} here read"
                       f"{'s' if len(others) == 1 else ''} it too, and would with --force read the new one"
                       if others else "")

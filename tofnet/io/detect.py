@@ -42,16 +42,17 @@ _EXPECTED = ("an ECD or dataset sequence folder, a ROS 2 bag folder or an events
 _ROSBAG2_MAGIC = (b"SQLite format 3\x00", b"\x89MCAP")
 
 
-def event_files_in(folder: Path, scanned: int = 10_000) -> list[str]:
-    """Names of the files of ``folder`` whose suffix names an events format (of its first ``scanned`` entries),
-    sorted: for the message of a folder that is not a recording but holds some."""
+def event_files_in(folder: Path, scanned: int = 10_000, suffixes: tuple[str, ...] | None = None) -> list[str]:
+    """Names of the files of ``folder`` whose suffix names an events format (or is one of ``suffixes``; of its first
+    ``scanned`` entries), sorted: for the message of a folder that is not a recording but holds some."""
+    wanted = set(_SUFFIX_NAMES) if suffixes is None else set(suffixes)
     names = []
     try:
         with os.scandir(folder) as entries:
             for number, entry in enumerate(entries):
                 if number >= scanned:
                     break
-                if Path(entry.name).suffix.lower() in _SUFFIX_NAMES and entry.is_file(follow_symlinks=False):
+                if Path(entry.name).suffix.lower() in wanted and entry.is_file(follow_symlinks=False):
                     names.append(entry.name)
     except OSError:
         return []

@@ -23,6 +23,8 @@ from tofnet.io.recording import Intrinsics, Recording, VelocitySource
 
 #: Events per chunk unless asked otherwise: 13 MB of ``EVENT_DTYPE``.
 DEFAULT_CHUNK = 1_000_000
+#: Events whose times ``first_times`` keeps (a first packet: the plausibility notes look at them).
+FIRST_TIMES = 1 << 16
 
 #: ``progress(events_done, events_total)``; the total is ``None`` when the file does not say.
 ProgressHook = Callable[[int, "int | None"], None]
@@ -49,6 +51,9 @@ class EventSource:
         self.streams: dict[str, str] = {}  # other streams in the file: name -> what
         self.unread: list[str] = []  # those of them tofnet does not read ("name, what"): convert says so
         self.notes: list[str] = []
+        self._first_times: np.ndarray | None = None  # the first packet's times (first_times)
+        #: A sensor the events may fill beyond the file's stated size (open_recording's ``reading_size``), px.
+        self.reading_size: tuple[int, int] | None = None
         self.doubts: list[tuple[str, str]] = []  # (topic, note) that usually mean a mistake (tofnet.io.plausible)
         self.window: tuple[int, int | None] | None = None  # [start, stop) µs on the file's clock (set_window)
         self._origin_us = 0  # the file's first event, which relative window times count from
@@ -70,26 +75,24 @@ class EventSource:
 
     def first_time(self) -> int | None:
         """The file's first event time (µs), ``None`` without events. Readers with an index override
-        this; the default decodes the first packet."""
-        packets = iter(self._packets(1 << 16))
-        try:
-            for packet in packets:
-                if len(packet):
-                    return int(packet[packet.dtype.names[0]][0])
-            return None
-        finally:
-            getattr(packets, "close", lambda: None)()
+        this; the default decodes the first packet (once: ``first_times``)."""
+        times = self.first_times()
+        return int(times[0]) if len(times) else None
 
-    def first_times(self, count: int = 1 << 16) -> np.ndarray:
-        """The times (µs, int64) of the file's first events: its first packet's, at most ``count``."""
-        packets = iter(self._packets(count))
-        try:
-            for packet in packets:
-                if len(packet):
-                    return np.asarray(packet[packet.dtype.names[0]][:count], dtype=np.int64)
-            return np.empty(0, np.int64)
-        finally:
-            getattr(packets, "close", lambda: None)()
+    def first_times(self, count: int = FIRST_TIMES) -> np.ndarray:
+        """The times (µs, int64) of the file's first events: its first packet's, at most ``count`` (at most
+        ``FIRST_TIMES``; decoded once per source)."""
+        if self._first_times is None:
+            packets = iter(self._packets(FIRST_TIMES))
+            self._first_times = np.empty(0, np.int64)
+            try:
+                for packet in packets:
+                    if len(packet):
+                        self._first_times = np.array(packet[packet.dtype.names[0]][:FIRST_TIMES], dtype=np.int64)
+                        break
+            finally:
+                getattr(packets, "close", lambda: None)()
+        return self._first_times[:count]
 
     def _window_packets(self, size_hint: int, start: int, stop: int | None) -> Iterable[np.ndarray]:
         """The events of ``[start, stop)``. The default decodes from the beginning, skips whole packets

@@ -31,7 +31,7 @@ from tofnet.io.extras import require
 from tofnet.io.hdf5_checks import H5File
 from tofnet.io.recording import Intrinsics
 from tofnet.io.calibration import intrinsics_from
-from tofnet.io.event_source import EventSource
+from tofnet.io.event_source import FIRST_TIMES, EventSource
 
 
 def scalar(h5: H5File, name: str, default=None):
@@ -72,8 +72,8 @@ class ColumnsSource(EventSource):
     def first_time(self) -> int | None:
         return int(self._times(0, 1)[0]) if self.n_rows else None
 
-    def first_times(self, count: int = 1 << 12) -> np.ndarray:
-        return self._times(0, min(count, self.n_rows))  # the time column's first rows only
+    def first_times(self, count: int = FIRST_TIMES) -> np.ndarray:
+        return self._times(0, min(count, FIRST_TIMES, self.n_rows))  # the time column's first rows only
 
     def _window_end_us(self) -> int | None:
         return int(self._times(self.n_rows - 1, self.n_rows)[0]) if self.n_rows else None

@@ -26,6 +26,8 @@ MIN_EVENTS = 1000
 #: ``MAX_PER_TIME``, are noted: a µs clock's times in ns (a clock of whole ms has many events per time).
 MIN_TIMES = 100
 MAX_PER_TIME = 4.0
+#: Times from this on (read as µs: 3,170 years) are said before a run: ns since 1970 (ROS stamps, ``time_ns()``).
+EPOCH_NS = 10**17
 
 
 def plausibility_notes(source) -> list[tuple[str, str, bool]]:
@@ -88,11 +90,13 @@ def _time_grain(times: np.ndarray, first: float, last: float | None) -> tuple[st
     distinct = np.unique(times)
     if len(distinct) < MIN_TIMES or np.any(distinct % 1000 != distinct[0] % 1000):
         return None
-    if len(times) / len(distinct) >= MAX_PER_TIME:  # whole milliseconds: a coarse clock, not another unit
+    if len(times) / len(distinct) >= MAX_PER_TIME:  # a clock of whole ms with many events per tick: not a unit
         return None
     lasts = "" if last is None else f"; read as µs it lasts {last - first:.3g} s, in ns {(last - first) / 1000:.3g} s"
+    # loud when the times are ns since 1970 (read as µs, thousands of years): a quiet sensor's ms clock is not
     return (f"the first {len(distinct):,} event times are all {distinct[0] % 1000} modulo 1000 µs, about one event "
-            f"each: nanoseconds of a µs clock? (integer arrays and binary formats hold µs{lasts})", True)
+            f"each: nanoseconds of a µs clock, or a clock of whole ms? (integer arrays and binary formats hold "
+            f"µs{lasts})", bool(distinct[0] >= EPOCH_NS))
 
 
 def _principal_point(source) -> tuple[str, bool] | None:

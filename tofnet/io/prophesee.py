@@ -140,7 +140,8 @@ class FaerySource(EventSource):
         from tofnet.io.evt3 import clamped_of, decode_file, new_state
 
         # the header's geometry, widened to a sensor size given over it (a header that states too small a sensor)
-        width, height = (max(a, b) for a, b in zip(self._fallback or self._geometry, self.sensor_size or (0, 0)))
+        given = [size for size in (self.sensor_size, self.reading_size) if size is not None]
+        width, height = (max(sizes) for sizes in zip(self._fallback or self._geometry, *given))
         state = new_state()
         try:
             yield from decode_file(self.path, width, height, state=state)

@@ -56,10 +56,13 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
                    columns: str | tuple[str, ...] | None = None,
                    topics: dict[str, str] | None = None, window=None, intrinsics: Intrinsics | None = None,
                    calib: str | Path | None = None, camera: str | None = None,
-                   allow_external: bool = False, side: str | None = None, rectify: bool = False) -> EventSource:
+                   allow_external: bool = False, side: str | None = None, rectify: bool = False,
+                   reading_size: tuple[int, int] | None = None) -> EventSource:
     """Open any recording ``detect_format`` knows; see the module docstring.
 
-    ``sensor_size`` (width, height px) overrides the file's; ``columns`` gives the column
+    ``sensor_size`` (width, height px) overrides the file's; ``reading_size`` (px) is a sensor the events may
+    fill (``tofnet run --sensor-size``: the network's) while the file's size stays: a reader that refuses pixels
+    beyond its header's geometry (EVT3) reads up to it; ``columns`` gives the column
     order of a plain ``(n, 4)`` numpy array (e.g. ``"x,y,t,p"``); ``topics`` overrides the
     ROS bag topics found automatically (keys ``events``, ``pose``, ``imu``, ``camera_info``);
     ``window`` (a ``tofnet.io.window.TimeWindow``) reads only the events of that time window;
@@ -114,12 +117,15 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
         if kind == "hdf5":  # an MVSEC or TUM-VIE file: the calibration its dataset ships beside it
             from tofnet.io.sequences_other import complete_file
             complete_file(source, side or "left")
+        for given in (sensor_size, reading_size):
+            if given is not None:
+                problem = sensor_size_problem(*(int(v) for v in given))
+                if problem:
+                    raise DataError(f"sensor size: {problem}")
         if sensor_size is not None:
-            width, height = (int(v) for v in sensor_size)
-            problem = sensor_size_problem(width, height)
-            if problem:
-                raise DataError(f"sensor size: {problem}")
-            source.sensor_size = (width, height)
+            source.sensor_size = tuple(int(v) for v in sensor_size)
+        if reading_size is not None:
+            source.reading_size = tuple(int(v) for v in reading_size)
         if intrinsics is not None or calib is not None:
             from tofnet.io.calibration import set_camera
             set_camera(source, intrinsics, calib, camera)
