@@ -144,6 +144,10 @@ def process(ts, xs, ys, ps, ip, fp, surface, bursts, prev, last_step, motion, ri
             else:
                 for dq in range(2 * radius + 1):
                     prefetch(flat_surface, top + dq * row)
+            if layered:  # a burst's later event writes its cell on the surface of its index (k < K)
+                own = top + radius * row
+                for kq in range(1, planes):
+                    prefetch(flat_surface, own + 2 * kq * plane_size)
             if not pinhole:
                 sq = (yq + row0) * width + xq
                 sq = sq if per_pixel else sample_of[sq]
