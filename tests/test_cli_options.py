@@ -263,3 +263,15 @@ def test_ctrl_c_inside_a_compiled_kernel_is_an_interruption_not_a_traceback(monk
     monkeypatch.setattr(tofnet.cli.info, "handle", broken)
     with pytest.raises(SystemError, match="a real bug"):
         main(["info", "whatever"])
+
+
+def test_a_command_leaves_tofnets_log_as_it_found_it(tmp_path, capsys):
+    """main() shows the log as 'tofnet COMMAND: ...' while the command runs; a script that calls the
+    API afterwards must not see its warnings under that command's name (nor lose them to it)."""
+    logger = logging.getLogger("tofnet")
+    before = list(logger.handlers), logger.level, logger.propagate
+    assert main(["info", str(tmp_path / "nothing.npy")]) == 2
+    assert capsys.readouterr().err.startswith("tofnet info: error: ")
+    assert (list(logger.handlers), logger.level, logger.propagate) == before
+    logging.getLogger("tofnet.io.trust").warning("warning: after the command")
+    assert "tofnet info" not in capsys.readouterr().err

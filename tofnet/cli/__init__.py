@@ -89,9 +89,8 @@ def main(argv: list[str] | None = None) -> int:
     from tofnet.cli.progress import log_to_stderr
     from tofnet.io.guard import reading
 
-    log_to_stderr(args.command)
-    try:
-        with reading():  # the files the command reads, which no output may replace
+    try:  # reading(): the files the command reads, which no output may replace
+        with log_to_stderr(args.command), reading():
             return int(args.handler(args) or 0)
     except TofnetError as err:
         print(f"tofnet {args.command}: error: {err}", file=sys.stderr)

@@ -6,6 +6,8 @@ from __future__ import annotations
 import logging
 import sys
 import time
+from contextlib import contextmanager
+from typing import Iterator
 
 #: True while a terminal's live progress line has no newline yet (a note must start a new line).
 _open_line = [False]
@@ -24,17 +26,24 @@ class _NoteHandler(logging.Handler):
         note(self.format(record))
 
 
-def log_to_stderr(command: str) -> None:
-    """Show tofnet's log (INFO and up: e.g. the first compile of kernels) as notes on stderr, never
-    on stdout, where some commands write data: ``tofnet COMMAND: message``."""
+@contextmanager
+def log_to_stderr(command: str) -> Iterator[None]:
+    """While a command runs, show tofnet's log (INFO and up: e.g. the first compile of kernels) as
+    notes on stderr, never on stdout, where some commands write data: ``tofnet COMMAND: message``.
+    The logger is as it was afterwards (a script calling ``main`` and then the API sees no prefix)."""
     logger = logging.getLogger("tofnet")
-    for old in [h for h in logger.handlers if isinstance(h, _NoteHandler)]:
-        logger.removeHandler(old)
+    before = logger.level, logger.propagate
     handler = _NoteHandler()
     handler.setFormatter(logging.Formatter(f"tofnet {command}: %(message)s"))
     logger.addHandler(handler)
     logger.setLevel(logging.INFO)
     logger.propagate = False
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(before[0])
+        logger.propagate = before[1]
 
 
 class Progress:
