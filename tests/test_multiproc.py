@@ -69,6 +69,24 @@ def test_equals_the_fixed_backend_bit_for_bit(session, options, patch):
     assert_identical(result, FixedBackend().run(compiled, recording, record_tot=True))
 
 
+def test_a_process_that_acts_without_input_counts_only_the_steps_the_run_ran(session):
+    """The session runs in chunks of 40 steps; the last one must end where the run does, not at its
+    chunk's end (a core-placed heartbeat counted 2400 beats against fixed's 1488)."""
+    from tofnet.core.network import Network
+    from tofnet.testing import HeartbeatProcess
+
+    beating = Network(list(network().processes) + [HeartbeatProcess(name="beat", sensor_size=SENSOR)])
+    compiled = compile_network(beating, patch=(8, 8))
+    recording = texture()
+    recording.events = recording.events[recording.events["t"] < 165_000]  # its last chunk: steps 160-199
+    expected = FixedBackend().run(compiled, recording)
+    assert expected.steps < 200  # the run ends inside its last chunk
+    result = session.run(recording, compiled=compiled)
+    assert expected.counts["beat"]["beats"] >= expected.steps * min(SENSOR)  # a beat per step, steps it ran
+    assert result.counts["beat"] == expected.counts["beat"] and result.steps == expected.steps
+    assert result.outputs["beat.beat"].tobytes() == expected.outputs["beat.beat"].tobytes()
+
+
 def test_a_full_240x180_scene_equals_the_fixed_backend_bit_for_bit(session):
     from tofnet.sim.engine import generate
     from tofnet.sim.scenarios import scenario

@@ -45,10 +45,11 @@ def test_chunks_of_1_7_and_1000_steps_equal_one_run(name, workers):
         with Session(COMPILED, RECORDING, backend=backend_of(name, workers), probes=["time_of_travel.counts"]) as s:
             while s.step < 105:
                 s.run(steps=chunk)
+            ran = s.step  # past the run's end (103): those steps ran too
             result = s.finish()
         for key, records in whole.outputs.items():
             assert result.outputs[key].tobytes() == records.tobytes(), (chunk, key)
-        assert result.counts == whole.counts and result.steps == whole.steps
+        assert result.counts == whole.counts and result.steps == max(whole.steps, ran) and whole.steps == 103
 
 
 def test_variables_agree_across_backends_at_every_step(workers):
@@ -157,6 +158,20 @@ def test_monitors_record_what_was_asked_and_no_more():
     assert set(arrays) == {"step", "values", "x", "y"} and arrays["x"].tolist() == [3, 10]
     with pytest.raises(TofnetError, match="PROCESS.VAR"):
         Monitor.parse("nonsense")
+
+
+@pytest.mark.parametrize("name", ["reference", "fixed", "multiproc"])
+def test_a_monitor_samples_every_step_the_run_ran_the_last_ones_in_flight_too(name, workers):
+    """finish() runs the steps in flight after the last event (the network's latency): they ran, so the
+    monitors sample them; and steps a session ran past the end count in the result's steps."""
+    every_step = Monitor("time_of_travel.counter", every=1, pixels=[(3, 4)])
+    with Session(COMPILED, RECORDING, backend=backend_of(name, workers), monitors=[every_step]) as s:
+        result = s.finish()
+    assert result.steps > 100 and every_step.steps == list(range(result.steps))
+    with Session(COMPILED, RECORDING, backend=backend_of(name, workers)) as s:
+        s.run(steps=result.steps + 20)
+        past = s.finish()
+    assert past.steps == result.steps + 20 and past.depth.tobytes() == result.depth.tobytes()
 
 
 def test_stop_releases_the_workers_at_once():
@@ -283,3 +298,36 @@ def test_a_session_reports_its_set_up_apart_from_the_network_time(name, monkeypa
         assert result.setup_time > 0, result.setup_time
     assert result.wall_time + result.setup_time + result.compile_time <= elapsed + 1e-3, \
         (result.wall_time, result.setup_time, result.compile_time, elapsed)
+
+
+@pytest.mark.parametrize("name,options", [("fixed", {"workers": 2}), ("multiproc", None), ("reference", None)])
+def test_a_process_number_and_a_changed_parameter_mean_the_same_on_bands_and_workers(name, options, workers):
+    """A ``vector`` variable is the whole process's: a process declaring one runs whole, so ``get``
+    reads that number (bands answered one per region, and the gather failed). A parameter set in a
+    session reaches ``self.process`` of the model on worker processes too, as on one machine."""
+    from tofnet import InputProcess, Network
+    from tofnet.testing import SpikeTallyProcess
+
+    def network():
+        source, tally = InputProcess(name="input", sensor_size=SENSOR), SpikeTallyProcess(name="tally", limit=100)
+        source.events.connect(tally.events)
+        return compile_network(Network([source, tally]), patch=(8, 8))
+
+    def session_run(backend, backend_options):
+        with Session(network(), RECORDING, backend=backend, backend_options=backend_options) as s:
+            s.run(steps=30)
+            seen = int(s.get("tally.tally")[0])
+            s.set("tally.limit", 0)  # from now on every spike
+            s.run(steps=30)
+            s.set("tally.tally", 7)
+            result = s.finish()
+        return seen, result
+
+    expected_seen, expected = session_run("fixed", None)
+    seen, result = session_run(backend_of(name, workers), options)
+    assert expected_seen == 100 and seen == expected_seen
+    assert result.outputs["tally.passed"].tobytes() == expected.outputs["tally.passed"].tobytes()
+    assert result.counts["tally"] == expected.counts["tally"] == {"passed": len(expected.outputs["tally.passed"])}
+    assert len(expected.outputs["tally.passed"]) > 300  # 100 passed, then every spike
+    if name != "reference":
+        assert "tally" in result.summary()["workers"]["whole"]

@@ -25,8 +25,8 @@ from tofnet.backends.registry import get_backend
 from tofnet.backends.runtime import clock_of, start_time_us
 from tofnet.backends.stream import Collected
 from tofnet.core.network import Network
-from tofnet.errors import BackendError, TofnetError
-from tofnet.events import MAX_TIME_US
+from tofnet.errors import BackendError, TofnetError, UnsupportedError
+from tofnet.events import EVENT_DTYPE, MAX_TIME_US
 from tofnet.io.recording import Recording
 from tofnet.monitor import Monitor
 
@@ -103,7 +103,7 @@ class Session:
                 self._resource.close(graceful=False)
                 raise
         if "stream" not in capabilities:
-            raise BackendError(f"backend {getattr(backend, 'name', type(backend).__name__)!r} offers no streams, "
+            raise UnsupportedError(f"backend {getattr(backend, 'name', type(backend).__name__)!r} offers no streams, "
                                f"which a session needs (Backend.capabilities has no 'stream')")
         return backend.open_stream(self.compiled, fuse=None if self._fuse else False, **options)
 
@@ -312,6 +312,7 @@ class Session:
         self._check_open()
         if self.recording is not None:
             self.run()
+        self._drain_sampled()
         result = self._guard(self.stream.close)
         self._keep(result.outputs)
         if self._keep_outputs:  # else only the steps run now, in flight until the end
@@ -319,6 +320,19 @@ class Session:
         self._state = "finished"
         self.stop()
         return result
+
+    def _drain_sampled(self) -> None:
+        """Run the steps ``close`` would run (the outputs still in flight) here, where the variable
+        monitors sample the start of each as of every step before (no events come: each is the
+        same step run); a sample is of a step that ran, so none at the end."""
+        end = self.stream.end_step() if hasattr(self.stream, "end_step") else None
+        if end is None or end <= self.step or not any(m.kind == "var" for m in self.monitors):
+            return
+        nothing = np.empty(0, EVENT_DTYPE)
+        for boundary in [b for b in self._boundaries(end) if b < end]:  # close runs the rest
+            until_us = self.stream.t0_us + boundary * self.timestep_us
+            self._keep(self._guard(lambda: self.stream.feed_all(nothing, until_us=until_us)))
+            self._sample()
 
     # -- state ----------------------------------------------------------------------------------
     def _split(self, name: str) -> tuple[Any, str]:

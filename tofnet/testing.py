@@ -267,6 +267,7 @@ from tofnet.core.counters import Count  # noqa: E402
 from tofnet.core.params import Param  # noqa: E402
 from tofnet.core.ports import Payload, PortSpec  # noqa: E402
 from tofnet.core.process import Process  # noqa: E402
+from tofnet.core.vars import Var  # noqa: E402
 from tofnet.models import StepModel, model  # noqa: E402
 
 
@@ -305,3 +306,76 @@ class ParityGateModel(StepModel):
 
     def counts(self):
         return {"passed": self.passed}
+
+
+class HeartbeatProcess(Process):
+    """Every step, events or not, a spike at each pixel (d, d) of the diagonal: a core-placed process
+    that acts without input (a run must count exactly the steps it ran, on every backend and band)."""
+
+    outports = (PortSpec("beat", Payload.POLARITY, 1, "a spike per diagonal pixel and step"),)
+    counters = (Count("beats", "output", "spikes sent"),)
+    resources_per_pixel = {"neurons": 1}
+
+
+@model(HeartbeatProcess)
+class HeartbeatModel(StepModel):
+    supports_regions = True
+
+    def __init__(self, process, ctx):
+        super().__init__(process, ctx)
+        self.beats = 0
+
+    def step(self, k, inbox):
+        x0, x1, y0, y1 = self.ctx.bounds
+        diagonal = np.arange(max(x0, y0), min(x1, y1))
+        out = np.zeros(len(diagonal), Payload.POLARITY.dtype)
+        out["x"], out["y"] = diagonal, diagonal
+        self.beats += len(out)
+        return {"beat": out}
+
+    def counts(self):
+        return {"beats": self.beats}
+
+
+class SpikeTallyProcess(Process):
+    """Passes spikes until it has passed ``limit`` of them (0: no limit), keeping the tally: a
+    process with a number of the whole process (a ``vector`` variable, so it runs whole on
+    bands and workers) whose model reads its parameter from ``self.process`` each step."""
+
+    inports = (PortSpec("events", Payload.POLARITY, 1, "spikes"),)
+    outports = (PortSpec("passed", Payload.POLARITY, 1, "the spikes passed"),)
+    params = (Param("limit", "int", 0, doc="spikes to pass at most (0: all)", minimum=0),)
+    vars = (Var("tally", "vector", "int64", doc="spikes passed so far", settable=True, low=0),)
+    counters = (Count("passed", "output", "spikes passed"),)
+    resources_per_pixel = {"accumulators": 1}
+
+
+@model(SpikeTallyProcess)
+class SpikeTallyModel(StepModel):
+    supports_regions = True  # what it emits is its region's; its tally is the whole process's
+
+    def __init__(self, process, ctx):
+        super().__init__(process, ctx)
+        self.tally = self.sent = 0
+
+    def step(self, k, inbox):
+        spikes = inbox.get("events")
+        if spikes is None:
+            return {"passed": None}
+        room = len(spikes) if self.process.limit == 0 else max(0, self.process.limit - self.tally)
+        passed = np.array(spikes[:room])
+        self.tally += len(passed)
+        self.sent += len(passed)
+        return {"passed": passed}
+
+    def counts(self):
+        return {"passed": self.sent}
+
+    def get_var(self, name, step):
+        return np.array([self.tally])
+
+    def set_var(self, name, value, step):
+        self.tally = int(value[0])
+
+    def set_param(self, name, value):
+        pass  # read from self.process each step

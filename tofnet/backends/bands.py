@@ -34,7 +34,7 @@ from tofnet.kernels.input_filter import NEVER
 from tofnet.kernels.kernel_config import KernelConfig, Region
 from tofnet.kernels.region import UNSORTED, TimeOfTravelKernel
 from tofnet.machine import cpu_count
-from tofnet.models.base import Model
+from tofnet.models.base import Model, splits_into_regions
 
 #: Packets with fewer events run their bands one after the other in the caller's thread: handing
 #: work to another thread and back (~0.15-0.3 ms on a virtual machine) costs more than it saves there
@@ -346,7 +346,7 @@ def band_placer(bands: Sequence[Band], threads: int):
             if process.name not in facts["banded"]:
                 facts["banded"].append(process.name)
             return BandedReader(process, model_class, bands, ctx, pool)
-        if process.placement != "core" or not getattr(model_class, "supports_regions", False):
+        if process.placement != "core" or not splits_into_regions(process, model_class):
             if process.name not in facts["whole"]:
                 facts["whole"].append(process.name)
             return model_class(process, ctx)

@@ -23,6 +23,7 @@ from tofnet.compiler.compiled import network_of
 from tofnet.core.network import Network
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, EVENT_DTYPE, TOT_DTYPE
+from tofnet.kernels.fixed_point import DEFAULT_FRAC_BITS, DEFAULT_PAYLOAD_BITS, FixedPointFormat
 from tofnet.io.recording import Intrinsics, Recording, VelocitySource, as_velocity_source
 
 #: Initial size of a fused run's result buffer in estimates (at most one per event); 4M x 28 B
@@ -82,8 +83,11 @@ class LocalBackend(Backend):
         #: Events per packet of ``run`` (None: 2^17 with one worker, 2^19 with several).
         self.packet_events = packet_events_for(packet_events, self.workers, self.name or "backend")
 
-    def _format(self):
-        return None
+    def _format(self) -> FixedPointFormat | None:
+        """The depth's fixed-point format, by ``arithmetic``: the default one for a backend whose
+        arithmetic is ``fixed`` (a subclass setting only ``arithmetic``/``family`` computes in fixed
+        point as it says), None for float."""
+        return FixedPointFormat(DEFAULT_FRAC_BITS, DEFAULT_PAYLOAD_BITS) if self.arithmetic == "fixed" else None
 
     def open_stream(self, compiled, *, recording: Recording | None = None, intrinsics: Intrinsics | None = None,
                     velocity_source: VelocitySource | tuple[float, float, float] | None = None,

@@ -293,6 +293,8 @@ class MultiprocSession:
             t0 = clock.t0_us if t0_us is None else int(t0_us)
             return self._banded_stream(compiled, pipeline, plans, known, t0, f"{pipeline.names[1]}.counts" in probes)
 
+        facts = split_facts(compiled, plans)
+
         def build(start_us: int) -> GraphExecutor:
             specs: dict[int, list] = {plan.index: [] for plan in plans}
 
@@ -300,6 +302,8 @@ class MultiprocSession:
                 if process.placement != "core":
                     return model_class(process, ctx)
                 placements, built = placements_for(compiled, process, model_class, plans, ctx)
+                if placements[0].rect is None and process.name not in facts["whole"]:  # one instance, on one worker
+                    facts["whole"].append(process.name)
                 for placement, spec in zip(placements, built):
                     specs[placement.worker].append(spec)
                 return RemoteModel(process, model_class, placements, self._exchange)
@@ -317,7 +321,7 @@ class MultiprocSession:
         stream = _GuardedStream(self, self.backend.name, build, t0, clock.timestep_us, sinks,
                                 payloads_of(network, list(dict.fromkeys(sinks + probes))))
         stream.extra = {"frac_bits": self.backend.format.frac_bits, "payload_bits": self.backend.format.payload_bits,
-                        "startup_s": self.startup_seconds, **split_facts(compiled, plans)}
+                        "startup_s": self.startup_seconds, **facts}
         return stream
 
     def _banded_stream(self, compiled, pipeline, plans, known, t0_us, record_tot: bool) -> FusedStream:
@@ -359,16 +363,15 @@ class MultiprocSession:
         for lo, hi in zip(np.r_[0, bounds], np.r_[bounds, total]):
             if hi <= lo:
                 continue
-            until = t0 + (int(chunk[hi - 1]) + 1) * chunk_us
+            # the last chunk runs to its last event's step, as a whole run does: a chunk's end past it would run
+            # steps the run has not (a process that acts without input would count them)
+            until = t0 + (int(chunk[hi - 1]) + 1) * chunk_us if hi < total else None
             collected.add(stream.feed_all(events[lo:hi], until_us=until))
             if progress is not None:
                 progress(int(hi), total)
         result = stream.close()
         collected.add(result.outputs)
         result.outputs = collected.joined(result.payloads, stream._empty)
-        # Chunks end past the run's last step; what host fields sent there is not the run's (as on the other backends).
-        result.outputs = {name: r[r["step"] < result.steps] if len(r) and r["step"][-1] >= result.steps else r
-                          for name, r in result.outputs.items()}
         return result.timed_by(clock)
 
 

@@ -36,9 +36,26 @@ def register_backend(name: str, factory: Callable[..., Backend] | str) -> None:
 
 def _lazy(target: str) -> Callable[..., Backend]:
     def load(**options) -> Backend:
-        module, attr = target.split(":")
-        return getattr(importlib.import_module(module), attr)(**options)
+        module, _, attr = target.partition(":")
+        try:
+            factory = getattr(importlib.import_module(module), attr)
+        except (ImportError, AttributeError, ValueError) as err:  # ValueError: an empty module name
+            raise BackendError(f"cannot load backend {target!r}: {type(err).__name__}: {err}") from None
+        return factory(**options)
     return load
+
+
+def _entry_point(name: str) -> Callable[..., Backend] | None:
+    """The factory of the ``tofnet.backends`` entry point ``name``; one line when it does not load
+    (a broken plug-in names itself, and leaves the other backends usable)."""
+    for ep in entry_points(group="tofnet.backends"):
+        if ep.name == name:
+            try:
+                return ep.load()
+            except Exception as err:
+                raise BackendError(f"entry point tofnet.backends:{name} ({ep.value}) failed to load: "
+                                   f"{type(err).__name__}: {err}") from None
+    return None
 
 
 def available_backends(optional: bool = False) -> list[str]:
@@ -57,7 +74,7 @@ def get_backend(name: str, **options) -> Backend:
     elif name in _BUILTIN or name in _OPTIONAL:
         factory = _lazy({**_OPTIONAL, **_BUILTIN}[name])
     else:
-        factory = next((ep.load() for ep in entry_points(group="tofnet.backends") if ep.name == name), None)
+        factory = _entry_point(name)
     if factory is not None:
         try:
             return factory(**options)

@@ -18,7 +18,7 @@ from tofnet.backends.band_merge import merged_by_step
 from tofnet.compiler.partition import rects_mask
 from tofnet.core.process import Process
 from tofnet.kernels.region import Region
-from tofnet.models.base import Model, ModelContext
+from tofnet.models.base import Model, ModelContext, splits_into_regions
 
 #: A model instance on a worker: (process name, core index; -1 for a whole-layer instance).
 Key = tuple[str, int]
@@ -206,7 +206,7 @@ def placements_for(compiled, process: Process, model_class: type, plans: list[Wo
     """Where the instances of ``process`` run and how each is built."""
     values = process.values
     ctx = replace(ctx, recording=None)  # what a core-placed model needs arrives on its ports
-    if not getattr(model_class, "supports_regions", False):
+    if not splits_into_regions(process, model_class):
         worker = sorted(plans, key=lambda p: len(p.cores))[0].index
         key = (process.name, -1)
         return [Placement(key, worker, None)], [ModelSpec(key, model_class, type(process), process.name, values, ctx)]

@@ -195,6 +195,16 @@ class GraphStream:
             for hook in hooks:
                 hook()
 
+    def end_step(self) -> int | None:
+        """The step ``close`` runs to (exclusive): every output of every event fed is out by then;
+        None before any event."""
+        ex = self.executor
+        if ex is None:
+            return None
+        last = ex.complete_until()
+        last = -1 if last is None else last  # the step of the latest event; it is complete now
+        return last + 1 + ex.drain_steps
+
     def close(self) -> RunResult:
         """Run the steps still in flight; their outputs (``outputs``) and every count so far."""
         if self._closed:
@@ -203,11 +213,9 @@ class GraphStream:
         ex = self.executor
         if ex is None:
             raise BackendError("stream closed before any event: nothing ran (t0 unknown)")
-        last = ex.complete_until()
-        last = -1 if last is None else last  # the step of the latest event; it is complete now
-        steps = last + 1 + ex.drain_steps  # every output of every event is out after these
+        steps = max(ex.clock, self.end_step())  # a session may have run past the end: those steps ran too
         try:
-            outputs = ex.advance(max(ex.clock, steps))
+            outputs = ex.advance(steps)
             counts = ex.counts()
         finally:
             self._release()

@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 import sys
 
+from tofnet.errors import BackendError
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
@@ -28,7 +30,7 @@ def register(subparsers) -> None:
 
 
 def handle(args) -> int:
-    from tofnet.backends.registry import available_backends, get_backend
+    from tofnet.backends.registry import available_backends
     from tofnet.conformance import DEFAULT_BASELINE, run_suite, select_cases
     from tofnet.conformance.runner import footnote, format_row, header, summary_line
 
@@ -39,8 +41,8 @@ def handle(args) -> int:
             print(f"{c.name:<{width}}  {c.doc}")
         print()
         for name in available_backends():
-            backend = get_backend(name)
-            print(f"backend {name:<12} arithmetic {backend.arithmetic}")
+            backend, problem = _loaded(name)
+            print(f"backend {name:<12} " + (f"arithmetic {backend.arithmetic}" if backend else f"cannot load: {problem}"))
         return 0
     if args.json:
         from tofnet.io.files import check_output
@@ -54,8 +56,15 @@ def handle(args) -> int:
     workers = workers_list(args.workers) if args.workers else None
     if workers is not None and not args.backend:
         backends = ["fixed", "float"]
+    unusable = {name: problem for name in backends for problem in [_loaded(name)[1]] if problem}
+    if args.backend and unusable:  # asked for by name: one line before any table
+        raise BackendError(next(iter(unusable.values())))
     outcomes, failed, cache = [], 0, {}
     for name in backends:
+        if name in unusable:  # a broken plug-in among all the backends: said, counted, and the others still run
+            print(f"== {name}: cannot load: {unusable[name]}\n")
+            failed += 1
+            continue
         print(f"== {name} with {args.workers} workers vs one" if workers else f"== {name} vs {against}")
         print(header())
         report = lambda r: print(format_row(r), flush=True)  # noqa: E731
@@ -78,9 +87,17 @@ def handle(args) -> int:
     return 1 if failed else 0
 
 
+def _loaded(name: str):
+    """``(backend, None)``, or ``(None, why)`` when ``name`` cannot be built (e.g. its plug-in fails to import)."""
+    from tofnet.backends.registry import get_backend
+    try:
+        return get_backend(name), None
+    except BackendError as err:
+        return None, str(err)
+
+
 def workers_list(text: str) -> list[int]:
     """``--workers 1,2,3,7``: positive whole numbers."""
-    from tofnet.errors import BackendError
     try:
         values = [int(part) for part in text.split(",") if part.strip()]
     except ValueError:

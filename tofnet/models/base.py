@@ -72,6 +72,14 @@ class ModelContext:
         return seconds_of(self.timestep_us)
 
 
+def splits_into_regions(process: Process, model_class: type) -> bool:
+    """Whether instances of ``model_class`` may each hold a region of ``process`` (bands, cores): the
+    model says it can, and the process declares no ``vector`` variable (numbers of the whole process,
+    which no merge of regions' values could give)."""
+    return bool(getattr(model_class, "supports_regions", False)) and \
+        not any(var.shape == "vector" for var in type(process).vars)
+
+
 class Model:
     """Runs one process. Subclasses set the class attributes and implement ``run``."""
 
