@@ -202,7 +202,7 @@ def test_an_unknown_option_is_said_by_its_subcommand_with_the_closest_option(cap
 
 
 def test_the_workers_line_says_bands_and_threads_apart():
-    from tofnet.cli.run import workers_line
+    from tofnet.cli.run_summary import workers_line
 
     assert workers_line({"threads": 2, "bands": 64, "whole": []}) == "64 bands of rows on 2 threads"
     assert workers_line({"threads": 1, "bands": 1, "whole": [], "one_band": "small packets"}) == \

@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 
 from tofnet.api import run
-from tofnet.cli.run import format_summary
+from tofnet.cli.run_summary import format_summary
 from tofnet.core.counters import KINDS, Count
 from tofnet.core.network import Network
 from tofnet.core.process import Process
@@ -103,6 +103,17 @@ def test_the_summary_accounts_for_every_event_once_per_reader(name):
     latencies = set(result.latency.values())
     latency_lines = [line for line in text.splitlines() if line.startswith("latency")]
     assert len(latency_lines) == (1 if len(latencies) == 1 else len(result.latency))
+    # a count no other line says (a denoiser's drops, a user's gate) has its process's line
+    said_apart = set(readers) | {name.partition(".")[0] for name in result.depth_outputs[:1]
+                                 if len(result.depth_outputs) == 1}
+    said_apart |= {(summary.get("undistortion") or {}).get("process")}  # the undistort line
+    for process, counts in result.counts.items():
+        own = [k for k in counts if not result.declared[process][k].get("total")]
+        if process not in said_apart and own:
+            line = next(line for line in text.splitlines() if line.startswith(f"{process:<14} "))
+            assert all(f"{k.replace('_', ' ')} {counts[k]:,}" in line for k in own), line
+    for process in result.counts:  # and none twice (the undistort process's counts are its lens line's)
+        assert sum(line.startswith(f"{process:<14} ") for line in text.splitlines()) <= 1, process
 
 
 def test_two_readers_are_not_summed_and_each_output_has_its_latency():

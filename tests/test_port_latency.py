@@ -6,7 +6,7 @@ import pytest
 from tofnet import InputProcess, Network, Process
 from tofnet.backends.event_driven import FixedBackend
 from tofnet.backends.registry import available_backends, get_backend
-from tofnet.cli.run import latency_lines
+from tofnet.cli.run_summary import latency_lines
 from tofnet.core.ports import Payload, PortSpec
 from tofnet.errors import NetworkError
 from tofnet.models import StepModel, register_model

@@ -53,7 +53,8 @@ def handle(args) -> int:
     from tofnet.api import DEFAULT_BACKEND, rotation_line
     from tofnet.cli.inputs import camera_options, input_options, sensor_size_option
     from tofnet.backends.runtime import clock_of
-    from tofnet.cli.run import backend_choice, build_network, reader_lines, workers_line
+    from tofnet.cli.run import backend_choice, build_network
+    from tofnet.cli.run_summary import reader_lines, workers_line
     from tofnet.io.files import atomic_path, write_text_atomic
     from tofnet.units import seconds
     from tofnet.live import CameraSource, ReplaySource, run_live
