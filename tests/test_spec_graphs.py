@@ -47,6 +47,31 @@ def test_bad_module_paths_get_one_line_naming_the_key():
     body = {"processes": {"x": {"type": "tofnet.networks:depth_network"}}}
     with pytest.raises(SpecError, match="is not a process type"):
         spec_from_dict(body)
+    body = {"processes": {"x": {"type": "tofnet.testing:ParityGateProces"}}}  # a typo
+    with pytest.raises(SpecError, match="module 'tofnet.testing' has no 'ParityGateProces'"):
+        spec_from_dict(body)
+
+
+def test_a_bare_type_name_two_modules_define_is_refused_naming_both(monkeypatch):
+    """The last class imported used to win, silently."""
+    import sys
+    import types
+
+    from tofnet.core.process import Process
+    monkeypatch.setattr(Process, "_registry", dict(Process._registry))
+    monkeypatch.setattr(Process, "_defined", {name: set(where) for name, where in Process._defined.items()})
+    for name in ("twin_a_zz", "twin_b_zz"):
+        module = types.ModuleType(name)
+        exec("from tofnet.testing import ParityGateProcess\n"
+             "class TwinGateProcess(ParityGateProcess):\n    pass\n", module.__dict__)
+        monkeypatch.setitem(sys.modules, name, module)
+    text = ("processes:\n  input: {type: InputProcess, sensor_size: [10, 8]}\n  gate: {type: TwinGate}\n"
+            "connections:\n  - input.events -> gate.events\n")
+    with pytest.raises(SpecError, match="'TwinGateProcess' is defined by twin_a_zz:TwinGateProcess and "
+                                        "twin_b_zz:TwinGateProcess; name one as module:Class"):
+        load_spec(text)
+    named = load_spec(text.replace("TwinGate}", "'twin_b_zz:TwinGateProcess'}"), allow_import=["twin_b_zz"])
+    assert type(named.network.process("gate")).__module__ == "twin_b_zz"
 
 
 def test_an_entry_point_offers_a_process_type(monkeypatch):

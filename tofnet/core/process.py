@@ -43,6 +43,8 @@ class Process:
     placement: ClassVar[str] = "core"
 
     _registry: ClassVar[dict[str, type["Process"]]] = {}
+    #: Class name -> every ``module:Class`` defining a process of that name (two: a bare name is ambiguous).
+    _defined: ClassVar[dict[str, set[str]]] = {}
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -56,6 +58,7 @@ class Process:
                     raise TypeError(f"{cls.__name__}.{spec.name}: added_latency_steps is declared on output ports, "
                                     f"as a whole number of steps >= 0 (or None), got {steps!r}")
         Process._registry[cls.__name__] = cls
+        Process._defined.setdefault(cls.__name__, set()).add(f"{cls.__module__}:{cls.__qualname__}")
 
     def __init__(self, name: str | None = None, **values: Any):
         type_name = type(self).__name__
@@ -95,8 +98,20 @@ class Process:
         return (SENSOR_SIZE,) + own if not any(p.name == SENSOR_SIZE.name for p in cls.params) else cls.params
 
     @classmethod
+    def ambiguity(cls, type_name: str) -> str | None:
+        """Why a bare class name cannot name one process type (two modules define it), or None."""
+        where = sorted(cls._defined.get(type_name, ()))
+        if len(where) < 2:
+            return None
+        return f"process type {type_name!r} is defined by {' and '.join(where)}; name one as module:Class"
+
+    @classmethod
     def type_named(cls, type_name: str) -> type["Process"]:
-        """The process class called ``type_name``; raises naming the known types."""
+        """The process class called ``type_name``; raises naming the known types, or the modules
+        that define it when more than one does."""
+        ambiguous = cls.ambiguity(type_name)
+        if ambiguous:
+            raise NetworkError(ambiguous)
         try:
             return cls._registry[type_name]
         except KeyError:

@@ -244,11 +244,16 @@ def process_class(type_name: str, *, allow_import: Any = None, spec_dir: Path | 
             raise SpecError(f"cannot import {quote(module_name)} for process type {quote(type_name)}: "
                             f"{type(err).__name__}: {reason(err)}") from None
         found = getattr(module, attr, None)
+        if found is None:
+            raise SpecError(f"{quote(type_name)}: module {quote(module_name)} has no {quote(attr)}")
         if not (isinstance(found, type) and issubclass(found, Process)):
             raise SpecError(f"{quote(type_name)} is not a process type (a subclass of tofnet.Process)")
         return found
     for candidate in (type_name, type_name + "Process"):
         if candidate in Process._registry:
+            ambiguous = Process.ambiguity(candidate)
+            if ambiguous:
+                raise SpecError(ambiguous)
             return Process._registry[candidate]
     for ep in entry_points(group=ENTRY_POINTS):
         if ep.name == type_name:
