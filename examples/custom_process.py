@@ -33,7 +33,7 @@ class DepthConsistencyProcess(Process):
     """
 
     inports = (PortSpec("depth", Payload.DEPTH, 1, "depth estimates, metres"),)
-    outports = (PortSpec("kept", Payload.DEPTH, 1, "the estimates a neighbour agrees with", required=False),)
+    outports = (PortSpec("kept", Payload.DEPTH, 1, "the estimates a neighbour agrees with"),)
     params = (
         Param("radius", "int", 2, unit="px", doc="neighbourhood that may agree", minimum=1),
         Param("window", "duration", "20ms", unit="s", doc="how recent the agreeing estimate must be", minimum=0.0),

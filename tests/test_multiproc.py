@@ -330,3 +330,37 @@ def test_the_worker_check_runs_multiproc_in_both_its_modes():
     assert [r.mode for r in results] == ["bands-1", "bands-2", "bands-1-per-core", "bands-2-per-core"]
     assert all(r.ok for r in results), [r.first for r in results]
     assert all(r.estimates[0] > 0 for r in results)
+
+
+def test_a_script_on_stdin_is_told_its_processes_need_a_module():
+    """Its workers cannot import what a script without a file defines; the hint said to guard the
+    main module, which it was."""
+    import subprocess
+    import sys
+    script = """
+from tofnet import InputProcess, Network, Payload, PortSpec, Process
+from tofnet.backends import get_backend
+from tofnet.io.recording import Recording
+from tofnet.models import StepModel, model
+from tofnet.testing import TEST_INTRINSICS, moving_pattern
+class StdinGateProcess(Process):
+    inports = (PortSpec("events", Payload.POLARITY, 1, "spikes"),)
+    outports = (PortSpec("passed", Payload.POLARITY, 1, "spikes"),)
+    resources_per_pixel = {"accumulators": 1}
+@model(StdinGateProcess)
+class StdinGateModel(StepModel):
+    def step(self, k, inbox):
+        return {"passed": inbox.get("events")}
+source, gate = InputProcess(name="input", sensor_size=(24, 16)), StdinGateProcess(name="gate")
+source.events.connect(gate.events)
+recording = Recording(moving_pattern((24, 16), (300, -150), 20_000, seed=1), intrinsics=TEST_INTRINSICS)
+try:
+    get_backend("multiproc", workers=2, timeout=60).run(Network([source, gate]), recording)
+except Exception as err:
+    print(type(err).__name__, err)
+"""
+    done = subprocess.run([sys.executable], input=script, capture_output=True, text=True, timeout=120)
+    assert done.stdout.startswith("BackendError multiproc worker"), done.stdout + done.stderr[-2000:]
+    assert "the main script has no file (stdin, -c or an interactive session)" in done.stdout.lower()
+    assert "put your processes and models in a module" in done.stdout
+

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import queue
 import signal
+import sys
 import threading
 import time
 from multiprocessing.connection import wait
@@ -144,7 +145,10 @@ class Channel:
         else:
             how = f"exit code {code}"
         hint = ""
-        if doing.endswith("starting") and code == 1:  # the usual cause: spawn re-imports an unguarded script
+        if doing.endswith("starting") and code == 1 and not _main_has_a_file():
+            hint = ("; its error is on stderr. The main script has no file (stdin, -c or an interactive session), so "
+                    "the spawned workers cannot import what it defines: put your processes and models in a module")
+        elif doing.endswith("starting") and code == 1:  # the usual cause: spawn re-imports an unguarded script
             hint = ("; its error is on stderr. A script that runs the multiproc backend must start from "
                     "'if __name__ == \"__main__\":' (workers are spawned and import the main module)")
         return BackendError(f"multiproc worker {self.index} (pid {self.process.pid}) {what} {doing}: {how}; "
@@ -213,3 +217,9 @@ def answers(expected: dict[int, tuple[Channel, str, str]], timeout: float, stuck
         raise WorkersRefused(refused[0], refused=len(refused), answered=len(replies))
     return replies
 
+
+def _main_has_a_file() -> bool:
+    """Whether the main module is a file the spawned workers can import (not stdin, -c or a REPL)."""
+    import os
+    path = getattr(sys.modules.get("__main__"), "__file__", None)
+    return bool(path) and os.path.isfile(path)

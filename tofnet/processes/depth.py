@@ -33,7 +33,7 @@ class DepthProcess(Process):
         PortSpec("b_w", Payload.ROTATION_TERM, 2, "B ω from an angular velocity process, px/s: eq. 7 when "
                  "connected, eq. 8 when not", required=False),
     )
-    outports = (PortSpec("depth", Payload.DEPTH, 1, "depth estimate, metres", required=False),)
+    outports = (PortSpec("depth", Payload.DEPTH, 1, "depth estimate, metres"),)
     counters = (Count("no_measurement", "rejected", "no signed count on either axis"),
                 Count("too_near", "rejected", "below min_depth"),
                 Count("too_far", "rejected", "beyond max_depth"),
