@@ -103,8 +103,8 @@ class Session:
                 self._resource.close(graceful=False)
                 raise
         if "stream" not in capabilities:
-            raise UnsupportedError(f"backend {getattr(backend, 'name', type(backend).__name__)!r} offers no streams, "
-                               f"which a session needs (Backend.capabilities has no 'stream')")
+            raise UnsupportedError(f"backend {getattr(backend, 'name', type(backend).__name__)!r} offers no "
+                                   f"streams, which a session needs (Backend.capabilities has no 'stream')")
         return backend.open_stream(self.compiled, fuse=None if self._fuse else False, **options)
 
     def _bind_monitors(self, monitors: list[Monitor]) -> list[str]:
