@@ -7,7 +7,7 @@ import pytest
 
 from tofnet.backends.base import Backend
 from tofnet.backends.reference import ReferenceBackend
-from tofnet.backends.registry import _registered, available_backends, get_backend, register_backend
+from tofnet.backends.registry import available_backends, get_backend
 from tofnet.conformance import CASES, format_table, run_suite
 from tofnet.conformance.compare import compare
 from tofnet.conformance.runner import select_cases
@@ -61,18 +61,6 @@ class ShiftedBackend(Backend):
             depth = depth[1:]
         return dataclasses.replace(result, outputs={**result.outputs, result.depth_output: depth},
                                    backend=self.name)
-
-
-@pytest.fixture
-def registered():
-    names = []
-
-    def register(name, factory):
-        register_backend(name, factory)
-        names.append(name)
-    yield register
-    for name in names:
-        _registered.pop(name, None)
 
 
 def test_a_backend_registered_at_runtime_runs_the_suite_by_name(registered):

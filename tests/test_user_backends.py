@@ -8,22 +8,10 @@ import pytest
 from tofnet.backends.base import Backend
 from tofnet.backends.event_driven import FixedBackend, FloatBackend
 from tofnet.backends.local import LocalBackend
-from tofnet.backends.registry import _registered, available_backends, get_backend, register_backend
+from tofnet.backends.registry import available_backends, get_backend
 from tofnet.cli import main
 from tofnet.conformance import CASES, run_suite
 from tofnet.errors import BackendError
-
-
-@pytest.fixture
-def registered():
-    names = []
-
-    def register(name, factory):
-        register_backend(name, factory)
-        names.append(name)
-    yield register
-    for name in names:
-        _registered.pop(name, None)
 
 
 @pytest.fixture(scope="module")
