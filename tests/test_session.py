@@ -331,3 +331,20 @@ def test_a_process_number_and_a_changed_parameter_mean_the_same_on_bands_and_wor
     assert len(expected.outputs["tally.passed"]) > 300  # 100 passed, then every spike
     if name != "reference":
         assert "tally" in result.summary()["workers"]["whole"]
+
+
+@pytest.mark.parametrize("monitors", [[], ["time_of_travel.counter@3,4"]], ids=["no-monitor", "monitor"])
+def test_a_session_that_keeps_no_outputs_hands_back_each_record_once(monitors):
+    """keep_outputs=False: what run/feed return and then finish()'s outputs make the whole run
+    (finish() dropped what its own run and, with a monitor, the steps in flight produced)."""
+    whole = get_backend("fixed").run(COMPILED, RECORDING)
+    with Session(COMPILED, RECORDING, backend="fixed", keep_outputs=False, monitors=monitors) as s:
+        parts = [s.run(steps=30)]
+        parts.append(s.finish().outputs)
+    events = RECORDING.events
+    with Session(COMPILED, intrinsics=TEST_INTRINSICS, backend="fixed", keep_outputs=False, monitors=monitors) as s:
+        fed = [s.feed(events[lo:lo + 1000]) for lo in range(0, len(events), 1000)]
+        fed.append(s.finish().outputs)
+    for got in (parts, fed):
+        depth = np.concatenate([part["depth.depth"] for part in got if len(part.get("depth.depth", ()))])
+        assert depth.tobytes() == whole.depth.tobytes()

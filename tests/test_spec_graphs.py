@@ -59,7 +59,7 @@ def test_a_bare_type_name_two_modules_define_is_refused_naming_both(monkeypatch)
 
     from tofnet.core.process import Process
     monkeypatch.setattr(Process, "_registry", dict(Process._registry))
-    monkeypatch.setattr(Process, "_defined", {name: set(where) for name, where in Process._defined.items()})
+    monkeypatch.setattr(Process, "_defined", {name: dict(where) for name, where in Process._defined.items()})
     for name in ("twin_a_zz", "twin_b_zz"):
         module = types.ModuleType(name)
         exec("from tofnet.testing import ParityGateProcess\n"
@@ -72,6 +72,23 @@ def test_a_bare_type_name_two_modules_define_is_refused_naming_both(monkeypatch)
         load_spec(text)
     named = load_spec(text.replace("TwinGate}", "'twin_b_zz:TwinGateProcess'}"), allow_import=["twin_b_zz"])
     assert type(named.network.process("gate")).__module__ == "twin_b_zz"
+
+    def local_class():  # made inside a function: no spec can name it by module, so it makes nothing ambiguous
+        from tofnet.testing import ParityGateProcess
+
+        class SpikeTallyProcess(ParityGateProcess):
+            pass
+        return SpikeTallyProcess
+    local_class()
+    assert Process.ambiguity("SpikeTallyProcess") is None
+    # a user's class named as a built-in: specs tofnet writes name the built-in by module, and load
+    module = types.ModuleType("twin_c_zz")
+    exec("from tofnet.processes.depth import DepthProcess as Base\nclass DepthProcess(Base):\n    pass\n",
+         module.__dict__)
+    monkeypatch.setitem(sys.modules, "twin_c_zz", module)
+    text = dump_spec(depth_network((64, 48)))
+    assert "type: 'tofnet.processes.depth:DepthProcess'" in text
+    assert type(load_spec(text).network.process("depth")).__module__ == "tofnet.processes.depth"
 
 
 def test_an_entry_point_offers_a_process_type(monkeypatch):

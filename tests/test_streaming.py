@@ -137,3 +137,18 @@ def test_times_beyond_the_documented_range_are_refused(fuse):
     near = make_events([MAX_TIME_US - 5_000, MAX_TIME_US - 1_000], [1, 2], [1, 1], [1, 1])
     stream.feed(near)  # just inside: accepted, and the filter still sees both events
     assert stream.close().accepted == 2
+
+
+def test_fused_and_model_by_model_streams_count_the_steps_a_promise_ran():
+    """A promise (until_us) past the last event completes steps; both kinds of stream count them
+    (the fused one counted only up to the last event and the latency)."""
+    events = recording(60_000, seed=7).events
+    steps = {}
+    for fuse in (True, False):
+        stream = FixedBackend(fuse=fuse).open_stream(network(), intrinsics=INTRINSICS,
+                                                     velocity_source=ConstantVelocity(VELOCITY), t0_us=0)
+        stream.feed_all(events)
+        plain = stream.end_step() if not fuse else None
+        stream.feed_all(events[:0], until_us=200_000)  # nothing more came by 200 ms
+        steps[fuse] = stream.close().steps
+    assert plain is not None and plain < 200 and steps[True] == steps[False] == 200

@@ -73,16 +73,20 @@ def test_a_backend_that_cannot_load_is_one_line_and_the_others_still_run(registe
     assert main(["conformance", "--list"]) == 0
     listed = [line for line in capsys.readouterr().out.splitlines() if line.startswith("backend ")]
     assert [line.split()[1] for line in listed] == available_backends()
-    assert "cannot load: cannot load backend" in next(line for line in listed if line.split()[1] == "broken")
+    assert "cannot load backend 'tofnet_no_such_module_zz" in next(line for line in listed if line.split()[1] == "broken")
     assert main(["conformance", "--backend", "broken", "--case", "edge+u"]) == 2  # asked for: one line, no table
     captured = capsys.readouterr()
     assert captured.out == "" and captured.err.count("\n") == 1 and "ModuleNotFoundError" in captured.err
 
 
-def test_a_broken_backend_among_all_is_counted_and_the_rest_run(registered, capsys, monkeypatch):
+def test_a_broken_backend_among_all_is_counted_and_the_rest_run(registered, capsys, monkeypatch, tmp_path):
     registered("broken", "tofnet_no_such_module_zz:Backend")
     monkeypatch.setattr("tofnet.backends.registry.available_backends", lambda optional=False: ["broken", "float"])
-    assert main(["conformance", "--case", "edge+u"]) == 1
+    assert main(["conformance", "--case", "edge+u", "--json", str(tmp_path / "outcomes.json")]) == 1
     out = capsys.readouterr()
-    assert "== broken: cannot load: " in out.out and "== float vs reference" in out.out
-    assert "1 case(s) failed" in out.err
+    assert "== broken: cannot load backend " in out.out and "== float vs reference" in out.out
+    assert out.err.splitlines()[-1] == "tofnet conformance: 1 backend(s) could not be loaded: broken"
+    import json
+    outcomes = json.loads((tmp_path / "outcomes.json").read_text())
+    assert outcomes[0]["backend"] == "broken" and "ModuleNotFoundError" in outcomes[0]["error"]
+    assert [o["case"] for o in outcomes[1:]] == ["edge+u"] and outcomes[1]["ok"]

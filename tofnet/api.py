@@ -309,7 +309,8 @@ def run_source(source, network: Network, *, backend: str = DEFAULT_BACKEND, back
     backend's packet for a whole run: larger with workers, whose bands pay on large packets); with
     ``spill_dir`` an output goes to a temporary file there once it outgrows ``spill_bytes``, and
     comes back as a memory map. The result equals ``run`` on the whole recording. A backend
-    without the ``stream`` capability is given the whole window read at once.
+    without the ``stream`` capability is given the whole window read at once (``progress`` follows
+    the reading; ``spill_dir`` and ``chunk_events`` do not apply).
     """
     from tofnet.backends.registry import get_backend
     from tofnet.backends.runtime import clock_of
@@ -320,7 +321,7 @@ def run_source(source, network: Network, *, backend: str = DEFAULT_BACKEND, back
     compiled = compile_network(network, **(compile_options or {}))
     chosen = get_backend(backend, **(backend_options or {}))
     if "stream" not in chosen.capabilities:  # a backend that offers only ``run``: the whole window at once
-        result = chosen.run(compiled, source.read(progress), record_tot=record_tot, probes=probes, progress=progress)
+        result = chosen.run(compiled, source.read(progress), record_tot=record_tot, probes=probes)
         return result, compiled
     stream = chosen.open_stream(compiled, recording=known, t0_us=clock_of(network).t0_us, probes=probes,
                                 record_tot=record_tot)

@@ -310,28 +310,32 @@ class Session:
         (every output since the session opened, every count; ``keep_outputs`` False: the outputs of
         the steps run now only). The session ends."""
         self._check_open()
+        now = Collected()  # what this call runs: the result's outputs when the session keeps none
         if self.recording is not None:
-            self.run()
-        self._drain_sampled()
+            now.add(self.run())
+        self._drain_sampled(now)
         result = self._guard(self.stream.close)
         self._keep(result.outputs)
-        if self._keep_outputs:  # else only the steps run now, in flight until the end
-            result.outputs = self._collected.joined(result.payloads, self.stream._empty)
+        now.add(result.outputs)
+        result.outputs = (self._collected if self._keep_outputs else now).joined(result.payloads, self.stream._empty)
         self._state = "finished"
         self.stop()
         return result
 
-    def _drain_sampled(self) -> None:
+    def _drain_sampled(self, produced: Collected) -> None:
         """Run the steps ``close`` would run (the outputs still in flight) here, where the variable
         monitors sample the start of each as of every step before (no events come: each is the
-        same step run); a sample is of a step that ran, so none at the end."""
+        same step run); a sample is of a step that ran, so none at the end. Their records go to
+        ``produced`` too."""
         end = self.stream.end_step() if hasattr(self.stream, "end_step") else None
         if end is None or end <= self.step or not any(m.kind == "var" for m in self.monitors):
             return
         nothing = np.empty(0, EVENT_DTYPE)
         for boundary in [b for b in self._boundaries(end) if b < end]:  # close runs the rest
             until_us = self.stream.t0_us + boundary * self.timestep_us
-            self._keep(self._guard(lambda: self.stream.feed_all(nothing, until_us=until_us)))
+            records = self._guard(lambda: self.stream.feed_all(nothing, until_us=until_us))
+            self._keep(records)
+            produced.add(records)
             self._sample()
 
     # -- state ----------------------------------------------------------------------------------

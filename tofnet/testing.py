@@ -352,7 +352,7 @@ class SpikeTallyProcess(Process):
 
 @model(SpikeTallyProcess)
 class SpikeTallyModel(StepModel):
-    supports_regions = True  # what it emits is its region's; its tally is the whole process's
+    supports_regions = True  # it could emit per region, but its tally is the whole process's: it runs whole
 
     def __init__(self, process, ctx):
         super().__init__(process, ctx)

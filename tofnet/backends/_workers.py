@@ -108,18 +108,6 @@ def _warm_up() -> None:
     depth.process_counts(out.tot if len(out.tot) else np.empty(0, TOT_DTYPE), velocity)
 
 
-def _set_param(model, name: str, value) -> None:
-    """As the host's ``GraphExecutor.set_param``: the model's process holds the new value before the model
-    is told (a model reading ``self.process`` sees it, as on one machine), and the old one if it refuses."""
-    previous = model.process.values.get(name)
-    model.process.set_param(name, value)
-    try:
-        model.set_param(name, value)
-    except BaseException:
-        model.process.set_param(name, previous)
-        raise
-
-
 class _Worker:
     """The state of one worker between messages: the model instances of the current run."""
 
@@ -149,7 +137,9 @@ class _Worker:
             return ("set", [self.models[key].set_var(name, value, step) for key in keys])
         if kind == "param":
             _, keys, name, value = message
-            return ("param", [_set_param(self.models[key], name, value) for key in keys])
+            from tofnet.models.base import apply_param
+            apply_param([(self.models[key].process, self.models[key]) for key in keys], name, value)
+            return ("param", [None] * len(keys))
         if kind == "band":
             from tofnet.backends._band_worker import BandWorker
             self._drop_band()

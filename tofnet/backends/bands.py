@@ -34,7 +34,7 @@ from tofnet.kernels.input_filter import NEVER
 from tofnet.kernels.kernel_config import KernelConfig, Region
 from tofnet.kernels.region import UNSORTED, TimeOfTravelKernel
 from tofnet.machine import cpu_count
-from tofnet.models.base import Model, splits_into_regions
+from tofnet.models.base import Model, holds_whole_numbers, splits_into_regions
 
 #: Packets with fewer events run their bands one after the other in the caller's thread: handing
 #: work to another thread and back (~0.15-0.3 ms on a virtual machine) costs more than it saves there
@@ -342,7 +342,8 @@ def band_placer(bands: Sequence[Band], threads: int):
     facts = {"workers": pool.threads, "bands": [list(b) for b in bands], "banded": [], "whole": []}
 
     def place(process, model_class, ctx):
-        if getattr(model_class, "reads_events", False) and getattr(model_class, "runs_in_bands", False):
+        if getattr(model_class, "reads_events", False) and getattr(model_class, "runs_in_bands", False) \
+                and not holds_whole_numbers(process):
             if process.name not in facts["banded"]:
                 facts["banded"].append(process.name)
             return BandedReader(process, model_class, bands, ctx, pool)

@@ -299,8 +299,11 @@ class FusedStream:
             outputs[self.tot_name] = canonical(self._held.pop(self.tot_name, np.empty(0, TOT_DTYPE)))
         t0, last = self.t0_us if self.t0_us is not None else 0, self._last_event_us
         last_step = (last - t0) // self.timestep_us if last is not None and last >= t0 else -1
+        # steps a promise (until_us) completed past the last event's count too, as a model-by-model stream's
+        latest = self._latest_us
+        promised = (latest - t0) // self.timestep_us if latest is not None and latest >= t0 else 0
         return RunResult(
-            self.backend, outputs, counts, last_step + 1 + self.pipeline.latency_steps,
+            self.backend, outputs, counts, max(last_step + 1 + self.pipeline.latency_steps, promised),
             t0, self.timestep_us,
             {name: self.pipeline.latency[name] for name in outputs}, dict(self.payloads),
             {name: kinds_of(kind.counters) for name, kind in zip(names, (InputProcess, TimeOfTravelProcess,

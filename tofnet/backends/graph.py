@@ -24,7 +24,7 @@ from tofnet.core.ports import InPort, OutPort
 from tofnet.core.process import Process
 from tofnet.errors import BackendError, NetworkError
 from tofnet.kernels.order import pixel_order
-from tofnet.models.base import ModelContext, concat, take
+from tofnet.models.base import ModelContext, apply_param, concat, take
 from tofnet.models.registry import model_for
 
 #: ``place(process, model_class, ctx) -> model``: builds (or places remotely) one process's model.
@@ -251,13 +251,7 @@ class GraphExecutor:
     def set_param(self, process: str, name: str, value) -> None:
         """Change a parameter from step ``clock`` on, with the declaration's checks; the model must accept it."""
         node = self.node(process)
-        previous = node.process.values.get(name)
-        node.process.set_param(name, value)  # converts and checks, or raises naming the field
-        try:
-            node.model.set_param(name, node.process.values[name])
-        except BaseException:
-            node.process.set_param(name, previous)
-            raise
+        apply_param([(node.process, node.model)], name, value)  # converts and checks, or raises naming the field
 
     def counts(self) -> dict[str, dict[str, int]]:
         """What each process counted, in the network's process order."""

@@ -40,7 +40,7 @@ def _lazy(target: str) -> Callable[..., Backend]:
         try:
             factory = getattr(importlib.import_module(module), attr)
         except (ImportError, AttributeError, ValueError) as err:  # ValueError: an empty module name
-            raise BackendError(f"cannot load backend {target!r}: {type(err).__name__}: {err}") from None
+            raise BackendError(f"cannot load backend {target!r}: {type(err).__name__}: {err}") from err
         return factory(**options)
     return load
 
@@ -54,7 +54,7 @@ def _entry_point(name: str) -> Callable[..., Backend] | None:
                 return ep.load()
             except Exception as err:
                 raise BackendError(f"entry point tofnet.backends:{name} ({ep.value}) failed to load: "
-                                   f"{type(err).__name__}: {err}") from None
+                                   f"{type(err).__name__}: {err}") from err  # the cause keeps its traceback
     return None
 
 

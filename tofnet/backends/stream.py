@@ -197,7 +197,7 @@ class GraphStream:
 
     def end_step(self) -> int | None:
         """The step ``close`` runs to (exclusive): every output of every event fed is out by then;
-        None before any event."""
+        None before the stream has a start time (no event, no ``t0_us``)."""
         ex = self.executor
         if ex is None:
             return None

@@ -42,7 +42,7 @@ def handle(args) -> int:
         print()
         for name in available_backends():
             backend, problem = _loaded(name)
-            print(f"backend {name:<12} " + (f"arithmetic {backend.arithmetic}" if backend else f"cannot load: {problem}"))
+            print(f"backend {name:<12} " + (f"arithmetic {backend.arithmetic}" if backend else problem))
         return 0
     if args.json:
         from tofnet.io.files import check_output
@@ -62,8 +62,8 @@ def handle(args) -> int:
     outcomes, failed, cache = [], 0, {}
     for name in backends:
         if name in unusable:  # a broken plug-in among all the backends: said, counted, and the others still run
-            print(f"== {name}: cannot load: {unusable[name]}\n")
-            failed += 1
+            print(f"== {name}: {unusable[name]}\n")
+            outcomes.append({"backend": name, "error": unusable[name]})
             continue
         print(f"== {name} with {args.workers} workers vs one" if workers else f"== {name} vs {against}")
         print(header())
@@ -84,7 +84,10 @@ def handle(args) -> int:
         write_text_atomic(args.json, json.dumps(outcomes, indent=2) + "\n")
     if failed:
         print(f"tofnet conformance: {failed} case(s) failed", file=sys.stderr)
-    return 1 if failed else 0
+    if unusable:
+        print(f"tofnet conformance: {len(unusable)} backend(s) could not be loaded: {', '.join(unusable)}",
+              file=sys.stderr)
+    return 1 if failed or unusable else 0
 
 
 def _loaded(name: str):

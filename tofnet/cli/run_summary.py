@@ -56,15 +56,19 @@ def latency_lines(summary: dict) -> list[str]:
     return [f"latency        {format_steps(steps)} ({steps * ms:g} ms)  {name}" for name, steps in latency.items()]
 
 
-def process_lines(summary: dict, result, skip=frozenset()) -> list[str]:
-    """A line of counts per process that counted something, but for the readers (said above), the
-    processes in ``skip`` and the counts that go into a total (said as the total)."""
+def process_lines(summary: dict, result, skip=frozenset(), totals_said: bool = False) -> list[str]:
+    """A line of counts per process that counted something, but for the processes in ``skip``, a
+    reader's account of the events (said above) and, when ``totals_said``, the counts that go into
+    a total (said as the total)."""
+    readers = summary.get("readers", {})
     lines = []
     for process, counts in summary["counts"].items():
-        if process in skip or process in summary.get("readers", {}):
+        if process in skip:
             continue
         declared = result.declared.get(process, {})
-        told = [f"{k.replace('_', ' ')} {v:,}" for k, v in counts.items() if not declared.get(k, {}).get("total")]
+        told = [f"{k.replace('_', ' ')} {v:,}" for k, v in counts.items()
+                if not (totals_said and declared.get(k, {}).get("total"))
+                and not (process in readers and declared.get(k, {}).get("kind") in ("read", "accepted", "dropped"))]
         if told:
             lines.append(f"{process:<14} {', '.join(told)}")
     return lines
@@ -85,7 +89,7 @@ def format_summary(summary: dict, result, written: dict, network_width) -> str:
         lines += [f"{total.replace('_', ' '):<14} {count:>12,}" for total, count in result.totals().items()]
         # the other processes' counts (a denoiser's drops, a user's gate), the totals' and the depth's said apart
         lens = (summary.get("undistortion") or {}).get("process")  # its counts are on the undistort line
-        lines += process_lines(summary, result, skip={depth_names[0].partition(".")[0], lens})
+        lines += process_lines(summary, result, skip={depth_names[0].partition(".")[0], lens}, totals_said=True)
         lines.append(f"depth out      {summary['depth_out']:>12,}  -> {written[depth_names[0]]}")
         # Every declared reason, zeros too: a zero says the check ran and rejected nothing.
         lines += [f"  rejected     {count:>12,}  {reason.replace('_', ' ')}"

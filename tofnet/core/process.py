@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 import re
+import sys
 from typing import Any, ClassVar
 
 from tofnet.core.counters import Count
@@ -43,8 +45,8 @@ class Process:
     placement: ClassVar[str] = "core"
 
     _registry: ClassVar[dict[str, type["Process"]]] = {}
-    #: Class name -> every ``module:Class`` defining a process of that name (two: a bare name is ambiguous).
-    _defined: ClassVar[dict[str, set[str]]] = {}
+    #: Class name -> where each class of that name is defined -> its ``module:Class`` (two: a bare name is ambiguous).
+    _defined: ClassVar[dict[str, dict[str, str]]] = {}
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -58,7 +60,8 @@ class Process:
                     raise TypeError(f"{cls.__name__}.{spec.name}: added_latency_steps is declared on output ports, "
                                     f"as a whole number of steps >= 0 (or None), got {steps!r}")
         Process._registry[cls.__name__] = cls
-        Process._defined.setdefault(cls.__name__, set()).add(f"{cls.__module__}:{cls.__qualname__}")
+        if "<locals>" not in cls.__qualname__:  # a class made inside a function no spec can name by module
+            Process._defined.setdefault(cls.__name__, {})[_defined_where(cls)] = f"{cls.__module__}:{cls.__qualname__}"
 
     def __init__(self, name: str | None = None, **values: Any):
         type_name = type(self).__name__
@@ -100,7 +103,7 @@ class Process:
     @classmethod
     def ambiguity(cls, type_name: str) -> str | None:
         """Why a bare class name cannot name one process type (two modules define it), or None."""
-        where = sorted(cls._defined.get(type_name, ()))
+        where = sorted(cls._defined.get(type_name, {}).values())
         if len(where) < 2:
             return None
         return f"process type {type_name!r} is defined by {' and '.join(where)}; name one as module:Class"
@@ -202,3 +205,10 @@ def _default_name(type_name: str) -> str:
     """``TimeOfTravelProcess`` -> ``time_of_travel``."""
     base = re.sub(r"Process$", "", type_name)
     return re.sub(r"(?<!^)(?=[A-Z])", "_", base).lower() or "process"
+
+
+def _defined_where(cls: type) -> str:
+    """Where ``cls`` is defined: its module's file and its qualified name (a script run as ``__main__``
+    and imported under its own name too defines one class, not two), or its module's name without a file."""
+    path = getattr(sys.modules.get(cls.__module__), "__file__", None)
+    return f"{os.path.realpath(path) if path else cls.__module__}:{cls.__qualname__}"

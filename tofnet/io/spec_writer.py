@@ -16,10 +16,12 @@ from tofnet.units import seconds
 
 
 def type_name_of(process: Process) -> str:
-    """How a spec names the type of ``process``: the class name for tofnet's own and for
-    classes a script defines, else ``package.module:ClassName`` (importable in a new process)."""
+    """How a spec names the type of ``process``: the class name for tofnet's own (unless another class
+    has that name) and for classes a script defines, else ``package.module:ClassName`` (importable in
+    a new process)."""
     cls = type(process)
-    if cls.__module__.startswith("tofnet.processes") or cls.__module__ in ("__main__", "__mp_main__"):
+    own = cls.__module__.startswith("tofnet.processes") and Process.ambiguity(cls.__name__) is None
+    if own or cls.__module__ in ("__main__", "__mp_main__"):
         return cls.__name__
     return f"{cls.__module__}:{cls.__qualname__}"
 

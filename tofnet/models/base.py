@@ -11,6 +11,7 @@ payload (``Payload.dtype``). ``StepModel`` turns a per-step ``step(k, inbox)`` i
 
 from __future__ import annotations
 
+from contextlib import suppress
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -72,12 +73,37 @@ class ModelContext:
         return seconds_of(self.timestep_us)
 
 
+def holds_whole_numbers(process: Process) -> bool:
+    """Whether ``process`` declares a ``vector`` variable: numbers of the whole process, which no merge of
+    regions' values could give, so it never runs as regions (bands, cores)."""
+    return any(var.shape == "vector" for var in type(process).vars)
+
+
 def splits_into_regions(process: Process, model_class: type) -> bool:
     """Whether instances of ``model_class`` may each hold a region of ``process`` (bands, cores): the
-    model says it can, and the process declares no ``vector`` variable (numbers of the whole process,
-    which no merge of regions' values could give)."""
-    return bool(getattr(model_class, "supports_regions", False)) and \
-        not any(var.shape == "vector" for var in type(process).vars)
+    model says it can, and the process holds no whole-process numbers."""
+    return bool(getattr(model_class, "supports_regions", False)) and not holds_whole_numbers(process)
+
+
+def apply_param(instances: list[tuple[Process, "Model"]], name: str, value: Any) -> None:
+    """Change parameter ``name`` of each ``(process, model)`` instance, all or none: the process holds
+    the new value (converted and checked by its declaration) before its model is told, so a model
+    reading ``self.process`` sees it (every backend, workers too); when one refuses, every process
+    and the models told before it get the old value back, and the refusal is raised."""
+    previous = [process.values.get(name) for process, _ in instances]
+    told = []
+    try:
+        for process, model in instances:
+            process.set_param(name, value)
+            model.set_param(name, process.values[name])
+            told.append((process, model))
+    except BaseException:
+        for (process, _), old in zip(instances, previous):
+            process.set_param(name, old)
+        for process, model in told:
+            with suppress(Exception):  # it took the new value; the old one it held before
+                model.set_param(name, process.values[name])
+        raise
 
 
 class Model:

@@ -50,8 +50,8 @@ class TimeSurfaceProcess(Process):
                  "connected, eq. 8 when not", required=False),
     )
     outports = (
-        PortSpec("depth", Payload.DEPTH, 1, "depth estimate per accepted first event, metres", required=False),
-        PortSpec("quality", QUALITY, 1, "the fit behind each estimate (aligned with depth)", required=False),
+        PortSpec("depth", Payload.DEPTH, 1, "depth estimate per accepted first event, metres"),
+        PortSpec("quality", QUALITY, 1, "the fit behind each estimate (aligned with depth)"),
     )
     counters = (*reader_counts("first events of an edge at a pixel"),
                 Count("burst", "dropped", "not the first event of an edge (within the burst window)"),
