@@ -348,3 +348,28 @@ def test_a_session_that_keeps_no_outputs_hands_back_each_record_once(monitors):
     for got in (parts, fed):
         depth = np.concatenate([part["depth.depth"] for part in got if len(part.get("depth.depth", ()))])
         assert depth.tobytes() == whole.depth.tobytes()
+
+
+def test_a_parameter_change_is_all_or_none_across_a_processs_instances():
+    """A worker holding several instances of a process: when one model refuses, none keeps the new value
+    (the process copies and the models told before it go back)."""
+    from tofnet.errors import BackendError as Refused
+    from tofnet.models.base import apply_param
+    from tofnet.testing import SpikeTallyProcess
+
+    class Model:
+        def __init__(self, refuses):
+            self.refuses, self.seen = refuses, []
+
+        def set_param(self, name, value):
+            if self.refuses and value == 5:
+                raise Refused("cannot change")
+            self.seen.append(value)
+
+    instances = [(SpikeTallyProcess(name="tally", limit=1), Model(False)),
+                 (SpikeTallyProcess(name="tally", limit=1), Model(True))]
+    with pytest.raises(Refused):
+        apply_param(instances, "limit", 5)
+    assert [process.limit for process, _ in instances] == [1, 1] and instances[0][1].seen == [5, 1]
+    apply_param(instances[:1], "limit", 3)
+    assert instances[0][0].limit == 3 and instances[0][1].seen == [5, 1, 3]
