@@ -51,6 +51,25 @@ def test_event_stream_reads_back_relative_to_its_first_event(tmp_path, recording
     assert np.array_equal(events, expected)
 
 
+@pytest.mark.parametrize("cut", [1, 2, 3, 4, 5, 6])
+def test_an_event_stream_cut_inside_an_event_is_read_to_its_last_whole_event_and_noted(tmp_path, recording, cut):
+    path = tmp_path / "rec.es"
+    _write(path, recording.events)
+    whole = path.read_bytes()
+    (tmp_path / "cut.es").write_bytes(whole[:len(whole) - cut])
+    read = read_recording(tmp_path / "cut.es")
+    lost = 1 if cut <= 5 else 2  # 5 bytes per event (no overflow before the last two at this rate)
+    assert np.array_equal(read.events, read_recording(path).events[:-lost])
+    partial = [note for note in read.notes if "partial" in note]
+    if cut == 5:  # the cut falls between two events: nothing to say
+        assert partial == []
+    else:
+        bytes_left = 5 - cut % 5
+        assert partial == [f"the file ends with {bytes_left} byte{'s' if bytes_left > 1 else ''} of a partial 5-byte "
+                           "event (not read): truncated?"]
+    assert not any("partial" in note for note in read_recording(path).notes)
+
+
 @pytest.mark.parametrize("chunk", [1, 997, 10_000, 10**7])
 def test_chunks_are_time_ordered_copies_of_the_whole(tmp_path, recording, chunk):
     path = tmp_path / "rec.raw"

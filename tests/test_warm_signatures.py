@@ -96,3 +96,14 @@ def test_the_workers_warmer_touches_fresh_output_with_the_types_the_bands_do(mon
     stream.kernel.run_events(recording.events[50:], stream._updates.rows, into, 0)
     assert stream.kernel._touched[2] > 0  # the real path touched
     assert len(touch.signatures) == 1, touch.signatures
+
+
+def test_the_event_stream_end_check_has_the_warmers_signature(tmp_path):
+    """The warmer walks a writable array; the reader's chunks (``np.fromfile``) are writable too."""
+    from tofnet.io import event_stream_tail
+
+    event_stream_tail.walk_bytes(np.zeros(5, np.uint8), 0, 0xFE)
+    path = tmp_path / "a.es"
+    path.write_bytes(b"Event Stream\x02\x00\x00\x01\x10\x00\x08\x00" + bytes([0xFF, 2, 3, 0, 4, 0, 6, 1]))
+    assert event_stream_tail.partial_event_bytes(path, "dvs") == 2  # an overflow, an event, 2 bytes of one
+    assert len(event_stream_tail.walk_bytes.signatures) == 1, event_stream_tail.walk_bytes.signatures

@@ -143,8 +143,10 @@ def _pipeline() -> str:
     from tofnet.io.evt3 import decode_words, new_state
     # tofnet's own EVT3 decoder (the files faery's decoder reads need no compiling)
     decode_words(np.array([0x8001, 0x0002, 0x6003, 0x2804, 0x3005, 0x4003], "<u2"), 24, 18, 0, new_state())
+    from tofnet.io.event_stream_tail import walk_bytes
+    walk_bytes(np.zeros(5, np.uint8), 0, 0xFE)  # the check that an Event Stream file ends on a whole event
     return (f"{len(names)} simulator scenarios ({PIPELINE_S * 1e3:g} ms at 24x18 px) written, read, run with "
-            f"{len(ESTIMATORS)} built-in estimators and scored; an EVT3 stream decoded")
+            f"{len(ESTIMATORS)} built-in estimators and scored; an EVT3 stream decoded, an Event Stream's end checked")
 
 
 #: Seconds of each scenario the pipeline warmer simulates (enough for events in every one).

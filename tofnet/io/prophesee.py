@@ -131,8 +131,18 @@ class FaerySource(EventSource):
                     yield from decoder
             else:
                 yield from faery.file_decoder.Decoder(self.path, file_type="es", time_range_cache=None)
+                self._note_es_tail()
         except RuntimeError as err:
             raise DataError(located(self.path, None, f"cannot decode ({reason(err)})")) from None
+
+    def _note_es_tail(self) -> None:
+        """Read to its end, an Event Stream file that stops inside an event was cut short (faery skips it)."""
+        from tofnet.io.event_stream_tail import EVENT_BYTES, partial_event_bytes
+
+        extra = partial_event_bytes(self.path, self.detail.split(",")[0])
+        if extra:
+            self.notes.append(f"the file ends with {extra} byte{'s' if extra > 1 else ''} of a partial "
+                              f"{EVENT_BYTES}-byte event (not read): truncated?")
 
     def _evt3_packets(self) -> Iterable[np.ndarray]:
         """EVT3 with the specification's time base (``tofnet.io.evt3``); a note counts the events
