@@ -34,6 +34,40 @@ def client():
         yield c
 
 
+def test_the_local_cluster_takes_work_from_this_process_only_and_serves_no_pages(client):
+    """Another user's process on the machine can reach loopback: without the certificates made for this cluster
+    it cannot submit work (code run as the batch's user), and the HTTP server Dask starts answers no page."""
+    import urllib.error
+    import urllib.request
+
+    from distributed.security import Security
+
+    address = client.scheduler.address
+    assert address.startswith("tls://127.0.0.1:")
+    for attempt, security in ((address.replace("tls://", "tcp://"), None), (address, Security.temporary())):
+        with pytest.raises(Exception):  # refused: encryption required / certificate not of this cluster
+            Client(attempt, timeout="5s", security=security, set_as_default=False)
+    port = client.run_on_scheduler(lambda dask_scheduler: dask_scheduler.http_server.port)
+    host = client.run_on_scheduler(lambda dask_scheduler: dask_scheduler.http_server.address)
+    assert host == "127.0.0.1"
+    for page in ("info/main/workers.html", "json/identity.json", "health"):
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(f"http://127.0.0.1:{port}/{page}", timeout=5)
+        assert refused.value.code == 404
+    assert client.submit(sum, [1, 2]).result() == 3  # the batch's own client works
+
+
+@pytest.fixture(scope="module")
+def existing():
+    """A client of a cluster a user started (plain TCP), which ``tofnet batch --scheduler`` connects to too."""
+    import logging
+
+    from distributed import Client, LocalCluster
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None,
+                      silence_logs=logging.CRITICAL) as cluster, Client(cluster, set_as_default=False) as c:
+        yield c
+
+
 @pytest.fixture(scope="module")
 def cache(tmp_path_factory):
     return tmp_path_factory.mktemp("scenarios")
@@ -158,7 +192,8 @@ def test_resume_runs_only_what_is_missing(client, cache, tmp_path):
     assert read_csv(again.files[0])[1]["depth_out"] == str(first.rows[1]["depth_out"])
 
 
-def test_ctrl_c_stops_cleanly_and_resume_finishes_the_batch(client, cache, tmp_path):
+def test_ctrl_c_stops_cleanly_and_resume_finishes_the_batch(existing, cache, tmp_path):
+    client = existing
     path = plan_file(tmp_path, cache, f"  - scenario: [slider, vertical, diagonal]\n    {SCENE}",
                      "  refractory: [5ms, 10ms, 20ms, 40ms]", keep="[summary]")
     command = [sys.executable, "-m", "tofnet", "batch", str(path), "--scheduler", client.scheduler.address]
@@ -183,7 +218,8 @@ def test_ctrl_c_stops_cleanly_and_resume_finishes_the_batch(client, cache, tmp_p
     assert [r["status"] for r in resumed.rows] == ["ok"] * 12
 
 
-def test_the_command_on_an_existing_scheduler_reports_progress_failures_and_files(client, cache, tmp_path, capsys):
+def test_the_command_on_an_existing_scheduler_reports_progress_failures_and_files(existing, cache, tmp_path, capsys):
+    client = existing
     (tmp_path / "broken.npy").write_bytes(b"not an array")
     path = plan_file(tmp_path, cache, f"  - broken.npy\n  - scenario: slider\n    {SCENE}", "  distance: [1, 2]",
                      keep="[metrics]")

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable
 
+import dask
 from distributed import Client, LocalCluster
 from distributed.diagnostics.plugin import WorkerPlugin
 
@@ -84,15 +85,20 @@ class WarmUp(WorkerPlugin):
 
 
 def local_cluster(workers: int | None = None, memory_limit: str | float | None = "auto") -> LocalCluster:
-    """One single-threaded worker process per core (or ``workers``) on loopback, no dashboard.
+    """One single-threaded worker process per core (or ``workers``) on loopback, no HTTP server, and only
+    this process may use it: mutual TLS with certificates made for it (another local user could otherwise
+    connect to the scheduler and run code on the workers as the user who started the batch).
 
     ``memory_limit`` per worker: ``"auto"`` shares the machine's memory equally, a
     number is bytes, a string like ``"2GB"``. A worker over 95 % of it is restarted.
     """
     n = workers or cpu_count()
-    with _sigint_ignored():  # inherited by the worker processes: Ctrl-C reaches the client only
+    # Dask starts an HTTP server whatever the dashboard setting: on loopback, and serving nothing (no routes)
+    no_pages = {"distributed.scheduler.http.routes": [], "distributed.worker.http.routes": []}
+    with _sigint_ignored(), dask.config.set(no_pages):  # SIG_IGN is inherited: Ctrl-C reaches the client only
         return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, memory_limit=memory_limit,
-                            host="127.0.0.1", dashboard_address=":0", silence_logs=logging.CRITICAL)
+                            host="127.0.0.1", dashboard_address="127.0.0.1:0", security=True,
+                            silence_logs=logging.CRITICAL)
 
 
 @contextlib.contextmanager
