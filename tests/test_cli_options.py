@@ -275,3 +275,21 @@ def test_a_command_leaves_tofnets_log_as_it_found_it(tmp_path, capsys):
     assert (list(logger.handlers), logger.level, logger.propagate) == before
     logging.getLogger("tofnet.io.trust").warning("warning: after the command")
     assert "tofnet info" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("words, said", [
+    (["live", "--replay", "EVENTS", "--seconds", "-5"], "--seconds: expected a time longer than 0 s, got -5"),
+    (["live", "--replay", "EVENTS", "--seconds", "0"], "--seconds: expected a time longer than 0 s, got 0"),
+    (["run", "EVENTS", "--timestep", "1ns"], "--timestep: input.timestep: expected at least 1e-06 s, got '1ns'"),
+    (["run", "EVENTS", "--timestep", "1.5us"], "input.timestep: must be a whole number of microseconds, got 1.5 µs"),
+])
+def test_a_duration_the_clock_cannot_keep_is_one_line(events_file, tmp_path, capsys, words, said):
+    """The clock counts whole µs: a step under 1 µs is refused by the parameter's bound, not by a second check
+    that contradicts it; a wall-time limit of 0 or less would stop a live run after its first packet."""
+    args = [str(events_file) if word == "EVENTS" else word for word in words]
+    try:  # argparse's errors exit, tofnet's return
+        run = words[0] == "run"  # (live has no --quiet)
+        code = main([*args, "--out", str(tmp_path / ("d.npz" if run else "frames")), *(COMMON if run else COMMON[:-1])])
+    except SystemExit as exit_:
+        code = exit_.code
+    assert code == 2 and said in error_line(capsys)

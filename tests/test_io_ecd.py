@@ -136,3 +136,11 @@ def test_a_folder_of_event_files_is_not_a_recording_and_the_message_names_them(t
     with pytest.raises(DataError, match=r"no events.txt; .* it holds event files \('a.aedat4', 'b.raw'\): give one "
                                         r"of them \(tofnet batch runs many\)"):
         read_recording(tmp_path)
+
+
+def test_an_events_file_with_commas_reads_as_one_with_spaces(tmp_path):
+    from tofnet.io.events import read_events_txt
+    (tmp_path / "spaces.txt").write_text("0.001 1 2 1\n0.002 3 4 0\n# note\n0.0035 5 6 1\n")
+    (tmp_path / "commas.txt").write_text("0.001,1,2,1\n0.002, 3, 4, 0\n# note\n0.0035,5,6,1\n")
+    spaces, commas = read_events_txt(tmp_path / "spaces.txt"), read_events_txt(tmp_path / "commas.txt")
+    assert len(commas) == 3 and np.array_equal(commas, spaces)

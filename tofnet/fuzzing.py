@@ -45,7 +45,7 @@ def decimal_times_us(data: bytes) -> list[int]:
     context = decimal.Context(prec=60_000, Emax=10**6, Emin=-(10**6), rounding=decimal.ROUND_HALF_UP)
     out = []
     for line in data.split(b"\n"):
-        fields = [f for f in re.split(rb"[ \t\r]+", line) if f]
+        fields = [f for f in re.split(rb"[ \t\r,]+", line) if f]
         if fields and not fields[0].startswith(b"#"):
             value = context.multiply(decimal.Decimal(fields[0].decode()), decimal.Decimal(1_000_000))
             out.append(int(value.to_integral_value(rounding=decimal.ROUND_HALF_UP, context=context)))

@@ -42,7 +42,7 @@ def clock_of(network: Network) -> Clock:
     timestep_us = timestep * 1e6
     if abs(timestep_us - round(timestep_us)) > 1e-6 or round(timestep_us) < 1:
         raise NetworkError(f"{owner or network.name}.timestep: must be a whole number of microseconds, "
-                           f"got {timestep!r} s")
+                           f"got {timestep * 1e6:.6g} µs")
     t0, _ = agreed("t0")
     return Clock(microseconds(timestep), None if t0 is None else microseconds(t0))
 

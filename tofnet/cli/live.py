@@ -32,7 +32,7 @@ def register(subparsers) -> None:
     g.add_argument("--drop-when-late", action="store_true",
                    help="drop the events of a packet fed more than one packet late (counted); default: fall "
                         "behind and say by how much")
-    g.add_argument("--seconds", type=float, default=None, help="stop after this many seconds of wall time")
+    g.add_argument("--seconds", default=None, help="stop after this much wall time, e.g. 10 or 30s")
     v = p.add_argument_group("display")
     v.add_argument("-o", "--out", metavar="DIR",
                    help="write PNG frames of the depth map into the folder DIR instead of opening a window; DIR "
@@ -63,6 +63,9 @@ def handle(args) -> int:
     png_every, keep = seconds(args.png_every, "--png-every"), seconds(args.keep, "--keep")
     if png_every <= 0 or keep <= 0:
         raise TofnetError("--png-every and --keep must be longer than 0 s")
+    wall_limit = None if args.seconds is None else seconds(args.seconds, "--seconds")
+    if wall_limit is not None and wall_limit <= 0:
+        raise TofnetError(f"--seconds: expected a time longer than 0 s, got {args.seconds}")
     check_live_outputs(args)  # before the source is opened: a refused output costs no run
     opened = None
     if args.replay:
@@ -104,7 +107,7 @@ def handle(args) -> int:
                     view = Window(depth, title=f"tofnet live: {origin}")
                 else:
                     note = "no display: give --out DIR for PNG frames of the depth map"
-            stop = None if args.seconds is None else _stop_after(args.seconds)
+            stop = None if wall_limit is None else _stop_after(wall_limit)
             try:
                 stats, result = run_live(source, network, backend=backend, backend_options=backend_options,
                                          compile_options=compile_options, drop_when_late=args.drop_when_late,

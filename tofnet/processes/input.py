@@ -41,7 +41,7 @@ class InputProcess(Process):
     params = (
         Param("sensor_size", "size", (240, 180), unit="px", doc="sensor (width, height)"),
         Param("timestep", "duration", "1ms", unit="s", doc="duration of one network step",
-              minimum=1e-9, maximum=MAX_PERIOD_S),
+              minimum=1e-6, maximum=MAX_PERIOD_S),
         Param("refractory", "duration", DEFAULT_REFRACTORY, unit="s",
               doc="minimum time between two accepted events of one pixel (0 disables)", minimum=0.0,
               maximum=MAX_PERIOD_S),

@@ -61,7 +61,7 @@ class TimeSurfaceProcess(Process):
                 Count("emitted", "output", "estimates sent"))
     params = (
         Param("sensor_size", "size", (240, 180), unit="px", doc="sensor (width, height)"),
-        Param("timestep", "duration", "1ms", unit="s", doc="duration of one network step", minimum=1e-9),
+        Param("timestep", "duration", "1ms", unit="s", doc="duration of one network step", minimum=1e-6),
         Param("t0", "duration", None, unit="s", optional=True,
               doc="start of step 0; the first event's time when omitted"),
         Param("model", "str", "rows", doc="fit lines along the image motion with their own offsets (rows) or one "
