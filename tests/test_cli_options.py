@@ -293,3 +293,35 @@ def test_a_duration_the_clock_cannot_keep_is_one_line(events_file, tmp_path, cap
     except SystemExit as exit_:
         code = exit_.code
     assert code == 2 and said in error_line(capsys)
+
+
+def test_a_sensor_size_other_than_the_files_is_said(tmp_path, capsys):
+    """The file states 240x180: a smaller --sensor-size is a crop (the events outside counted, and said why), a
+    larger one runs as given; info with one shows it over the file's, not in its place."""
+    folder = tmp_path / "rec"
+    assert main(["simulate", "slider", str(folder), "--duration", "0.03", "--quiet"]) == 0
+    assert main(["run", str(folder), "--sensor-size", "120x90", "-o", str(tmp_path / "d.npz")]) == 0
+    out = capsys.readouterr().out
+    assert ("note           the file states a 240x180 px sensor; --sensor-size 120x90 runs 120x90 px of it (a crop: "
+            "the events outside are counted out_of_bounds)") in out
+    assert "events lay outside the 120x90 sensor (a crop of the file's, see the note)" in out
+    assert main(["run", str(folder), "--sensor-size", "300x200", "-o", str(tmp_path / "e.npz")]) == 0
+    assert "--sensor-size 300x200 runs 300x200 px (events read up to it)" in capsys.readouterr().out
+    assert main(["run", str(folder), "-o", str(tmp_path / "f.npz")]) == 0
+    assert "the file states" not in capsys.readouterr().out  # the file's own size: nothing to say
+    assert main(["info", str(folder), "--sensor-size", "120x90"]) == 0
+    out = capsys.readouterr().out
+    assert "sensor         120x90 px" in out and "sensor size 120x90 px given, over the 240x180 px the file states" in out
+
+
+def test_the_cloud_of_a_run_at_a_constant_velocity_takes_the_runs_camera_and_poses(events_file, tmp_path, capsys):
+    """An event file with no calibration or poses, run with --intrinsics and --velocity: the depth file records
+    both, and `plot cloud` places the estimates with them (it refused: no intrinsics, no poses)."""
+    depth = tmp_path / "d.npz"
+    assert main(["run", str(events_file), "-o", str(depth), *COMMON]) == 0
+    capsys.readouterr()
+    assert main(["plot", "cloud", str(events_file), str(depth), "--out", str(tmp_path / "c.png")]) == 0
+    err = capsys.readouterr().err
+    assert f"camera: the run's, from {depth} (fx 200, fy 200 px)" in err
+    assert f"poses: the run's constant velocity (0.5, 0, 0 m/s, camera frame), from {depth}" in err
+    assert (tmp_path / "c.png").stat().st_size > 10_000

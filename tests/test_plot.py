@@ -89,6 +89,11 @@ def test_windows_from_specs():
     for bad in ("0.3:0.2", "-5ms", "soon"):
         with pytest.raises(TofnetError):
             resolve_window(bad, span, default_s=None)
+    assert resolve_window("1.5:2.5", span, default_s=None) == Window(2_500_000, 3_500_000, 1_000_000)  # in part
+    for outside in ("5:6", "2:3", "-2:0"):  # the span is 0 .. 2 s since its start: an empty figure
+        with pytest.raises(TofnetError, match=rf"window '{outside}': outside the span of the events and estimates, "
+                                              r"0 \.\. 2 s since its start"):
+            resolve_window(outside, span, default_s=None)
 
 
 def test_a_default_window_with_few_estimates_is_widened_and_says_so():

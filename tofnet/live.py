@@ -193,9 +193,9 @@ class LiveStats:
         out = [f"delay          p50 {self.percentile_ms(50):.2f} ms, p99 {self.percentile_ms(99):.2f} ms, "
                f"max {self.percentile_ms(100):.2f} ms  (event's step start -> estimate handed back, "
                f"{len(self.delays_us):,} estimates)",
-               f"events         {self.events_in:,} in {self.wall_s:.2f} s ({rate:,.0f} events/s) for "
-               f"{self.span_us * 1e-6:.2f} s of source time",
-               f"cpu            {self.cpu_s:.2f} s for {self.span_us * 1e-6:.2f} s of source time "
+               f"events         {self.events_in:,} in {self.wall_s:.3g} s ({rate:,.0f} events/s) for "
+               f"{self.span_us * 1e-6:.3g} s of source time",
+               f"cpu            {self.cpu_s:.3g} s for {self.span_us * 1e-6:.3g} s of source time "
                f"({100 * self.cpu_s / max(self.span_us * 1e-6, 1e-9):.0f} % of one core; above 100 % it cannot "
                "keep up)",
                f"packets        {self.packets:,}, late {self.late_packets:,} (fed more than one packet after "

@@ -95,6 +95,7 @@ def handle(args) -> int:
                                          latency_steps=args.latency_steps, allow_external=args.allow_external,
                                          **sequence_options(args), **camera_options(args))
     require_timing(meta)
+    recording = _with_run_camera(recording, meta, args.depth)
     options = {"window": args.window, "window_s": window_s, "reduce": args.reduce or "latest", "with_gt": not args.no_gt}
     depth_path = Path(args.depth)
     support = available_kinds(recording)
@@ -120,6 +121,33 @@ def handle(args) -> int:
             continue
         print(save_figure(figure(kind, recording, depth, meta, **options), path))
     return 0
+
+
+def _with_run_camera(recording, meta: dict, depth_path: str):
+    """The recording, completed where it lacks what the depth file's run used: its intrinsics and, for a run at a
+    constant velocity (``tofnet run --velocity``), the poses that velocity implies (the camera's frame at the
+    first event is the world's; no rotation). Each one taken is said on stderr."""
+    import dataclasses
+
+    import numpy as np
+
+    from tofnet.cli.export import run_camera
+    from tofnet.eval.views import has_poses
+    from tofnet.io.groundtruth import Trajectory
+
+    changes = {}
+    if recording.intrinsics is None and (intrinsics := run_camera(meta, depth_path)) is not None:
+        changes["intrinsics"] = intrinsics
+        print(f"camera: the run's, from {depth_path} (fx {intrinsics.fx:g}, fy {intrinsics.fy:g} px)", file=sys.stderr)
+    velocity = (meta.get("summary") or {}).get("velocity_m_s")
+    if not has_poses(recording.trajectory) and velocity is not None and len(recording.events):
+        start_s, end_s = recording.events["t"][0] * 1e-6, recording.events["t"][-1] * 1e-6 + 1.0
+        v = np.asarray(velocity, dtype=np.float64)
+        changes["trajectory"] = Trajectory([start_s, end_s], [np.zeros(3), v * (end_s - start_s)],
+                                           [[0.0, 0.0, 0.0, 1.0]] * 2, source=f"{depth_path}: velocity {list(v)} m/s")
+        print(f"poses: the run's constant velocity ({', '.join(f'{c:g}' for c in v)} m/s, camera frame), from "
+              f"{depth_path}", file=sys.stderr)
+    return dataclasses.replace(recording, **changes) if changes else recording
 
 
 def handle_units(args) -> int:

@@ -170,6 +170,16 @@ def _setting(item: str) -> str:
     return ".".join(part.strip() for part in item.partition("=")[0].partition(".")[::2])
 
 
+def sensor_size_note(stated, network_size, given_size) -> str:
+    """Why the network's sensor differs from the one the file states (px): a crop, or a header said too small."""
+    (sw, sh), (nw, nh) = stated, network_size
+    by = f"--sensor-size {given_size[0]}x{given_size[1]}" if given_size else "the network's sensor_size (spec)"
+    if nw <= sw and nh <= sh:
+        return (f"the file states a {sw}x{sh} px sensor; {by} runs {nw}x{nh} px of it (a crop: the events outside "
+                "are counted out_of_bounds)")
+    return f"the file states a {sw}x{sh} px sensor; {by} runs {nw}x{nh} px (events read up to it)"
+
+
 def build_network(args, recording_sensor_size, recording=None):
     """The network the options describe, and the compile options and backend it names."""
     from tofnet.api import apply_overrides, constant_velocity, load_network
@@ -221,6 +231,7 @@ def handle(args) -> int:
                 print(f"tofnet run: note: {doubt}", file=sys.stderr)
         # where the file does not say its size, --sensor-size is it (not the events' extent, nor a note that it
         # is); where the file says a smaller one, its header is wrong; a smaller --sensor-size is a crop
+        stated = source.sensor_size  # the file's own (None: it does not say)
         if given_size and (source.sensor_size is None or any(g > f for g, f in zip(given_size, source.sensor_size))):
             source.sensor_size = given_size
         # A file that says its sensor size (or given one) streams through the network in chunks (events
@@ -251,10 +262,15 @@ def handle(args) -> int:
     summary["undistortion"] = undistortion_of(network, recording, result, str(args.recording),
                                               no_undistort=getattr(args, "no_undistort", False))
     summary["notes"] = list(recording.notes)
+    if stated is not None and tuple(stated) != tuple(network.sensor_size):
+        summary["stated_sensor_size"] = list(stated)
+        summary["notes"].append(sensor_size_note(stated, network.sensor_size, given_size))
     if args.velocity and not any(float(v) for v in args.velocity.split(",")):  # parsed by constant_velocity
         summary["notes"].append(f"--velocity {args.velocity}: no translation, so no depth (depth from event timing "
                                 "needs the camera to translate)")
     summary["camera"] = camera_of(run_intrinsics(network, recording))
+    if args.velocity:  # the poses it implies: `tofnet plot cloud` places the estimates with them
+        summary["velocity_m_s"] = [float(v) for v in args.velocity.split(",")]
     summary["total_time_s"] = time.perf_counter() - clock.started
     summary["compile_time_s"], summary["kernels_compiled"] = clock.compile_seconds, clock.compiled
     written = write_outputs(out, result, summary, args.record_tot, check=lambda paths: check_more_outputs(args, paths))
@@ -302,7 +318,8 @@ def write_outputs(out: Path, result, summary: dict, record_tot: bool, check=None
             write_depth(path, records, t0_us=result.t0_us, timestep_us=result.timestep_us,
                         latency_steps=result.latency[name],
                         summary={**result.facts(), "recording": summary["recording"], "notes": summary["notes"],
-                                 **{key: summary[key] for key in ("window_us", "reading_size") if key in summary},
+                                 **{key: summary[key] for key in ("window_us", "reading_size", "velocity_m_s")
+                                    if key in summary},
                                  "undistortion": lens_of_run(summary.get("undistortion")),
                                  "camera": summary.get("camera")})
         else:

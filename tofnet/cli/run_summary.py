@@ -123,5 +123,7 @@ def format_summary(summary: dict, result, written: dict, network_width) -> str:
         for reason, count in account["dropped"].items():
             warning = result.declared.get(reader, {}).get(reason, {}).get("warning")
             if count and warning:
+                if reason == "out_of_bounds" and summary.get("stated_sensor_size"):  # a crop the notes explain
+                    warning = "events lay outside the {width}x{height} sensor (a crop of the file's, see the note)"
                 lines.append(f"warning        {count:,} {warning.format(width=width, height=height)}")
     return "\n".join(lines)

@@ -203,8 +203,10 @@ def evaluate(recording, depth: np.ndarray, meta: dict, *, window_s: float = DEFA
     """Metrics of ``depth`` (with its ``meta``: ``t0_us``, ``timestep_us``, ``latency_steps``) on a ``Recording``;
     against its ground-truth frames when it has them (``frame_gt``; ``interpolate`` in time)."""
     if recording.gt_depth is None:
-        raise DataError(f"{recording.source}: no ground-truth depth, per event (events_depth.npy, e.g. from "
-                        f"`tofnet simulate`) or as frames (a DSEC, MVSEC or M3ED sequence); eval needs one")
+        raise DataError(f"{recording.source}: no ground-truth depth, per event (events_depth.npy beside an ECD "
+                        "folder's events, or in a .npz tofnet wrote: `tofnet simulate` and `tofnet convert` to those "
+                        "keep it; RAW, DAT, Event Stream, AEDAT4 and HDF5 have no place for it) or as frames "
+                        "(a DSEC, MVSEC, M3ED or EVIMO2 sequence); eval needs one")
     meta = require_timing(meta)
     return evaluate_arrays(depth, recording.events, recording.gt_depth, t0_us=int(meta["t0_us"]),
                            timestep_us=int(meta["timestep_us"]), latency_steps=int(meta["latency_steps"]),

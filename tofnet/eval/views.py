@@ -73,6 +73,9 @@ def resolve_window(spec: str | float | None, span_us: tuple[int, int], *, defaul
         b = seconds(second, "window end") if second.strip() else (end - t0) * 1e-6
         if not b > a:
             raise TofnetError(f"window {spec!r}: the end must come after the start")
+        if a * 1e6 >= end - t0 or b <= 0:  # nothing of the recording or the run: an empty figure says nothing
+            raise TofnetError(f"window {spec!r}: outside the span of the events and estimates, 0 .. "
+                              f"{(end - t0) * 1e-6:g} s since its start")
         return Window(t0 + int(round(a * 1e6)), t0 + int(round(b * 1e6)), t0)
     length = seconds(spec, "window")
     if not length > 0:

@@ -145,11 +145,13 @@ class EventSource:
         return None
 
     def window_text(self) -> str:
-        """``12.5 .. 14.5 s from the first event`` for notes and messages."""
+        """``12.5 s .. 14.5 s from the first event`` (``from 20 s after the first event to the end``)."""
+        from tofnet.io.window import seconds_text
+
         start, stop = self.window
-        rel = (start - self._origin_us) * 1e-6
-        end = "the end" if stop is None else f"{(stop - self._origin_us) * 1e-6:g} s"
-        return f"{rel:g} s .. {end} from the first event"
+        if stop is None:
+            return f"from {seconds_text(start - self._origin_us)} after the first event to the end"
+        return f"{seconds_text(start - self._origin_us)} .. {seconds_text(stop - self._origin_us)} from the first event"
 
     def empty_window(self) -> DataError:
         """The one-line error for a window without events: the window in the terms it was asked in

@@ -123,7 +123,10 @@ def open_recording(path: str | Path, *, sensor_size: tuple[int, int] | None = No
                 if problem:
                     raise DataError(f"sensor size: {problem}")
         if sensor_size is not None:
-            source.sensor_size = tuple(int(v) for v in sensor_size)
+            stated, source.sensor_size = source.sensor_size, tuple(int(v) for v in sensor_size)
+            if stated is not None and tuple(stated) != source.sensor_size:
+                source.notes.append(f"sensor size {source.sensor_size[0]}x{source.sensor_size[1]} px given, over the "
+                                    f"{stated[0]}x{stated[1]} px the file states")
         if reading_size is not None:
             source.reading_size = tuple(int(v) for v in reading_size)
         if intrinsics is not None or calib is not None:

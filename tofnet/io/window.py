@@ -32,7 +32,12 @@ class TimePoint:
     absolute: bool = False
 
     def text(self) -> str:
-        return absolute_text(self.us) if self.absolute else f"{self.us * 1e-6:g} s"
+        return absolute_text(self.us) if self.absolute else seconds_text(self.us)
+
+
+def seconds_text(us: int) -> str:
+    """``0.00002 s``, ``12.5 s``: µs as seconds, exact and without an exponent."""
+    return f"{Decimal(int(us)).scaleb(-6).normalize():f} s"
 
 
 def absolute_text(us: int) -> str:
@@ -78,7 +83,7 @@ class TimeWindow:
         """How the window was asked for, for notes and messages."""
         parts = [f"start {self.start.text()}" if self.start else "from the first event"]
         if self.duration_us is not None:
-            parts.append(f"duration {self.duration_us * 1e-6:g} s")
+            parts.append(f"duration {seconds_text(self.duration_us)}")
         if self.until is not None:
             parts.append(f"until {self.until.text()}")
         return ", ".join(parts)
