@@ -61,10 +61,15 @@ def quote(value: object, limit: int = 40) -> str:
 
 
 def quote_field(path: object, field: object) -> str:
-    """A field of the file ``path`` for an error message: ``quote(field)``, unless a symlink takes the file, or
-    one of the two folders it is in, out of the folder its name is in (a recording's ``calib.txt`` linked
-    to ``~/.git-credentials``, its ``disparity/`` linked to ``~/secrets/``): what it holds is not the
-    recording's to show, so it is not quoted. Links higher up (``/home`` on a cluster) are not looked at.
+    """A field of the file ``path`` for an error message: ``quote(field)``, unless ``field_hidden(path)``."""
+    return field_hidden(path) or quote(field)
+
+
+def field_hidden(path: object) -> str | None:
+    """Why no field of the file ``path`` may be quoted (the words that stand for it), or ``None``: a symlink
+    takes the file, or one of the two folders it is in, out of the folder its name is in (a recording's
+    ``calib.txt`` linked to ``~/.git-credentials``, its ``disparity/`` linked to ``~/secrets/``), so what it
+    holds is not the recording's to show. Links higher up (``/home`` on a cluster) are not looked at.
     Within ``fields_shown_within(folder)`` a file outside ``folder`` (links resolved) is not quoted either."""
     import os
     try:
@@ -82,7 +87,7 @@ def quote_field(path: object, field: object) -> str:
                 f"{shown_path(os.path.realpath(linked))})")
     if outside:
         return f"a field not shown ({shown_path(path)} is outside {scope[1]})"
-    return quote(field)
+    return None
 
 
 #: The folder whose files' fields may be quoted, and what it is, in a ``fields_shown_within`` scope.
