@@ -122,3 +122,8 @@ def test_a_task_quotes_no_field_of_a_file_outside_the_plans_folder(folder):
     assert "links out of its folder, to " in linked, linked
     assert "sk-live" not in absolute + linked and "\n" not in absolute + linked
     assert "got 'API_KEY=sk-live-ABCDEF0123456789SECRET'" in own, own
+    # a calib: file outside the plan's folder is read on the client, and quoted no more there
+    (folder / "secret" / "cam.yaml").write_text(f"cam0:\n  camera_model: {SECRET}  intrinsics: [1, 1, 1, 1]\n")
+    with pytest.raises(PlanError) as err:
+        load_plan(write(plans, f"recordings: [own.txt]\ncalib: {folder / 'secret' / 'cam.yaml'}\n"))
+    assert "sk-live" not in str(err.value) and "cam.yaml is outside the plan's folder)" in str(err.value), err.value

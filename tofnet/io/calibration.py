@@ -255,8 +255,8 @@ def _camera_from(data, camera, sensor_size, show: Callable[[object], str] = quot
     if cameras:  # Kalibr camchain
         name, (entry, size) = _pick(cameras, camera, sensor_size, show, hidden)
         if entry.get("camera_model", "pinhole") != "pinhole":
-            raise ValueError(f"{_name(name, hidden)}.camera_model {show(entry['camera_model'])}: only pinhole is "
-                             "supported")
+            label = _name(name, hidden and f"camera {list(cameras).index(name)}")  # by position when hidden
+            raise ValueError(f"{label}.camera_model {show(entry['camera_model'])}: only pinhole is supported")
         return (intrinsics_from(entry["intrinsics"], entry.get("distortion_coeffs", ()),
                                 entry.get("distortion_model", "radtan"), show), _size(size, show), _name(name, None))
     raise ValueError("no camera found (no value0, camera_matrix, intrinsics or camN keys)")
