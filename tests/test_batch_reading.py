@@ -77,3 +77,53 @@ def test_errors_name_the_line_and_the_key(folder, text, line, expected):
         load_plan(path)
     message = str(err.value)
     assert message.startswith(f"{path}:{line}: ") and expected in message and "\n" not in message, message
+
+
+SECRET = "API_KEY=sk-live-ABCDEF0123456789SECRET 1 2 3\n"
+
+
+@pytest.mark.parametrize("text, line, key", [
+    ("recordings: [../secret/token.txt]\n", 1, "recordings[0]"),
+    ("recordings:\n  - {path: ../secret/token.txt}\n", 2, "recordings[0].path"),
+    ("recordings: [plain.npy]\ncalib: sub/../../secret/cam.yaml\n", 2, "calib"),
+    ("recordings: [plain.npy]\nnetworks: [../secret/spec.yaml]\n", 2, "networks[0]"),
+])
+def test_a_plan_reads_no_file_out_of_its_folder_by_a_relative_path(folder, text, line, key):
+    """The audit's case: ``{path: ../../secret/token.txt}`` was read, its first field quoted into results.csv."""
+    (folder / "secret").mkdir()
+    for name in ("token.txt", "cam.yaml", "spec.yaml"):
+        (folder / "secret" / name).write_text(SECRET)
+    plans = folder / "plans"
+    plans.mkdir()
+    (plans / "plain.npy").symlink_to(folder / "plain.npy")
+    (plans / "sub").mkdir()
+    path = write(plans, text)
+    with pytest.raises(PlanError) as err:
+        load_plan(path)
+    assert str(err.value).startswith(f"{path}:{line}: {key}: '") and "leaves the plan's folder (..); give an " \
+        "absolute path to look elsewhere" in str(err.value), str(err.value)
+    # an absolute name is the user's to see in the plan, and the output may be anywhere (tofnet writes only there)
+    plan = load_plan(write(plans, f"output: ../results\nrecordings: [{folder / 'plain.npy'}]\n"))
+    assert plan.recordings[0].path == str(folder / "plain.npy") and plan.output.resolve() == folder / "results"
+
+
+def test_a_task_quotes_no_field_of_a_file_outside_the_plans_folder(folder):
+    """A file named absolutely, or through a link out of the plan's folder, is read, but its fields stay out
+    of the terminal and results.csv; a file of the plan's folder is quoted as before."""
+    (folder / "secret").mkdir()
+    (folder / "secret" / "token.txt").write_text(SECRET)
+    plans = folder / "plans"
+    plans.mkdir()
+    (plans / "link.txt").symlink_to(folder / "secret" / "token.txt")
+    (plans / "own.txt").write_text(SECRET)
+    plan = load_plan(write(plans, f"recordings:\n  - {folder / 'secret' / 'token.txt'}\n  - link.txt\n  - own.txt\n"))
+    absolute, linked, own = (run_task(task)["error"] for task in expand(plan))
+    assert "got a field not shown (" in absolute and "token.txt is outside the plan's folder)" in absolute, absolute
+    assert "links out of its folder, to " in linked, linked
+    assert "sk-live" not in absolute + linked and "\n" not in absolute + linked
+    assert "got 'API_KEY=sk-live-ABCDEF0123456789SECRET'" in own, own
+    # a calib: file outside the plan's folder is read on the client, and quoted no more there
+    (folder / "secret" / "cam.yaml").write_text(f"cam0:\n  camera_model: {SECRET}  intrinsics: [1, 1, 1, 1]\n")
+    with pytest.raises(PlanError) as err:
+        load_plan(write(plans, f"recordings: [own.txt]\ncalib: {folder / 'secret' / 'cam.yaml'}\n"))
+    assert "sk-live" not in str(err.value) and "cam.yaml is outside the plan's folder)" in str(err.value), err.value

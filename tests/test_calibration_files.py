@@ -220,3 +220,63 @@ def test_camera_of_a_one_camera_file_is_refused_not_ignored(tmp_path):
         set_camera(source, None, tmp_path / "calib.txt", "cam9")
     set_camera(source, None, tmp_path / "calib.txt", None)
     assert source.intrinsics.fx == pytest.approx(199.1)
+
+
+SECRET = "API_KEY=sk-live-" + "A" * 200
+
+
+@pytest.mark.parametrize("name, camera, hostile", [
+    ("calibration.json", "2", lambda: _with(lambda d: d["value0"]["intrinsics"][2].update(camera_type=SECRET))),
+    ("calibration.json", "2", lambda: _with(lambda d: d["value0"]["intrinsics"][2]["intrinsics"].update(fx=SECRET))),
+    ("calibration.json", "2", lambda: _with(lambda d: d["value0"]["resolution"][2].__setitem__(0, SECRET))),
+    ("cam.yaml", None, lambda: KALIBR.replace("camera_model: pinhole", f"camera_model: {SECRET}", 1)),
+    ("cam.yaml", None, lambda: KALIBR.replace("distortion_model: equidistant", f"distortion_model: {SECRET}", 1)),
+    ("info.yaml", None, lambda: ROS.replace("data: [226.38,", f"data: [{SECRET},", 1)),
+    ("cam_to_cam.yaml", None, lambda: DSEC.replace("camera_matrix: [553.47,", f"camera_matrix: ['{SECRET}',", 1)),
+    ("cam_to_cam.yaml", "camX", lambda: DSEC.replace("  cam1:", f"  cam{SECRET}:", 1)),  # the error lists the names
+    ("cam.yaml", None, lambda: KALIBR.replace("camera_model: pinhole", f"camera_model: !{SECRET}", 1)),  # a YAML tag
+])
+def test_a_calibration_file_quotes_40_characters_of_a_field_and_none_when_it_links_out(tmp_path, name, camera,
+                                                                                        hostile):
+    """The audit's case: a TUM-VIE JSON linked out of its folder was quoted up to ~160 characters
+    (camera_type, float()'s and int()'s own messages); the text readers' rule holds for every layout."""
+    text = hostile()
+    (tmp_path / "rec").mkdir()
+    (tmp_path / "away").mkdir()
+    (tmp_path / "rec" / name).write_text(text)
+    with pytest.raises(TofnetError) as err:
+        read_camera_file(tmp_path / "rec" / name, camera)
+    message = str(err.value)
+    assert "API_KEY=sk-live-A" in message and "A" * 30 not in message and "\n" not in message, message
+    (tmp_path / "away" / name).write_text(text)
+    (tmp_path / "rec" / name).unlink()
+    (tmp_path / "rec" / name).symlink_to(tmp_path / "away" / name)
+    with pytest.raises(TofnetError) as err:
+        read_camera_file(tmp_path / "rec" / name, camera)
+    message = str(err.value)
+    assert "sk-live" not in message and "links out of its folder, to " in message and "\n" not in message, message
+
+
+def _with(change):
+    data = _tumvie()
+    change(data)
+    return json.dumps(data)
+
+
+def test_info_of_a_tumvie_folder_whose_calibration_links_out(tmp_path, capsys):
+    """The audit's reproduction end to end: ``tofnet info`` on a made TUM-VIE sequence folder."""
+    from tofnet.testing_datasets import MAKERS
+
+    folder = tmp_path / "tumvie"
+    MAKERS["tumvie"](folder)
+    calibration = next(folder.glob("camera-calibration*.json"))
+    data = json.loads(calibration.read_text())
+    for entry in data["value0"]["intrinsics"]:
+        entry["camera_type"] = SECRET
+    away = tmp_path / calibration.name
+    away.write_text(json.dumps(data))
+    calibration.unlink()
+    calibration.symlink_to(away)
+    assert main(["info", str(folder)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "sk-live" not in err and "links out of its folder" in err, err

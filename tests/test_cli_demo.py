@@ -57,6 +57,30 @@ def test_demo_never_replaces_files_it_did_not_write(tmp_path, capsys, monkeypatc
     assert _contents(out) == before and not [p for p in tmp_path.iterdir() if p.name.endswith(".part")]
 
 
+def test_demo_never_replaces_files_added_to_an_earlier_demos_folder(tmp_path, capsys, monkeypatch):
+    """The audit's case: files inside an earlier demo's sub-folders and a user's ``.thesis.part`` were
+    removed without --force, since only top-level names were compared with the manifest."""
+    from tofnet.cli.demo import DEMO
+    from tofnet.io.files import write_manifest
+
+    out = tmp_path / "tofnet-demo"
+    for name in ("eval.json", "figures/compare.png", "recording/events.txt"):
+        (out / name).parent.mkdir(parents=True, exist_ok=True)
+        (out / name).write_text("the demo's")
+    write_manifest(out, DEMO)
+    _no_work(monkeypatch)
+    for added in ("figures/my_notes.txt", "recording/mine/data.txt", ".thesis.part"):
+        (out / added).parent.mkdir(parents=True, exist_ok=True)
+        (out / added).write_text("mine")
+        before = _contents(out)
+        for force in ([], ["--force"]):
+            assert main(["demo", "--out", str(out), "--duration", "0.1", *force]) == 2
+            err = _one_line(capsys)
+            assert f"holding '{added}', which tofnet did not write" in err
+        assert _contents(out) == before
+        (out / added).unlink()
+
+
 def test_demo_replaces_its_own_folder_and_only_when_it_succeeds(tmp_path, capsys, monkeypatch):
     from tofnet.io.guard import MANIFEST
 

@@ -203,6 +203,33 @@ def test_a_folder_that_cannot_be_listed_is_never_tofnets(tmp_path, monkeypatch):
     assert guard.foreign_entries(tmp_path / "out") == ["(a folder that cannot be listed: Permission denied)"]
 
 
+def test_only_files_the_manifest_lists_are_tofnets_at_any_depth(tmp_path):
+    """A listed ``figures/cloud.png`` once made all of ``figures/`` tofnet's, and any ``.X.part`` its temporary."""
+    from tofnet.io import guard
+    from tofnet.io.files import write_manifest
+
+    out = tmp_path / "out"
+    for name in ("depth.npz", "figures/cloud.png", "recording/events.txt"):
+        (out / name).parent.mkdir(parents=True, exist_ok=True)
+        (out / name).write_text("tofnet's")
+    write_manifest(out, "tofnet demo")
+    (out / "empty").mkdir()  # nothing in it to lose
+    (out / ".depth.npz.ab_c1234.part").write_text("a killed write")  # tofnet's temporaries for listed files
+    (out / "figures" / ".cloud.png.zz999999.old.part").mkdir()
+    assert guard.foreign_entries(out) == []
+    (out / "figures" / "my_notes.txt").write_text("precious")
+    (out / "recording" / "mine").mkdir()
+    (out / "recording" / "mine" / "data.txt").write_text("secret")
+    (out / ".thesis.part").write_text("draft")  # a user's, though named like a temporary
+    (out / ".notes.txt.abcdefgh.part").write_text("no notes.txt is listed")
+    (out / "figures" / "link.png").symlink_to(out / "depth.npz")  # tofnet writes no links
+    assert guard.foreign_entries(out) == [".notes.txt.abcdefgh.part", ".thesis.part", "figures/link.png",
+                                          "figures/my_notes.txt", "recording/mine/data.txt"]
+    # a listed folder (a batch's tasks/, filled as its tasks run) covers what is under it
+    write_manifest(out, "tofnet batch", ["depth.npz", "figures", "recording"])
+    assert guard.foreign_entries(out) == [".notes.txt.abcdefgh.part", ".thesis.part"]
+
+
 def test_the_outputs_fuzz_target_sees_what_the_guard_prevents(tmp_path, monkeypatch):
     """With the guard switched off, the fuzzer's ``outputs`` target reports the damage it finds."""
     from tofnet import fuzzing

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+from typing import Iterator
+
 
 class TofnetError(Exception):
     """Base of every error caused by the user's network, spec or data."""
@@ -57,21 +61,51 @@ def quote(value: object, limit: int = 40) -> str:
 
 
 def quote_field(path: object, field: object) -> str:
-    """A field of the file ``path`` for an error message: ``quote(field)``, unless a symlink takes the file, or
-    one of the two folders it is in, out of the folder its name is in (a recording's ``calib.txt`` linked
-    to ``~/.git-credentials``, its ``disparity/`` linked to ``~/secrets/``): what it holds is not the
-    recording's to show, so it is not quoted. Links higher up (``/home`` on a cluster) are not looked at."""
+    """A field of the file ``path`` for an error message: ``quote(field)``, unless ``field_hidden(path)``."""
+    return field_hidden(path) or quote(field)
+
+
+def field_hidden(path: object) -> str | None:
+    """Why no field of the file ``path`` may be quoted (the words that stand for it), or ``None``: a symlink
+    takes the file, or one of the two folders it is in, out of the folder its name is in (a recording's
+    ``calib.txt`` linked to ``~/.git-credentials``, its ``disparity/`` linked to ``~/secrets/``), so what it
+    holds is not the recording's to show. Links higher up (``/home`` on a cluster) are not looked at.
+    Within ``fields_shown_within(folder)`` a file outside ``folder`` (links resolved) is not quoted either."""
     import os
     try:
         name = os.path.abspath(os.fspath(path))
         linked = next((link for link in (name, os.path.dirname(name), os.path.dirname(os.path.dirname(name)))
                        if os.path.islink(link) and not _inside(os.path.realpath(link),
                                                                os.path.realpath(os.path.dirname(link)))), None)
+        scope = _SHOWN_WITHIN.get()
+        outside = scope is not None and not _inside(os.path.realpath(name), scope[0])
     except (TypeError, ValueError, OSError):
         linked = os.fspath(path) if isinstance(path, (str, os.PathLike)) else str(path)
-    if linked is None:
-        return quote(field)
-    return f"a field not shown ({shown_path(linked)} links out of its folder, to {shown_path(os.path.realpath(linked))})"
+        outside = False
+    if linked is not None:
+        return (f"a field not shown ({shown_path(linked)} links out of its folder, to "
+                f"{shown_path(os.path.realpath(linked))})")
+    if outside:
+        return f"a field not shown ({shown_path(path)} is outside {scope[1]})"
+    return None
+
+
+#: The folder whose files' fields may be quoted, and what it is, in a ``fields_shown_within`` scope.
+_SHOWN_WITHIN: contextvars.ContextVar[tuple[str, str] | None] = contextvars.ContextVar("tofnet_shown_within",
+                                                                                      default=None)
+
+
+@contextlib.contextmanager
+def fields_shown_within(folder: object, what: str) -> Iterator[None]:
+    """A scope in which ``quote_field`` quotes only files inside ``folder`` (``what``, e.g. "the plan's
+    folder"): a batch plan may name a file anywhere by an absolute path, and its errors go to the terminal
+    and to results.csv, where the first field of ``/home/me/.env`` read as events must not appear."""
+    import os
+    token = _SHOWN_WITHIN.set((os.path.realpath(os.fspath(folder)), what))
+    try:
+        yield
+    finally:
+        _SHOWN_WITHIN.reset(token)
 
 
 def _inside(path: str, folder: str) -> bool:

@@ -3,7 +3,7 @@
 A small plan must not be able to make ``tofnet batch --check`` run for minutes: the number
 of tasks is computed from the sizes of the plan's lists before any grid is expanded, and
 a glob looks at a bounded number of files and folders, never leaving the plan's folder
-unless its pattern is absolute.
+unless its pattern is absolute (nor does a path it reads, ``check_inside_plan``).
 """
 
 from __future__ import annotations
@@ -52,11 +52,19 @@ def bounded_glob(pattern: str, base: Path, limit: int | None = None) -> list[Pat
             from None
 
 
-def _glob(pattern: str, base: Path, limit: int) -> list[Path]:
-    path = Path(pattern).expanduser()
+def check_inside_plan(name: str, what: str = "path") -> None:
+    """Refuse (one line) a relative ``name`` that climbs out of the plan's folder with ``..``: a plan from
+    someone else could otherwise read ``../../.env`` beside it. An absolute name, which whoever runs the
+    plan sees, may look anywhere (errors then quote no field of it, ``tofnet.errors.fields_shown_within``)."""
+    path = Path(name).expanduser()
     if not path.is_absolute() and ".." in path.parts:
-        raise TofnetError(f"{quote(pattern)} leaves the plan's folder (..); give an absolute pattern to look "
+        raise TofnetError(f"{quote(name)} leaves the plan's folder (..); give an absolute {what} to look "
                           "elsewhere")
+
+
+def _glob(pattern: str, base: Path, limit: int) -> list[Path]:
+    check_inside_plan(pattern, "pattern")
+    path = Path(pattern).expanduser()
     parts = path.parts[1:] if path.is_absolute() else path.parts
     root = Path(path.anchor) if path.is_absolute() else base
     fixed = 0

@@ -16,10 +16,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from tofnet.batch.bounds import bounded_glob, check_task_count, exists
+from tofnet.batch.bounds import bounded_glob, check_inside_plan, check_task_count, exists
 from tofnet.batch.grid import check_grid, read_grid
 from tofnet.batch.reading import READ_KEYS
-from tofnet.errors import SpecError, TofnetError, located, quote
+from tofnet.errors import SpecError, TofnetError, fields_shown_within, located, quote
 from tofnet.io.safe_yaml import _line, _parse_yaml, yaml_source
 
 TOP_KEYS = ("name", "description", "output", "cache", "recordings", "networks", "grid", "backend", "keep",
@@ -130,7 +130,8 @@ def load_plan(path_or_text: str | Path, *, output: str | Path | None = None, all
         allow = allowed_imports(allow_import)
     except SpecError as err:
         raise PlanError(str(err)) from None
-    return _PlanReader(tree, source, base, allow).read(output)
+    with fields_shown_within(base, "the plan's folder"):  # a calib: file named absolutely is not quoted
+        return _PlanReader(tree, source, base, allow).read(output)
 
 
 class _PlanReader:
@@ -144,7 +145,14 @@ class _PlanReader:
     def fail(self, container: Any, key: Any, path: str, message: str) -> PlanError:
         return PlanError(located(self.source, _line(container, key), f"{path}: {message}"))
 
-    def resolve(self, value: str) -> Path:
+    def resolve(self, value: str, where: tuple = (), reads: bool = True) -> Path:
+        """``value`` from the plan's folder; one it reads not out of it by ``..`` (the output and cache may be
+        anywhere: they hold only what tofnet writes); ``where``: container, key, path an error names."""
+        try:
+            if reads:
+                check_inside_plan(value)
+        except TofnetError as err:
+            raise (self.fail(*where, str(err)) if where else err) from None
         path = Path(value).expanduser()
         return path if path.is_absolute() else self.base / path
 
@@ -165,8 +173,8 @@ class _PlanReader:
         name = self.text(tree, "name", "name", default=Path(self.source).stem if self.source != "<string>" else "batch")
         description = self.text(tree, "description", "description")
         out = Path(output) if output is not None else self.resolve(self.text(tree, "output", "output",
-                                                                             default=f"{name}-results"))
-        cache = self.resolve(self.text(tree, "cache", "cache")) if "cache" in tree else out / "scenarios"
+                                                                             default=f"{name}-results"), reads=False)
+        cache = self.resolve(self.text(tree, "cache", "cache"), reads=False) if "cache" in tree else out / "scenarios"
         backend = self.backend(tree, "backend", "backend")
         keep = self.keep(tree)
         self.defaults = self.read_options(tree, {}, "")
@@ -259,7 +267,7 @@ class _PlanReader:
              options: dict[str, Any]) -> RecordingSource:
         if not isinstance(value, str) or not value.strip():
             raise self.fail(container, key, path, f"expected a path, got {value!r}")
-        resolved = self.resolve(value)
+        resolved = self.resolve(value, (container, key, path))
         if not exists(resolved, Path.exists):
             hint = ("; a pattern is written {glob: ...} (with the same reading keys) to match several"
                     if any(c in value for c in "*?[") and isinstance(container, Mapping) else "")
@@ -269,7 +277,7 @@ class _PlanReader:
 
     def glob(self, container: Any, key: Any, path: str, pattern: str,
              options: dict[str, Any]) -> list[RecordingSource]:
-        full = self.resolve(pattern)
+        full = self.resolve(pattern, reads=False)  # bounded_glob refuses a pattern out of the plan's folder
         try:
             matches = bounded_glob(pattern, self.base)
         except TofnetError as err:
@@ -347,7 +355,7 @@ class _PlanReader:
                 raise self.fail(container, key, path, f"expected a spec file or {PAPER!r}, got {spec!r}")
             resolved = None
             if spec != PAPER:
-                resolved = self.resolve(spec)
+                resolved = self.resolve(spec, (container, key, f"{path}.spec" if container is entry else path))
                 self.load_spec(resolved, container, key, f"{path}.spec" if container is entry else path)
             estimator = self.estimator(entry, resolved, path) if container is entry else None
             name = self.text(entry, "name", f"{path}.name") if container is entry else None

@@ -45,6 +45,8 @@ class Task:
     scenario_folder: str | None = None
     #: Content fingerprint of the input files (``tofnet.batch.outputs.fingerprint``), set before running.
     fingerprint: str | None = None
+    #: The plan's folder: errors quote fields only of files in it (``tofnet.errors.fields_shown_within``).
+    plan_folder: str | None = None
 
     @property
     def parameters(self) -> dict[str, Any]:
@@ -70,7 +72,8 @@ def expand(plan: Plan) -> list[Task]:
                 backend = network.backend or plan.backend
                 task_id = make_task_id(recording, network, point, backend)
                 tasks.append(Task(len(tasks), task_id, recording, network, tuple(point.items()), backend,
-                                  plan.keep, str(plan.output / TASKS_DIR / task_id), scenario_folder))
+                                  plan.keep, str(plan.output / TASKS_DIR / task_id), scenario_folder,
+                                  plan_folder=str(plan.base)))
     seen: dict[str, Task] = {}
     for task in tasks:
         if task.task_id in seen:  # only when two recordings share a name and a path; plan.py forbids it

@@ -15,11 +15,12 @@ import shutil
 import socket
 import time
 import uuid
+from contextlib import nullcontext
 from pathlib import Path
 from typing import Any
 
 from tofnet.batch.tasks import SCENARIO_FILE, Task
-from tofnet.errors import TofnetError
+from tofnet.errors import TofnetError, fields_shown_within
 from tofnet.io.files import write_text_atomic
 from tofnet.io.guard import reading
 
@@ -79,7 +80,8 @@ def run_task(task: Task, recording_path: str | None = None) -> dict[str, Any]:
            "fingerprint": task.fingerprint}
     folder = Path(task.folder)
     try:
-        with reading():  # what the task reads, which none of its outputs may replace
+        shown = fields_shown_within(task.plan_folder, "the plan's folder") if task.plan_folder else nullcontext()
+        with reading(), shown:  # what the task reads, which none of its outputs may replace
             row.update(_run(task, recording_path or task.recording_path, folder))
         row["status"] = "ok"
     except MemoryError:

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import math
+from functools import partial
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
-from tofnet.errors import DataError, TofnetError, located, quote
+from tofnet.errors import DataError, TofnetError, field_hidden, located, quote, quote_field
 from tofnet.io.files import write_text_atomic
 from tofnet.io.groundtruth import finite_number, read_text
 from tofnet.io.recording import Intrinsics, focal_problem
@@ -108,8 +110,8 @@ def read_camera_file(path: str | Path, camera: str | None = None,
             return read_calibration(path), None, "calib.txt"
         from tofnet.io.safe_yaml import read_yaml_file
         data = read_yaml_file(path, "calibration")
-    try:
-        return _camera_from(data, camera, sensor_size)
+    try:  # its fields are quoted as the text readers' are: cut to 40 characters, never from a file linked out
+        return _camera_from(data, camera, sensor_size, partial(quote_field, path), field_hidden(path))
     except IntrinsicsError as err:
         raise DataError(located(path, None, str(err))) from None
     except (KeyError, IndexError, TypeError, ValueError, AttributeError, OverflowError) as err:
@@ -118,9 +120,25 @@ def read_camera_file(path: str | Path, camera: str | None = None,
 
 
 def _reason(err: BaseException) -> str:
+    """The first line of an error of the layout. The messages raised here quote the file's fields through
+    ``quote_field`` (numbers too: ``_numbers``, ``_size``) and Python's own that remain (a key tofnet asked
+    for, a wrong type) hold none, so the line is not cut at a length that would drop what was expected
+    after two long paths; the cap only keeps it readable."""
     if isinstance(err, KeyError):
         return f"no key {err.args[0]!r}" if err.args else "a key is missing"
-    return str(err).split("\n")[0][:160] or type(err).__name__
+    return str(err).split("\n")[0][:800] or type(err).__name__
+
+
+def _numbers(values, what: str, show: Callable[[object], str] = quote) -> list[float]:
+    """``values`` (any nesting) as floats: one that is not a number is named through ``show``, not by
+    float()'s own message, which quotes all of it."""
+    out = []
+    for value in np.ravel(np.asarray(values, dtype=object)):
+        try:
+            out.append(float(value))
+        except (TypeError, ValueError, OverflowError):
+            raise ValueError(f"{what}: expected a number, got {show(value)}") from None
+    return out
 
 
 def _looks_like_calib_txt(text: str) -> bool:
@@ -135,16 +153,17 @@ MODEL_NAMES = {"radtan": "radtan", "plumb_bob": "radtan", "radial-tangential": "
                "equidistant": "equidistant", "fisheye": "equidistant", "kb4": "equidistant"}
 
 
-def intrinsics_from(matrix, coefficients, model: str) -> Intrinsics:
+def intrinsics_from(matrix, coefficients, model: str, show: Callable[[object], str] = quote) -> Intrinsics:
     """``Intrinsics`` from ``[fx, fy, cx, cy]`` and distortion coefficients of a named model.
 
-    radtan: ``k1 k2 p1 p2 [k3]`` (k3 = 0 when absent); equidistant: ``k1 k2 k3 k4``.
+    radtan: ``k1 k2 p1 p2 [k3]`` (k3 = 0 when absent); equidistant: ``k1 k2 k3 k4``. ``show`` quotes a
+    field of the file in an error (``quote_field``).
     """
     model_name = MODEL_NAMES.get(str(model).lower().strip())
     if model_name is None:
-        raise ValueError(f"unknown distortion model {quote(str(model), 20)}; expected one of "
+        raise ValueError(f"unknown distortion model {show(str(model))}; expected one of "
                          f"{', '.join(sorted(MODEL_NAMES))}")
-    coefficients = tuple(float(c) for c in np.ravel(coefficients))
+    coefficients = tuple(_numbers(coefficients, "distortion coefficients", show))
     if str(model).lower().strip() == "none":  # Kalibr's and others' word for a lens without distortion
         if any(coefficients):
             raise ValueError(f"distortion model 'none' with coefficients {', '.join(f'{c:g}' for c in coefficients)}")
@@ -156,9 +175,9 @@ def intrinsics_from(matrix, coefficients, model: str) -> Intrinsics:
         raise ValueError(f"{model_name} distortion needs {expected} coefficients, got {len(coefficients)}")
     if not any(coefficients):
         coefficients = ()
-    matrix = np.ravel(np.asarray(matrix, dtype=np.float64))
-    if matrix.size != 4:
-        raise ValueError(f"expected 4 numbers fx fy cx cy, got {matrix.size}")
+    matrix = _numbers(matrix, "fx fy cx cy", show)
+    if len(matrix) != 4:
+        raise ValueError(f"expected 4 numbers fx fy cx cy, got {len(matrix)}")
     fx, fy, cx, cy = (float(v) for v in matrix)
     check_intrinsics(fx, fy, cx, cy, coefficients)
     return Intrinsics(fx, fy, cx, cy, distortion=coefficients,
@@ -193,51 +212,57 @@ def is_number(field: str) -> bool:
         return False
 
 
-def _camera_from(data, camera, sensor_size):
+def _camera_from(data, camera, sensor_size, show: Callable[[object], str] = quote, hidden: str | None = None):
+    """The camera of a parsed calibration file; ``show`` quotes its fields, ``hidden`` (``field_hidden``)
+    stands for its camera names when they may not be shown."""
     if not isinstance(data, dict):
         raise ValueError(f"expected a mapping at the top, got {type(data).__name__}")
     if "value0" in data:  # TUM-VIE / Basalt JSON
         body = data["value0"]
         cameras = {str(k): (entry, body.get("resolution", [None] * (k + 1))[k])
                    for k, entry in enumerate(body["intrinsics"])}
-        name, (entry, size) = _pick(cameras, camera, sensor_size)
+        name, (entry, size) = _pick(cameras, camera, sensor_size, show, hidden)
         kind, values = entry["camera_type"], entry["intrinsics"]
         if kind not in ("kb4", "pinhole"):
-            raise ValueError(f"value0.intrinsics[{name}].camera_type {kind!r}: only kb4 and pinhole are supported")
+            raise ValueError(f"value0.intrinsics[{name}].camera_type {show(kind)}: only kb4 and pinhole are "
+                             "supported")
         coefficients = [values[k] for k in ("k1", "k2", "k3", "k4")] if kind == "kb4" else []
-        return (intrinsics_from([values["fx"], values["fy"], values["cx"], values["cy"]], coefficients, "kb4"),
-                _size(size), f"camera {name} ({kind})")
+        return (intrinsics_from([values["fx"], values["fy"], values["cx"], values["cy"]], coefficients, "kb4", show),
+                _size(size, show), f"camera {name} ({kind})")
     if "camera_matrix" in data and "image_width" in data:  # ROS camera_info
-        k = [float(v) for v in data["camera_matrix"]["data"]]
+        k = _numbers(data["camera_matrix"]["data"], "camera_matrix.data", show)
         if len(k) != 9:
             raise ValueError(f"camera_matrix.data: expected 9 numbers (3x3), got {len(k)}")
         coefficients = (data.get("distortion_coefficients") or {}).get("data") or []
         model = data.get("distortion_model") or "plumb_bob"
         if model in ("plumb_bob", "radtan"):
             coefficients = list(coefficients)[:5]  # rational_polynomial is refused below, by name
-        return (intrinsics_from([k[0], k[4], k[2], k[5]], coefficients, model),
-                _size([data["image_width"], data["image_height"]]), f"camera_info {data.get('camera_name', '')}".strip())
+        return (intrinsics_from([k[0], k[4], k[2], k[5]], coefficients, model, show),
+                _size([data["image_width"], data["image_height"]], show),
+                f"camera_info {_name(data.get('camera_name') or '', None)}".strip())
     if isinstance(data.get("intrinsics"), dict):  # DSEC cam_to_cam.yaml
         # The raw cameras first: the rectified camRectN (no distortion) only when asked for by name.
         entries = sorted(((name, entry) for name, entry in data["intrinsics"].items()
                           if isinstance(entry, dict) and "camera_matrix" in entry),
                          key=lambda item: str(item[0]).startswith("camRect"))
         cameras = {name: (entry, entry.get("resolution")) for name, entry in entries}
-        name, (entry, size) = _pick(cameras, camera, sensor_size)
+        name, (entry, size) = _pick(cameras, camera, sensor_size, show, hidden)
         return (intrinsics_from(entry["camera_matrix"], entry.get("distortion_coeffs", ()),
-                                entry.get("distortion_model", "radtan")), _size(size), f"intrinsics.{name}")
+                                entry.get("distortion_model", "radtan"), show), _size(size, show),
+                f"intrinsics.{_name(name, None)}")
     cameras = {name: (entry, entry.get("resolution")) for name, entry in data.items()
                if str(name).startswith("cam") and isinstance(entry, dict) and "intrinsics" in entry}
     if cameras:  # Kalibr camchain
-        name, (entry, size) = _pick(cameras, camera, sensor_size)
+        name, (entry, size) = _pick(cameras, camera, sensor_size, show, hidden)
         if entry.get("camera_model", "pinhole") != "pinhole":
-            raise ValueError(f"{name}.camera_model {entry['camera_model']!r}: only pinhole is supported")
+            label = _name(name, hidden and f"camera {list(cameras).index(name)}")  # by position when hidden
+            raise ValueError(f"{label}.camera_model {show(entry['camera_model'])}: only pinhole is supported")
         return (intrinsics_from(entry["intrinsics"], entry.get("distortion_coeffs", ()),
-                                entry.get("distortion_model", "radtan")), _size(size), name)
+                                entry.get("distortion_model", "radtan"), show), _size(size, show), _name(name, None))
     raise ValueError("no camera found (no value0, camera_matrix, intrinsics or camN keys)")
 
 
-def _pick(cameras: dict, camera, sensor_size):
+def _pick(cameras: dict, camera, sensor_size, show: Callable[[object], str] = quote, hidden: str | None = None):
     if not cameras:
         raise ValueError("no camera with intrinsics in the file")
     if camera is not None:
@@ -245,20 +270,36 @@ def _pick(cameras: dict, camera, sensor_size):
         if key not in cameras and key.isdigit() and int(key) < len(cameras):
             key = list(cameras)[int(key)]
         if key not in cameras:
-            raise ValueError(f"no camera {camera!r}; the file has {', '.join(map(str, cameras))}")
+            names = [_name(name, None) for name in list(cameras)[:12]]
+            more = f" and {len(cameras) - 12} more" if len(cameras) > 12 else ""
+            raise ValueError(f"no camera {quote(camera)}; the file has {hidden or ', '.join(names) + more}")
         return key, cameras[key]
     if sensor_size is not None:
         for key, (entry, size) in cameras.items():
-            if size is not None and _size(size) == tuple(sensor_size):
+            if size is not None and _size(size, show) == tuple(sensor_size):
                 return key, (entry, size)
     key = next(iter(cameras))
     return key, cameras[key]
 
 
-def _size(size) -> tuple[int, int] | None:
+def _name(name: object, hidden: str | None) -> str:
+    """A camera's name (a key of the file) in a message: as written when short, else cut to 40 characters;
+    ``hidden`` when no field of the file may be shown (in errors: what a file that was read says of its
+    camera is named as written)."""
+    text = str(name)
+    return hidden or (text if len(text) <= 40 and text.isprintable() else quote(text))
+
+
+def _size(size, show: Callable[[object], str] = quote) -> tuple[int, int] | None:
     if size is None:
         return None
-    width, height = (int(v) for v in list(size)[:2])
+    out = []
+    for value in list(size)[:2]:
+        try:
+            out.append(int(value))
+        except (TypeError, ValueError, OverflowError):  # int()'s message quotes all of it
+            raise ValueError(f"resolution: expected whole numbers, got {show(value)}") from None
+    width, height = out
     return width, height
 
 

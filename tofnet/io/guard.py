@@ -13,7 +13,7 @@ is protected too.
 
 A folder output (an ECD recording, ``export --maps``, a batch's output) is marked with
 ``MANIFEST``, which lists what tofnet wrote there. Such a folder is replaced only when
-it is empty or holds nothing but what its manifest lists (``foreign_entries``).
+it is empty or holds no file, at any depth, but what its manifest lists (``foreign_entries``).
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ import contextlib
 import contextvars
 import json
 import os
+import re
 from pathlib import Path
 from typing import Iterable, Iterator
 
@@ -109,15 +110,50 @@ def read_manifest(folder: str | Path) -> dict | None:
 
 
 def foreign_entries(folder: str | Path) -> list[str]:
-    """Names in ``folder`` (top level) that tofnet did not write there: everything when it
-    has no manifest, else what the manifest does not list (tofnet's own interrupted
-    temporary files ``.NAME.*.part`` count as its own)."""
+    """Files in ``folder`` that tofnet did not write there, as paths relative to it: every
+    top-level name when it has no manifest, else every file, at any depth, whose relative
+    path the manifest does not list. A listed folder (a batch lists its ``tasks`` and its
+    scenario cache, which its workers fill as they run) covers what is under it; tofnet's
+    own interrupted temporaries (``_temporary_of``) count as its own; empty folders hold
+    nothing to lose."""
     folder = Path(folder)
     try:
         names = sorted(entry.name for entry in os.scandir(folder))
     except OSError as err:  # a folder that cannot be listed may hold anything: never tofnet's
         return [f"(a folder that cannot be listed: {err.strerror or type(err).__name__})"]
     manifest = read_manifest(folder)
-    listed = {MANIFEST, *(str(name).split("/")[0] for name in manifest["files"])} if manifest else set()
-    return [name for name in names if name not in listed
-            and not (manifest and name.startswith(".") and name.endswith(".part"))]
+    if manifest is None:
+        return names
+    listed = {MANIFEST, *(str(name) for name in manifest["files"])}
+    found: list[str] = []
+    _foreign_under(folder, "", listed, found)
+    return found
+
+
+#: A temporary name tofnet's writers make (``tempfile`` with prefix ``.NAME.`` and suffix
+#: ``.part``, ``.old.part`` for a folder moved aside): eight characters of its alphabet between.
+_TEMPORARY = re.compile(r"\.(?P<name>.+)\.[a-z0-9_]{8}(?:\.old)?\.part")
+
+
+def _temporary_of(name: str, prefix: str, listed: set[str]) -> bool:
+    """Whether ``name`` is tofnet's temporary for a file it lists at ``prefix`` (a user's
+    ``.thesis.part`` is not: nothing called ``thesis`` is listed, nor has it the random part)."""
+    match = _TEMPORARY.fullmatch(name)
+    return match is not None and prefix + match["name"] in listed
+
+
+def _foreign_under(folder: Path, prefix: str, listed: set[str], found: list[str]) -> None:
+    try:
+        entries = sorted(os.scandir(folder), key=lambda entry: entry.name)
+    except OSError as err:
+        found.append(f"{prefix}(a folder that cannot be listed: {err.strerror or type(err).__name__})")
+        return
+    for entry in entries:
+        relative = prefix + entry.name
+        if relative in listed or _temporary_of(entry.name, prefix, listed):
+            continue
+        # a symbolic link is never followed: tofnet writes none, so it is foreign (removing it would lose the link)
+        if entry.is_dir(follow_symlinks=False):
+            _foreign_under(Path(entry.path), relative + "/", listed, found)
+        else:
+            found.append(relative)

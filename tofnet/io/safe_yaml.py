@@ -14,7 +14,7 @@ from typing import Any
 
 import yaml
 
-from tofnet.errors import DataError, SpecError, located, quote
+from tofnet.errors import DataError, SpecError, located, quote, quote_field
 
 # YAML 1.1 (PyYAML) reads 1e-3 as a string; YAML 1.2 and people read it as a number.
 _FLOAT = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+$")
@@ -87,6 +87,11 @@ class _Builder:
     def __init__(self, source: str):
         self.source, self.loader, self.values, self.active = source, yaml.SafeLoader(""), 0, set()
 
+    def quote(self, value: Any) -> str:
+        """A field of the document: from a file, as the text readers quote (``quote_field``: never from a
+        file that links out of its folder, a calibration YAML linked to ``~/.ssh/config``)."""
+        return quote(value) if self.source == "<string>" else quote_field(self.source, value)
+
     def fail(self, node: yaml.Node, message: str) -> SpecError:
         return SpecError(located(self.source, node.start_mark.line + 1, message))
 
@@ -100,14 +105,14 @@ class _Builder:
         if isinstance(node, (yaml.MappingNode, yaml.SequenceNode)):
             kind = "map" if isinstance(node, yaml.MappingNode) else "seq"
             if node.tag != f"tag:yaml.org,2002:{kind}":
-                raise self.fail(node, f"tag {quote(node.tag)} is not allowed; a spec holds plain values")
+                raise self.fail(node, f"tag {self.quote(node.tag)} is not allowed; a spec holds plain values")
             self.active.add(id(node))
             try:
                 return self.mapping(node, line) if kind == "map" else self.sequence(node, line)
             finally:
                 self.active.discard(id(node))
         if node.tag not in _PLAIN_TAGS:
-            raise self.fail(node, f"tag {quote(node.tag)} is not allowed; a spec holds plain values")
+            raise self.fail(node, f"tag {self.quote(node.tag)} is not allowed; a spec holds plain values")
         if node.tag == "tag:yaml.org,2002:str" and node.style is None and _FLOAT.match(node.value):
             return float(node.value)
         try:
@@ -115,7 +120,7 @@ class _Builder:
         except yaml.YAMLError as err:
             raise _yaml_error(err, self.source) from None
         except (ValueError, OverflowError):  # e.g. an integer of more than 4300 digits
-            raise self.fail(node, f"cannot read the value {quote(node.value)}") from None
+            raise self.fail(node, f"cannot read the value {self.quote(node.value)}") from None
 
     def mapping(self, node: yaml.MappingNode, line: int) -> "_Map":
         try:
@@ -131,7 +136,7 @@ class _Builder:
                 raise SpecError(located(self.source, key_line, "a mapping key must be a plain value"))
             if key in out:
                 raise SpecError(located(self.source, key_line,
-                                        f"duplicate key {quote(key)} (first on line {out.key_lines[key]})"))
+                                        f"duplicate key {self.quote(key)} (first on line {out.key_lines[key]})"))
             out[key] = self.build(value_node)
             out.key_lines[key] = key_line
         return out
