@@ -227,17 +227,21 @@ OVERRIDES = {
 def apply_overrides(network: Network, **values: Any) -> None:
     """Set parameters by option name (see ``OVERRIDES``) or as ``PROCESS.PARAM`` (one process's parameter,
     converted and checked as a spec's: ``None`` clears an optional one); ``None`` values of the options are
-    skipped (not given)."""
+    skipped (not given). The ``PROCESS.PARAM`` of one process are set together (``Process.set_params``: all
+    or none, checked once), so their order does not matter."""
+    together: dict[str, dict[str, Any]] = {}
     for option, value in values.items():
         process, dot, param = option.partition(".")
         if dot:
-            network.process(process).set_param(param, value)
+            together.setdefault(process, {})[param] = value
             continue
         if value is None:
             continue
         param, targets = override_targets(network, option)
         for process in targets:
             process.set_param(param, value)
+    for process, params in together.items():
+        network.process(process).set_params(params)
     network.validate()
 
 
