@@ -162,6 +162,32 @@ def test_a_recording_without_poses_says_how_to_give_the_velocity(tmp_path, capsy
                  "--out", str(tmp_path / "d.npz"), "--quiet"]) == 0
 
 
+def test_the_hints_set_options_work_in_the_order_it_gives_them(tmp_path, capsys):
+    """The options of one process are set together and checked once: the hint's order (source, then the
+    samples it needs) works; a bad value among them is named and changes nothing (all or none)."""
+    import re
+
+    from tofnet.api import default_network
+    from tofnet.errors import NetworkError
+    from tofnet.events import make_events
+    np.save(tmp_path / "ev.npy", make_events([0, 1000, 2000], [1, 2, 3], [1, 1, 1], [1, 1, 1]))
+    (tmp_path / "vs.txt").write_text("0 0.5 0 0\n1 0.5 0 0\n")
+    run = ["run", str(tmp_path / "ev.npy"), "--intrinsics", "200,200,120,90", "--out", str(tmp_path / "d.npz"),
+           "--quiet"]
+    assert main(run) == 2
+    hint = re.search(r"--set (\S+=samples) --set (\S+)=FILE", capsys.readouterr().err)
+    assert main([*run, "--set", hint[1], "--set", f"{hint[2]}={tmp_path / 'vs.txt'}"]) == 0
+    assert main([*run, "--force", "--set", hint[1], "--set", "velocity.update_every=0",
+                 "--set", f"{hint[2]}={tmp_path / 'vs.txt'}"]) == 2
+    assert error_line(capsys) == ("tofnet run: error: --set velocity.update_every=0: velocity.update_every: "
+                                  "expected at least 1 steps, got 0")
+    velocity = default_network(sensor_size=(24, 16)).process("velocity")
+    before = velocity.values
+    with pytest.raises(NetworkError, match="source 'samples' needs samples"):
+        velocity.set_params({"source": "samples", "per": "pixel"})
+    assert velocity.values == before
+
+
 def test_every_command_that_writes_takes_o_for_out():
     from tofnet.cli import build_parser
 

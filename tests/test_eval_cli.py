@@ -93,3 +93,29 @@ def test_eval_and_plot_say_when_the_depth_was_run_on_other_events(files, capsys)
     assert main(["plot", "depthmap", str(files / "rec"), str(files / "other.npz"), "--out",
                  str(files / "map.png")]) == 0
     assert "was run on 5,000 events" in capsys.readouterr().err
+
+
+def test_eval_with_its_own_window_scores_the_part_the_run_read(tmp_path, capsys):
+    """A run over 40..60 ms: ``eval --start 0s`` counts that window's events only (the estimates come from them
+    alone), and a note says so; a window inside the run's is kept without a note; one outside it is an error."""
+    events = make_events([10_000, 10_100, 50_000, 50_100, 50_200, 160_000], [0, 1, 0, 1, 2, 3], [0] * 6, [1] * 6)
+    write_ecd(tmp_path / "rec", events, intrinsics=Intrinsics(10, 10, 2, 2), sensor_size=(4, 1),
+              gt_depth=np.full(6, 2.0))
+    depth = np.empty(2, DEPTH_DTYPE)
+    depth["step"], depth["t"] = 42, 10_000 + 43 * 1000  # from the events at 50.0 and 50.1 ms
+    depth["x"], depth["y"], depth["z"] = [0, 1], 0, 2.0
+    write_depth(tmp_path / "d.npz", depth, summary={"window_us": [40_000, 60_000]}, **META)
+    scored = ["eval", str(tmp_path / "rec"), str(tmp_path / "d.npz"), "--json", "-"]
+    assert main([*scored, "--start", "0s"]) == 0
+    out, err = capsys.readouterr()
+    assert (json.loads(out)["events_in"], json.loads(out)["estimates"]) == (3, 2)
+    assert err.strip() == (f"tofnet eval: note: scoring 0.03 .. 0.05 s from the first event: the window asked "
+                           f"(start 0 s) cut to the run's (0.03 .. 0.05 s from the first event), whose events "
+                           f"alone {tmp_path / 'd.npz'}'s estimates come from")
+    assert main([*scored, "--start", "40.05ms", "--duration", "5ms"]) == 0  # inside the run's: as asked
+    out, err = capsys.readouterr()
+    assert (json.loads(out)["events_in"], json.loads(out)["estimates"], err) == (2, 2, "")  # the step overlaps
+    assert main([*scored, "--start", "100ms"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"tofnet eval: error: {tmp_path / 'd.npz'}: its run read 0.03 .. 0.05 s from the first event; "
+                   "the window asked (start 0.1 s: 0.1 .. the end from the first event) is outside it")

@@ -78,13 +78,18 @@ def test_frames_nearest_interpolated_and_through_a_pixel_map():
     assert np.isnan(got[2])  # mapped outside the frame
 
 
-def test_rectify_moves_events_through_the_map_and_counts_those_left_out(dsec, tmp_path):
+def _shifted_map(dsec, folder):
+    """A copy of the DSEC folder whose rectification map moves every event 1 px right (the last column leaves)."""
     import shutil
-    folder = tmp_path / "seq"
     shutil.copytree(dsec, folder)
     y, x = np.mgrid[0:SIZE[1], 0:SIZE[0]].astype(np.float32)
     with h5py.File(folder / "events" / "left" / "rectify_map.h5", "w") as h5:
         h5.create_dataset("rectify_map", data=np.stack([x + 1, y], axis=-1))
+    return folder
+
+
+def test_rectify_moves_events_through_the_map_and_counts_those_left_out(dsec, tmp_path):
+    folder = _shifted_map(dsec, tmp_path / "seq")
     raw = read_recording(folder)
     rectified = read_recording(folder, rectify=True)
     keep = raw.events["x"] < SIZE[0] - 1
@@ -94,6 +99,30 @@ def test_rectify_moves_events_through_the_map_and_counts_those_left_out(dsec, tm
     # Raw pixels look the ground truth up through the map: raw column 0 is rectified column 1, unknown.
     assert np.isnan(raw.gt_depth[raw.events["x"] == 0]).all() and np.isfinite(raw.gt_depth[raw.events["x"] == 1]).all()
     assert np.isnan(rectified.gt_depth[rectified.events["x"] == 1]).all()
+
+
+def test_rectified_events_left_out_are_counted_by_every_streaming_read(dsec, tmp_path, capsys):
+    from tofnet.io import open_recording
+    folder = _shifted_map(dsec, tmp_path / "seq")
+    raw = read_recording(folder)
+    window = raw.events["t"] < raw.events["t"][0] + 300_000
+    left_out = f"{int((raw.events['x'][window] == SIZE[0] - 1).sum()):,} events fell outside the rectified image"
+    with open_recording(folder, rectify=True) as source:  # chunks, read twice: each read counts its own
+        for _ in range(2):
+            assert sum(len(c) for c in source.chunks(1000)) == int((raw.events["x"] < SIZE[0] - 1).sum())
+            assert left_out_of(source.notes) == [int((raw.events["x"] == SIZE[0] - 1).sum())]
+    out, report = tmp_path / "depth.npz", tmp_path / "run.json"
+    assert main(["run", str(folder), "--rectify", "--velocity=-0.5,0,0", "--duration", "300ms", "--out", str(out),
+                 "--json", str(report)]) == 0  # streams: the file says its sensor size
+    assert any(left_out in n for n in json.loads(report.read_text())["notes"])
+    assert left_out in capsys.readouterr().out
+    assert main(["info", str(folder), "--rectify", "--duration", "300ms"]) == 0
+    assert left_out in capsys.readouterr().out
+
+
+def left_out_of(notes):
+    """The counts of the rectification notes among ``notes`` (one per source)."""
+    return [int(n.split(": ")[-1].split(" ")[0].replace(",", "")) for n in notes if "fell outside" in n]
 
 
 @pytest.mark.parametrize("damage, expected", [

@@ -227,17 +227,21 @@ OVERRIDES = {
 def apply_overrides(network: Network, **values: Any) -> None:
     """Set parameters by option name (see ``OVERRIDES``) or as ``PROCESS.PARAM`` (one process's parameter,
     converted and checked as a spec's: ``None`` clears an optional one); ``None`` values of the options are
-    skipped (not given)."""
+    skipped (not given). The ``PROCESS.PARAM`` of one process are set together (``Process.set_params``: all
+    or none, checked once), so their order does not matter."""
+    together: dict[str, dict[str, Any]] = {}
     for option, value in values.items():
         process, dot, param = option.partition(".")
         if dot:
-            network.process(process).set_param(param, value)
+            together.setdefault(process, {})[param] = value
             continue
         if value is None:
             continue
         param, targets = override_targets(network, option)
         for process in targets:
             process.set_param(param, value)
+    for process, params in together.items():
+        network.process(process).set_params(params)
     network.validate()
 
 
@@ -280,12 +284,33 @@ def run(recording: Recording, network: Network | None = None, *, backend: str = 
         from tofnet.session import Session
         with Session(compiled, recording, backend=backend, backend_options=backend_options, probes=probes,
                      record_tot=record_tot, monitors=monitors) as session:
+            if progress is not None:  # model by model is slow: steps in pieces, the progress after each
+                _run_in_pieces(session, progress)
             result = session.finish()
         result.extra["monitors"] = session.monitors
         return result, compiled
     result = get_backend(backend, **(backend_options or {})).run(compiled, recording, record_tot=record_tot,
                                                                  probes=probes, progress=progress)
     return result, compiled
+
+
+def _run_in_pieces(session, progress: ProgressCallback) -> None:
+    """Run a session on its recording to the step of the last event in pieces of about half a second
+    (``tofnet.pacing``), calling ``progress(events fed, events)`` after each; ``finish`` runs the rest."""
+    from tofnet.pacing import Pacer
+
+    times = session.recording.events["t"]
+    if not len(times):
+        return
+    pacer = Pacer(first=1, most=1 << 20)
+    while True:
+        before = session.step  # the last event's step as Session.run counts it (t0 is the stream's once fed)
+        last = (int(times[-1]) - session.stream.t0_us) // session.timestep_us + 1
+        if before >= last:
+            return
+        session.run(steps=pacer.size(last - before))
+        pacer.took(session.step - before)
+        progress(session.events_fed, len(times))
 
 
 def constant_velocity(network: Network, text: str) -> None:
@@ -328,17 +353,31 @@ def run_source(source, network: Network, *, backend: str = DEFAULT_BACKEND, back
     if chunk_events is None:
         chunk_events = getattr(chosen, "packet_events", DEFAULT_PACKET_EVENTS)
     collected = Collected(spill_dir, spill_bytes)
+    # progress after the events are processed, not read: a chunk may take long on a slow backend, so with
+    # progress asked each is fed in pieces of about half a second (tofnet.pacing: one chunk whole on a fast one)
+    from tofnet.pacing import Pacer
+    pacer = Pacer(first=1 << 12, most=chunk_events) if progress is not None else None
     try:
         read = 0
-        chunks = iter(source.chunks(chunk_events, progress))
+        chunks = iter(source.chunks(chunk_events))
         reading = getattr(stream, "clock", None)  # the file's decoding is not the network's time
         while True:
             with reading.reading() if reading is not None else nullcontext():
                 chunk = next(chunks, None)
             if chunk is None:
                 break
+            if pacer is None:
+                collected.add(stream.feed_all(chunk))
+                read += len(chunk)
+                continue
+            done = 0
+            while done < len(chunk):
+                piece = chunk[done:done + pacer.size(len(chunk) - done)]
+                collected.add(stream.feed_all(piece))
+                pacer.took(len(piece))
+                done += len(piece)
+                progress(read + done, source.n_events)
             read += len(chunk)
-            collected.add(stream.feed_all(chunk))
         if not read:
             from tofnet.errors import DataError, located
             raise DataError(located(source.path, None, "no events"))

@@ -190,6 +190,11 @@ class Session:
         return self.stream.executor.clock if self.stream.executor is not None else 0
 
     @property
+    def events_fed(self) -> int:
+        """Events of the recording fed so far (a progress's count)."""
+        return self._cursor
+
+    @property
     def time(self) -> float:
         """Seconds from step 0's start to the start of ``step``."""
         return self.step * self.timestep_us * 1e-6

@@ -72,13 +72,17 @@ def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = 
     depth, meta = read_depth(depth_path)
     meta = dict(meta)
     summary = meta.get("summary") or {}
-    if window is None:  # the run's own time window, when it had one: its events, not the whole recording's
-        window = _window_of_run(summary, depth_path)
+    ran = _window_of_run(summary, depth_path)
+    # the run's own time window, when it had one: its events, not the whole recording's; a window asked here
+    # too is cut to the run's once the file's first event (which relative times count from) is known
+    own, window = (window, None) if window is not None and ran is not None else (None, window or ran)
     reading = summary.get("reading_size")  # the run's --sensor-size: the file read as far as the run read it
     reading = tuple(reading) if isinstance(reading, list) and len(reading) == 2 and all(
         type(v) is int and 0 < v <= 1 << 16 for v in reading) else None
     with open_recording(recording_path, window=window, allow_external=allow_external, side=side,
                         rectify=rectify, reading_size=reading, **camera) as source:
+        if own is not None:
+            source.set_window(_common_window(source, own, summary["window_us"], depth_path))
         recording = source.read()
         bounds = source.window
     if recording.sensor_size is not None and len(depth):
@@ -109,6 +113,33 @@ def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = 
         import logging
         logging.getLogger("tofnet.cli").warning(f"warning: {depth_path} {mismatch}")
     return recording, depth, meta
+
+
+def _common_window(source, own, ran: list, depth_path: str):
+    """The part of the window asked (``own``, a ``TimeWindow``) that the run read too (``ran``: its ``window_us``):
+    the estimates come from those events alone, so coverage over the others would count events the run never
+    saw. A note says when the window asked is cut; ``DataError`` when the two do not overlap."""
+    import logging
+
+    from tofnet.io.window import parse_window
+
+    first = source.first_time()
+    if first is None:
+        raise DataError(f"{source.path}: no events")
+    start, stop = own.resolve(first)
+    common = (max(start, ran[0]), min((t for t in (stop, ran[1]) if t is not None), default=None))
+
+    def text(bounds) -> str:
+        return (f"{(bounds[0] - first) * 1e-6:g} .. "
+                f"{'the end' if bounds[1] is None else f'{(bounds[1] - first) * 1e-6:g} s'} from the first event")
+    if common[1] is not None and common[1] <= common[0]:
+        raise DataError(f"{depth_path}: its run read {text(ran)}; the window asked ({own.text()}: {text((start, stop))}) "
+                        "is outside it")
+    if common != (start, stop):
+        logging.getLogger("tofnet.cli").info(
+            f"note: scoring {text(common)}: the window asked ({own.text()}) cut to the run's ({text(ran)}), whose "
+            f"events alone {depth_path}'s estimates come from")
+    return parse_window(start=f"@{common[0]}us", until=None if common[1] is None else f"@{common[1]}us")
 
 
 def _window_of_run(summary: dict, depth_path: str):

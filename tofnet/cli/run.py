@@ -118,27 +118,36 @@ def add_network_options(p: argparse.ArgumentParser) -> None:
                         "above, e.g. --set time_surface.burst_surfaces=4 or --set input.refractory=5ms; repeatable")
 
 
-def set_parameter(network, item: str) -> None:
-    """``--set PROCESS.PARAM=VALUE``: the value read as a YAML scalar or list (``4``, ``5ms``, ``[0.5, 0, 0]``)
-    and converted and checked as the spec's would be; every mistake is one line naming the option."""
+def set_parameters(network, items) -> None:
+    """``--set PROCESS.PARAM=VALUE`` (each value read as a YAML scalar or list: ``4``, ``5ms``, ``[0.5, 0, 0]``),
+    converted and checked as the spec's would be. The items of one process are set together and checked once
+    (``apply_overrides``), so that parameters which need each other (``velocity.source=samples`` and
+    ``velocity.samples=FILE``) work in any order; every mistake is one line naming the option(s)."""
     import yaml
 
+    from tofnet.api import apply_overrides
     from tofnet.errors import NetworkError
 
-    name, equals, text = item.partition("=")
-    process, dot, param = _setting(item).partition(".")
-    if not (equals and dot and process and param and text.strip()):
-        raise NetworkError(f"--set {item!r}: expected PROCESS.PARAM=VALUE, e.g. time_surface.burst_surfaces=4 "
-                           f"(null clears an optional parameter)")
-    try:
-        value = yaml.safe_load(text)
-    except yaml.YAMLError:
-        value = text
-    from tofnet.api import apply_overrides
-    try:
-        apply_overrides(network, **{f"{process}.{param}": value})
-    except NetworkError as err:
-        raise NetworkError(f"--set {item}: {err}") from None
+    by_process: dict[str, dict[str, tuple[str, object]]] = {}
+    for item in items:
+        name, equals, text = item.partition("=")
+        process, dot, param = _setting(item).partition(".")
+        if not (equals and dot and process and param and text.strip()):
+            raise NetworkError(f"--set {item!r}: expected PROCESS.PARAM=VALUE, e.g. time_surface.burst_surfaces=4 "
+                               f"(null clears an optional parameter)")
+        try:
+            value = yaml.safe_load(text)
+        except yaml.YAMLError:
+            value = text
+        by_process.setdefault(process, {})[param] = (item, value)
+    for process, params in by_process.items():
+        try:
+            apply_overrides(network, **{f"{process}.{param}": value for param, (_, value) in params.items()})
+        except NetworkError as err:
+            # a value that does not convert names its field: that option; a check of several, all of them
+            named = [item for param, (item, _) in params.items() if str(err).startswith(f"{process}.{param}:")]
+            named = named or [item for item, _ in params.values()]
+            raise NetworkError(f"{' '.join(f'--set {item}' for item in named)}: {err}") from None
 
 
 def run_intrinsics(network, recording):
@@ -204,8 +213,7 @@ def build_network(args, recording_sensor_size, recording=None):
         except NetworkError as err:
             flag = f"--{option.replace('_', '-')}"
             raise NetworkError(str(err) if str(err).startswith(flag) else f"{flag}: {err}") from None
-    for item in getattr(args, "set_params", None) or ():
-        set_parameter(network, item)
+    set_parameters(network, getattr(args, "set_params", None) or ())
     if args.patch:
         compile_options["patch"] = "auto" if args.patch == "auto" else parse_size(args.patch, "--patch")
     return network, compile_options, spec_backend, backend_options

@@ -178,16 +178,24 @@ class Process:
 
     def set_param(self, name: str, value: Any) -> None:
         """Change one parameter, with the same conversion and checks as the constructor."""
+        self.set_params({name: value})
+
+    def set_params(self, values: dict[str, Any]) -> None:
+        """Change several parameters together, all or none: each converted as the constructor does, then the
+        cross-parameter checks once on them all, so parameters that depend on each other (a velocity's
+        ``source`` and its ``samples``) may be given in any order."""
         declared = {p.name: p for p in self.all_params()}
-        if name not in declared:
-            raise NetworkError(f"{self.name} ({type(self).__name__}) has no parameter {name!r}; "
-                               f"expected {', '.join(declared)}")
-        previous = self._values[name]
-        self._values[name] = declared[name].coerce(value, self.name)
+        for name in values:
+            if name not in declared:
+                raise NetworkError(f"{self.name} ({type(self).__name__}) has no parameter {name!r}; "
+                                   f"expected {', '.join(declared)}")
+        previous = {name: self._values[name] for name in values}
         try:
+            for name, value in values.items():
+                self._values[name] = declared[name].coerce(value, self.name)
             self._check()
-        except NetworkError:
-            self._values[name] = previous
+        except BaseException:
+            self._values.update(previous)
             raise
 
     def port(self, name: str) -> InPort | OutPort:

@@ -63,6 +63,7 @@ class EventSource:
         self._asked = None  # the TimeWindow as asked (set_window), for messages in the user's terms
         self.frame_gt = None  # ground truth as frames (tofnet.io.frames.FrameDepth): dataset sequences
         self.remap = None  # moves each packet's pixels (tofnet.io.sequences.PixelRemap: DSEC --rectify)
+        self._remap_noted: str | None = None  # the remap's note as it stands in ``notes`` (_note_remap)
 
     # --- to implement -------------------------------------------------------------
     def _packets(self, size_hint: int) -> Iterable[np.ndarray]:
@@ -200,6 +201,9 @@ class EventSource:
         packets = iter(self._packets(size_hint) if self.window is None
                        else self._window_packets(size_hint, *self.window))
         done = 0
+        if self.remap is not None:  # each read counts its own drops (tofnet live reads the start, then all)
+            self.remap.dropped = 0
+            self._note_remap()
         while True:
             try:
                 packet = next(packets)
@@ -212,7 +216,21 @@ class EventSource:
                                                          f"{reason(err)}")) from None
             check_packet(packet, done, self.path)
             done += len(packet)
-            yield packet if self.remap is None else self.remap(packet)
+            if self.remap is not None:
+                packet = self.remap(packet)
+                self._note_remap()
+            yield packet
+
+    def _note_remap(self) -> None:
+        """The remap's count of events left out, in ``notes`` as it stands: updated with every packet, so
+        that every way of reading (``read``, ``chunks`` in run, info, live, even a read stopped early)
+        shows it, and ``metadata()``'s notes (the same list) too."""
+        note = self.remap.note()
+        if self._remap_noted in self.notes:
+            self.notes[self.notes.index(self._remap_noted)] = note
+        else:
+            self.notes.append(note)
+        self._remap_noted = note
 
     def metadata(self, *, imu: bool = True) -> Recording:
         """What is known about the camera before reading the events: a ``Recording`` without
@@ -237,7 +255,7 @@ class EventSource:
         del parts
         recording = Recording(events=events, intrinsics=self.intrinsics, trajectory=self.trajectory,
                               sensor_size=self.sensor_size, imu=self.imu, source=str(self.path),
-                              notes=list(self.notes) + ([self.remap.note()] if self.remap is not None else []),
+                              notes=list(self.notes),
                               frame_gt=self.frame_gt)
         if depths:
             recording.gt_depth = np.concatenate(depths)
