@@ -63,3 +63,18 @@ def test_a_run_with_monitors_reports_progress(recording_folder, monkeypatch):
     (a,), (b,) = plain.extra["monitors"], paced.extra["monitors"]
     for key, value in a.arrays().items():
         np.testing.assert_array_equal(b.arrays()[key], value)
+
+
+def test_a_streamed_run_with_progress_keeps_its_workers_bands(recording_folder, monkeypatch):
+    """Pieces start small; a stream keeps one band on a small first packet (a live stream's latency), but a run over
+    a whole recording asked for workers: its bands from the first piece, and the same estimates as one worker."""
+    monkeypatch.setattr(tofnet.pacing, "PIECE_SECONDS", 1e-4)
+    runs = {}
+    for workers in (1, 2):
+        with open_recording(recording_folder) as source:
+            runs[workers], _ = run_source(source, _network(), backend="fixed", backend_options={"workers": workers},
+                                          progress=lambda d, t: None)
+    facts = runs[2].summary()["workers"]
+    assert facts["bands"] == 2 and "one_band" not in facts, facts
+    for name in runs[1].outputs:
+        np.testing.assert_array_equal(runs[2].outputs[name], runs[1].outputs[name])

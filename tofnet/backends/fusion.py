@@ -228,6 +228,12 @@ class FusedStream:
         self.tot = copy_records(self.kernel.buffers()[2][:n_tot]) if self.record_tot else None
         return into[:end]
 
+    def expect_whole_run(self) -> None:
+        """A run over a whole recording, not a live stream: its bands (workers) from the first packet, whatever
+        its size (a stream otherwise keeps one band on a small first packet, where bands cost latency)."""
+        if hasattr(self.kernel, "one_band_below"):
+            self.kernel.one_band_below = 0
+
     def feed_all(self, events: np.ndarray, until_us: int | None = None) -> dict[str, np.ndarray]:
         """The records of the steps this packet completed, canonical order (as ``GraphStream``)."""
         depth = self._feed(events, until_us, True)

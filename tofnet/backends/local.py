@@ -167,8 +167,7 @@ class LocalBackend(Backend):
         t0 = start_time_us(clock_of(network).t0_us, recording)
         stream = self.open_stream(network, recording=recording, t0_us=t0, probes=probes, record_tot=record_tot)
         if isinstance(stream, FusedStream):
-            if isinstance(stream.kernel, BandedKernel):
-                stream.kernel.one_band_below = 0  # a run asked for workers: bands, whatever its first packet
+            stream.expect_whole_run()
             return run_fused(stream, recording.events, self.packet_events, progress)
         return run_in_packets(stream, recording.events, self.packet_events, progress)
 
