@@ -101,3 +101,17 @@ def test_npz_timing_out_of_a_runs_range_names_the_field(tmp_path, meta, last_ste
     depth["step"][-1] = 3  # an hour's timestep itself is a run's
     write_depth(tmp_path / "ok.npz", depth, t0_us=0, timestep_us=3_600_000_000, latency_steps=1_000_000)
     assert read_depth(tmp_path / "ok.npz")[1]["timestep_us"] == 3_600_000_000
+
+
+@pytest.mark.parametrize("text, message", [
+    ('{"n": ' + "1" * 5000 + "}", "summary_json is not readable JSON (Exceeds the limit (4300 digits)"),  # ValueError
+    ("[" * 100_000, "summary_json is nested too deeply"),
+    ('{"n": 1', "summary_json is not valid JSON (Expecting ',' delimiter, line 1 column 8)"),
+])
+def test_a_summary_python_cannot_read_is_one_line(tmp_path, text, message):
+    write_depth(tmp_path / "d.npz", _depth(), t0_us=1468939993066000, timestep_us=1000, latency_steps=2)
+    arrays = dict(np.load(tmp_path / "d.npz"))
+    np.savez(tmp_path / "d.npz", **{**arrays, "summary_json": np.str_(text)})
+    with pytest.raises(DataError) as err:
+        read_depth(tmp_path / "d.npz")
+    assert str(err.value).startswith(f"{tmp_path / 'd.npz'}: {message}")

@@ -20,6 +20,7 @@ from tofnet.errors import DataError, located, quote_field
 from tofnet.events import DEPTH_DTYPE, MAX_TIME_US
 from tofnet.io.files import write_text_atomic
 from tofnet.io.groundtruth import read_text
+from tofnet.io.jsontext import parse_json
 from tofnet.io.npy import Column, load_npz, write_npz
 
 CSV_HEADER = "t,x,y,z,step"
@@ -136,12 +137,7 @@ def _read_npz(path: Path) -> tuple[np.ndarray, dict]:
     if text is not None and (text.shape != () or text.dtype.kind != "U"):
         raise DataError(located(path, None, "'summary_json' must be one string"))
     text = "" if text is None else str(text)
-    try:
-        meta["summary"] = json.loads(text) if text.strip() else {}
-    except json.JSONDecodeError as err:
-        raise DataError(located(path, None, f"summary_json is not valid JSON ({err.msg})")) from None
-    except RecursionError:
-        raise DataError(located(path, None, "summary_json is nested too deeply")) from None
+    meta["summary"] = parse_json(text, path, "summary_json") if text.strip() else {}
     return depth, meta
 
 

@@ -17,7 +17,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -163,11 +162,9 @@ def _tumvie(folder: Path, source, events: Path, side: str) -> None:
 
 def _json(path: Path) -> dict:
     from tofnet.io.files import read_text
+    from tofnet.io.jsontext import parse_json
 
-    try:
-        return json.loads(read_text(path, "calibration file", limit=1 << 20))
-    except ValueError as err:
-        raise DataError(located(path, None, f"not valid JSON ({err})")) from None
+    return parse_json(read_text(path, "calibration file", limit=1 << 20), path)
 
 
 def _pose_matrix(entry, path: Path) -> np.ndarray:
