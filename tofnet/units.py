@@ -11,6 +11,9 @@ from tofnet.events import MAX_TIME_US
 #: Largest magnitude of any duration, in seconds: the documented time range (2**61 µs).
 MAX_DURATION_S = MAX_TIME_US * 1e-6
 
+#: Longest timestep and refractory period (s): an hour is far beyond any use and keeps
+#: step arithmetic well inside int64 microseconds (docs/reliability.md). A depth file's too.
+MAX_PERIOD_S = 3600.0
 #: Most windows ``eval`` scores and ``plot error`` draws (about 1 KB of memory each in ``eval``): 2.8 h of
 #: eval's default 100 ms windows; a figure is narrower than that anyway.
 MAX_METRIC_WINDOWS = 100_000

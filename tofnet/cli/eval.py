@@ -85,7 +85,7 @@ def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = 
             raise DataError(f"{depth_path}: {int(outside.sum()):,} of its {len(depth):,} estimates lie outside "
                             f"{recording_path}'s {width}x{height} sensor: is it this recording's depth?")
     given = {}
-    from tofnet.processes.input import MAX_PERIOD_S
+    from tofnet.units import MAX_PERIOD_S
     if timestep is not None:
         given["timestep_us"] = microseconds(seconds(timestep, "--timestep", limit=MAX_PERIOD_S))
         if given["timestep_us"] <= 0:

@@ -22,6 +22,7 @@ from tofnet.io.files import write_text_atomic
 from tofnet.io.groundtruth import read_text
 from tofnet.io.jsontext import parse_json
 from tofnet.io.npy import Column, load_npz, write_npz
+from tofnet.units import MAX_PERIOD_S
 
 CSV_HEADER = "t,x,y,z,step"
 #: Estimates per slice when a depth file is written (bounded memory for any number of them).
@@ -147,8 +148,6 @@ def check_timing(path: object, depth: np.ndarray, meta: dict) -> None:
     times ``timestep_us`` inside the time range (2**61 µs). ``eval`` and ``plot`` count their windows in steps
     times the timestep: a timestep of 2**60 µs made them ask for 336 TiB, and a larger product would wrap in
     int64. A one-line ``DataError`` naming the field; a value that is absent (``None``) is not checked."""
-    from tofnet.processes.input import MAX_PERIOD_S
-
     timestep, latency = meta.get("timestep_us"), meta.get("latency_steps")
     longest = round(MAX_PERIOD_S * 1e6)
     if timestep is not None and not 1 <= timestep <= longest:
