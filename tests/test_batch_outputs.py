@@ -160,6 +160,9 @@ def test_resume_reruns_a_task_whose_recording_changed(folder):
     assert is_complete(task) is not None
     np.save(folder / "a.npy", make_events([0, 1000], [1, 3], [1, 1], [1, 0]))  # same path, other events
     assert is_complete(replace(task, fingerprint=fingerprint(task))) is None
+    for text in ("[" * 100_000, '{"task": ' + "1" * 5000 + "}", "[1, 2]"):  # traceback (RecursionError, ...)
+        (folder / "out" / "tasks" / task.task_id / ROW_FILE).write_text(text)
+        assert is_complete(task) is None  # not a row: the task runs again
 
 
 def test_a_full_disk_while_writing_the_table_is_one_line_and_no_file(tmp_path, monkeypatch):

@@ -107,6 +107,10 @@ def test_task_ids_survive_an_edit_of_the_plan_and_change_with_what_a_task_comput
     ("recordings: [a.npy]\ngrid:\n  distance: [1]\n  time_of_travel.distance: [2]\n", 2,
      "grid: for network 'paper': time_of_travel.distance is given twice (as distance too)"),
     ("recordings: [a.npy]\ngrid:\n  input.refractory: [null]\n", 3, "input.refractory: a value is required"),
+    *((f"recordings:\n  - scenario: slider\n{key}: null\n", 3, f"{key}: expected a non-empty string, got null")
+      for key in ("cache", "output", "name", "description", "backend")),  # TypeError, "None-results"
+    ("recordings:\n  - {path: a.npy, name: ~}\n", 2, "recordings[0].name: expected a non-empty string, got null"),
+    ("recordings:\n  - {path: }\n", 2, "recordings[0].path: expected a non-empty string, got null"),
     ("recordings: [a.npy\n", 2, "malformed YAML"),
     ("recordings:\n  - {path: '*.raw', velocity: [0.3, 0, 0]}\n", 2,
      "no such file or folder; a pattern is written {glob: ...} (with the same reading keys) to match several"),

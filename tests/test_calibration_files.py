@@ -154,6 +154,11 @@ def test_errors_name_the_file_and_the_key(tmp_path):
     (tmp_path / "broken.json").write_text('{"value0": ')
     with pytest.raises(DataError, match=r"broken.json: not valid JSON"):
         read_camera_file(tmp_path / "broken.json")
+    for text, why in (('{"a": ' + "[" * 100_000, "the JSON is nested too deeply"),  # were RecursionError, ValueError
+                      ('{"value0": ' + "1" * 5000 + "}", r"not readable JSON \(Exceeds the limit \(4300 digits\)")):
+        (tmp_path / "broken.json").write_text(text)
+        with pytest.raises(DataError, match=rf"broken.json: {why}"):
+            read_camera_file(tmp_path / "broken.json")
 
 
 def test_intrinsics_no_camera_has_are_refused_naming_the_file(tmp_path):

@@ -154,3 +154,27 @@ def test_evaluate_uses_the_depth_metadata():
     assert ev.errors.mean_abs_m == pytest.approx(2.0)  # step 2 - 1 = step 1: the 4 m event
     with pytest.raises(DataError, match="lacks latency_steps"):
         evaluate(rec, depth, {"t0_us": 0, "timestep_us": DT})
+
+
+def test_windows_are_counted_and_bounded_before_any_is_made(monkeypatch):
+    """An estimate at step 2.3e15 (2**61 µs after t0) made 2.3e13 windows of 100 ms: bincount asked for 82 TiB.
+    The count is one line naming the field and the fix; the error figure (an automatic band window of 200 times
+    the span overflowed int64) draws, and refuses a band window giving more than MAX_METRIC_WINDOWS bands."""
+    from tofnet.eval import plots_error
+    from tofnet.eval.plots import error_figure
+    from tofnet.units import MAX_METRIC_WINDOWS
+
+    events = make_events([0, 1_000, 2_000], [1, 1, 1], [1, 1, 1], [1, 1, 1])
+    far = (2**61 - 2) // DT - 1
+    depth = depth_of([(2, 1, 1, 1.0), (far, 1, 1, 2.0)])
+    with pytest.raises(DataError, match=rf"^per-window metrics: the estimates \(array 'step' to {far}\), reaching "
+                                        rf".* make 23,058,430,092,137 windows of 100 ms, more than the "
+                                        rf"{MAX_METRIC_WINDOWS:,} allowed; give a longer --window"):
+        evaluate_arrays(depth, events, np.ones(3), t0_us=0, timestep_us=DT, latency_steps=2, window_s=0.1)
+    rec = Recording(events=events, gt_depth=np.ones(3), source="rec")
+    meta = {"t0_us": 0, "timestep_us": DT, "latency_steps": 2}
+    assert error_figure(rec, depth, meta).axes  # drawn, one band
+    monkeypatch.setattr(plots_error, "MAX_METRIC_WINDOWS", 1_000)  # the same check, on a small figure
+    with pytest.raises(DataError, match="the error bands over 3.001 ms make 3,001 windows of 1 µs, more than the "
+                                        "1,000 allowed; give a longer --error-window"):
+        error_figure(rec, depth_of([(2, 1, 1, 1.0)]), meta, window_s=1e-6)

@@ -77,3 +77,41 @@ def test_bad_suffix_and_missing_npz_arrays(tmp_path):
         read_depth(tmp_path / "d.npz")
     with pytest.raises(DataError, match="gone.npz: file not found"):
         read_depth(tmp_path / "gone.npz")
+
+
+
+@pytest.mark.parametrize("meta, last_step, message", [
+    ({"timestep_us": 2**60}, 3, "'timestep_us' must be 1..3600000000 µs (at most 3600 s), got 1152921504606846976"),
+    ({"timestep_us": 0}, 3, "'timestep_us' must be 1..3600000000 µs"),
+    ({"latency_steps": 2**60}, 3, "'latency_steps' must be 0..1,000,000, got 1152921504606846976"),
+    ({"latency_steps": -1}, 3, "'latency_steps' must be 0..1,000,000, got -1"),
+    ({"timestep_us": 3_600_000_000}, 700_000_000,  # 700 M hours: beyond 2**61 µs (640 M hours)
+     "array 'step' reaches 700000000: 700000000 steps of 3600000000 µs ('timestep_us') lie beyond the time range"),
+])
+def test_npz_timing_out_of_a_runs_range_names_the_field(tmp_path, meta, last_step, message):
+    """eval multiplies steps by the timestep: a timestep or latency of 2**60 (|v| < 2**61 was all that was
+    asked) made it allocate hundreds of TiB; each is one line naming the field, when the file is read."""
+    depth = _depth()
+    depth["step"][-1] = last_step
+    write_depth(tmp_path / "d.npz", depth, **{"t0_us": 1468939993066000, "timestep_us": 1000, "latency_steps": 2,
+                                              **meta})
+    with pytest.raises(DataError) as err:
+        read_depth(tmp_path / "d.npz")
+    assert str(err.value).startswith(f"{tmp_path / 'd.npz'}: {message}")
+    depth["step"][-1] = 3  # an hour's timestep itself is a run's
+    write_depth(tmp_path / "ok.npz", depth, t0_us=0, timestep_us=3_600_000_000, latency_steps=1_000_000)
+    assert read_depth(tmp_path / "ok.npz")[1]["timestep_us"] == 3_600_000_000
+
+
+@pytest.mark.parametrize("text, message", [
+    ('{"n": ' + "1" * 5000 + "}", "summary_json is not readable JSON (Exceeds the limit (4300 digits)"),  # ValueError
+    ("[" * 100_000, "summary_json is nested too deeply"),
+    ('{"n": 1', "summary_json is not valid JSON (Expecting ',' delimiter, line 1 column 8)"),
+])
+def test_a_summary_python_cannot_read_is_one_line(tmp_path, text, message):
+    write_depth(tmp_path / "d.npz", _depth(), t0_us=1468939993066000, timestep_us=1000, latency_steps=2)
+    arrays = dict(np.load(tmp_path / "d.npz"))
+    np.savez(tmp_path / "d.npz", **{**arrays, "summary_json": np.str_(text)})
+    with pytest.raises(DataError) as err:
+        read_depth(tmp_path / "d.npz")
+    assert str(err.value).startswith(f"{tmp_path / 'd.npz'}: {message}")

@@ -25,15 +25,29 @@ def _depth(rows):
 def test_maps_keep_the_latest_estimate_and_its_age():
     depth = _depth([(1000, 1, 1, 2.0), (4000, 1, 1, 3.0), (6000, 2, 1, 5.0), (25_000, 0, 0, 1.0)])
     maps = list(depth_maps(depth, (8, 6), 10_000, t0_us=0))
-    assert [m.index for m in maps] == [0, 1, 2] and [m.estimates for m in maps] == [3, 0, 1]
+    # window 1: nothing new and max_age = window, so no depth: not made
+    assert [m.index for m in maps] == [0, 2] and [m.estimates for m in maps] == [3, 1]
     first = maps[0]
     assert first.depth[1, 1] == 3.0 and first.age_ms[1, 1] == pytest.approx(6.0)
     assert first.depth[1, 2] == 5.0 and np.isnan(first.depth[0, 0]) and np.isnan(first.age_ms[0, 0])
-    assert np.isnan(maps[1].depth).all()  # nothing new and max_age = window
     held = list(depth_maps(depth, (8, 6), 10_000, t0_us=0, max_age_us=20_000))
+    assert [m.index for m in held] == [0, 1, 2] and [m.estimates for m in held] == [3, 0, 1]
     assert held[1].depth[1, 1] == 3.0 and held[1].age_ms[1, 1] == pytest.approx(16.0)
     with pytest.raises(DataError, match="outside the 2x2 map"):
         list(depth_maps(depth, (2, 2), 10_000))
+
+
+def test_maps_of_estimates_far_apart_are_few_and_bounded():
+    """Two estimates 2**61 µs apart made a window per millisecond between them (16 PiB asked for before any was
+    written); only windows with depth are made, and more maps than MAX_MAPS is one line before the first."""
+    from tofnet.units import MAX_MAPS
+    far = _depth([(0, 1, 1, 1.0), (2**61 - 2, 2, 1, 2.0)])
+    assert [m.index for m in depth_maps(far, (4, 4), 1000, t0_us=0)] == [0, (2**61 - 2) // 1000]
+    with pytest.raises(DataError, match=f"far.npz: the estimates .* make 1,000,001 maps of 1 ms, more than the "
+                                        f"{MAX_MAPS:,} allowed; give a longer --window"):
+        depth_maps(far, (4, 4), 1000, t0_us=0, max_age_us=10**9, source="far.npz")  # each held for 1,000,000 windows
+    with pytest.raises(DataError, match="depth: estimates before t0_us = 5000, where the maps start: 1 "):
+        depth_maps(far, (4, 4), 1000, t0_us=5000)
 
 
 def test_png16_holds_millimetres(tmp_path):
@@ -118,6 +132,20 @@ def test_cli_export_maps_and_cloud(tmp_path, capsys):
                                                                         "age_000001.npy", "depth_000000.npy"]
     assert main(["export", str(tmp_path / "depth.npz")]) == 2
     assert "nothing to do" in capsys.readouterr().err
+    # A 5 s span wrote 501 windows (1504 files of the sensor's size); only the two with depth are written.
+    write_depth(tmp_path / "span.npz", _depth([(0, 1, 1, 1.0), (5_000_000, 2, 2, 2.0)]), t0_us=0, timestep_us=1000,
+                latency_steps=2, summary={})
+    assert main(["export", str(tmp_path / "span.npz"), "--maps", str(tmp_path / "span"), "--sensor-size", "8x6",
+                 "--no-png"]) == 0
+    assert "2 windows of 10ms with depth" in capsys.readouterr().out
+    assert (tmp_path / "span" / "index.csv").read_text().splitlines()[1:] == ["0,0.000000,0.010000,1,1",
+                                                                              "500,5.000000,5.010000,1,1"]
+    assert len(list((tmp_path / "span").glob("*.npy"))) == 4
+    assert main(["export", str(tmp_path / "span.npz"), "--maps", str(tmp_path / "span2"), "--sensor-size", "8x6",
+                 "--window", "1us", "--max-age", "5s"]) == 2
+    err = capsys.readouterr().err
+    assert "span.npz: the estimates (5 s after t0, each shown up to 5 s) make 5,000,001 maps of 1 µs" in err
+    assert len(err.splitlines()) == 1 and not (tmp_path / "span2").exists()
 
 
 def test_export_uses_the_runs_camera_and_checks_the_cloud_before_any_map(tmp_path, capsys):

@@ -300,6 +300,12 @@ def test_bad_options_are_rejected():
     assert MultiprocBackend(workers=0).workers == MultiprocBackend(workers="auto").workers == cpu_count()
     with pytest.raises(BackendError, match="timeout"):
         MultiprocBackend(timeout=0)
+    for option in ("timeout", "start_timeout"):  # 1e300 s reached the waits: OverflowError
+        for value in (1e300, 86_401, 10**400):
+            with pytest.raises(BackendError, match=rf"multiproc: {option} must be a positive number of seconds, "
+                                                   rf"at most 86400 \(a day\), got"):
+                MultiprocBackend(workers=1, **{option: value})
+    assert MultiprocBackend(workers=1, timeout=86_400).timeout == 86_400.0
 
 
 def test_one_timeout_bounds_the_start_too(leak_check, monkeypatch):

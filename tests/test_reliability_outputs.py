@@ -120,6 +120,13 @@ def test_existing_outputs_need_force(folder, tmp_path, capsys):
     assert "exists; pass --force" in one_line_error(capsys, ["simulate", "slider", str(simulated), "--quiet"])
 
 
+def test_a_manifest_python_cannot_read_marks_no_folder_as_tofnets(tmp_path):
+    from tofnet.io.guard import MANIFEST, read_manifest
+    for text in ("[" * 100_000, '{"files": [' + "1" * 5000 + "]}"):  # were RecursionError, ValueError
+        (tmp_path / MANIFEST).write_text(text)
+        assert read_manifest(tmp_path) is None
+
+
 def test_missing_output_folders_are_created(folder, tmp_path, capsys):
     out, summary = tmp_path / "new" / "d.csv", tmp_path / "other" / "deep" / "run.json"
     assert main(["run", str(folder), "--out", str(out), "--json", str(summary), "--quiet"]) == 0

@@ -239,7 +239,10 @@ def test_meta_txt_is_parsed_as_a_literal_only():
                  "[(1, 2), (3,)]", "{'s': 'it\\'s', \"t\": \"x\"}", "{}"):
         assert parse_literal(text, "m") == ast.literal_eval(text)
     for text, why in (("{'a': __import__('os')}", "unexpected text"), ("[" * 100 + "]" * 100, "nested more than 64"),
-                      ("{'a' 1}", "expected a colon"), ("[1, 2", "the text ends inside a bracket"), ("1 2", "a second value")):
+                      ("{'a' 1}", "expected a colon"), ("[1, 2", "the text ends inside a bracket"), ("1 2", "a second value"),
+                      # a container as a key: a tuple's was looked for among the values (StopIteration)
+                      *((key, "a dictionary key must be a string, a number, True, False or None") for key in
+                        ("{'meta': {(1, 2): 3}}", "{(): 1}", "{[1]: 2}", "{'a': {{}: 1}}", "{(1, (2,)): 3}"))):
         with pytest.raises(DataError, match=f"m: not a Python literal .* at character [0-9,]+: {why}"):
             parse_literal(text, "m")
     with pytest.raises(DataError, match=r"w.meta.fx: expected a finite number, got int"):

@@ -105,6 +105,26 @@ def test_tumvie_calibration_missing_several_or_without_mocap_calibration(folders
         read_recording(folder)
 
 
+@pytest.mark.parametrize("text, message", [
+    # a zero quaternion was a numpy warning, then "mocap_data.txt: pose 0: pose is not finite"
+    ('{"value0": {"T_imu_marker": {"px": 0, "py": 0, "pz": 0, "qx": 0, "qy": 0, "qz": 0, "qw": 0}}}',
+     "value0.T_imu_marker: the quaternion (qx, qy, qz, qw) is zero: no rotation"),
+    ("{}", "value0.T_imu_marker: expected a pose {px, py, pz, qx, qy, qz, qw}"),  # "t1: ...: 'value0'"
+    ("[1, 2]", "value0.T_imu_marker: expected a pose"),
+    ('{"value0": {"T_imu_marker": {"px": 0, "py": 0, "pz": 0, "qx": 0, "qy": 0, "qz": 0, "qw": NaN}}}',
+     "value0.T_imu_marker: expected finite numbers"),
+])
+def test_a_bad_tumvie_mocap_calibration_names_its_file(folders, tmp_path, text, message):
+    import warnings
+    folder = _copy(folders, "tumvie", tmp_path)
+    (folder / "mocap-imu-calibrationA.json").write_text(text)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # and no numpy warning on the way
+        with pytest.raises(DataError) as err:
+            read_recording(folder)
+    assert str(err.value).startswith(f"{folder / 'mocap-imu-calibrationA.json'}: {message}")
+
+
 def test_a_folder_with_two_sequences_is_refused(folders, tmp_path):
     folder = _copy(folders, "m3ed", tmp_path)
     shutil.copy(folder / "car_urban_day_1_data.h5", folder / "car_urban_day_2_data.h5")

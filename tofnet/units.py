@@ -5,11 +5,20 @@ from __future__ import annotations
 import math
 import re
 
-from tofnet.errors import TofnetError, quote
+from tofnet.errors import DataError, TofnetError, quote
 from tofnet.events import MAX_TIME_US
 
 #: Largest magnitude of any duration, in seconds: the documented time range (2**61 µs).
 MAX_DURATION_S = MAX_TIME_US * 1e-6
+
+#: Longest timestep and refractory period (s): an hour is far beyond any use and keeps
+#: step arithmetic well inside int64 microseconds (docs/reliability.md). A depth file's too.
+MAX_PERIOD_S = 3600.0
+#: Most windows ``eval`` scores and ``plot error`` draws (about 1 KB of memory each in ``eval``): 2.8 h of
+#: eval's default 100 ms windows; a figure is narrower than that anyway.
+MAX_METRIC_WINDOWS = 100_000
+#: Most depth maps ``export --maps`` writes (2-3 sensor-sized files each): an hour of 10 ms maps is 360,000.
+MAX_MAPS = 1_000_000
 
 _TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "ns": 1e-9}
 _LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
@@ -80,3 +89,13 @@ def format_seconds(value: float) -> str:
 def format_steps(n: int) -> str:
     """``"1 step"``, ``"2 steps"``."""
     return f"{n} step" if n == 1 else f"{n} steps"
+
+
+def bounded_windows(count: int, window_us: int, what: str, fix: str, most: int, unit: str = "windows") -> int:
+    """``count`` windows of ``window_us`` when at most ``most``, else a one-line ``DataError``: ``what`` makes them
+    (a depth file's time span, which may be hostile), ``fix`` what would narrow them. Counted with Python ints, and
+    checked before anything is allocated per window (a 2**61 µs span in 1 ms windows is 2.3e15 of them)."""
+    if count > most:
+        raise DataError(f"{what} make {count:,} {unit} of {format_seconds(window_us * 1e-6)}, more than the "
+                        f"{most:,} allowed; {fix}")
+    return count

@@ -42,6 +42,8 @@ DEFAULT_TIMEOUT = 120.0
 DEFAULT_CHUNK_STEPS = 250
 #: Steps per synchronisation at most: a chunk's steps run at once (1000 s at the 1 ms step).
 MAX_CHUNK_STEPS = 1_000_000
+#: Longest ``timeout``, ``start_timeout`` (s): a day; the waits overflow near 9.2e9 s (1e300 was an OverflowError).
+MAX_TIMEOUT_S = 86_400.0
 _REPLY = {"build": "built", "run": "run", "counts": "counts", "finish": "finished", "get": "get", "set": "set",
           "param": "param", "band": "band", "band_run": "band_run", "band_promise": "band_promise",
           "band_counts": "band_counts", "band_map": "band_map"}
@@ -101,8 +103,9 @@ class MultiprocBackend(Backend):
             raise BackendError(f"multiproc: chunk_steps must be at most {MAX_CHUNK_STEPS} (steps run between two "
                                f"synchronisations, each held in memory), got {chunk_steps}")
         for label, value in (("timeout", timeout), ("start_timeout", start_timeout)):
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < float("inf"):
-                raise BackendError(f"multiproc: {label} must be a positive number of seconds, got {value!r}")
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value <= MAX_TIMEOUT_S:
+                raise BackendError(f"multiproc: {label} must be a positive number of seconds, at most "
+                                   f"{MAX_TIMEOUT_S:g} (a day), got {value!r}")
         self.workers, self.timeout, self.start_timeout = workers, float(timeout), float(start_timeout)
         self.chunk_steps = chunk_steps
         self.format = FixedPointFormat(frac_bits, payload_bits)

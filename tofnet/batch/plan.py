@@ -157,6 +157,9 @@ class _PlanReader:
         return path if path.is_absolute() else self.base / path
 
     def text(self, container: Mapping, key: str, path: str, default: str | None = None) -> str | None:
+        if key in container and container[key] is None:  # `output:` alone is no default: it became "None-results"
+            raise self.fail(container, key, path, "expected a non-empty string, got null (an empty value); "
+                            "leave the key out for its default")
         value = container.get(key, default)
         if value is not None and (not isinstance(value, str) or not value.strip()):
             raise self.fail(container, key, path, f"expected a non-empty string, got {value!r}")

@@ -186,11 +186,12 @@ def _undistorted(recording, lens: dict, path: str):
 def is_complete(task: Task) -> dict | None:
     """``task``'s row when its outputs are all there from an earlier, successful run; else ``None``."""
     folder = Path(task.folder)
+    from tofnet.io.jsontext import parse_json
     try:
-        row = json.loads((folder / ROW_FILE).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        row = parse_json((folder / ROW_FILE).read_text(encoding="utf-8"), folder / ROW_FILE)
+    except (OSError, ValueError, TofnetError):  # unreadable: the task runs again
         return None
-    if row.get("status") != "ok" or row.get("task_id") != task.task_id:
+    if not isinstance(row, dict) or row.get("status") != "ok" or row.get("task_id") != task.task_id:
         return None
     if row.get("fingerprint") != task.fingerprint:  # the recording's (or spec's) content changed since
         return None

@@ -43,10 +43,6 @@ def register(subparsers) -> None:
     p.set_defaults(handler=handle)
 
 
-#: Largest ``--latency-steps`` accepted (a network of a million processes in a chain).
-MAX_LATENCY_STEPS = 1_000_000
-
-
 def add_timing_options(p: argparse.ArgumentParser) -> None:
     """Timing for depth files that do not carry it (``.csv``); shared with ``tofnet plot``."""
     g = p.add_argument_group("timing (only needed for depth files without it, such as .csv)")
@@ -66,6 +62,7 @@ def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = 
     sequence folder as the run did; ``camera``: ``intrinsics``, ``calib``, ``camera`` (``camera_options``).
     """
     from tofnet.io import read_depth
+    from tofnet.io.depth import MAX_LATENCY_STEPS, check_timing
     from tofnet.io.source import open_recording
     from tofnet.units import microseconds, seconds
 
@@ -92,7 +89,7 @@ def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = 
             raise DataError(f"{depth_path}: {int(outside.sum()):,} of its {len(depth):,} estimates lie outside "
                             f"{recording_path}'s {width}x{height} sensor: is it this recording's depth?")
     given = {}
-    from tofnet.processes.input import MAX_PERIOD_S
+    from tofnet.units import MAX_PERIOD_S
     if timestep is not None:
         given["timestep_us"] = microseconds(seconds(timestep, "--timestep", limit=MAX_PERIOD_S))
         if given["timestep_us"] <= 0:
@@ -105,6 +102,7 @@ def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = 
         if meta.get(key) is not None and int(meta[key]) != value:
             raise DataError(f"{depth_path}: the file says {key} = {meta[key]}, the option says {value}")
         meta[key] = value
+    check_timing(depth_path, depth, meta)  # a .csv's steps with --timestep, as a .npz's were when read
     if meta.get("t0_us") is None and meta.get("timestep_us") is not None:
         meta["t0_us"] = _t0_from_stamps(depth, int(meta["timestep_us"]), recording, depth_path)
     if bounds is not None:

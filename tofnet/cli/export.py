@@ -93,8 +93,9 @@ def handle(args) -> int:
             raise TofnetError(f"--window: expected a positive duration (one map per window), got {args.window!r}")
         max_age_us = microseconds(seconds(args.max_age, "--max-age")) if args.max_age else None
         done = write_depth_maps(depth_maps(depth, sensor, window_us, t0_us=meta.get("t0_us"),
-                                           max_age_us=max_age_us), args.maps, png=not args.no_png)
-        print(f"maps           {done['windows']} windows of {args.window} -> {Path(args.maps)}/ (index.csv)")
+                                           max_age_us=max_age_us, source=args.depth), args.maps, png=not args.no_png)
+        print(f"maps           {done['windows']} windows of {args.window} with depth -> {Path(args.maps)}/ "
+              "(index.csv; windows without any are not written)")
         if done["saturated_png_pixels"]:
             print(f"warning        {done['saturated_png_pixels']:,} PNG pixels beyond 65.535 m written as 65535")
     if args.ply:

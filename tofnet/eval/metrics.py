@@ -233,10 +233,16 @@ def _windows(depth: np.ndarray, events: np.ndarray, matches: Matches, t0_us: int
     window_us = max(1, int(round(window_s * 1e6)))
     ev_win = window_index(input_steps(events["t"], t0_us, timestep_us) * timestep_us, window_us)
     est_win = window_index(matches.input_step * timestep_us, window_us)
-    last = max(int(ev_win.max()) if len(ev_win) else -1, int(est_win.max()) if len(est_win) else -1)
+    last_event, last_estimate = (int(w.max()) if len(w) else -1 for w in (ev_win, est_win))
+    last = max(last_event, last_estimate)
     if last < 0:
         return []
-    n_win = last + 1
+    from tofnet.units import MAX_METRIC_WINDOWS, bounded_windows, format_seconds
+    what = (f"the estimates (array 'step' to {int(depth['step'].max())})"
+            if last_estimate >= last_event else "the recording's events")
+    n_win = bounded_windows(last + 1, window_us, f"per-window metrics: {what}, reaching "
+                            f"{format_seconds(last * window_us * 1e-6)} after t0,", "give a longer --window "
+                            "(0: none) or a time window (--start/--duration)", MAX_METRIC_WINDOWS)
     # Times before t0 belong to no window; bincount needs non-negative indices.
     events_per = np.bincount(ev_win[ev_win >= 0], minlength=n_win)
     in_win = est_win >= 0

@@ -12,7 +12,7 @@ from tofnet.eval.bins import band_window_s, window_quartiles
 from tofnet.eval.metrics import evaluate
 from tofnet.eval.plots_base import new_figure, span_us
 from tofnet.eval.views import has_poses, poses_at
-from tofnet.units import format_seconds
+from tofnet.units import MAX_METRIC_WINDOWS, bounded_windows, format_seconds
 
 #: One style per axis, so lines that coincide (a slider's y and z, both 0) stay apart:
 #: colour, line style, marker; the markers of y and z sit at alternate places.
@@ -83,7 +83,12 @@ def _plot_error(ax, ev, z: np.ndarray, window_s: float, duration_us: int) -> Non
     valid = m.valid
     rel = np.abs(z[valid] - m.gt[valid]) / m.gt[valid] * 100.0
     window_us = max(1, int(round(window_s * 1e6)))
-    n = max(1, -(-duration_us // window_us))
+    n = bounded_windows(max(1, -(-duration_us // window_us)), window_us, f"the error bands over "
+                        f"{format_seconds(duration_us * 1e-6)}", "give a longer --error-window (or auto)",
+                        MAX_METRIC_WINDOWS)
+    # A window longer than the span holds the same values; shortened to it, it stays inside int64 (an automatic
+    # window for a 2**61 µs span is 200 times that).
+    window_us = min(window_us, duration_us + 1)
     q, counts = window_quartiles(m.input_step[valid] * ev.timestep_us, rel, window_us, n,
                                  least=LEAST_PER_WINDOW)
     centres = (np.arange(n) + 0.5) * window_us * 1e-6

@@ -94,17 +94,13 @@ def read_camera_file(path: str | Path, camera: str | None = None,
     the first whose resolution equals ``sensor_size``, else the first. Returns ``(intrinsics, (width,
     height) or None, what was used)``; errors are one line naming the file and the key.
     """
-    import json
-
     from tofnet.io.files import read_text as read_limited
 
     path = Path(path)
     text = read_limited(path, "calibration file", limit=1 << 20)
     if text.lstrip().startswith("{"):
-        try:
-            data = json.loads(text)
-        except ValueError as err:
-            raise DataError(located(path, None, f"not valid JSON ({err})")) from None
+        from tofnet.io.jsontext import parse_json
+        data = parse_json(text, path)
     else:
         if _looks_like_calib_txt(text):
             return read_calibration(path), None, "calib.txt"

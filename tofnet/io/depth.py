@@ -20,7 +20,9 @@ from tofnet.errors import DataError, located, quote_field
 from tofnet.events import DEPTH_DTYPE, MAX_TIME_US
 from tofnet.io.files import write_text_atomic
 from tofnet.io.groundtruth import read_text
+from tofnet.io.jsontext import parse_json
 from tofnet.io.npy import Column, load_npz, write_npz
+from tofnet.units import MAX_PERIOD_S
 
 CSV_HEADER = "t,x,y,z,step"
 #: Estimates per slice when a depth file is written (bounded memory for any number of them).
@@ -32,6 +34,8 @@ _META = ("t0_us", "timestep_us", "latency_steps")
 _ARRAYS = ("t", "t_us", "x", "y", "z", "step")
 #: Below this |t| (µs) a float64 holds every µs exactly; larger CSV times are parsed as decimals.
 _FLOAT_EXACT_US = 2**52
+#: Largest ``latency_steps`` a depth file (or ``--latency-steps``) may give: a chain of a million processes.
+MAX_LATENCY_STEPS = 1_000_000
 
 
 def _jsonable(value: Any) -> Any:
@@ -129,17 +133,32 @@ def _read_npz(path: Path) -> tuple[np.ndarray, dict]:
                                   or not -MAX_TIME_US < int(value) < MAX_TIME_US):
             raise DataError(located(path, None, f"'{key}' must be one whole number, |value| < 2**61"))
         meta[key] = None if value is None else int(value)
+    check_timing(path, depth, meta)
     text = arrays.get("summary_json")
     if text is not None and (text.shape != () or text.dtype.kind != "U"):
         raise DataError(located(path, None, "'summary_json' must be one string"))
     text = "" if text is None else str(text)
-    try:
-        meta["summary"] = json.loads(text) if text.strip() else {}
-    except json.JSONDecodeError as err:
-        raise DataError(located(path, None, f"summary_json is not valid JSON ({err.msg})")) from None
-    except RecursionError:
-        raise DataError(located(path, None, "summary_json is nested too deeply")) from None
+    meta["summary"] = parse_json(text, path, "summary_json") if text.strip() else {}
     return depth, meta
+
+
+def check_timing(path: object, depth: np.ndarray, meta: dict) -> None:
+    """The timing of a depth file (or the options that complete a ``.csv``'s), in the ranges a run can have:
+    ``timestep_us`` 1 µs to ``MAX_PERIOD_S``, ``latency_steps`` 0 to ``MAX_LATENCY_STEPS``, and every ``step``
+    times ``timestep_us`` inside the time range (2**61 µs). ``eval`` and ``plot`` count their windows in steps
+    times the timestep: a timestep of 2**60 µs made them ask for 336 TiB, and a larger product would wrap in
+    int64. A one-line ``DataError`` naming the field; a value that is absent (``None``) is not checked."""
+    timestep, latency = meta.get("timestep_us"), meta.get("latency_steps")
+    longest = round(MAX_PERIOD_S * 1e6)
+    if timestep is not None and not 1 <= timestep <= longest:
+        raise DataError(located(path, None, f"'timestep_us' must be 1..{longest} µs (at most {MAX_PERIOD_S:g} s), "
+                                            f"got {timestep}"))
+    if latency is not None and not 0 <= latency <= MAX_LATENCY_STEPS:
+        raise DataError(located(path, None, f"'latency_steps' must be 0..{MAX_LATENCY_STEPS:,}, got {latency}"))
+    if timestep is not None and len(depth) and int(depth["step"].max()) * timestep >= MAX_TIME_US:
+        last = int(depth["step"].max())
+        raise DataError(located(path, None, f"array 'step' reaches {last}: {last} steps of {timestep} µs "
+                                            f"('timestep_us') lie beyond the time range (2**61 µs)"))
 
 
 def _checked(path: Path, columns: dict[str, np.ndarray], row_line: Callable[[int], int] | None) -> np.ndarray:

@@ -70,6 +70,8 @@ def parse_literal(text: str, where: str) -> object:
         if top[2] != "value":
             raise fail(f"expected {'a colon' if top[2] == 'colon' else 'a comma or a closing bracket'}")
         if isinstance(top[0], dict) and top[1] is _NO_KEY:
+            if isinstance(value, (dict, list)):  # a tuple too, until it closes: no key of EVIMO's is one
+                raise fail("a dictionary key must be a string, a number, True, False or None")
             top[1], top[2] = value, "colon"
         elif isinstance(top[0], dict):
             top[0][top[1]], top[1], top[2] = value, _NO_KEY, "separator"

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
-import json
 import os
 import re
 from pathlib import Path
@@ -99,10 +98,12 @@ def inputs_under(folder: str | Path, inputs: Iterable[str | Path] = ()) -> Path 
 
 def read_manifest(folder: str | Path) -> dict | None:
     """The manifest of ``folder`` (``{"written_by": ..., "files": [...]}``), or ``None``."""
+    from tofnet.errors import DataError
+    from tofnet.io.jsontext import parse_json
     try:
         with open(Path(folder) / MANIFEST, encoding="utf-8") as handle:
-            data = json.load(handle)
-    except (OSError, ValueError):
+            data = parse_json(handle.read(), Path(folder) / MANIFEST)
+    except (OSError, ValueError, DataError):  # unreadable: no manifest, so nothing in the folder is tofnet's
         return None
     if not isinstance(data, dict) or not isinstance(data.get("files"), list):
         return None

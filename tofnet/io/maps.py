@@ -3,7 +3,9 @@
 Window ``k`` covers ``[t0 + k W, t0 + (k+1) W)`` µs. Each pixel shows its latest estimate
 made before the window's end and at most ``max_age`` old (default ``W``: only this
 window's estimates); the age map gives, in milliseconds, how long before the window's
-end that estimate was made. Pixels without one are NaN.
+end that estimate was made. Pixels without one are NaN. A window whose map would hold no
+depth at all is not written (its number is skipped), and at most ``tofnet.units.MAX_MAPS``
+maps are: more is one line before the first is written.
 
 PNG: single-channel 16-bit greyscale, depth in whole millimetres (rounded to nearest),
 0 = no depth, depths above 65.535 m written as 65535 (counted). Written with Pillow,
@@ -37,43 +39,85 @@ class DepthMap:
 
 
 def depth_maps(depth: np.ndarray, sensor_size: tuple[int, int], window_us: int, *, t0_us: int | None = None,
-               max_age_us: int | None = None) -> Iterator[DepthMap]:
-    """``DepthMap`` per window from ``DEPTH_DTYPE`` estimates sorted by time (memory: two H x W maps)."""
+               max_age_us: int | None = None, source: str = "depth") -> Iterator[DepthMap]:
+    """``DepthMap`` per window holding depth, from ``DEPTH_DTYPE`` estimates sorted by time (memory: two H x W
+    maps). Windows without any (none made in the window, nor within ``max_age_us`` of its end) are skipped: an
+    empty map says nothing, and a few estimates far apart in time would otherwise make millions of them. Checked
+    before the first map (``source`` names the file in the one-line errors): at most ``MAX_MAPS`` maps."""
+    from tofnet.units import MAX_MAPS, bounded_windows, format_seconds
+
     if window_us <= 0:
         raise DataError(f"window must be positive, got {window_us} µs")
     width, height = (int(v) for v in sensor_size)
     max_age_us = window_us if max_age_us is None else int(max_age_us)
     t = depth["t"]
     if len(t) and np.any(t[1:] < t[:-1]):
-        raise DataError("depth estimates must be sorted by time")
+        raise DataError(f"{source}: depth estimates must be sorted by time")
     outside = (depth["x"] >= width) | (depth["y"] >= height)
     if np.any(outside):
-        raise DataError(f"{int(outside.sum())} estimates lie outside the {width}x{height} map "
+        raise DataError(f"{source}: {int(outside.sum())} estimates lie outside the {width}x{height} map "
                         f"(first at x={int(depth['x'][outside][0])}, y={int(depth['y'][outside][0])})")
     if len(t) == 0:
-        return
+        return iter(())
     t0 = int(t[0]) if t0_us is None else int(t0_us)
+    if int(t[0]) < t0:  # window 0 starts at t0: these would be in no map
+        raise DataError(f"{source}: estimates before t0_us = {t0}, where the maps start: "
+                        f"{int(np.count_nonzero(t < t0)):,} (the first at {int(t[0])} µs)")
+    runs = _windows_with_depth(t - t0, window_us, max_age_us)
+    count = sum(stop - start for start, stop in runs)
+    bounded_windows(count, window_us, f"{source}: the estimates ({format_seconds((int(t[-1]) - t0) * 1e-6)} after "
+                    f"t0, each shown up to {format_seconds(max_age_us * 1e-6)})", "give a longer --window, a "
+                    "shorter --max-age, or a time window (--start/--duration)", MAX_MAPS, "maps")
+    return _maps(depth, t0, (width, height), window_us, max_age_us, runs)
+
+
+def _windows_with_depth(rel_us: np.ndarray, window_us: int, max_age_us: int) -> list[tuple[int, int]]:
+    """The windows ``[start, stop)`` (indices, merged runs) whose map holds depth: window ``k`` does when an
+    estimate lies in ``[end_k - max_age, end_k)``, ``end_k = (k + 1) W``, i.e. ``k`` from ``rel // W`` to
+    ``(rel + max_age) // W - 1`` (and up to the last estimate's window). One run per estimate at most."""
+    last = int(rel_us[-1]) // window_us
+    # An age beyond every window changes nothing; clipped, every sum below stays inside int64.
+    age = min(max_age_us, (last + 1) * window_us)
+    if age <= 0:
+        return []
+    first = rel_us // window_us
+    final = np.minimum(first + (rel_us % window_us + age) // window_us - 1, last)
+    keep = final >= first
+    first, final = first[keep], final[keep]
+    if len(first) == 0:
+        return []
+    # Both ends grow with time: a run starts where an estimate's windows begin after the previous one's end.
+    new = np.ones(len(first), dtype=bool)
+    new[1:] = first[1:] > final[:-1] + 1
+    starts, ends = first[new], np.maximum.reduceat(final, np.flatnonzero(new))
+    return [(int(a), int(b) + 1) for a, b in zip(starts, ends)]
+
+
+def _maps(depth: np.ndarray, t0: int, size: tuple[int, int], window_us: int, max_age_us: int,
+          runs: list[tuple[int, int]]) -> Iterator[DepthMap]:
+    width, height = size
+    t = depth["t"]
     latest_z = np.full(height * width, np.nan, dtype=np.float32)
     latest_t = np.zeros(height * width, dtype=np.int64)
     flat = depth["y"].astype(np.int64) * width + depth["x"]
-    n_windows = int((int(t[-1]) - t0) // window_us) + 1
-    bounds = np.searchsorted(t, t0 + np.arange(n_windows + 1, dtype=np.int64) * window_us, side="left")
-    for k in range(max(n_windows, 0)):
-        start, stop = bounds[k], bounds[k + 1]
-        if stop > start:
-            # The last estimate of each pixel in the window wins.
-            reverse = flat[start:stop][::-1]
+    applied = 0
+    for k in (k for start, stop in runs for k in range(start, stop)):
+        t_end = t0 + (k + 1) * window_us
+        begin, stop = (int(v) for v in np.searchsorted(t, [t_end - window_us, t_end], side="left"))
+        if stop > applied:
+            # The last estimate of each pixel before the window's end wins.
+            reverse = flat[applied:stop][::-1]
             pixels, first = np.unique(reverse, return_index=True)
             last = stop - 1 - first
             latest_z[pixels] = depth["z"][last]
             latest_t[pixels] = t[last]
-        t_end = t0 + (k + 1) * window_us
+            applied = stop
         age_us = (t_end - latest_t).astype(np.float64)
         fresh = ~np.isnan(latest_z) & (age_us <= max_age_us)
         yield DepthMap(k, t_end - window_us, t_end,
                        np.where(fresh, latest_z, np.nan).reshape(height, width).astype(np.float32),
                        np.where(fresh, age_us * 1e-3, np.nan).reshape(height, width).astype(np.float32),
-                       int(stop - start))
+                       stop - begin)
 
 
 def depth_to_png16(depth_m: np.ndarray) -> tuple[np.ndarray, int]:
@@ -101,7 +145,7 @@ def write_depth_maps(maps: Iterator[DepthMap], folder: str | Path, *, png: bool 
 
     The folder is written as a whole (``tofnet.io.files.atomic_path``): it replaces an
     earlier export's folder, leaving exactly the new files, and never a folder holding
-    files tofnet did not write there. ``index.csv``:
+    files tofnet did not write there. ``index.csv``, one row per map written (windows without depth have none):
     ``window,t_start_s,t_end_s,pixels_with_depth,estimates_in_window``.
     Returns ``{"windows": n, "saturated_png_pixels": n}``.
     """

@@ -17,7 +17,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -155,32 +154,39 @@ def _tumvie(folder: Path, source, events: Path, side: str) -> None:
     except _NoneOrSeveral as err:
         source.notes.append(f"mocap_data.txt not used (poses of the marker, not the camera): {err}")
         return
-    t_imu_cam = _pose_matrix(_json(calib)["value0"]["T_imu_cam"][index], calib)
-    t_imu_marker = _pose_matrix(_json(marker)["value0"]["T_imu_marker"], marker)
+    t_imu_cam = _pose_matrix(_json(calib), calib, "value0", "T_imu_cam", index)
+    t_imu_marker = _pose_matrix(_json(marker), marker, "value0", "T_imu_marker")
     source.trajectory = read_mocap(gt / "mocap_data.txt", np.linalg.inv(t_imu_marker) @ t_imu_cam)
     source.notes.append(f"poses from {gt / 'mocap_data.txt'} (camera through {calib.name} and {marker.name})")
 
 
 def _json(path: Path) -> dict:
     from tofnet.io.files import read_text
+    from tofnet.io.jsontext import parse_json
 
-    try:
-        return json.loads(read_text(path, "calibration file", limit=1 << 20))
-    except ValueError as err:
-        raise DataError(located(path, None, f"not valid JSON ({err})")) from None
+    return parse_json(read_text(path, "calibration file", limit=1 << 20), path)
 
 
-def _pose_matrix(entry, path: Path) -> np.ndarray:
-    """A 4x4 transform from Basalt's ``{px, py, pz, qx, qy, qz, qw}``."""
+def _pose_matrix(data: object, path: Path, *keys: str | int) -> np.ndarray:
+    """A 4x4 transform from Basalt's ``{px, py, pz, qx, qy, qz, qw}`` at ``data[keys[0]][keys[1]]...`` of the
+    JSON file ``path``; else a one-line ``DataError`` naming the file and the keys."""
     from tofnet.io.groundtruth import quaternion_to_matrix
 
+    where = ".".join(str(key) for key in keys)
     try:
-        values = [float(entry[k]) for k in ("px", "py", "pz", "qx", "qy", "qz", "qw")]
-    except (KeyError, TypeError, ValueError):
-        raise DataError(located(path, None, "expected a pose {px, py, pz, qx, qy, qz, qw}")) from None
-    q = np.asarray(values[3:]) / np.linalg.norm(values[3:])
+        entry = data
+        for key in keys:
+            entry = entry[key]
+        values = np.array([float(entry[k]) for k in ("px", "py", "pz", "qx", "qy", "qz", "qw")])
+    except (KeyError, IndexError, TypeError, ValueError, OverflowError):
+        raise DataError(located(path, None, f"{where}: expected a pose {{px, py, pz, qx, qy, qz, qw}}")) from None
+    if not np.isfinite(values).all():
+        raise DataError(located(path, None, f"{where}: expected finite numbers, got {values.tolist()}"))
+    norm = np.linalg.norm(values[3:])
+    if not norm > 0:  # it divides the quaternion below (a NaN pose, blamed on mocap_data.txt)
+        raise DataError(located(path, None, f"{where}: the quaternion (qx, qy, qz, qw) is zero: no rotation"))
     matrix = np.eye(4)
-    matrix[:3, :3] = quaternion_to_matrix(q[None])[0]
+    matrix[:3, :3] = quaternion_to_matrix((values[3:] / norm)[None])[0]
     matrix[:3, 3] = values[:3]
     return matrix
 

@@ -7,7 +7,7 @@ from tofnet.core.params import Param
 from tofnet.core.ports import Payload, PortSpec
 from tofnet.core.process import Process
 from tofnet.core.vars import Var
-from tofnet.processes.input import MAX_PERIOD_S
+from tofnet.units import MAX_PERIOD_S
 
 
 class BackgroundActivityFilterProcess(Process):

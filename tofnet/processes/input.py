@@ -7,6 +7,7 @@ from tofnet.core.params import Param
 from tofnet.core.ports import Payload, PortSpec
 from tofnet.core.process import Process
 from tofnet.core.vars import Var
+from tofnet.units import MAX_PERIOD_S
 
 #: Default refractory period. An edge makes each pixel it crosses fire a burst of
 #: events (a 1-2 px edge takes 1-2 pixel crossings to pass); a refractory period
@@ -19,9 +20,6 @@ from tofnet.core.vars import Var
 #: scenes want less (fast_slider: 5-10 ms). See docs/accuracy.md.
 DEFAULT_REFRACTORY = "60ms"
 
-#: Longest timestep and refractory period (s): an hour is far beyond any use and keeps
-#: step arithmetic well inside int64 microseconds (docs/reliability.md).
-MAX_PERIOD_S = 3600.0
 
 
 class InputProcess(Process):
