@@ -35,7 +35,7 @@ def test_nothing_past_the_compiler_names_the_papers_processes():
 #: tofnet's layers, lowest first: a module may import its own layer and those below, never above.
 #: ``tofnet`` is the package's ``__init__`` (a facade over core, processes and networks).
 LAYERS = (
-    {"errors", "events", "units", "numba_cache", "machine"},
+    {"errors", "events", "units", "numba_cache", "machine", "pacing"},
     {"core", "kernels", "monitor", "fuzzing_checks"},
     {"compiler"},
     {"io"},
