@@ -112,6 +112,9 @@ def test_task_ids_survive_an_edit_of_the_plan_and_change_with_what_a_task_comput
     ("recordings:\n  - {path: a.npy, name: ~}\n", 2, "recordings[0].name: expected a non-empty string, got null"),
     ("recordings:\n  - {path: }\n", 2, "recordings[0].path: expected a non-empty string, got null"),
     ("recordings: [a.npy\n", 2, "malformed YAML"),
+    ("- scenario: slider\n", 1, "expected a mapping with keys name, description,"),
+    ("- scenario: slider\n", 1, "recordings, networks, grid, backend, keep, intrinsics, calib, camera, velocity, columns, "
+                              "topics, start, duration, until, side, rectify; got a list"),  # not the loader's '_Seq'
     ("recordings:\n  - {path: '*.raw', velocity: [0.3, 0, 0]}\n", 2,
      "no such file or folder; a pattern is written {glob: ...} (with the same reading keys) to match several"),
 ])

@@ -169,7 +169,7 @@ class _PlanReader:
         tree = self.tree
         if not isinstance(tree, Mapping):
             raise PlanError(located(self.source, _line(tree), f"expected a mapping with keys {', '.join(TOP_KEYS)}; "
-                                    f"got {type(tree).__name__}"))
+                                    f"got {_kind_word(tree)}"))
         for key in tree:
             if key not in TOP_KEYS:
                 raise self.fail(tree, key, str(key), f"unknown key; expected one of {', '.join(TOP_KEYS)}")
@@ -408,3 +408,9 @@ def _recording_name(path: Path) -> str:
     DSEC folder), its folder name, or its file name without the suffix."""
     from tofnet.io.layouts import sequence_name
     return sequence_name(path) or (path.name if path.is_dir() else path.stem)
+
+
+def _kind_word(value: object) -> str:
+    """What a YAML value is, in a user's words (not the loader's class names)."""
+    kinds = ((list, "a list"), (str, "text"), (bool, "true or false"), ((int, float), "a number"))
+    return "nothing" if value is None else next((word for kind, word in kinds if isinstance(value, kind)), "a value")
