@@ -202,3 +202,16 @@ def test_a_batch_over_the_events_files_of_dsec_folders_scores_them_by_folder_nam
     for row in rows.values():
         assert row["status"] == "ok" and 0 < float(row["mean_abs_cut10_m"]) < 0.1
         assert row["mean_abs_cut10_m"] == row["mean_abs_m"]
+
+
+def test_eval_reads_a_sequence_as_its_run_did(dsec, tmp_path, capsys):
+    """A run with --rectify records it in the depth file; eval without the flag rectifies too (it matched few
+    estimates, their pixels being rectified and the events not), and says so."""
+    folder = _shifted_map(dsec, tmp_path / "seq")
+    out = tmp_path / "depth.npz"
+    assert main(["run", str(folder), "--rectify", "--velocity=-0.5,0,0", "--duration", "300ms", "--out", str(out)]) == 0
+    capsys.readouterr()
+    assert main(["eval", str(folder), str(out), "--json", str(tmp_path / "a.json")]) == 0
+    assert "note: events rectified, as the run read them (--rectify, from" in capsys.readouterr().err
+    assert main(["eval", str(folder), str(out), "--rectify", "--json", str(tmp_path / "b.json")]) == 0
+    assert json.loads((tmp_path / "a.json").read_text()) == json.loads((tmp_path / "b.json").read_text())

@@ -73,6 +73,7 @@ def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = 
     # the run's own time window, when it had one: its events, not the whole recording's; a window asked here
     # too is cut to the run's once the file's first event (which relative times count from) is known
     own, window = (window, None) if window is not None and ran is not None else (None, window or ran)
+    side, rectify, taken = _sequence_of_run(summary, depth_path, side, rectify)
     reading = summary.get("reading_size")  # the run's --sensor-size: the file read as far as the run read it
     reading = tuple(reading) if isinstance(reading, list) and len(reading) == 2 and all(
         type(v) is int and 0 < v <= 1 << 16 for v in reading) else None
@@ -82,6 +83,9 @@ def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = 
             source.set_window(_common_window(source, own, summary["window_us"], depth_path))
         recording = source.read()
         bounds = source.window
+    import logging
+    for note in taken:
+        logging.getLogger("tofnet.cli").info(f"note: {note}")
     if recording.sensor_size is not None and len(depth):
         width, height = (max(a, b) for a, b in zip(recording.sensor_size, reading or (0, 0)))
         outside = (depth["x"] >= width) | (depth["y"] >= height)
@@ -111,6 +115,25 @@ def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = 
         import logging
         logging.getLogger("tofnet.cli").warning(f"warning: {depth_path} {mismatch}")
     return recording, depth, meta
+
+
+def _sequence_of_run(summary: dict, depth_path: str, side: str | None, rectify: bool) -> tuple:
+    """A dataset sequence read as the run read it (``--side``, ``--rectify``, recorded in the depth file), so the
+    estimates meet the events and ground truth at the pixels they were made at: ``(side, rectify, notes)``.
+    A side asked here other than the run's is refused (its depth is another camera's)."""
+    ran = summary.get("sequence")
+    ran = ran if isinstance(ran, dict) else {}
+    ran_side, ran_rectify, notes = ran.get("side"), ran.get("rectify") is True, []
+    if ran_side in ("left", "right") and side is None:
+        side = ran_side
+        notes.append(f"the {side} camera, as the run read it (from {depth_path})")
+    elif ran_side in ("left", "right") and side != ran_side:
+        raise DataError(f"{depth_path}: the run read the {ran_side} camera; --side {side} scores another camera's "
+                        "events against its depth")
+    if ran_rectify and not rectify:
+        rectify = True
+        notes.append(f"events rectified, as the run read them (--rectify, from {depth_path})")
+    return side, rectify, notes
 
 
 def _common_window(source, own, ran: list, depth_path: str):

@@ -221,7 +221,7 @@ def build_network(args, recording_sensor_size, recording=None):
 
 def handle(args) -> int:
     from tofnet.api import DEFAULT_BACKEND, rotation_line, run, run_source, undistortion_of
-    from tofnet.cli.inputs import input_options, sensor_size_option
+    from tofnet.cli.inputs import input_options, sensor_size_option, sequence_options
     from tofnet.cli.outputs import check_more_outputs, check_run_outputs
     from tofnet.cli.progress import Progress
     from tofnet.io.source import open_recording
@@ -277,6 +277,9 @@ def handle(args) -> int:
         summary["notes"].append(f"--velocity {args.velocity}: no translation, so no depth (depth from event timing "
                                 "needs the camera to translate)")
     summary["camera"] = camera_of(run_intrinsics(network, recording))
+    reading = {key: value for key, value in sequence_options(args).items() if value}
+    if reading:  # how a dataset sequence was read (a side, rectified): eval and plot read it the same way
+        summary["sequence"] = reading
     if args.velocity:  # the poses it implies: `tofnet plot cloud` places the estimates with them
         summary["velocity_m_s"] = [float(v) for v in args.velocity.split(",")]
     summary["total_time_s"] = time.perf_counter() - clock.started
@@ -326,7 +329,7 @@ def write_outputs(out: Path, result, summary: dict, record_tot: bool, check=None
             write_depth(path, records, t0_us=result.t0_us, timestep_us=result.timestep_us,
                         latency_steps=result.latency[name],
                         summary={**result.facts(), "recording": summary["recording"], "notes": summary["notes"],
-                                 **{key: summary[key] for key in ("window_us", "reading_size", "velocity_m_s")
+                                 **{key: summary[key] for key in ("window_us", "reading_size", "velocity_m_s", "sequence")
                                     if key in summary},
                                  "undistortion": lens_of_run(summary.get("undistortion")),
                                  "camera": summary.get("camera")})
