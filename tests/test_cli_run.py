@@ -189,3 +189,20 @@ def test_a_header_that_states_too_small_a_sensor_is_read_at_the_size_given(edge_
     with open_recording(tmp_path / "big.raw") as source:  # a size the decoder cannot read: unknown, and said so
         assert source.sensor_size is None
         assert "is not a sensor size (width, height; at most 65535 px a side)" in " | ".join(source.notes)
+
+
+def test_maps_of_a_csv_say_where_their_windows_start(tmp_path, capsys):
+    """A .csv holds no t0: its windows start at the first estimate, which the output says (the .npz of the same run
+    starts them at the run's t0, so map k of the two holds other times)."""
+    from tofnet.sim.run import simulate
+    folder = tmp_path / "rec"
+    simulate("slider", folder, duration=0.05, seed=0)
+    for suffix in (".npz", ".csv"):
+        assert main(["run", str(folder), "--out", str(tmp_path / f"d{suffix}"), "--quiet"]) == 0
+    capsys.readouterr()
+    first = read_depth(tmp_path / "d.npz")[0]["t"].min()
+    assert main(["export", str(tmp_path / "d.csv"), "--maps", str(tmp_path / "m"), "--recording", str(folder)]) == 0
+    assert (f"holds no t0: the windows start at its first estimate ({first * 1e-6:.6f} s); the .npz of the same run "
+            "starts them at the run's t0") in capsys.readouterr().out
+    assert main(["export", str(tmp_path / "d.npz"), "--maps", str(tmp_path / "n")]) == 0
+    assert "holds no t0" not in capsys.readouterr().out

@@ -92,6 +92,9 @@ def handle(args) -> int:
         if window_us <= 0:
             raise TofnetError(f"--window: expected a positive duration (one map per window), got {args.window!r}")
         max_age_us = microseconds(seconds(args.max_age, "--max-age")) if args.max_age else None
+        if meta.get("t0_us") is None and len(depth):  # a .csv: a .npz's windows count from its run's t0
+            print(f"note           {args.depth} holds no t0: the windows start at its first estimate "
+                  f"({int(depth['t'][0]) * 1e-6:.6f} s); the .npz of the same run starts them at the run's t0")
         done = write_depth_maps(depth_maps(depth, sensor, window_us, t0_us=meta.get("t0_us"),
                                            max_age_us=max_age_us, source=args.depth), args.maps, png=not args.no_png)
         print(f"maps           {done['windows']} windows of {args.window} with depth -> {Path(args.maps)}/ "
