@@ -2,6 +2,7 @@
 what `tofnet eval` and `tofnet export` make of the depth file."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -77,8 +78,11 @@ def test_an_undistort_process_moves_the_spikes_and_eval_and_export_follow(distor
     assert meta["latency_steps"] == 3 and meta["summary"]["undistortion"]["model"] == "radtan"
     assert meta["summary"]["undistortion"]["sensor_size"] == list(SIZE)
     assert main(["eval", str(distorted_folder), str(out), "--window", "0", "--json", "-"]) == 0
-    scored = json.loads(capsys.readouterr().out)
+    captured = capsys.readouterr()
+    scored = json.loads(captured.out)
     assert scored["matched"] == len(depth) and scored["unmatched"] == 0  # matched at their undistorted pixels
+    left = re.search(r"note: ([\d,]+) of ([\d,]+) events leave the undistorted image and are not scored", captured.err)
+    assert left and 0 < int(left[1].replace(",", "")) < int(left[2].replace(",", ""))  # said, not silently dropped
     plys = {how: tmp_path / f"{how}.ply" for how in ("default", "undistorted", "raw")}
     for how, ply in plys.items():
         assert main(["export", str(out), "--ply", str(ply)] + ([] if how == "default" else ["--pixels", how])) == 0

@@ -248,7 +248,13 @@ def handle(args) -> int:
                         "undistort process instead")
     if undistortion:  # the estimates are at undistorted pixels: match them to events moved there too
         from tofnet.eval.undistorted import lens_from_summary, undistorted_recording
+        before = len(recording.events)
         recording = undistorted_recording(recording, *lens_from_summary(undistortion))
+        if len(recording.events) < before:  # as the run's undistort process did (its counts say so too)
+            import logging
+            logging.getLogger("tofnet.cli").info(
+                f"note: {before - len(recording.events):,} of {before:,} events leave the undistorted image and are "
+                "not scored (the run's undistort process left them out too)")
     result = evaluate(recording, depth, meta, window_s=window_s, interpolate=args.frames == "interpolate")
     from tofnet.eval.rotation import format_share_split, split_by_true_share
     shares, what = split_by_true_share(recording, depth, result)
