@@ -65,16 +65,18 @@ def test_a_run_with_monitors_reports_progress(recording_folder, monkeypatch):
         np.testing.assert_array_equal(b.arrays()[key], value)
 
 
-def test_a_streamed_run_with_progress_keeps_its_workers_bands(recording_folder, monkeypatch):
-    """Pieces start small; a stream keeps one band on a small first packet (a live stream's latency), but a run over
-    a whole recording asked for workers: its bands from the first piece, and the same estimates as one worker."""
+def test_a_streamed_run_with_progress_chooses_its_bands_on_its_chunks_not_its_pieces(recording_folder, monkeypatch):
+    """Pieces start small, and a stream keeps one band on a small first packet (a live stream's latency): a run's
+    bands are chosen on its chunks, as without progress, and give the estimates of one worker."""
+    import tofnet.backends.bands
     monkeypatch.setattr(tofnet.pacing, "PIECE_SECONDS", 1e-4)
+    monkeypatch.setattr(tofnet.backends.bands, "FUSED_BANDS_FROM", 10_000)  # the chunk (~27,000) above, pieces below
     runs = {}
-    for workers in (1, 2):
+    for workers, progress in ((1, None), (2, None), (2, lambda d, t: None)):
         with open_recording(recording_folder) as source:
-            runs[workers], _ = run_source(source, _network(), backend="fixed", backend_options={"workers": workers},
-                                          progress=lambda d, t: None)
-    facts = runs[2].summary()["workers"]
-    assert facts["bands"] == 2 and "one_band" not in facts, facts
-    for name in runs[1].outputs:
-        np.testing.assert_array_equal(runs[2].outputs[name], runs[1].outputs[name])
+            runs[workers, progress is None], _ = run_source(source, _network(), backend="fixed",
+                                                            backend_options={"workers": workers}, progress=progress)
+    quiet, paced = runs[2, True].summary()["workers"], runs[2, False].summary()["workers"]
+    assert paced == quiet and paced["bands"] == 2 and "one_band" not in paced, paced
+    for name in runs[1, True].outputs:
+        np.testing.assert_array_equal(runs[2, False].outputs[name], runs[1, True].outputs[name])

@@ -352,8 +352,6 @@ def run_source(source, network: Network, *, backend: str = DEFAULT_BACKEND, back
                                 record_tot=record_tot)
     if chunk_events is None:
         chunk_events = getattr(chosen, "packet_events", DEFAULT_PACKET_EVENTS)
-    if hasattr(stream, "expect_whole_run"):  # a whole run, fed in pieces below: its workers' bands from the first
-        stream.expect_whole_run()
     collected = Collected(spill_dir, spill_bytes)
     # progress after the events are processed, not read: a chunk may take long on a slow backend, so with
     # progress asked each is fed in pieces of about half a second (tofnet.pacing: one chunk whole on a fast one)
@@ -368,6 +366,8 @@ def run_source(source, network: Network, *, backend: str = DEFAULT_BACKEND, back
                 chunk = next(chunks, None)
             if chunk is None:
                 break
+            if not read and hasattr(stream, "expect_packets"):  # bands for the chunks, not the pieces cut below
+                stream.expect_packets(len(chunk))
             if pacer is None:
                 collected.add(stream.feed_all(chunk))
                 read += len(chunk)

@@ -228,6 +228,15 @@ class FusedStream:
         self.tot = copy_records(self.kernel.buffers()[2][:n_tot]) if self.record_tot else None
         return into[:end]
 
+    def expect_packets(self, n_events: int) -> None:
+        """A run feeds packets of about ``n_events`` (its chunks; progress may cut them into smaller pieces): the
+        kernel's bands are chosen and built for that size now, not for the first piece."""
+        prepare = getattr(self.kernel, "prepare", None)
+        if prepare is not None and not self._prepared:
+            with self.clock.aside():
+                prepare(n_events)
+            self._prepared = True
+
     def expect_whole_run(self) -> None:
         """A run over a whole recording, not a live stream: its bands (workers) from the first packet, whatever
         its size (a stream otherwise keeps one band on a small first packet, where bands cost latency)."""
