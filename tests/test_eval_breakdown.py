@@ -89,3 +89,20 @@ def test_a_steady_run_has_no_reversal_up_to_its_last_event():
     trajectory = Trajectory((0.0, 0.0, 0.0), (Segment(0.3, (0.5, 0.0, 0.0)),))  # stands still after 0.3 s
     t = np.array([0.0, 0.1, 0.2999, 0.29999])
     assert motion_phase(trajectory, t).tolist() == [0, 0, 0, 0]
+
+
+def test_the_motion_phase_grid_is_counted_before_it_is_made():
+    """Events two hours apart make a grid of 7.2 million 1 ms cells; ten times the bound (a hostile file's times) is one
+    line before anything is allocated."""
+    from tofnet.errors import DataError
+    from tofnet.eval.breakdown import MAX_PHASE_CELLS, PHASE_STEP_S
+
+    class Steady:
+        def velocity_at(self, t):
+            return np.tile([0.5, 0.0, 0.0], (len(np.atleast_1d(t)), 1))
+
+    assert motion_phase(Steady(), np.array([0.0, 7200.0])).tolist() == [0, 0]
+    span = MAX_PHASE_CELLS * PHASE_STEP_S * 10
+    with pytest.raises(DataError, match=r"the events, over 1e\+06 s, make 1,000,000,100 motion-phase cells of 1 ms, "
+                                        r"more than the 100,000,000 allowed; score a time window"):
+        motion_phase(Steady(), np.array([0.0, span]))

@@ -24,6 +24,7 @@ import numpy as np
 
 from tofnet.eval.match import Matches
 from tofnet.eval.metrics import ErrorStats, _number
+from tofnet.units import bounded_windows
 
 #: Band edges of the true depth, metres: < 1, 1-2, 2-4, 4-8, >= 8.
 DEPTH_BANDS = (0.0, 1.0, 2.0, 4.0, 8.0, math.inf)
@@ -33,6 +34,8 @@ REVERSAL_WINDOW_S = 0.1
 SLOW_SHARE = 0.25
 #: Velocity sampling of the phase labels, seconds.
 PHASE_STEP_S = 0.001
+#: Most cells of ``PHASE_STEP_S`` in a motion-phase grid: 28 hours of a recording (a few GB while it is scored).
+MAX_PHASE_CELLS = 100_000_000
 PHASES = ("steady", "reversal")
 
 
@@ -90,8 +93,12 @@ def motion_phase(trajectory, t_s: np.ndarray) -> np.ndarray:
     if t_s.size == 0:
         return np.zeros(0, dtype=np.int8)
     lo, hi = float(t_s.min()) - REVERSAL_WINDOW_S, float(t_s.max())
-    # The grid ends at the last event: a trajectory stands still after its end, which is no reversal.
-    grid = np.linspace(lo, hi, int(math.ceil((hi - lo) / PHASE_STEP_S)) + 1)
+    # The grid ends at the last event: a trajectory stands still after its end, which is no reversal. Its size is
+    # counted before it is made (a recording's events may span 2**61 µs).
+    cells = bounded_windows(int(math.ceil((hi - lo) / PHASE_STEP_S)), round(PHASE_STEP_S * 1e6),
+                            f"the events, over {hi - lo:.6g} s,", "score a time window (--start/--duration)",
+                            MAX_PHASE_CELLS, unit="motion-phase cells")
+    grid = np.linspace(lo, hi, cells + 1)
     spacing = (hi - lo) / max(len(grid) - 1, 1)
     velocity = np.asarray(trajectory.velocity_at(grid), dtype=np.float64)
     speed = np.linalg.norm(velocity, axis=1)
