@@ -206,16 +206,25 @@ def answers(expected: dict[int, tuple[Channel, str, str]], timeout: float, stuck
                                                  ready=ready)
             except WorkerError as err:
                 if not settle:
+                    _raise_if_another_died(expected, channel, doing)
                     raise
                 refused.append(err)
             except BackendError:
-                for other, _, _ in expected.values():
-                    if other is not channel and not other.process.is_alive():
-                        raise other.failure("died", f"while {doing}") from None
+                _raise_if_another_died(expected, channel, doing)
                 raise
     if refused:
         raise WorkersRefused(refused[0], refused=len(refused), answered=len(replies))
     return replies
+
+
+def _raise_if_another_died(expected: dict, channel: Channel, doing: str) -> None:
+    """A worker that died is named before one that failed because of it (a band that lost its partner mid-packet
+    reports that a worker went away, often before the parent sees the death): the first dead one's failure."""
+    for other, _, _ in expected.values():
+        if other is not channel:
+            other.process.join(0.05)  # a worker whose partner saw it go is gone: let its exit code arrive
+            if not other.process.is_alive():
+                raise other.failure("died", f"while {doing}") from None
 
 
 def _main_has_a_file() -> bool:
