@@ -208,8 +208,11 @@ def test_errors_name_the_file(tmp_path):
         load_spec(str(tmp_path / "missing.yaml"))
     with pytest.raises(SpecError, match="empty spec"):
         load_spec("\n\n")
-    with pytest.raises(SpecError, match="<string>:1: expected a mapping"):
+    with pytest.raises(SpecError, match="<string>:1: expected a mapping") as err:
         load_spec("- just\n- a list\n")
+    assert str(err.value).endswith("; got a list")  # in a user's words, not the YAML loader's class '_Seq'
+    with pytest.raises(SpecError, match=r"expected a mapping with keys .*; got text$"):
+        load_spec("just words\n")
 
 
 def test_malformed_yaml_reports_yamls_line():

@@ -20,7 +20,7 @@ from tofnet.batch.bounds import bounded_glob, check_inside_plan, check_task_coun
 from tofnet.batch.grid import check_grid, read_grid
 from tofnet.batch.reading import READ_KEYS
 from tofnet.errors import SpecError, TofnetError, fields_shown_within, located, quote
-from tofnet.io.safe_yaml import _line, _parse_yaml, yaml_source
+from tofnet.io.safe_yaml import _line, _parse_yaml, kind_word, yaml_source
 
 TOP_KEYS = ("name", "description", "output", "cache", "recordings", "networks", "grid", "backend", "keep",
             *READ_KEYS)
@@ -169,7 +169,7 @@ class _PlanReader:
         tree = self.tree
         if not isinstance(tree, Mapping):
             raise PlanError(located(self.source, _line(tree), f"expected a mapping with keys {', '.join(TOP_KEYS)}; "
-                                    f"got {_kind_word(tree)}"))
+                                    f"got {kind_word(tree)}"))
         for key in tree:
             if key not in TOP_KEYS:
                 raise self.fail(tree, key, str(key), f"unknown key; expected one of {', '.join(TOP_KEYS)}")
@@ -408,9 +408,3 @@ def _recording_name(path: Path) -> str:
     DSEC folder), its folder name, or its file name without the suffix."""
     from tofnet.io.layouts import sequence_name
     return sequence_name(path) or (path.name if path.is_dir() else path.stem)
-
-
-def _kind_word(value: object) -> str:
-    """What a YAML value is, in a user's words (not the loader's class names)."""
-    kinds = ((list, "a list"), (str, "text"), (bool, "true or false"), ((int, float), "a number"))
-    return "nothing" if value is None else next((word for kind, word in kinds if isinstance(value, kind)), "a value")

@@ -41,6 +41,12 @@ class _Seq(list):
     item_lines: list = []
 
 
+def kind_word(value: object) -> str:
+    """What a YAML value is, in a user's words (``a list``, ``text``), not the loader's class names (``_Seq``)."""
+    kinds = ((list, "a list"), (str, "text"), (bool, "true or false"), ((int, float), "a number"))
+    return "nothing" if value is None else next((word for kind, word in kinds if isinstance(value, kind)), "a value")
+
+
 def _parse_yaml(text: str, source: str, empty: str = "empty spec; expected a mapping with processes and connections"
                 ) -> Any:
     if len(text) > MAX_SPEC_BYTES:

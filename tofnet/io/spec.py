@@ -22,7 +22,7 @@ from tofnet.core.ports import InPort, OutPort
 from tofnet.core.process import Process
 from tofnet.errors import SpecError, TofnetError, located, quote, reason
 from tofnet.io.safe_yaml import (MAX_SPEC_BYTES, _Map, _Seq, _line, _parse_yaml, _read_spec_file,  # noqa: F401
-                                 read_yaml_file, yaml_source)
+                                 kind_word, read_yaml_file, yaml_source)
 from tofnet.io.spec_data import Spec
 from tofnet.io.trust import ENTRY_POINTS, allowed_imports, check_import, file_a_spec_names
 from tofnet.io.spec_writer import (dump_spec, network_signature, network_to_dict, networks_equal,  # noqa: F401
@@ -65,7 +65,7 @@ class _Reader:
         tree = self.tree
         if not isinstance(tree, Mapping):
             raise SpecError(located(self.source, _line(tree), "expected a mapping with keys "
-                                    f"{', '.join(TOP_KEYS)}; got {type(tree).__name__}"))
+                                    f"{', '.join(TOP_KEYS)}; got {kind_word(tree)}"))
         for key in tree:
             if key not in TOP_KEYS:
                 raise self.fail(tree, key, str(key), f"unknown key; expected one of {', '.join(TOP_KEYS)}")
