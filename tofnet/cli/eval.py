@@ -83,9 +83,8 @@ def load_inputs(recording_path: str, depth_path: str, *, timestep: str | None = 
             source.set_window(_common_window(source, own, summary["window_us"], depth_path))
         recording = source.read()
         bounds = source.window
-    import logging
     for note in taken:
-        logging.getLogger("tofnet.cli").info(f"note: {note}")
+        _note(note)
     if recording.sensor_size is not None and len(depth):
         width, height = (max(a, b) for a, b in zip(recording.sensor_size, reading or (0, 0)))
         outside = (depth["x"] >= width) | (depth["y"] >= height)
@@ -136,12 +135,16 @@ def _sequence_of_run(summary: dict, depth_path: str, side: str | None, rectify: 
     return side, rectify, notes
 
 
+def _note(text: str) -> None:
+    """A note on stderr (``tofnet eval: note: ...``, through the command's log handler), not in the report."""
+    import logging
+    logging.getLogger("tofnet.cli").info(f"note: {text}")
+
+
 def _common_window(source, own, ran: list, depth_path: str):
     """The part of the window asked (``own``, a ``TimeWindow``) that the run read too (``ran``: its ``window_us``):
     the estimates come from those events alone, so coverage over the others would count events the run never
     saw. A note says when the window asked is cut; ``DataError`` when the two do not overlap."""
-    import logging
-
     from tofnet.io.window import parse_window
 
     first = source.first_time()
@@ -157,8 +160,8 @@ def _common_window(source, own, ran: list, depth_path: str):
         raise DataError(f"{depth_path}: its run read {text(ran)}; the window asked ({own.text()}: {text((start, stop))}) "
                         "is outside it")
     if common != (start, stop):
-        logging.getLogger("tofnet.cli").info(
-            f"note: scoring {text(common)}: the window asked ({own.text()}) cut to the run's ({text(ran)}), whose "
+        _note(
+            f"scoring {text(common)}: the window asked ({own.text()}) cut to the run's ({text(ran)}), whose "
             f"events alone {depth_path}'s estimates come from")
     return parse_window(start=f"@{common[0]}us", until=None if common[1] is None else f"@{common[1]}us")
 
@@ -251,10 +254,8 @@ def handle(args) -> int:
         before = len(recording.events)
         recording = undistorted_recording(recording, *lens_from_summary(undistortion))
         if len(recording.events) < before:  # as the run's undistort process did (its counts say so too)
-            import logging
-            logging.getLogger("tofnet.cli").info(
-                f"note: {before - len(recording.events):,} of {before:,} events leave the undistorted image and are "
-                "not scored (the run's undistort process left them out too)")
+            _note(f"{before - len(recording.events):,} of {before:,} events leave the undistorted image and are not "
+                  "scored (the run's undistort process left them out too)")
     result = evaluate(recording, depth, meta, window_s=window_s, interpolate=args.frames == "interpolate")
     from tofnet.eval.rotation import format_share_split, split_by_true_share
     shares, what = split_by_true_share(recording, depth, result)

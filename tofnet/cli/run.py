@@ -273,15 +273,15 @@ def handle(args) -> int:
     if stated is not None and tuple(stated) != tuple(network.sensor_size):
         summary["stated_sensor_size"] = list(stated)
         summary["notes"].append(sensor_size_note(stated, network.sensor_size, given_size))
-    if args.velocity and not any(float(v) for v in args.velocity.split(",")):  # parsed by constant_velocity
-        summary["notes"].append(f"--velocity {args.velocity}: no translation, so no depth (depth from event timing "
-                                "needs the camera to translate)")
+    if args.velocity:  # checked by constant_velocity; the poses it implies place `tofnet plot cloud`'s estimates
+        summary["velocity_m_s"] = [float(v) for v in args.velocity.split(",")]
+        if not any(summary["velocity_m_s"]):
+            summary["notes"].append(f"--velocity {args.velocity}: no translation, so no depth (depth from event "
+                                    "timing needs the camera to translate)")
     summary["camera"] = camera_of(run_intrinsics(network, recording))
     reading = {key: value for key, value in sequence_options(args).items() if value}
     if reading:  # how a dataset sequence was read (a side, rectified): eval and plot read it the same way
         summary["sequence"] = reading
-    if args.velocity:  # the poses it implies: `tofnet plot cloud` places the estimates with them
-        summary["velocity_m_s"] = [float(v) for v in args.velocity.split(",")]
     summary["total_time_s"] = time.perf_counter() - clock.started
     summary["compile_time_s"], summary["kernels_compiled"] = clock.compile_seconds, clock.compiled
     written = write_outputs(out, result, summary, args.record_tot, check=lambda paths: check_more_outputs(args, paths))
