@@ -181,11 +181,8 @@ class FusedStream:
         changes only once it succeeded."""
         first = self.t0_us is None
         kernel = self.kernel
-        prepare = getattr(kernel, "prepare", None)  # bands built for the first packet's size: set-up, not running
-        if prepare is not None and not self._prepared:  # once: a context per 1 ms packet costs ~1 µs
-            with self.clock.aside():
-                prepare(len(events))
-            self._prepared = True
+        if not self._prepared:  # bands built for the first packet's size (once: a context per 1 ms packet costs ~1 µs)
+            self.expect_packets(len(events))
         if first:
             kernel.t0_us = span[0]
         try:
@@ -231,11 +228,11 @@ class FusedStream:
     def expect_packets(self, n_events: int) -> None:
         """A run feeds packets of about ``n_events`` (its chunks; progress may cut them into smaller pieces): the
         kernel's bands are chosen and built for that size now, not for the first piece."""
-        prepare = getattr(self.kernel, "prepare", None)
+        prepare = getattr(self.kernel, "prepare", None)  # set-up, not running
         if prepare is not None and not self._prepared:
             with self.clock.aside():
                 prepare(n_events)
-            self._prepared = True
+        self._prepared = True
 
     def expect_whole_run(self) -> None:
         """A run over a whole recording, not a live stream: its bands (workers) from the first packet, whatever
