@@ -127,7 +127,7 @@ def test_cli_export_maps_and_cloud(tmp_path, capsys):
     assert main(["export", str(tmp_path / "depth.npz"), "--maps", str(tmp_path / "maps"), "--window", "10ms",
                  "--ply", str(tmp_path / "cloud.ply")]) == 0
     out = capsys.readouterr().out
-    assert "2 windows of 10ms" in out and "2 points (camera frame)" in out
+    assert "2 windows of 10ms" in out and "2 points (camera frame)" in out and "without any" not in out
     assert sorted(p.name for p in (tmp_path / "maps").iterdir())[:4] == [".tofnet-manifest.json", "age_000000.npy",
                                                                         "age_000001.npy", "depth_000000.npy"]
     assert main(["export", str(tmp_path / "depth.npz")]) == 2
@@ -137,7 +137,8 @@ def test_cli_export_maps_and_cloud(tmp_path, capsys):
                 latency_steps=2, summary={})
     assert main(["export", str(tmp_path / "span.npz"), "--maps", str(tmp_path / "span"), "--sensor-size", "8x6",
                  "--no-png"]) == 0
-    assert "2 windows of 10ms with depth" in capsys.readouterr().out
+    assert "2 windows of 10ms with depth -> " in (out := capsys.readouterr().out)
+    assert "(index.csv; 499 windows between them without any, not written)" in out  # nothing lost without a count
     assert (tmp_path / "span" / "index.csv").read_text().splitlines()[1:] == ["0,0.000000,0.010000,1,1",
                                                                               "500,5.000000,5.010000,1,1"]
     assert len(list((tmp_path / "span").glob("*.npy"))) == 4

@@ -97,8 +97,9 @@ def handle(args) -> int:
                   f"({int(depth['t'][0]) * 1e-6:.6f} s); the .npz of the same run starts them at the run's t0")
         done = write_depth_maps(depth_maps(depth, sensor, window_us, t0_us=meta.get("t0_us"),
                                            max_age_us=max_age_us, source=args.depth), args.maps, png=not args.no_png)
-        print(f"maps           {done['windows']} windows of {args.window} with depth -> {Path(args.maps)}/ "
-              "(index.csv; windows without any are not written)")
+        empty = done["empty_windows"]
+        print(f"maps           {done['windows']:,} windows of {args.window} with depth -> {Path(args.maps)}/ (index.csv"
+              + (f"; {empty:,} windows between them without any, not written)" if empty else ")"))
         if done["saturated_png_pixels"]:
             print(f"warning        {done['saturated_png_pixels']:,} PNG pixels beyond 65.535 m written as 65535")
     if args.ply:

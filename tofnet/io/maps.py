@@ -147,15 +147,17 @@ def write_depth_maps(maps: Iterator[DepthMap], folder: str | Path, *, png: bool 
     earlier export's folder, leaving exactly the new files, and never a folder holding
     files tofnet did not write there. ``index.csv``, one row per map written (windows without depth have none):
     ``window,t_start_s,t_end_s,pixels_with_depth,estimates_in_window``.
-    Returns ``{"windows": n, "saturated_png_pixels": n}``.
+    Returns ``{"windows": n, "empty_windows": n, "saturated_png_pixels": n}`` (``empty_windows``: those
+    before the last map that hold no depth, not written).
     """
     from tofnet.io.files import atomic_path, write_text_atomic
     from tofnet.io.npy import write_npy
 
     rows = ["window,t_start_s,t_end_s,pixels_with_depth,estimates_in_window"]
-    saturated = 0
+    saturated, spanned = 0, 0
     with atomic_path(folder, folder=True, written_by="tofnet export --maps") as partial:
         for depth_map in maps:
+            spanned = depth_map.index + 1
             stem = f"{depth_map.index:06d}"
             write_npy(partial / f"depth_{stem}.npy", depth_map.depth)
             write_npy(partial / f"age_{stem}.npy", depth_map.age_ms)
@@ -167,4 +169,4 @@ def write_depth_maps(maps: Iterator[DepthMap], folder: str | Path, *, png: bool 
             rows.append(f"{depth_map.index},{depth_map.t_start_us * 1e-6:.6f},{depth_map.t_end_us * 1e-6:.6f},"
                         f"{pixels},{depth_map.estimates}")
         write_text_atomic(partial / "index.csv", "\n".join(rows) + "\n")
-    return {"windows": len(rows) - 1, "saturated_png_pixels": saturated}
+    return {"windows": len(rows) - 1, "empty_windows": spanned - (len(rows) - 1), "saturated_png_pixels": saturated}
