@@ -8,6 +8,7 @@ import pytest
 from tofnet.batch import PlanError, expand, load_plan
 from tofnet.batch.worker import run_task
 from tofnet.cli import main
+from tofnet.errors import SpecError
 
 from formats_helpers import pattern_recording
 
@@ -127,3 +128,14 @@ def test_a_task_quotes_no_field_of_a_file_outside_the_plans_folder(folder):
     with pytest.raises(PlanError) as err:
         load_plan(write(plans, f"recordings: [own.txt]\ncalib: {folder / 'secret' / 'cam.yaml'}\n"))
     assert "sk-live" not in str(err.value) and "cam.yaml is outside the plan's folder)" in str(err.value), err.value
+    # a spec named absolutely: the line of its fault, neither its keys nor its values (40 characters were quoted)
+    (folder / "secret" / "net.yaml").write_text(f"name: x\nprocesses:\n  input: {{type: InputProcess, timestep: "
+                                                f"'{SECRET}'}}\n")
+    (plans / "net.yaml").write_text((folder / "secret" / "net.yaml").read_text())
+    with pytest.raises(SpecError) as err:
+        load_plan(write(plans, f"recordings: [own.txt]\nnetworks: [{folder / 'secret' / 'net.yaml'}]\n"))
+    assert str(err.value).startswith(f"{folder / 'secret' / 'net.yaml'}:3: not a spec tofnet can load: a field not "
+                                     "shown ("), err.value
+    assert "sk-live" not in str(err.value) and "timestep" not in str(err.value), err.value
+    with pytest.raises(SpecError, match="net.yaml:3: processes.input.timestep: .* got 'API_KEY=sk-live"):
+        load_plan(write(plans, "recordings: [own.txt]\nnetworks: [net.yaml]\n"))  # its own folder's: quoted

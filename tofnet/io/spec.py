@@ -20,7 +20,7 @@ from tofnet.compiler.partition import parse_patch_size, patch_per_layer
 from tofnet.core.network import Network
 from tofnet.core.ports import InPort, OutPort
 from tofnet.core.process import Process
-from tofnet.errors import SpecError, TofnetError, located, quote, reason
+from tofnet.errors import SpecError, TofnetError, field_hidden, located, quote, reason, shown_path
 from tofnet.io.safe_yaml import (MAX_SPEC_BYTES, _Map, _Seq, _line, _parse_yaml, _read_spec_file,  # noqa: F401
                                  kind_word, read_yaml_file, yaml_source)
 from tofnet.io.spec_data import Spec
@@ -286,7 +286,16 @@ def load_spec(path_or_text: str | Path, *, allow_import: Any = None, replaced: I
     """
     text, source, path = yaml_source(path_or_text, "spec")
     folder = path.resolve().parent if path is not None else None
-    return _Reader(_parse_yaml(text, source), source, allow_import, folder, replaced).read()
+    try:
+        return _Reader(_parse_yaml(text, source), source, allow_import, folder, replaced).read()
+    except SpecError as err:
+        hidden = field_hidden(path) if path is not None else None
+        if hidden is None:
+            raise
+        # a batch plan may name a spec anywhere: the line of the fault, not the keys and values around it
+        line = re.match(rf"{re.escape(shown_path(source))}:(\d+): ", str(err))
+        raise SpecError(located(source, int(line.group(1)) if line else None,
+                                f"not a spec tofnet can load: {hidden}; 'tofnet compile FILE' shows the fault")) from None
 
 
 def spec_from_dict(data: Mapping[str, Any], source: str = "<dict>", *, allow_import: Any = None) -> Spec:
