@@ -53,6 +53,8 @@ def test_reading_keys_plan_wide_and_per_recording(folder):
     alone = json.loads((folder / "s.json").read_text())
     assert 0 < row["events_in"] == alone["events_in"] < len(np.load(folder / "plain.npy"))
     assert row["depth_out"] == alone["depth_out"] > 0
+    # and says what its reading noted (the window, the calibration), as the run's summary does
+    assert row["notes"] == "; ".join(alone["notes"]) and "time window" in row["notes"], (row["notes"], alone["notes"])
     # Without calibration (nothing beside the file) the task fails with the reader's one line.
     plan = load_plan(write(folder, "recordings: [plain.npy]\ncolumns: x,y,t,p\nvelocity: 0.5,0,0\n"))
     row = run_task(expand(plan)[0])

@@ -39,7 +39,7 @@ def columns(parameters: Iterable[str], rows: Iterable[dict] = ()) -> list[str]:
     rejected = [k for k in keys if k.startswith("rejected_")]
     latency = [k for k in keys if k.startswith("latency_") and k not in COUNT_COLUMNS]
     counts = [*COUNT_COLUMNS[:3], *dropped, *COUNT_COLUMNS[3:5], *rejected, *COUNT_COLUMNS[5:], *latency]
-    return [*INPUT_COLUMNS, *parameters, "status", "error", *counts, *METRIC_COLUMNS, *TIMING_COLUMNS,
+    return [*INPUT_COLUMNS, *parameters, "status", "error", "notes", *counts, *METRIC_COLUMNS, *TIMING_COLUMNS,
             *OUTPUT_COLUMNS]
 
 

@@ -138,7 +138,8 @@ def _run(task: Task, recording_path: str, folder: Path) -> dict[str, Any]:
     summary["notes"] = list(recording.notes)
     lens = lens_of_run(summary["undistortion"])  # the estimates' pixels are undistorted: scored and recorded so
     out: dict[str, Any] = {
-        "backend": backend, "events_in": summary["events_in"], "accepted": summary["accepted"],
+        "backend": backend, "notes": "; ".join(summary["notes"]) or None,  # what the reader left out, and why
+        "events_in": summary["events_in"], "accepted": summary["accepted"],
         "dropped": sum(summary["dropped"].values()),
         **{f"dropped_{r}": n for r, n in summary["dropped"].items()},  # the first reader's reasons
         "tot_spikes": summary["tot_spikes"], "depth_out": summary.get("depth_out"),
