@@ -152,6 +152,19 @@ def test_unknown_resource_needs_a_limit():
         compile_network(net)
     compiled = compile_network(net, Budget(core=CoreBudget(extra={"synapses": 30})))
     assert compiled.layers[0].usage_max["synapses"] <= 30 and compiled.layers[0].cores == 20
+    # a limit spelt like one the network needs would leave that one at its default unseen (8192 accumulators)
+    with pytest.raises(BudgetError, match=r"budget.core.synapse: no process of network .* needs 'synapse'; did you "
+                                          r"mean 'synapses'\?"):
+        compile_network(net, Budget(core=CoreBudget(extra={"synapses": 30, "synapse": 20})))
+    with pytest.raises(BudgetError, match=r"budget.core.acumulators: .* did you mean 'accumulators'\? \(its limit "
+                                          r"stays 8192\)"):
+        compile_network(net, Budget.from_dict({"core": {"acumulators": 100, "synapses": 30}}))
+    # a limit of the user's own for other networks is kept, and the report says no process here needs it
+    from tofnet.compiler.report import format_report
+    mine = compile_network(net, Budget(core=CoreBudget(extra={"synapses": 30, "widgets": 5})))
+    assert mine.layers[0].cores == 20 and "  budget: core.widgets: no process of this network needs it" in \
+        format_report(mine)
+    assert "no process of this network needs" not in format_report(compiled)
 
 
 def test_budget_dict_round_trip_and_named_budgets():

@@ -7,9 +7,9 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from tofnet.compiler.budget import LOIHI2, Budget
+from tofnet.compiler.budget import CORE_LIMITS, LOIHI2, Budget
 from tofnet.compiler.partition import (PatchOption, Rect, Traffic, auto_patch, max_pixels_per_core,
-                                       patch_per_layer, plan_layer, rects_mask, traffic_of, usage_of)
+                                       needs_of, patch_per_layer, plan_layer, rects_mask, traffic_of, usage_of)
 from tofnet.core.network import Network
 from tofnet.errors import BackendError, BudgetError
 
@@ -207,6 +207,7 @@ def compile_network(network: Network, budget: Budget | str | Mapping = LOIHI2,
     layered = [p for p in ordered if p.placement == "core"]
     requests = patch_per_layer(patch, [p.name for p in layered])
     limits = budget.core.limits()
+    _check_limit_names(network, budget, layered)
     plans = [plan_layer(p, limits, p.sensor_size, requests[p.name]) for p in layered]
     total = sum(len(plan.rects) for plan in plans)
     _check_chips(network, budget, plans, total)
@@ -230,6 +231,26 @@ def compile_network(network: Network, budget: Budget | str | Mapping = LOIHI2,
     host = tuple(p.name for p in ordered if p.placement == "host")
     traffic = traffic_of(network, by_name, per_chip)
     return CompiledNetwork(network, budget, tuple(layers), tuple(cores), tuple(traffic), host, patch)
+
+
+def unused_limits(budget: Budget, layered: list) -> list[str]:
+    """The budget's own per-core limits (``extra``) that no core-placed process of ``layered`` needs."""
+    needed = {key for process in layered for key in needs_of(process)}
+    return [name for name, _ in budget.core.extra if name not in needed]
+
+
+def _check_limit_names(network: Network, budget: Budget, layered: list) -> None:
+    """A limit no process needs, spelt like one that is (``acumulators``), would leave the real one at its
+    default unseen: one line. Others are the user's (a budget kept for several networks): the report says so."""
+    import difflib
+
+    known = sorted({*CORE_LIMITS, *(key for process in layered for key in needs_of(process))})
+    for name in unused_limits(budget, layered):
+        close = difflib.get_close_matches(name, known, n=1, cutoff=0.75)
+        if close:
+            stays = budget.core.limits().get(close[0])
+            raise BudgetError(f"budget.core.{name}: no process of network {network.name!r} needs {name!r}; did you "
+                              f"mean {close[0]!r}?" + (f" (its limit stays {stays})" if stays is not None else ""))
 
 
 def core_numbers(plans: list, per_chip: int) -> list[list[int]]:

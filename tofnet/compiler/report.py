@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from tofnet.compiler.compiled import CompiledNetwork
+from tofnet.compiler.compiled import CompiledNetwork, unused_limits
 from tofnet.compiler.partition import Traffic
 
 
@@ -76,6 +76,8 @@ def format_report(compiled: CompiledNetwork) -> str:
         hosted = ", ".join(f"{name} ({type(net.process(name)).__name__})" for name in compiled.host)
         lines.append(f"host      {hosted}")
     notes = [(p.name, note) for p in net.processes for note in p.compiler_notes()]
+    layered = [net.process(layer.name) for layer in compiled.layers]
+    notes += [("budget", f"core.{name}: no process of this network needs it") for name in unused_limits(budget, layered)]
     if notes:
         lines += ["", "notes"] + [f"  {name}: {note}" for name, note in notes]
     if compiled.traffic:
