@@ -114,6 +114,28 @@ def test_spec_round_trip_keeps_compile_and_backend():
     assert spec_from_dict(spec_to_dict(spec)).compile == spec.compile
 
 
+@pytest.mark.parametrize("backend, line, message", [
+    ("{name: fixed, wokers: 2}", 0, "backend: backend 'fixed' does not take the option 'wokers'; its options: "
+                                    "frac_bits, payload_bits, packet_events, fuse, workers"),
+    ("{name: fixed,\n          fuse: 3}", 1, "backend: fixed: fuse: expected true or false, got 3"),
+    ("{name: float, workers: -3}", 0, "backend: float: workers must be a whole number of workers"),
+])
+def test_a_specs_backend_options_are_checked_as_it_is_read_naming_its_line(tmp_path, backend, line, message):
+    """Before, a misspelt option or a bad value said so only when the run started, naming no file (and fuse: 3
+    ran as true)."""
+    from tofnet.api import load_network
+    path = tmp_path / "net.yaml"
+    path.write_text(PAPER.replace("compile: {patch: [30, 30], budget: loihi2}", f"backend: {backend}"))
+    at = PAPER.splitlines().index("compile: {patch: [30, 30], budget: loihi2}") + 1 + line
+    with pytest.raises(SpecError) as err:
+        load_network(path)
+    assert str(err.value).startswith(f"{path}:{at}: {message}"), str(err.value)
+    # a backend this install cannot run (lava on Python 3.11) is checked by its options' names only: the run
+    # may ask for another
+    path.write_text(PAPER.replace("compile: {patch: [30, 30], budget: loihi2}", "backend: {name: lava, packet_events: 4096}"))
+    assert load_network(path)[2:] == ("lava", {"packet_events": 4096})
+
+
 def test_units_as_strings_or_si_numbers():
     spec = load_spec(PAPER.replace("timestep: 1ms", "timestep: 1e-3").replace("max_depth: 20", "max_depth: 2000cm"))
     assert spec.network.process("input").timestep == 0.001

@@ -202,8 +202,22 @@ def load_network(spec: str | Path | None = None, *, sensor_size: tuple[int, int]
     if sensor_size is not None and network.sensor_size != tuple(sensor_size):
         resize(network, sensor_size)
     from tofnet.io.trust import cap_workers  # a spec may not ask for more workers than the machine has
-    return network, dict(loaded.compile or {}), loaded.backend, cap_workers(loaded.backend_options or {},
-                                                                            f"{spec}: backend")
+    options = cap_workers(loaded.backend_options or {}, f"{spec}: backend")
+    if loaded.backend is not None:
+        _check_spec_backend(loaded, options)
+    return network, dict(loaded.compile or {}), loaded.backend, options
+
+
+def _check_spec_backend(loaded, options: dict) -> None:
+    """A spec's backend options, checked as it is read: its file and line, not a bare message when it runs."""
+    from tofnet.backends.registry import check_backend_options
+    from tofnet.errors import BackendError, SpecError, located
+    try:
+        check_backend_options(loaded.backend, options)
+    except BackendError as err:
+        named = [key for key in options if repr(key) in str(err) or f"{key}:" in str(err)]
+        line = loaded.backend_lines.get(named[0] if len(named) == 1 else "")
+        raise SpecError(located(loaded.source, line, f"backend: {err}")) from None
 
 
 def resize(network: Network, sensor_size: tuple[int, int]) -> None:

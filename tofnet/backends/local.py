@@ -21,7 +21,7 @@ from tofnet.backends.stream import GraphStream, packet_events_for, run_in_packet
 from tofnet.compiler.bands import input_reach, plan_bands
 from tofnet.compiler.compiled import network_of
 from tofnet.core.network import Network
-from tofnet.errors import BackendError
+from tofnet.errors import BackendError, quote
 from tofnet.events import DEPTH_DTYPE, EVENT_DTYPE, TOT_DTYPE
 from tofnet.kernels.fixed_point import DEFAULT_FRAC_BITS, DEFAULT_PAYLOAD_BITS, FixedPointFormat
 from tofnet.io.recording import Intrinsics, Recording, VelocitySource, as_velocity_source
@@ -77,6 +77,8 @@ class LocalBackend(Backend):
     run_modes = (("fused", {"fuse": True}), ("unfused", {"fuse": False}))
 
     def __init__(self, packet_events: int | None = None, fuse: bool = True, workers: int | str = 1):
+        if not isinstance(fuse, (bool, np.bool_)):  # a spec's ``fuse: 3`` or ``"no"`` was taken as true
+            raise BackendError(f"{self.name or 'backend'}: fuse: expected true or false, got {quote(fuse)}")
         self.fuse = bool(fuse)
         #: Bands the sensor is cut into (``tofnet.backends.bands``), run on at most one thread per CPU.
         self.workers = resolve_workers(workers, f"{self.name or 'backend'}: workers")

@@ -35,13 +35,16 @@ def register_backend(name: str, factory: Callable[..., Backend] | str) -> None:
 
 
 def _lazy(target: str) -> Callable[..., Backend]:
-    def load(**options) -> Backend:
+    def resolve() -> Callable[..., Backend]:
         module, _, attr = target.partition(":")
         try:
-            factory = getattr(importlib.import_module(module), attr)
+            return getattr(importlib.import_module(module), attr)
         except (ImportError, AttributeError, ValueError) as err:  # ValueError: an empty module name
             raise BackendError(f"cannot load backend {target!r}: {type(err).__name__}: {err}") from err
-        return factory(**options)
+
+    def load(**options) -> Backend:
+        return resolve()(**options)
+    load.resolve = resolve  # the class itself, for its options' names
     return load
 
 
@@ -69,20 +72,68 @@ def available_backends(optional: bool = False) -> list[str]:
 def get_backend(name: str, **options) -> Backend:
     """The backend called ``name``, built with ``options`` (e.g. ``workers=4``); raises naming
     the available ones, or the options the backend does not take."""
+    factory = _factory(name)
+    if factory is None:
+        raise BackendError(f"unknown backend {name!r}; available: {', '.join(available_backends(optional=True))}")
+    return _build(name, factory, options)
+
+
+def check_backend_options(name: str, options: dict) -> None:
+    """Raise ``BackendError`` when the backend ``name`` does not take ``options`` (by its signature) or, for the
+    built-ins that run anywhere, refuses their values (one is built and dropped). A backend that is unknown or
+    cannot be built here is left to ``get_backend`` where it runs: a spec naming ``lava`` still runs with
+    ``--backend fixed`` where lava is not installed."""
+    if not options:
+        return
+    try:
+        factory = _factory(name)
+        taken = None if factory is None else _option_names(factory)
+    except BackendError:
+        return
+    unknown = [key for key in options if taken is not None and key not in taken]
+    if unknown:
+        raise BackendError(_unknown_options(name, unknown, taken))
+    if name in _BUILTIN and name not in _registered:
+        _build(name, factory, options)
+
+
+def _factory(name: str) -> Callable[..., Backend] | None:
     if name in _registered:
-        factory = _registered[name]
-    elif name in _BUILTIN or name in _OPTIONAL:
-        factory = _lazy({**_OPTIONAL, **_BUILTIN}[name])
-    else:
-        factory = _entry_point(name)
-    if factory is not None:
-        try:
-            return factory(**options)
-        except TypeError as err:
-            if not options:
-                raise
-            raise BackendError(f"backend {name!r} does not take the options {sorted(options)}: {err}") from None
-    raise BackendError(f"unknown backend {name!r}; available: {', '.join(available_backends(optional=True))}")
+        return _registered[name]
+    if name in _BUILTIN or name in _OPTIONAL:
+        return _lazy({**_OPTIONAL, **_BUILTIN}[name])
+    return _entry_point(name)
+
+
+def _build(name: str, factory: Callable[..., Backend], options: dict) -> Backend:
+    try:
+        return factory(**options)
+    except TypeError as err:
+        if not options:
+            raise
+        taken = _option_names(factory)
+        unknown = [key for key in options if taken is not None and key not in taken]
+        if unknown:
+            raise BackendError(_unknown_options(name, unknown, taken)) from None
+        raise BackendError(f"backend {name!r} does not take the options {sorted(options)}: {err}") from None
+
+
+def _unknown_options(name: str, unknown: list[str], taken: list[str]) -> str:
+    return (f"backend {name!r} does not take the option{'s' if len(unknown) > 1 else ''} "
+            f"{', '.join(map(repr, unknown))}; its options: {', '.join(taken) or 'none'}")
+
+
+def _option_names(factory: Callable[..., Backend]) -> list[str] | None:
+    """The keywords ``factory`` takes (None when it takes any, or cannot tell)."""
+    import inspect
+    try:
+        target = factory.resolve() if hasattr(factory, "resolve") else factory
+        parameters = list(inspect.signature(target).parameters.values())
+    except (TypeError, ValueError, BackendError):
+        return None
+    if any(p.kind is p.VAR_KEYWORD for p in parameters):
+        return None
+    return [p.name for p in parameters if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
 
 
 def backends_by_family() -> dict[str, list[str]]:

@@ -83,7 +83,9 @@ class _Reader:
             raise self.network_error(err, processes) from None
         compile_options = self.compile(tree, network)
         backend, options = self.backend(tree)
-        return Spec(network, compile_options, backend, options, description, self.source)
+        section = tree.get("backend")
+        lines = {"": _line(tree, "backend"), **{str(key): _line(section, key) for key in options}}
+        return Spec(network, compile_options, backend, options, description, self.source, lines)
 
     def processes(self, tree: Mapping) -> dict[str, Process]:
         if "processes" not in tree:

@@ -27,6 +27,8 @@ class Spec:
     backend_options: dict[str, Any] = field(default_factory=dict)
     description: str | None = None
     source: str = "<string>"
+    #: The line of ``backend`` (key ``""``) and of each of its options in the spec's file, for errors found later.
+    backend_lines: dict[str, int | None] = field(default_factory=dict, compare=False, repr=False)
 
     @property
     def budget(self) -> Budget:
