@@ -44,9 +44,9 @@ def test_bad_module_paths_get_one_line_naming_the_key():
     body = {"processes": {"x": {"type": "no_such_module_xyz:Thing"}}}
     with pytest.raises(SpecError, match=r"processes\.x\.type: cannot import 'no_such_module_xyz'"):
         spec_from_dict(body, allow_import=["no_such_module_xyz"])
-    body = {"processes": {"x": {"type": "tofnet.networks:depth_network"}}}
-    with pytest.raises(SpecError, match="is not a process type"):
-        spec_from_dict(body)
+    for type_name in ("tofnet.networks:depth_network", "tofnet:Process"):  # the base class: no port, no model
+        with pytest.raises(SpecError, match=f"'{type_name}' is not a process type"):
+            spec_from_dict({"processes": {"x": {"type": type_name}}})
     body = {"processes": {"x": {"type": "tofnet.testing:ParityGateProces"}}}  # a typo
     with pytest.raises(SpecError, match="module 'tofnet.testing' has no 'ParityGateProces'"):
         spec_from_dict(body)

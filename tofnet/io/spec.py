@@ -248,7 +248,7 @@ def process_class(type_name: str, *, allow_import: Any = None, spec_dir: Path | 
         found = getattr(module, attr, None)
         if found is None:
             raise SpecError(f"{quote(type_name)}: module {quote(module_name)} has no {quote(attr)}")
-        if not (isinstance(found, type) and issubclass(found, Process)):
+        if not (isinstance(found, type) and issubclass(found, Process)) or found is Process:
             raise SpecError(f"{quote(type_name)} is not a process type (a subclass of tofnet.Process)")
         return found
     for candidate in (type_name, type_name + "Process"):
