@@ -55,6 +55,9 @@ def test_compile_errors_are_one_line(tmp_path, capsys):
     assert main(["compile", "--budget", str(budget), "--patch", "auto"]) == 2
     assert "allow max_chips: 2" in capsys.readouterr().err
     assert main(["compile", "--budget", str(budget), "--patch", "auto", "--max-chips", "2"]) == 0
+    for chips in ("0", "1.5"):  # one message for both (1.5 was argparse's "invalid int value")
+        assert main(["compile", "--max-chips", chips]) == 2
+        assert f"--max-chips: expected a whole number of chips >= 1, got '{chips}'" in capsys.readouterr().err
     bad = tmp_path / "bad.yaml"
     bad.write_text("name: x\nprocesses:\n  input: {type: Camera}\n")
     assert main(["compile", str(bad)]) == 2

@@ -22,7 +22,7 @@ def register(subparsers) -> None:
     p.add_argument("--budget", metavar="FILE|NAME",
                    help="budget YAML file, or a built-in name (loihi2, oheo-gulch, kapoho-point); "
                         "default: the spec's, else loihi2")
-    p.add_argument("--max-chips", type=int, metavar="N", help="allow at most N chips")
+    p.add_argument("--max-chips", metavar="N", help="allow at most N chips")
     p.add_argument("--patch", action="append", metavar="WxH|auto|LAYER=WxH",
                    help="patch size for every layer, or for one layer (repeatable); default: the spec's, else auto")
     p.add_argument("--sensor-size", metavar="WxH", help="override the spec's sensor size, e.g. 1280x720")
@@ -81,9 +81,10 @@ def handle(args) -> int:
         network.validate()
     budget = load_budget(args.budget) if args.budget else spec.budget
     if args.max_chips is not None:
-        if args.max_chips < 1:
-            raise TofnetError(f"--max-chips: expected a positive number, got {args.max_chips}")
-        budget = budget.with_max_chips(args.max_chips)
+        chips = args.max_chips.strip()
+        if not (chips.isdigit() and int(chips) >= 1):  # one message for 0, 1.5 and two
+            raise TofnetError(f"--max-chips: expected a whole number of chips >= 1, got {args.max_chips!r}")
+        budget = budget.with_max_chips(int(chips))
     layers = [p.name for p in network.processes if p.placement == "core"]
     patch = parse_patch_args(args.patch, spec.compile.get("patch"), layers)
     compiled = compile_network(network, budget=budget, patch=patch)
