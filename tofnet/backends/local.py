@@ -13,7 +13,7 @@ from typing import Iterable
 import numpy as np
 
 from tofnet.backends.bands import BandedKernel, band_placer, resolve_workers, sampled_row_load, threads_for
-from tofnet.backends.base import Backend, ProgressCallback, RunResult
+from tofnet.backends.base import Backend, ProgressCallback, RunResult, payloads_of
 from tofnet.backends.fusion import FusedStream, PipelineParams, paper_chain
 from tofnet.backends.graph import GraphExecutor, canonical, resolve_probes, sinks_of
 from tofnet.backends.runtime import clock_of, start_time_us
@@ -58,14 +58,6 @@ def check_sensor_fits(network: Network, recording: Recording) -> None:
             raise BackendError(f"sensor size mismatch: process '{process.name}' is {size[0]}x{size[1]} px and "
                                f"{recording.source} declares {width}x{height} px; size the network to the "
                                f"recording (e.g. --sensor-size {width}x{height})")
-
-
-def payloads_of(network: Network, names: Iterable[str]) -> dict[str, str]:
-    out = {}
-    for name in names:
-        proc, _, port = name.partition(".")
-        out[name] = network.process(proc).port(port).spec.payload.name
-    return out
 
 
 class LocalBackend(Backend):
