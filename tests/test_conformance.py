@@ -91,6 +91,56 @@ def test_a_crashing_backend_fails_its_cases_and_the_suite_goes_on(registered):
     assert results[0].first == "error: IndexError: a bug in the backend"
 
 
+class ForgetfulBackend(ShiftedBackend):
+    """The reference's records and counts, with its result's ``payloads`` or ``declared`` emptied after
+    it was built (a backend of the audit's: every case passed, its summary said 0 events in, and
+    ``tofnet run -o np.npz`` wrote np.depth.depth.npz)."""
+
+    name = "forgetful"
+
+    def __init__(self, forget):
+        super().__init__()
+        self.forget = forget
+
+    def run(self, compiled, recording, **options):
+        result = super().run(compiled, recording, **options)
+        setattr(result, self.forget, {})
+        return result
+
+
+def test_a_backend_whose_result_loses_payloads_or_declared_counts_fails_naming_the_field(registered):
+    registered("no-payloads", lambda: ForgetfulBackend("payloads"))
+    registered("no-declared", lambda: ForgetfulBackend("declared"))
+    (payloads,) = run_suite("no-payloads", cases=["edge+u"], cache=CACHE)
+    assert not payloads.ok and payloads.first.startswith("payloads: {} vs {'depth.depth': 'depth'")
+    (declared,) = run_suite("no-declared", cases=["edge+u"], cache=CACHE)
+    assert not declared.ok
+    assert declared.first == "declared counts of processes [] vs ['depth', 'input', 'time_of_travel', 'velocity']"
+
+
+def test_the_comparison_names_each_summary_field_a_user_would_read_differently():
+    scene = next(c for c in CASES if c.name == "borders").build()
+    base = ReferenceBackend().run(scene.network, scene.recording, record_tot=True)
+    unread = dataclasses.replace(base, declared={**base.declared, "input": {
+        name: {**what, "kind": "other"} for name, what in base.declared["input"].items()}})
+    differences = compare(unread, base, "quantised", scene.network).differences
+    assert differences[0] == ("declared count input.events_in: {'kind': 'other', 'total': ''} vs "
+                              "{'kind': 'read', 'total': ''}")
+    assert f"summary events_in: 0 vs {base.events_in}" in differences and base.events_in > 0
+    assert f"summary accepted: 0 vs {base.accepted}" in differences
+    assert any(line.startswith("summary dropped: {} vs {'out_of_bounds': 4") for line in differences)
+
+
+def test_the_workers_check_compares_what_a_user_reads_too():
+    from tofnet.conformance.workers import first_difference
+    scene = next(c for c in CASES if c.name == "edge+u").build()
+    base = ReferenceBackend().run(scene.network, scene.recording)
+    unnamed = dataclasses.replace(base)
+    unnamed.payloads = {}
+    assert first_difference(base, dataclasses.replace(base)) == ""
+    assert first_difference(unnamed, base) == "payloads: {} vs {'depth.depth': 'depth'}"
+
+
 def test_quantised_comparison_uses_the_count_weighted_bound():
     case = next(c for c in CASES if c.name == "edge+u")
     scene = case.build()

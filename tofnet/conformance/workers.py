@@ -3,8 +3,9 @@
 ``check_workers("fixed", (1, 2, 3, 7))`` runs each selected case on the backend with one worker
 and with each N of ``workers`` (the sensor cut into N bands, ``tofnet.backends.bands``), in each
 way the backend offers to run a network (``Backend.run_modes``: fused and model by model; for
-``multiproc`` bands and chip core by chip core), and compares every output's bytes, every count, the steps and
-``t0`` (``tofnet conformance --backend fixed --workers 1,2,3,7``). Small scenes cut into 7
+``multiproc`` bands and chip core by chip core), and compares every output's bytes, every count, the steps,
+``t0`` and what a user reads (payloads, declared counts, the summary: ``visible.py``)
+(``tofnet conformance --backend fixed --workers 1,2,3,7``). Small scenes cut into 7
 bands have bands narrower than the halo, bands without events and events on band edges.
 """
 
@@ -14,6 +15,7 @@ import time
 from typing import Callable, Iterable
 
 from tofnet.backends.registry import get_backend
+from tofnet.conformance.visible import visible_differences
 from tofnet.conformance.runner import CaseResult, select_cases
 from tofnet.errors import TofnetError
 
@@ -22,7 +24,8 @@ DEFAULT_WORKERS = (1, 2, 3, 7)
 
 
 def first_difference(got, expected) -> str:
-    """The first way two results differ (outputs by bytes, counts, steps, t0), or '' when identical."""
+    """The first way two results differ (steps, t0, counts, outputs by bytes, then what a user reads:
+    payloads, declared counts, the summary), or '' when identical."""
     for what in ("steps", "t0_us", "counts"):
         if getattr(got, what) != getattr(expected, what):
             return f"{what}: {getattr(got, what)!r} vs {getattr(expected, what)!r}"
@@ -33,7 +36,7 @@ def first_difference(got, expected) -> str:
         if a.dtype != b.dtype or a.tobytes() != b.tobytes():
             at = next((i for i in range(min(len(a), len(b))) if a[i].tobytes() != b[i].tobytes()), min(len(a), len(b)))
             return f"{name}: {len(a)} vs {len(b)} records, first differing at {at}"
-    return ""
+    return next(iter(visible_differences(got, expected)), "")
 
 
 def check_workers(backend: str = "fixed", workers: Iterable[int] = DEFAULT_WORKERS,
