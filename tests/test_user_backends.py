@@ -123,3 +123,17 @@ def test_a_result_without_payloads_or_declared_counts_is_refused(scene):
     assert "\n" not in str(err.value) and "RunResult.of(network, ...)" in str(err.value)
     assert "no payload for ['depth.depth'], no declared counts for ['input', 'time_of_travel', 'depth', " \
            "'velocity']" in str(err.value)
+
+
+def test_the_workers_check_is_not_applicable_to_a_backend_that_takes_no_workers(registered, capsys):
+    """It said FAIL (``backend 'run-only' does not take the options ['workers']``) before: a backend
+    declares ``"bands"`` in its capabilities when it takes ``workers=N``."""
+    from tofnet.conformance.workers import check_workers
+    registered("run-only", RunOnlyBackend)
+    assert "bands" not in RunOnlyBackend.capabilities and "bands" in MyFixedBackend.capabilities
+    (row,) = check_workers("run-only", (1, 2), ["edge+u"])
+    assert (row.applies, row.ok, row.mode) == (False, True, "bands")
+    assert row.first == "n/a: backend 'run-only' takes no workers (Backend.capabilities has no 'bands')"
+    assert main(["conformance", "--backend", "run-only", "--workers", "1,2", "--case", "edge+u"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[2].split()[:3] == ["edge+u", "bands", "n/a"] and out[3].startswith("1 cases: 0 passed, 1 not applicable")

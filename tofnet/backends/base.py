@@ -241,7 +241,9 @@ class Backend(ABC):
     family: str = "float"
     #: What a ``Session`` may ask of it (declared, never probed): ``"stream"``: ``open_stream(compiled,
     #: fuse=..., recording=..., ...)`` as ``LocalBackend``'s; ``"workers"``: ``session(compiled)`` keeps
-    #: worker processes for a session's lifetime; ``"open session"``: it is such a running session.
+    #: worker processes for a session's lifetime; ``"open session"``: it is such a running session;
+    #: ``"bands"``: it takes ``workers=N`` (the sensor cut into N bands of rows, the same bytes for every
+    #: N: ``tofnet conformance --workers`` checks it, and is n/a without it).
     capabilities: frozenset[str] = frozenset()
     #: The ways it offers to run one network (a name, the options that select it), each of which
     #: must give the same bytes with any number of ``workers`` (``tofnet.conformance.workers``).

@@ -65,7 +65,7 @@ class LocalBackend(Backend):
 
     #: Whether this backend may run a recognised chain through a fused kernel.
     fuses = False
-    capabilities = frozenset({"stream"})
+    capabilities = frozenset({"stream", "bands"})
     run_modes = (("fused", {"fuse": True}), ("unfused", {"fuse": False}))
 
     def __init__(self, packet_events: int | None = None, fuse: bool = True, workers: int | str = 1):

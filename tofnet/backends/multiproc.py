@@ -83,7 +83,7 @@ class MultiprocBackend(Backend):
         Fixed-point format, as for the ``fixed`` backend (docs/fixed_point.md).
     """
 
-    capabilities = frozenset({"stream", "workers"})
+    capabilities = frozenset({"stream", "workers", "bands"})
     run_modes = (("bands", {}), ("per-core", {"per_core": True}))
 
     name = "multiproc"
