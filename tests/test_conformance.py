@@ -255,6 +255,26 @@ def test_a_pass_with_unequal_estimates_is_marked_and_explained():
     assert not format_table([equal]).splitlines()[-1].startswith("pass*")  # no such row, no footnote
 
 
+def test_the_table_columns_hold_the_longest_case_and_mode(capsys):
+    """``bands-1-unfused`` (15 characters) and ``variables-time-surface-texture`` (30) overflowed
+    columns of 10 and 24, pushing the rest of their rows out of line."""
+    from tofnet.cli import main
+    from tofnet.conformance.runner import CaseResult
+
+    rows = [CaseResult("edge+u", "fixed x1", "fixed x1", "bands-1", True, (110, 110), "", 0.1),
+            CaseResult("variables-time-surface-texture", "fixed x7", "fixed x1", "bands-7-unfused", False, (5, 6),
+                       "counts differ", 0.1)]
+    table = format_table(rows).splitlines()
+    ends = [line.index(word) + len(word) for line, word in zip(table, ("estimates", "110/110", "5/6"))]
+    assert ends == [30 + 1 + 15 + 1 + 5 + 1 + 11] * 3  # case, mode, verdict, estimates (right-aligned)
+    assert table[2].split() == ["variables-time-surface-texture", "bands-7-unfused", "FAIL", "5/6", "counts", "differ"]
+    assert main(["conformance", "--backend", "fixed", "--workers", "1", "--case", "edge+u"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert [line.split()[:3] for line in out[2:4]] == [["edge+u", "bands-1", "pass"],
+                                                       ["edge+u", "bands-1-unfused", "pass"]]
+    assert out[1].index("estimates") + 9 == out[2].index("110/110") + 7 == out[3].index("110/110") + 7
+
+
 def test_the_docs_count_the_cases_there_are():
     import re
     from pathlib import Path
