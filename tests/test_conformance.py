@@ -91,6 +91,56 @@ def test_a_crashing_backend_fails_its_cases_and_the_suite_goes_on(registered):
     assert results[0].first == "error: IndexError: a bug in the backend"
 
 
+class ForgetfulBackend(ShiftedBackend):
+    """The reference's records and counts, with its result's ``payloads`` or ``declared`` emptied after
+    it was built (a backend of the audit's: every case passed, its summary said 0 events in, and
+    ``tofnet run -o np.npz`` wrote np.depth.depth.npz)."""
+
+    name = "forgetful"
+
+    def __init__(self, forget):
+        super().__init__()
+        self.forget = forget
+
+    def run(self, compiled, recording, **options):
+        result = super().run(compiled, recording, **options)
+        setattr(result, self.forget, {})
+        return result
+
+
+def test_a_backend_whose_result_loses_payloads_or_declared_counts_fails_naming_the_field(registered):
+    registered("no-payloads", lambda: ForgetfulBackend("payloads"))
+    registered("no-declared", lambda: ForgetfulBackend("declared"))
+    (payloads,) = run_suite("no-payloads", cases=["edge+u"], cache=CACHE)
+    assert not payloads.ok and payloads.first.startswith("payloads: {} vs {'depth.depth': 'depth'")
+    (declared,) = run_suite("no-declared", cases=["edge+u"], cache=CACHE)
+    assert not declared.ok
+    assert declared.first == "declared counts of processes [] vs ['depth', 'input', 'time_of_travel', 'velocity']"
+
+
+def test_the_comparison_names_each_summary_field_a_user_would_read_differently():
+    scene = next(c for c in CASES if c.name == "borders").build()
+    base = ReferenceBackend().run(scene.network, scene.recording, record_tot=True)
+    unread = dataclasses.replace(base, declared={**base.declared, "input": {
+        name: {**what, "kind": "other"} for name, what in base.declared["input"].items()}})
+    differences = compare(unread, base, "quantised", scene.network).differences
+    assert differences[0] == ("declared count input.events_in: {'kind': 'other', 'total': ''} vs "
+                              "{'kind': 'read', 'total': ''}")
+    assert f"summary events_in: 0 vs {base.events_in}" in differences and base.events_in > 0
+    assert f"summary accepted: 0 vs {base.accepted}" in differences
+    assert any(line.startswith("summary dropped: {} vs {'out_of_bounds': 4") for line in differences)
+
+
+def test_the_workers_check_compares_what_a_user_reads_too():
+    from tofnet.conformance.workers import first_difference
+    scene = next(c for c in CASES if c.name == "edge+u").build()
+    base = ReferenceBackend().run(scene.network, scene.recording)
+    unnamed = dataclasses.replace(base)
+    unnamed.payloads = {}
+    assert first_difference(base, dataclasses.replace(base)) == ""
+    assert first_difference(unnamed, base) == "payloads: {} vs {'depth.depth': 'depth'}"
+
+
 def test_quantised_comparison_uses_the_count_weighted_bound():
     case = next(c for c in CASES if c.name == "edge+u")
     scene = case.build()
@@ -203,6 +253,26 @@ def test_a_pass_with_unequal_estimates_is_marked_and_explained():
                                 "depth lies within the quantisation tolerance")
     assert "docs/fixed_point.md" in table[-1]
     assert not format_table([equal]).splitlines()[-1].startswith("pass*")  # no such row, no footnote
+
+
+def test_the_table_columns_hold_the_longest_case_and_mode(capsys):
+    """``bands-1-unfused`` (15 characters) and ``variables-time-surface-texture`` (30) overflowed
+    columns of 10 and 24, pushing the rest of their rows out of line."""
+    from tofnet.cli import main
+    from tofnet.conformance.runner import CaseResult
+
+    rows = [CaseResult("edge+u", "fixed x1", "fixed x1", "bands-1", True, (110, 110), "", 0.1),
+            CaseResult("variables-time-surface-texture", "fixed x7", "fixed x1", "bands-7-unfused", False, (5, 6),
+                       "counts differ", 0.1)]
+    table = format_table(rows).splitlines()
+    ends = [line.index(word) + len(word) for line, word in zip(table, ("estimates", "110/110", "5/6"))]
+    assert ends == [30 + 1 + 15 + 1 + 5 + 1 + 11] * 3  # case, mode, verdict, estimates (right-aligned)
+    assert table[2].split() == ["variables-time-surface-texture", "bands-7-unfused", "FAIL", "5/6", "counts", "differ"]
+    assert main(["conformance", "--backend", "fixed", "--workers", "1", "--case", "edge+u"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert [line.split()[:3] for line in out[2:4]] == [["edge+u", "bands-1", "pass"],
+                                                       ["edge+u", "bands-1-unfused", "pass"]]
+    assert out[1].index("estimates") + 9 == out[2].index("110/110") + 7 == out[3].index("110/110") + 7
 
 
 def test_the_docs_count_the_cases_there_are():

@@ -271,7 +271,7 @@ def test_a_session_asks_a_backend_what_it_declares_it_can_do():
     with Session(COMPILED, RECORDING, backend=Streaming()) as s:
         s.run(steps=30)
         assert s.step == 30
-    assert get_backend("multiproc").capabilities == {"stream", "workers"}
+    assert get_backend("multiproc").capabilities == {"stream", "workers", "bands"}
 
 
 @pytest.mark.parametrize("name", ["fixed", "multiproc"])

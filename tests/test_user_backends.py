@@ -5,7 +5,7 @@ itself without taking the other backends down."""
 import numpy as np
 import pytest
 
-from tofnet.backends.base import Backend
+from tofnet.backends.base import Backend, RunResult
 from tofnet.backends.event_driven import FixedBackend, FloatBackend
 from tofnet.backends.local import LocalBackend
 from tofnet.backends.registry import available_backends, get_backend
@@ -90,3 +90,50 @@ def test_a_broken_backend_among_all_is_counted_and_the_rest_run(registered, caps
     outcomes = json.loads((tmp_path / "outcomes.json").read_text())
     assert outcomes[0]["backend"] == "broken" and "ModuleNotFoundError" in outcomes[0]["error"]
     assert [o["case"] for o in outcomes[1:]] == ["edge+u"] and outcomes[1]["ok"]
+
+
+class RebuiltBackend(Backend):  # docs/backends.md's recipe for a result of one's own: ``RunResult.of``
+    name = "rebuilt"
+    arithmetic = "fixed"
+    family = "fixed"
+
+    def run(self, compiled, recording, **options):
+        ran = FixedBackend().run(compiled, recording, **options)
+        return RunResult.of(compiled, self.name, ran.outputs, ran.counts, steps=ran.steps, t0_us=ran.t0_us,
+                            timestep_us=ran.timestep_us, latency=ran.latency)
+
+
+def test_a_result_built_with_run_result_of_reads_as_the_built_ins(scene):
+    """A result built positionally as the docs implied (no ``declared``) said 0 events in and accepted
+    in the summary, and one without ``payloads`` wrote its depth under another name; ``RunResult.of``
+    derives both from the network."""
+    mine, fixed = (b.run(scene.network, scene.recording) for b in (RebuiltBackend(), FixedBackend()))
+    assert mine.payloads == fixed.payloads and mine.declared == fixed.declared
+    assert mine.events_in == fixed.events_in == len(scene.recording.events) and mine.accepted == fixed.accepted > 0
+    assert mine.facts() == fixed.facts() and mine.depth.tobytes() == fixed.depth.tobytes()
+
+
+def test_a_result_without_payloads_or_declared_counts_is_refused(scene):
+    ran = FixedBackend().run(scene.network, scene.recording)
+    positional = (ran.backend, ran.outputs, ran.counts, ran.steps, ran.t0_us, ran.timestep_us, ran.latency)
+    with pytest.raises(TypeError, match="declared"):
+        RunResult(*positional, ran.payloads)
+    with pytest.raises(BackendError) as err:
+        RunResult(*positional, {}, {})
+    assert "\n" not in str(err.value) and "RunResult.of(network, ...)" in str(err.value)
+    assert "no payload for ['depth.depth'], no declared counts for ['input', 'time_of_travel', 'depth', " \
+           "'velocity']" in str(err.value)
+
+
+def test_the_workers_check_is_not_applicable_to_a_backend_that_takes_no_workers(registered, capsys):
+    """It said FAIL (``backend 'run-only' does not take the options ['workers']``) before: a backend
+    declares ``"bands"`` in its capabilities when it takes ``workers=N``."""
+    from tofnet.conformance.workers import check_workers
+    registered("run-only", RunOnlyBackend)
+    assert "bands" not in RunOnlyBackend.capabilities and "bands" in MyFixedBackend.capabilities
+    (row,) = check_workers("run-only", (1, 2), ["edge+u"])
+    assert (row.applies, row.ok, row.mode) == (False, True, "bands")
+    assert row.first == "n/a: backend 'run-only' takes no workers (Backend.capabilities has no 'bands')"
+    assert main(["conformance", "--backend", "run-only", "--workers", "1,2", "--case", "edge+u"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[2].split()[:3] == ["edge+u", "bands", "n/a"] and out[3].startswith("1 cases: 0 passed, 1 not applicable")

@@ -8,6 +8,8 @@ from typing import Callable, Iterable
 
 import numpy as np
 
+from tofnet.compiler.compiled import network_of
+from tofnet.core.counters import kinds_of
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE
 from tofnet.units import seconds_of
@@ -20,6 +22,20 @@ REPORT_ONLY = ("readers", "latency")
 
 #: ``progress(done, total)``: called now and then with events processed so far.
 ProgressCallback = Callable[[int, int], None]
+
+
+def payloads_of(network, names: Iterable[str]) -> dict[str, str]:
+    """The payload each output port (``process.port``) of ``network`` sends, by name."""
+    out = {}
+    for name in names:
+        proc, _, port = name.partition(".")
+        out[name] = network.process(proc).port(port).spec.payload.name
+    return out
+
+
+def declared_of(network) -> dict[str, dict[str, dict]]:
+    """What each process of ``network`` declares it counts (``Process.counters``, as plain data)."""
+    return {p.name: kinds_of(type(p).counters) for p in network.processes}
 
 
 @dataclass
@@ -43,8 +59,8 @@ class RunResult:
     t0_us: int
     timestep_us: int
     latency: dict[str, int]
-    payloads: dict[str, str] = field(default_factory=dict)
-    declared: dict[str, dict[str, dict]] = field(default_factory=dict)
+    payloads: dict[str, str]
+    declared: dict[str, dict[str, dict]]
     wall_time: float = 0.0
     extra: dict = field(default_factory=dict)
     #: Seconds the run spent compiling kernels or loading numba's cache (not in ``wall_time``), and
@@ -56,6 +72,25 @@ class RunResult:
     setup_time: float = 0.0
     #: Seconds spent reading the input between packets (a file streamed in chunks; not in ``wall_time``).
     read_time: float = 0.0
+
+    def __post_init__(self) -> None:
+        unnamed = [name for name in self.outputs if name not in self.payloads]
+        undeclared = [name for name in self.counts if name not in self.declared]
+        if unnamed or undeclared:
+            raise BackendError(f"RunResult of backend {self.backend!r}: expected payloads naming every output and "
+                               f"declared counts of every counted process (RunResult.of(network, ...) derives "
+                               f"both); no payload for {unnamed}, no declared counts for {undeclared}")
+
+    @classmethod
+    def of(cls, network, backend: str, outputs: dict[str, np.ndarray], counts: dict[str, dict[str, int]], *,
+           steps: int, t0_us: int, timestep_us: int, latency: dict[str, int], **rest) -> "RunResult":
+        """The result of running ``network`` (a ``Network`` or ``CompiledNetwork``), its ``payloads`` and
+        ``declared`` derived from it: the one way every backend builds its result. ``latency`` names
+        every output the run returns (a stream's ``outputs`` may hold fewer until its run joins them);
+        ``rest``: ``extra`` and the times."""
+        network = network_of(network)
+        return cls(backend, outputs, counts, steps, t0_us, timestep_us, latency, payloads_of(network, latency),
+                   declared_of(network), **rest)
 
     def timed_by(self, clock) -> "RunResult":
         """Take the times of a ``tofnet.kernels.compilation.Stopwatch`` started with the run."""
@@ -206,7 +241,9 @@ class Backend(ABC):
     family: str = "float"
     #: What a ``Session`` may ask of it (declared, never probed): ``"stream"``: ``open_stream(compiled,
     #: fuse=..., recording=..., ...)`` as ``LocalBackend``'s; ``"workers"``: ``session(compiled)`` keeps
-    #: worker processes for a session's lifetime; ``"open session"``: it is such a running session.
+    #: worker processes for a session's lifetime; ``"open session"``: it is such a running session;
+    #: ``"bands"``: it takes ``workers=N`` (the sensor cut into N bands of rows, the same bytes for every
+    #: N: ``tofnet conformance --workers`` checks it, and is n/a without it).
     capabilities: frozenset[str] = frozenset()
     #: The ways it offers to run one network (a name, the options that select it), each of which
     #: must give the same bytes with any number of ``workers`` (``tofnet.conformance.workers``).

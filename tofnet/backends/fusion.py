@@ -18,7 +18,6 @@ from tofnet.backends.base import RunResult
 from tofnet.backends.graph import canonical, latencies
 from tofnet.backends.runtime import clock_of
 from tofnet.backends.stream import check_packet
-from tofnet.core.counters import kinds_of
 from tofnet.core.network import Network
 from tofnet.errors import BackendError
 from tofnet.events import DEPTH_DTYPE, TOT_DTYPE
@@ -53,6 +52,7 @@ class PipelineParams:
     depth: DepthProcess
     velocity: VelocityProcess
     names: tuple[str, str, str, str]  # input, time-of-travel, depth, velocity
+    network: Network  # the four processes (a result's payloads and declared counts come from it)
     #: Per output port: steps from an input event to it (``graph.latencies``, from the declarations).
     latency: dict[str, int]
 
@@ -99,7 +99,7 @@ def paper_chain(network: Network, family: str, probes=()) -> PipelineParams | No
         return None
     return PipelineParams(sensor_size=network.sensor_size, timestep_us=clock_of(network).timestep_us,
                           input_filter=filter_settings(inp), units=unit_settings(tot), depth=dep, velocity=vel,
-                          names=(inp.name, tot.name, dep.name, vel.name),
+                          names=(inp.name, tot.name, dep.name, vel.name), network=network,
                           latency=latencies(network, {inp.name}, {p.name: Model.latency_steps(p) for p in procs}))
 
 
@@ -314,11 +314,9 @@ class FusedStream:
         # steps a promise (until_us) completed past the last event's count too, as a model-by-model stream's
         latest = self._latest_us
         promised = (latest - t0) // self.timestep_us if latest is not None and latest >= t0 else 0
-        return RunResult(
-            self.backend, outputs, counts, max(last_step + 1 + self.pipeline.latency_steps, promised),
-            t0, self.timestep_us,
-            {name: self.pipeline.latency[name] for name in outputs}, dict(self.payloads),
-            {name: kinds_of(kind.counters) for name, kind in zip(names, (InputProcess, TimeOfTravelProcess,
-                                                                           DepthProcess, VelocityProcess))},
+        return RunResult.of(
+            self.pipeline.network, self.backend, outputs, counts,
+            steps=max(last_step + 1 + self.pipeline.latency_steps, promised), t0_us=t0, timestep_us=self.timestep_us,
+            latency={name: self.pipeline.latency[name] for name in outputs},
             extra={**({"frac_bits": fmt.frac_bits, "payload_bits": fmt.payload_bits} if fmt else {}),
                    **getattr(kernel, "facts", {})}).timed_by(self.clock)

@@ -60,6 +60,7 @@ class LavaBackend(LocalBackend):
     arithmetic = "fixed"
     family = "fixed"
     fuses = False
+    capabilities = frozenset({"stream"})  # no "bands": it takes no ``workers``
 
     def __init__(self, arithmetic: str = "fixed", frac_bits: int = DEFAULT_FRAC_BITS,
                  payload_bits: int = DEFAULT_PAYLOAD_BITS, packet_events: int = DEFAULT_PACKET_EVENTS,

@@ -13,7 +13,7 @@ from typing import Iterable
 import numpy as np
 
 from tofnet.backends.bands import BandedKernel, band_placer, resolve_workers, sampled_row_load, threads_for
-from tofnet.backends.base import Backend, ProgressCallback, RunResult
+from tofnet.backends.base import Backend, ProgressCallback, RunResult, payloads_of
 from tofnet.backends.fusion import FusedStream, PipelineParams, paper_chain
 from tofnet.backends.graph import GraphExecutor, canonical, resolve_probes, sinks_of
 from tofnet.backends.runtime import clock_of, start_time_us
@@ -60,20 +60,12 @@ def check_sensor_fits(network: Network, recording: Recording) -> None:
                                f"recording (e.g. --sensor-size {width}x{height})")
 
 
-def payloads_of(network: Network, names: Iterable[str]) -> dict[str, str]:
-    out = {}
-    for name in names:
-        proc, _, port = name.partition(".")
-        out[name] = network.process(proc).port(port).spec.payload.name
-    return out
-
-
 class LocalBackend(Backend):
     """Runs the models of ``family`` in this process, model by model (``GraphExecutor``)."""
 
     #: Whether this backend may run a recognised chain through a fused kernel.
     fuses = False
-    capabilities = frozenset({"stream"})
+    capabilities = frozenset({"stream", "bands"})
     run_modes = (("fused", {"fuse": True}), ("unfused", {"fuse": False}))
 
     def __init__(self, packet_events: int | None = None, fuse: bool = True, workers: int | str = 1):

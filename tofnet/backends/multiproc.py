@@ -19,10 +19,10 @@ import numpy as np
 
 from tofnet.backends._channel import Channel, WorkersRefused, answers
 from tofnet.backends.bands import resolve_workers, sampled_row_load
-from tofnet.backends.base import Backend, ProgressCallback, RunResult
+from tofnet.backends.base import Backend, ProgressCallback, RunResult, payloads_of
 from tofnet.backends.graph import GraphExecutor, resolve_probes, sinks_of
 from tofnet.backends.fusion import FusedStream, paper_chain
-from tofnet.backends.local import binding, payloads_of, run_fused
+from tofnet.backends.local import binding, run_fused
 from tofnet.backends.shared_bands import SharedBandKernel, band_rows, split_facts
 from tofnet.backends.stream import packet_events_for
 from tofnet.compiler.bands import input_reach
@@ -83,7 +83,7 @@ class MultiprocBackend(Backend):
         Fixed-point format, as for the ``fixed`` backend (docs/fixed_point.md).
     """
 
-    capabilities = frozenset({"stream", "workers"})
+    capabilities = frozenset({"stream", "workers", "bands"})
     run_modes = (("bands", {}), ("per-core", {"per_core": True}))
 
     name = "multiproc"

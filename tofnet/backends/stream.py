@@ -8,7 +8,6 @@ import numpy as np
 
 from tofnet.backends.base import ProgressCallback, RunResult
 from tofnet.backends.graph import GraphExecutor
-from tofnet.core.counters import kinds_of
 from tofnet.errors import BackendError
 from tofnet.events import EVENT_DTYPE, MAX_TIME_US
 from tofnet.kernels.compilation import Stopwatch
@@ -219,11 +218,9 @@ class GraphStream:
             counts = ex.counts()
         finally:
             self._release()
-        wanted = [name for name in ex.sinks + ex.probes]
-        return RunResult(self.backend, outputs, counts, steps, self.t0_us, self.timestep_us,
-                         {name: ex.output_latency(name) for name in wanted},
-                         {name: ex.payload_of(name) for name in wanted},
-                         {p.name: kinds_of(type(p).counters) for p in ex.network.processes}, extra=dict(self.extra)).timed_by(self.clock)
+        latency = {name: ex.output_latency(name) for name in ex.sinks + ex.probes}
+        return RunResult.of(ex.network, self.backend, outputs, counts, steps=steps, t0_us=self.t0_us,
+                            timestep_us=self.timestep_us, latency=latency, extra=dict(self.extra)).timed_by(self.clock)
 
 
 class Collected:

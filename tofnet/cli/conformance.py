@@ -32,7 +32,9 @@ def register(subparsers) -> None:
 def handle(args) -> int:
     from tofnet.backends.registry import available_backends
     from tofnet.conformance import DEFAULT_BASELINE, run_suite, select_cases
-    from tofnet.conformance.runner import footnote, format_row, header, summary_line
+    from tofnet.conformance.compare import MODES
+    from tofnet.conformance.runner import column_widths, footnote, format_row, header, summary_line
+    from tofnet.conformance.workers import check_workers, planned_rows
 
     cases = select_cases(args.case)
     if args.list:
@@ -66,10 +68,11 @@ def handle(args) -> int:
             outcomes.append({"backend": name, "error": unusable[name]})
             continue
         print(f"== {name} with {args.workers} workers vs one" if workers else f"== {name} vs {against}")
-        print(header())
-        report = lambda r: print(format_row(r), flush=True)  # noqa: E731
+        modes = MODES if workers is None else [row[0] for row in planned_rows(_loaded(name)[0], workers)]
+        widths = column_widths((c.name for c in cases), modes)  # rows print as they come: every name fits
+        print(header(widths))
+        report = lambda r: print(format_row(r, widths), flush=True)  # noqa: E731
         if workers is not None:
-            from tofnet.conformance.workers import check_workers
             results = check_workers(name, workers, [c.name for c in cases], report=report)
         else:
             results = run_suite(name, against, [c.name for c in cases], cache=cache, report=report)

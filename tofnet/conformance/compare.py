@@ -23,7 +23,10 @@ and which depth neurons were reached. Depth outputs then compare by mode:
            in ``Comparison.notes`` instead; their counts may differ.
 
 Outputs are compared in the canonical order (step, then y, then x), which every
-backend produces.
+backend produces. What a user reads off a result is compared too (``visible_differences``):
+each output's payload, each process's declared counts and the run summary (events in,
+accepted, drops, totals, latency, steps; in ``quantised`` mode but for what follows from the
+estimates, compared above within the tolerance).
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.lib.recfunctions import repack_fields
 
+from tofnet.conformance.visible import ESTIMATE_KEYS, visible_differences
 from tofnet.core.network import Network
 from tofnet.kernels.fixed_point import DEFAULT_FRAC_BITS, depth_tolerance, quantize, rotation_depth_tolerance
 from tofnet.kernels.rotation import rotational_flow
@@ -118,6 +122,7 @@ def compare(result, baseline, mode: str, network: Network, recording=None) -> Co
         else:
             _compare_records(name, a, b, mode, diff)
     _compare_counts(result.counts, baseline.counts, shifts, diff, unbounded, slack)
+    diff += visible_differences(result, baseline, ESTIMATE_KEYS if mode == "quantised" else ())
     return out
 
 

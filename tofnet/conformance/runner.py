@@ -164,20 +164,30 @@ def footnote(results: list[CaseResult]) -> list[str]:
             for mode in modes]
 
 
-def format_row(r: CaseResult, width: int = 24) -> str:
+#: The narrowest case and mode columns of the table.
+COLUMNS = (24, 10)
+
+
+def column_widths(cases: Iterable[str], modes: Iterable[str]) -> tuple[int, int]:
+    """The widths of the case and mode columns that hold every name given (at least ``COLUMNS``)."""
+    return max([COLUMNS[0], *map(len, cases)]), max([COLUMNS[1], *map(len, modes)])
+
+
+def format_row(r: CaseResult, widths: tuple[int, int] = COLUMNS) -> str:
     estimates = f"{r.estimates[0]}/{r.estimates[1]}"
     first = r.first.splitlines()[0] if r.first else ""
     verdict = "n/a" if not r.applies else ("pass*" if unequal(r) else "pass") if r.ok else "FAIL"
-    return f"{r.case:<{width}} {r.mode:<10} {verdict:<5} {estimates:>11}  {first}"
+    return f"{r.case:<{widths[0]}} {r.mode:<{widths[1]}} {verdict:<5} {estimates:>11}  {first}"
 
 
-def header(width: int = 24) -> str:
-    return f"{'case':<{width}} {'mode':<10} {'':<5} {'estimates':>11}  first difference"
+def header(widths: tuple[int, int] = COLUMNS) -> str:
+    return f"{'case':<{widths[0]}} {'mode':<{widths[1]}} {'':<5} {'estimates':>11}  first difference"
 
 
 def format_table(results: list[CaseResult]) -> str:
     """The table of cases (pass/fail, estimates backend/baseline, first difference) and a total line."""
-    lines = [header()] + [format_row(r) for r in results] + [summary_line(results)] + footnote(results)
+    widths = column_widths((r.case for r in results), (r.mode for r in results))
+    lines = [header(widths)] + [format_row(r, widths) for r in results] + [summary_line(results)] + footnote(results)
     return "\n".join(lines)
 
 
@@ -192,4 +202,4 @@ def summary_line(results: list[CaseResult]) -> str:
 
 
 __all__ = ["CaseResult", "run_suite", "format_table", "format_row", "footnote", "header", "summary_line",
-           "select_cases", "get_case", "DEFAULT_BASELINE"]
+           "column_widths", "select_cases", "get_case", "DEFAULT_BASELINE"]
