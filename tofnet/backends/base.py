@@ -59,8 +59,9 @@ class RunResult:
     t0_us: int
     timestep_us: int
     latency: dict[str, int]
-    payloads: dict[str, str]
-    declared: dict[str, dict[str, dict]]
+    # None only to be refused in one line below (a required field left out was a TypeError's traceback)
+    payloads: dict[str, str] | None = None
+    declared: dict[str, dict[str, dict]] | None = None
     wall_time: float = 0.0
     extra: dict = field(default_factory=dict)
     #: Seconds the run spent compiling kernels or loading numba's cache (not in ``wall_time``), and
@@ -74,9 +75,9 @@ class RunResult:
     read_time: float = 0.0
 
     def __post_init__(self) -> None:
-        unnamed = [name for name in self.outputs if name not in self.payloads]
-        undeclared = [name for name in self.counts if name not in self.declared]
-        if unnamed or undeclared:
+        unnamed = [name for name in self.outputs if name not in (self.payloads or {})]
+        undeclared = [name for name in self.counts if name not in (self.declared or {})]
+        if unnamed or undeclared or self.payloads is None or self.declared is None:
             raise BackendError(f"RunResult of backend {self.backend!r}: expected payloads naming every output and "
                                f"declared counts of every counted process (RunResult.of(network, ...) derives "
                                f"both); no payload for {unnamed}, no declared counts for {undeclared}")
