@@ -20,6 +20,7 @@ import numpy as np
 from tofnet.core.process import Process
 from tofnet.errors import BackendError
 from tofnet.units import seconds_of
+from tofnet.kernels.fixed_point import FixedPointFormat
 from tofnet.kernels.region import Region
 
 FAMILIES = ("reference", "float", "fixed")
@@ -30,8 +31,9 @@ class ModelContext:
     """Everything a model is built with besides its process.
 
     ``family``: ``reference``, ``float`` or ``fixed``; ``fixed_format`` the fixed-point format
-    (``tofnet.kernels.fixed_point.FixedPointFormat``) for ``fixed``; ``t0_us`` the start of
-    step 0 and ``timestep_us`` the step (µs); ``recording`` what is known about the camera
+    (``tofnet.kernels.fixed_point.FixedPointFormat``) for ``fixed``, by default the ``fixed`` backend's
+    (16 fractional bits, 24-bit payloads); ``t0_us`` the start of step 0 and ``timestep_us`` the
+    step (µs); ``recording`` what is known about the camera
     (intrinsics, poses, IMU; its events are not for models) — None on a worker; ``region``
     the pixels this instance holds (None: all); ``inputs[port]`` the static descriptions
     (``output_meta``) of what feeds each input port, one per source.
@@ -45,6 +47,10 @@ class ModelContext:
     recording: Any = None
     region: Region | None = None
     inputs: dict[str, list[Any]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.family == "fixed" and self.fixed_format is None:  # the fixed backend's default, never float silently
+            self.fixed_format = FixedPointFormat()
 
     @property
     def arithmetic(self) -> str:
