@@ -19,6 +19,7 @@ import numpy as np
 
 from tofnet.core.process import Process
 from tofnet.errors import BackendError
+from tofnet.models.contract import checked_outputs, failures_named, who
 from tofnet.units import seconds_of
 from tofnet.kernels.fixed_point import FixedPointFormat
 from tofnet.kernels.region import Region
@@ -197,22 +198,22 @@ class StepModel(Model):
 
     def run(self, first: int, end: int, inputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         cuts = {port: np.searchsorted(records["step"], np.arange(first - 1, end)) for port, records in inputs.items()}
-        parts: dict[str, list[np.ndarray]] = {spec.name: [] for spec in self.process.outports}
+        dtypes = {spec.name: spec.payload.dtype for spec in self.process.outports}
+        parts: dict[str, list[np.ndarray]] = {port: [] for port in dtypes}
+        name = who(self.process, type(self))
         for i, k in enumerate(range(first, end)):
             inbox = {}
             for port, records in inputs.items():
                 lo, hi = cuts[port][i], cuts[port][i + 1]
                 inbox[port] = records[lo:hi] if hi > lo else None
-            for port, sent in self.step(k, inbox).items():
+            with failures_named(name, f"step {k}"):  # the user's code: one line naming the process and step
+                outbox = self.step(k, inbox)
+            for port, sent in checked_outputs(name, self.process, outbox, f"step {k}", dtypes).items():
                 if sent is not None and len(sent):
                     sent = np.array(sent, copy=True)
                     sent["step"] = k
                     parts[port].append(sent)
-        return {port: concat(chunks, _dtype_of(self.process, port)) for port, chunks in parts.items()}
-
-
-def _dtype_of(process: Process, port: str) -> np.dtype:
-    return process.port(port).spec.payload.dtype
+        return {port: concat(chunks, dtypes[port]) for port, chunks in parts.items()}
 
 
 def concat(chunks: list[np.ndarray], dtype: np.dtype) -> np.ndarray:
