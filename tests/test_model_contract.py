@@ -4,10 +4,12 @@ the same on every backend, its own exception kept as the cause."""
 
 import contextlib
 
+import numpy as np
 import pytest
 
 from faulty_models import RAISE_FROM, FaultyRangeProcess, faulty_network
 from tofnet.backends.registry import get_backend
+from tofnet.cli import main
 from tofnet.conformance import BackendRunner
 from tofnet.errors import BackendError
 from tofnet.io.recording import Recording
@@ -34,6 +36,26 @@ def refusal(runner, network, recording) -> BackendError:
         runner.run(network, recording)
     assert "\n" not in str(err.value)
     return err.value
+
+
+def test_spikes_outside_the_size_stop_every_backend_with_the_same_line(runners, recording):
+    """Before: fixed and float took them into the next row's state, multiproc dropped them all without a
+    count, reference raised an IndexError."""
+    network = faulty_network(SENSOR, "shift")
+    messages = {name: str(refusal(runner, network, recording)) for name, runner in runners.items()}
+    first = messages["reference{}"]
+    assert first.startswith("process 'f' (FaultyModel) sent ") and " on f.passed outside its 24x16 size in " in first
+    assert "(first x=" in first and "a model's spikes must lie within its port's size" in first
+    sent = int(first.split(" sent ")[1].split(" spikes")[0].replace(",", ""))
+    assert sent > 100
+    assert set(messages.values()) == {first}, messages
+
+
+def test_a_range_model_is_checked_alike(runners, recording):
+    network = faulty_network(SENSOR, "shift", kind=FaultyRangeProcess)
+    message = str(refusal(runners["fixed{}"], network, recording))
+    assert message.startswith("process 'f' (FaultyRangeModel) sent ") and "outside its 24x16 size" in message
+    assert str(refusal(runners["multiproc{'workers': 2}"], network, recording)) == message
 
 
 @pytest.mark.parametrize("name", ["reference{}", "fixed{}", "fixed{'workers': 2}"])
@@ -86,3 +108,18 @@ def test_a_broken_contract_says_what_was_expected(runners, recording, mode, expe
 def test_a_range_models_broken_contract_names_its_steps(runners, recording, mode, expected):
     message = str(refusal(runners["fixed{}"], faulty_network(SENSOR, mode, kind=FaultyRangeProcess), recording))
     assert message.startswith("process 'f' (FaultyRangeModel), steps ") and expected in message
+
+
+def test_tofnet_run_prints_the_one_line(tmp_path, recording, capsys):
+    np.save(tmp_path / "events.npy", recording.events)
+    spec = tmp_path / "faulty.yaml"
+    spec.write_text("processes:\n"
+                    "  input: {type: InputProcess, sensor_size: [24, 16]}\n"
+                    "  f: {type: 'faulty_models:FaultyProcess', mode: shift}\n"
+                    "  a: {type: BackgroundActivityFilterProcess}\n"
+                    "connections:\n  - input.events -> f.events\n  - f.passed -> a.events\n")
+    code = main(["run", str(tmp_path / "events.npy"), "--spec", str(spec), "--allow-import", "faulty_models",
+                 "--out", str(tmp_path / "out.npz")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and err[-1].startswith("tofnet run: error: process 'f' (FaultyModel) sent "), err
+    assert "outside its 24x16 size" in err[-1] and "Traceback" not in "\n".join(err)

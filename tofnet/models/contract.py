@@ -1,10 +1,12 @@
 """What a model may send, checked where models run (the executor, band threads, worker processes).
 
 A model's ``run`` (or ``StepModel.step``) returns a mapping of its declared output ports to
-records laid out as the port's payload (``Payload.dtype``, 1-D). A model that breaks this, or
-raises, stops the run with one line naming the process, its model, the step and what was
-expected (docs/extending.md, "What a model may send"), the same on every backend; the model's
-own exception stays the ``__cause__``.
+records laid out as the port's payload (``Payload.dtype``, 1-D), spikes at pixels inside the
+process's size. A model that breaks this, or raises, stops the run with one line naming the
+process, its model, the step and what was expected (docs/extending.md, "What a model may send"),
+the same on every backend: before, a spike outside the sensor wrapped into the next row on
+``fixed``, vanished on ``multiproc`` and was an ``IndexError`` on ``reference``. The model's own
+exception stays the ``__cause__``.
 """
 
 from __future__ import annotations
@@ -68,6 +70,24 @@ def checked_outputs(name: str, process: Process, sent: Any, steps: str,
             raise BackendError(f"{name}, {steps}: sent {_kind(records)} on {process.name}.{port}, expected a 1-D "
                                f"array of {payload} records ({_fields(dtype)}: the port's Payload.dtype)")
     return sent
+
+
+def check_within(name: str, process: Process, port: str, records: np.ndarray, steps: str) -> None:
+    """Raise when spike ``records`` sent on ``port`` in ``steps`` (``steps_text``) lie outside the process's
+    size (vectorised: the coordinates' extremes first, the offending spikes only when there are some)."""
+    if not len(records) or records.dtype.names is None or "x" not in records.dtype.names:
+        return
+    width, height = process.sensor_size
+    x, y = records["x"], records["y"]
+    signed = x.dtype.kind != "u" or y.dtype.kind != "u"
+    if x.max() < width and y.max() < height and not (signed and (x.min() < 0 or y.min() < 0)):
+        return
+    bad = ~((x >= 0) & (x < width) & (y >= 0) & (y < height))  # a NaN coordinate too
+    outside = records[bad]
+    first = outside[np.lexsort((outside["x"], outside["y"], outside["step"]))[0]]  # first in the canonical order
+    raise BackendError(f"{name} sent {len(outside):,} spikes on {process.name}.{port} outside its {width}x{height} "
+                       f"size in {steps} (first x={first['x']}, y={first['y']} at step {first['step']}); a model's "
+                       "spikes must lie within its port's size")
 
 
 def run_model(process: Process, model, first: int, end: int, inputs: dict[str, np.ndarray],
