@@ -194,3 +194,20 @@ def test_the_paper_chain_is_fused_whatever_its_names():
     assert isinstance(FixedBackend().open_stream(sub, intrinsics=TEST_INTRINSICS), GraphStream)
     recording = texture()
     assert FixedBackend().run(sub, recording).depth.tobytes() == FixedBackend().run(net, recording).depth.tobytes()
+
+
+def test_an_executor_of_the_fixed_family_computes_in_the_fixed_backends_format():
+    """``GraphExecutor(family="fixed")`` without a ``fixed_format`` computed the depth in float (z 0.75 where the
+    fixed backend gave 0.74996948): it now takes the fixed backend's format."""
+    from tofnet.backends.graph import GraphExecutor
+    from tofnet.backends.runtime import clock_of, start_time_us
+    from tofnet.conformance.cases import get_case
+
+    scene = get_case("patch-d2-ragged").build()
+    clock = clock_of(scene.network)
+    executor = GraphExecutor(scene.network, family="fixed", backend="mine", recording=scene.recording,
+                             t0_us=start_time_us(clock.t0_us, scene.recording), timestep_us=clock.timestep_us)
+    executor.feed(scene.recording.events)
+    depth = executor.advance(executor.complete_until() + 1 + executor.drain_steps)["depth.depth"]
+    fixed = FixedBackend().run(scene.network, scene.recording).depth
+    assert len(depth) > 100 and depth.tobytes() == fixed.tobytes()

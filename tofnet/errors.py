@@ -113,6 +113,18 @@ def _inside(path: str, folder: str) -> bool:
     return path == folder or path.startswith(folder.rstrip(os.sep) + os.sep)
 
 
+def interrupted(err: BaseException) -> bool:
+    """Whether a ``KeyboardInterrupt`` is among the exceptions that led to ``err`` (Ctrl-C inside a compiled
+    kernel: numba's dispatcher wraps it in a ``SystemError``)."""
+    seen = set()
+    while err is not None and id(err) not in seen:
+        if isinstance(err, KeyboardInterrupt):
+            return True
+        seen.add(id(err))
+        err = err.__cause__ or err.__context__
+    return False
+
+
 def reason(err: BaseException, limit: int = 80) -> str:
     """The first line of an exception's text, cut to ``limit`` characters: library
     messages may quote raw bytes of the file (zipfile quotes whole headers)."""

@@ -31,12 +31,14 @@ DIRECT_BYTES = 4000
 
 
 class WorkerError(BackendError):
-    """A worker that is alive answered with an error (its traceback in the message); ``refusal``: the
-    one-line message of a ``TofnetError`` it raised (a value the user gave refused), else None."""
+    """A worker that is alive answered with an error: its traceback in the message, or ``refusal``: the
+    one-line message of a ``TofnetError`` it raised (a value the user gave refused, a model's failure)."""
 
-    def __init__(self, message: str, refusal: str | None = None):
+    def __init__(self, message: str, refusal: str | None = None, traceback: str = ""):
         super().__init__(message)
         self.refusal = refusal
+        #: The worker's traceback text, when the message is a refusal's one line.
+        self.traceback = traceback
 
 
 class WorkersRefused(WorkerError):
@@ -44,7 +46,7 @@ class WorkersRefused(WorkerError):
     what it asked (``answers(..., settle=True)``)."""
 
     def __init__(self, first: WorkerError, refused: int, answered: int):
-        super().__init__(str(first), first.refusal)
+        super().__init__(str(first), first.refusal, first.traceback)
         self.refused, self.answered = refused, answered
 
 
@@ -126,8 +128,11 @@ class Channel:
                                f"{timeout if limit is None else limit:g} s while {doing}; all workers were stopped (raise the backend's "
                                f"{timeout_name} if the machine is just slow)")
         if message[0] == "error":
-            raise WorkerError(f"multiproc worker {self.index} failed while {doing}; its traceback:\n{message[1]}",
-                              message[2] if len(message) > 2 else None)
+            refusal = message[2] if len(message) > 2 else None
+            if refusal is not None:  # a TofnetError (a model's failure names its process and step): its one line
+                raise WorkerError(f"multiproc worker {self.index} failed while {doing}: {refusal}", refusal,
+                                  message[1])
+            raise WorkerError(f"multiproc worker {self.index} failed while {doing}; its traceback:\n{message[1]}")
         if message[0] != kind:
             raise BackendError(f"multiproc worker {self.index} sent {message[0]!r} while {doing}, expected {kind!r}")
         return message

@@ -126,7 +126,9 @@ class _Worker:
             if self.fault is not None:
                 self._fire_fault()
             _, items, first, end = message
-            return ("run", [(key, self.models[key].run(first, end, inputs)) for key, inputs in items])
+            from tofnet.models.contract import run_model  # each instance's failure names its process and step
+            return ("run", [(key, run_model(self.models[key].process, self.models[key], first, end, inputs))
+                            for key, inputs in items])
         if kind == "counts":
             return ("counts", [self.models[key].counts() for key in message[1]])
         if kind == "get":

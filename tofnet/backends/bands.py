@@ -35,6 +35,7 @@ from tofnet.kernels.kernel_config import KernelConfig, Region
 from tofnet.kernels.region import UNSORTED, TimeOfTravelKernel
 from tofnet.machine import cpu_count
 from tofnet.models.base import Model, holds_whole_numbers, splits_into_regions
+from tofnet.models.contract import run_model
 
 #: Packets with fewer events run their bands one after the other in the caller's thread: handing
 #: work to another thread and back (~0.15-0.3 ms on a virtual machine) costs more than it saves there
@@ -302,7 +303,7 @@ class BandedReader(Model):
         return self.models[0].complete_until()  # every band was fed the same events
 
     def run(self, first: int, end: int, inputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        answers = self.pool.run(lambda b: self.models[b].run(first, end, inputs), len(self.models),
+        answers = self.pool.run(lambda b: run_model(self.process, self.models[b], first, end, inputs), len(self.models),
                                 self._fed < SERIAL_BELOW)
         self._fed = 0
         ports = list(answers[0])

@@ -25,6 +25,7 @@ from tofnet.core.process import Process
 from tofnet.errors import BackendError, NetworkError
 from tofnet.kernels.order import pixel_order
 from tofnet.models.base import ModelContext, apply_param, concat, take
+from tofnet.models.contract import check_within, run_model, steps_text, who
 from tofnet.models.registry import model_for
 
 #: ``place(process, model_class, ctx) -> model``: builds (or places remotely) one process's model.
@@ -95,6 +96,8 @@ class Node:
     model: Any
     inputs: dict[str, list[Edge]]
     outputs: dict[str, list[Edge]]
+    #: How errors name it: ``process 'f' (FaultyModel)``, the model's class even when a stand-in runs it.
+    name: str = ""
 
 
 def resolve_probes(network: Network, probes: Iterable[str], record_tot: bool = False) -> list[str]:
@@ -172,7 +175,7 @@ class GraphExecutor:
             cls = classes[process.name]
             metas[process.name] = cls.output_meta(process, ctx)
             model = place(process, cls, ctx) if place is not None else cls(process, ctx)
-            self.nodes.append(Node(process, model, inputs, outputs))
+            self.nodes.append(Node(process, model, inputs, outputs, who(process, cls)))
         self.drain_steps = max(self.latency.values(), default=0)
 
     # -- events -------------------------------------------------------------------------------
@@ -203,11 +206,14 @@ class GraphExecutor:
                 dtype = process.port(port).spec.payload.dtype
                 parts = [edge.take(end - 1, dtype) for edge in edges]
                 inputs[port] = parts[0] if len(parts) == 1 else canonical(concat(parts, dtype))
-            sent = node.model.run(first, end, inputs)
+            # checked here, for every backend alike: a spike outside the size would wrap into the next row of a
+            # kernel's state, or be routed to no core, or index past a dense array
+            sent = run_model(process, node.model, first, end, inputs, node.name)
             for port, edges in node.outputs.items():
                 records = sent.get(port)
                 if records is None:
                     continue
+                check_within(node.name, process, port, records, steps_text(first, end))
                 records = canonical(records)
                 for edge in edges:
                     if len(records):

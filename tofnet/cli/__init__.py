@@ -7,7 +7,7 @@ import importlib
 import re
 import sys
 
-from tofnet.errors import TofnetError
+from tofnet.errors import TofnetError, interrupted
 
 #: Subcommand modules, in the order ``tofnet --help`` lists them.
 SUBCOMMANDS = ("demo", "run", "simulate", "eval", "plot", "compile", "conformance", "info", "convert", "export",
@@ -99,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"tofnet {args.command}: interrupted", file=sys.stderr)
         return 130
     except SystemError as err:  # Ctrl-C inside a compiled kernel: numba's dispatcher wraps it in a SystemError
-        if not _interrupted(err):
+        if not interrupted(err):
             raise
         print(f"tofnet {args.command}: interrupted", file=sys.stderr)
         return 130
@@ -108,17 +108,6 @@ def main(argv: list[str] | None = None) -> int:
         import os
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
-
-
-def _interrupted(err: BaseException) -> bool:
-    """Whether a ``KeyboardInterrupt`` is among the exceptions that led to ``err``."""
-    seen = set()
-    while err is not None and id(err) not in seen:
-        if isinstance(err, KeyboardInterrupt):
-            return True
-        seen.add(id(err))
-        err = err.__cause__ or err.__context__
-    return False
 
 
 if __name__ == "__main__":

@@ -19,7 +19,9 @@ import numpy as np
 
 from tofnet.core.process import Process
 from tofnet.errors import BackendError
+from tofnet.models.contract import checked_outputs, failures_named, who
 from tofnet.units import seconds_of
+from tofnet.kernels.fixed_point import FixedPointFormat
 from tofnet.kernels.region import Region
 
 FAMILIES = ("reference", "float", "fixed")
@@ -30,8 +32,9 @@ class ModelContext:
     """Everything a model is built with besides its process.
 
     ``family``: ``reference``, ``float`` or ``fixed``; ``fixed_format`` the fixed-point format
-    (``tofnet.kernels.fixed_point.FixedPointFormat``) for ``fixed``; ``t0_us`` the start of
-    step 0 and ``timestep_us`` the step (µs); ``recording`` what is known about the camera
+    (``tofnet.kernels.fixed_point.FixedPointFormat``) for ``fixed``, by default the ``fixed`` backend's
+    (16 fractional bits, 24-bit payloads); ``t0_us`` the start of step 0 and ``timestep_us`` the
+    step (µs); ``recording`` what is known about the camera
     (intrinsics, poses, IMU; its events are not for models) — None on a worker; ``region``
     the pixels this instance holds (None: all); ``inputs[port]`` the static descriptions
     (``output_meta``) of what feeds each input port, one per source.
@@ -45,6 +48,10 @@ class ModelContext:
     recording: Any = None
     region: Region | None = None
     inputs: dict[str, list[Any]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.family == "fixed" and self.fixed_format is None:  # the fixed backend's default, never float silently
+            self.fixed_format = FixedPointFormat()
 
     @property
     def arithmetic(self) -> str:
@@ -191,22 +198,22 @@ class StepModel(Model):
 
     def run(self, first: int, end: int, inputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         cuts = {port: np.searchsorted(records["step"], np.arange(first - 1, end)) for port, records in inputs.items()}
-        parts: dict[str, list[np.ndarray]] = {spec.name: [] for spec in self.process.outports}
+        dtypes = {spec.name: spec.payload.dtype for spec in self.process.outports}
+        parts: dict[str, list[np.ndarray]] = {port: [] for port in dtypes}
+        name = who(self.process, type(self))
         for i, k in enumerate(range(first, end)):
             inbox = {}
             for port, records in inputs.items():
                 lo, hi = cuts[port][i], cuts[port][i + 1]
                 inbox[port] = records[lo:hi] if hi > lo else None
-            for port, sent in self.step(k, inbox).items():
+            with failures_named(name, f"step {k}"):  # the user's code: one line naming the process and step
+                outbox = self.step(k, inbox)
+            for port, sent in checked_outputs(name, self.process, outbox, f"step {k}", dtypes).items():
                 if sent is not None and len(sent):
                     sent = np.array(sent, copy=True)
                     sent["step"] = k
                     parts[port].append(sent)
-        return {port: concat(chunks, _dtype_of(self.process, port)) for port, chunks in parts.items()}
-
-
-def _dtype_of(process: Process, port: str) -> np.dtype:
-    return process.port(port).spec.payload.dtype
+        return {port: concat(chunks, dtypes[port]) for port, chunks in parts.items()}
 
 
 def concat(chunks: list[np.ndarray], dtype: np.dtype) -> np.ndarray:
