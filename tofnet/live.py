@@ -15,14 +15,14 @@ event that caused it (the estimate's stamp minus its output's latency plus one s
 the moment ``feed`` handed it back, on the source's clock: at most one step more than
 from the event itself. A packet is *late* when it is fed more than one packet after it
 was complete; with ``drop_when_late`` its events are dropped (and counted), otherwise the
-run falls behind and says by how much. Docs: docs/live.md.
+run falls behind and says by how much. The statistics (``LiveStats``, the delays in a fixed histogram):
+``tofnet.live_stats``. Docs: docs/live.md.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
@@ -30,6 +30,7 @@ import numpy as np
 from tofnet.errors import TofnetError
 from tofnet.events import EVENT_DTYPE
 from tofnet.io.recording import Recording
+from tofnet.live_stats import LiveStats
 
 
 class LiveSource(Protocol):
@@ -167,47 +168,6 @@ class CameraSource:
             carry = events[cuts[-2]:]
 
 
-@dataclass
-class LiveStats:
-    """What a live run measured. Delays in µs on the source's clock."""
-
-    delays_us: list = field(default_factory=list)
-    events_in: int = 0
-    packets: int = 0
-    late_packets: int = 0
-    dropped_events: int = 0
-    dropped_packets: int = 0
-    max_behind_us: float = 0.0
-    behind_us: float = 0.0  # at the last packet
-    depth_out: int = 0
-    span_us: int = 0  # the source's time covered
-    batches: int = 0  # feeds of several late packets at once (``catching_up``)
-    wall_s: float = 0.0
-    cpu_s: float = 0.0  # this process's CPU time (all threads) during the run
-
-    def percentile_ms(self, q: float) -> float:
-        return float(np.percentile(self.delays_us, q)) * 1e-3 if self.delays_us else float("nan")
-
-    def lines(self) -> list[str]:
-        rate = self.events_in / self.wall_s if self.wall_s > 0 else 0.0
-        out = [f"delay          p50 {self.percentile_ms(50):.2f} ms, p99 {self.percentile_ms(99):.2f} ms, "
-               f"max {self.percentile_ms(100):.2f} ms  (event's step start -> estimate handed back, "
-               f"{len(self.delays_us):,} estimates)",
-               f"events         {self.events_in:,} in {self.wall_s:.3g} s ({rate:,.0f} events/s) for "
-               f"{self.span_us * 1e-6:.3g} s of source time",
-               f"cpu            {self.cpu_s:.3g} s for {self.span_us * 1e-6:.3g} s of source time "
-               f"({100 * self.cpu_s / max(self.span_us * 1e-6, 1e-9):.0f} % of one core; above 100 % it cannot "
-               "keep up)",
-               f"packets        {self.packets:,}, late {self.late_packets:,} (fed more than one packet after "
-               f"they were complete); behind at most {self.max_behind_us * 1e-3:.1f} ms, at the end "
-               f"{self.behind_us * 1e-3:.1f} ms" + (f"; caught up {self.batches:,} times, several packets at once"
-                                                     if self.batches else "")]
-        if self.dropped_packets:
-            out.append(f"dropped        {self.dropped_events:,} events in {self.dropped_packets:,} late packets "
-                       "(--drop-when-late)")
-        return out
-
-
 def live_camera(metadata: Recording) -> dict:
     """What a live session is told of the camera: the source's metadata (``Session(camera=...)``), so its
     processes bind to its intrinsics, poses and IMU as a run's do (given only the intrinsics and poses, a
@@ -323,7 +283,7 @@ def run_live(source: LiveSource, network, *, backend: str = "fixed", backend_opt
             depth = produced.get(primary) if primary else None
             if depth is not None and len(depth):
                 now = source.now_us()
-                stats.delays_us.extend((now - (depth["t"] - (latency + 1) * step_us)).tolist())
+                stats.delays.add(now - (depth["t"] - (latency + 1) * step_us))
                 stats.depth_out += len(depth)
                 if on_depth is not None:
                     on_depth(depth)
