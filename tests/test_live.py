@@ -140,6 +140,45 @@ def test_falling_behind_is_measured_and_drops_only_when_asked(recording_file):
     assert dropped.depth_out < kept.depth_out  # what was dropped was not estimated
 
 
+class _Packets:
+    """A recording's 1 ms packets on its own clock (never late); a ``KeyboardInterrupt`` instead of packet
+    ``interrupt_at`` (a second Ctrl-C while waiting for a camera)."""
+    packet_us = 1000
+
+    def __init__(self, recording, count: int, interrupt_at: int | None = None):
+        self.recording, self.count, self.interrupt_at = recording, count, interrupt_at
+        self.t0_us, self.now = int(recording.events["t"][0]), 0.0
+
+    def metadata(self):
+        return self.recording
+
+    def now_us(self):
+        return self.now
+
+    def packets(self):
+        t = self.recording.events["t"]
+        for i in range(self.count):
+            if i == self.interrupt_at:
+                raise KeyboardInterrupt
+            start = self.t0_us + 1000 * i
+            self.now = start + 1000
+            yield self.recording.events[np.searchsorted(t, start):np.searchsorted(t, start + 1000)], start + 1000
+
+
+def test_ctrl_c_while_waiting_for_a_packet_ends_the_run_as_the_source_s_end_does():
+    recording = pattern_recording(int(SPAN_S * 1e6))
+    network = _network(recording)
+    try:
+        stopped, stopped_result = run_live(_Packets(recording, 150, interrupt_at=60), network, backend="fixed")
+    except KeyboardInterrupt:
+        pytest.fail("the KeyboardInterrupt escaped run_live: the figures of the run up to it are lost")
+    ended, ended_result = run_live(_Packets(recording, 60), network, backend="fixed")
+    assert stopped.interrupted and not ended.interrupted
+    assert stopped.packets == ended.packets == 60 and stopped.events_in == ended.events_in
+    assert stopped.depth_out == ended.depth_out > 0 and stopped_result.counts == ended_result.counts
+    assert stopped.lines()[-1] == "ended          by Ctrl-C: these figures cover the run up to it"
+
+
 def test_bad_speed_is_one_line(recording_file):
     with open_recording(recording_file) as source, pytest.raises(TofnetError, match="--speed"):
         ReplaySource(source, speed=0)

@@ -21,6 +21,9 @@ run falls behind and says by how much. The statistics (``LiveStats``, the delays
 
 from __future__ import annotations
 
+import contextlib
+import signal
+import threading
 import time
 from collections.abc import Callable, Iterator
 from typing import Protocol
@@ -241,14 +244,50 @@ def catching_up(source: LiveSource, stats: "LiveStats", drop_when_late: bool,
         yield (np.concatenate(parts) if len(parts) > 1 else events), until_us
 
 
+@contextlib.contextmanager
+def _ctrl_c_stops(stats: LiveStats) -> Iterator[None]:
+    """Ctrl-C (SIGINT) ends the run as ``stop()`` does, after the packet being fed: ``stats.interrupted`` is set
+    and the session finishes, so the figures of the run up to it are whole. A second Ctrl-C raises
+    ``KeyboardInterrupt`` as usual. Only in the main thread, and only over Python's own handler."""
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
+        yield
+        return
+
+    def interrupted(signum, frame) -> None:
+        stats.interrupted = True
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    signal.signal(signal.SIGINT, interrupted)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+def _until_interrupted(packets: Iterator, stats: LiveStats) -> Iterator:
+    """``packets`` until Ctrl-C (``stats.interrupted``), or a ``KeyboardInterrupt`` raised while waiting for the
+    next one (a second Ctrl-C while a camera sends nothing), which marks it: between two packets the session
+    can finish."""
+    while not stats.interrupted:
+        try:
+            item = next(packets)
+        except StopIteration:
+            return
+        except KeyboardInterrupt:
+            stats.interrupted = True
+            return
+        yield item
+
+
 def run_live(source: LiveSource, network, *, backend: str = "fixed", backend_options: dict | None = None,
              compile_options: dict | None = None, drop_when_late: bool = False,
              on_depth: Callable[[np.ndarray], None] | None = None, tick: Callable[[], None] | None = None,
              stop: Callable[[], bool] | None = None) -> tuple[LiveStats, object]:
-    """Run ``network`` on ``source`` until it ends (or ``stop()`` is true); the statistics and the run's
-    ``RunResult`` (counts, latency; its outputs only those of the last steps, run at the end: the
-    estimates are not kept). ``on_depth(records)`` sees every batch of depth estimates as it comes
-    (the last steps' too); ``tick()`` is called after every packet (to refresh a display)."""
+    """Run ``network`` on ``source`` until it ends (or ``stop()`` is true, or Ctrl-C: ``_ctrl_c_stops``); the
+    statistics and the run's ``RunResult`` (counts, latency; its outputs only those of the last steps, run at
+    the end: the estimates are not kept). ``on_depth(records)`` sees every batch of depth estimates as it
+    comes (the last steps' too); ``tick()`` is called after every packet (to refresh a display)."""
     from tofnet.compiler import compile_network
     from tofnet.session import Session
 
@@ -273,27 +312,29 @@ def run_live(source: LiveSource, network, *, backend: str = "fixed", backend_opt
         def runs_bands() -> bool:  # a graph stream's bands (a fused stream keeps 1 ms packets whole: faster)
             return session is not None and len(getattr(session.stream, "extra", {}).get("bands", ())) > 1
 
-        for events, until_us in catching_up(source, stats, drop_when_late, runs_bands):
-            if session is None:
-                if not len(events):
-                    continue
-                open_session(int(events["t"][0]))
-            stats.events_in += len(events)
-            produced = session.feed(events, until_us)
-            depth = produced.get(primary) if primary else None
-            if depth is not None and len(depth):
-                now = source.now_us()
-                stats.delays.add(now - (depth["t"] - (latency + 1) * step_us))
-                stats.depth_out += len(depth)
-                if on_depth is not None:
-                    on_depth(depth)
-            stats.span_us = until_us - first
-            if tick is not None:
-                tick()
-            if stop is not None and stop():
-                break
+        with _ctrl_c_stops(stats):
+            packets = _until_interrupted(catching_up(source, stats, drop_when_late, runs_bands), stats)
+            for events, until_us in packets:
+                if session is None:
+                    if not len(events):
+                        continue
+                    open_session(int(events["t"][0]))
+                stats.events_in += len(events)
+                produced = session.feed(events, until_us)
+                depth = produced.get(primary) if primary else None
+                if depth is not None and len(depth):
+                    now = source.now_us()
+                    stats.delays.add(now - (depth["t"] - (latency + 1) * step_us))
+                    stats.depth_out += len(depth)
+                    if on_depth is not None:
+                        on_depth(depth)
+                stats.span_us = until_us - first
+                if tick is not None:
+                    tick()
+                if stop is not None and stop():
+                    break
         if session is None:
-            raise TofnetError("live: the source gave no events")
+            raise TofnetError("live: the source gave no events" + (" before Ctrl-C" if stats.interrupted else ""))
         result = session.finish()  # the steps still in flight (not counted in the delays: nothing waits for them)
         if primary and primary in result.outputs:
             stats.depth_out += len(result.outputs[primary])

@@ -81,6 +81,7 @@ class LiveStats:
     batches: int = 0  # feeds of several late packets at once (``catching_up``)
     wall_s: float = 0.0
     cpu_s: float = 0.0  # this process's CPU time (all threads) during the run
+    interrupted: bool = False  # ended by Ctrl-C (``live._ctrl_c_stops``): the figures cover the run up to it
 
     def percentile_ms(self, q: float) -> float:
         """The ``q``-th percentile of the delays (ms); NaN without any."""
@@ -100,6 +101,8 @@ class LiveStats:
                f"they were complete); behind at most {self.max_behind_us * 1e-3:.1f} ms, at the end "
                f"{self.behind_us * 1e-3:.1f} ms" + (f"; caught up {self.batches:,} times, several packets at once"
                                                      if self.batches else "")]
+        if self.interrupted:
+            out.append("ended          by Ctrl-C: these figures cover the run up to it")
         if self.dropped_packets:
             out.append(f"dropped        {self.dropped_events:,} events in {self.dropped_packets:,} late packets "
                        "(--drop-when-late)")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import sys
 from pathlib import Path
 
 from tofnet.errors import TofnetError
@@ -116,7 +117,8 @@ def handle(args) -> int:
             except KeyboardInterrupt as err:
                 if not isinstance(view, PngFolder):
                     raise
-                # Ctrl-C ends a camera run (without --seconds): the whole frames written so far are kept.
+                # A second Ctrl-C (the first ends the run with its summary, run_live): the whole frames
+                # written so far are kept.
                 view.stop()
                 interrupted = err
             except BaseException:
@@ -153,6 +155,9 @@ def handle(args) -> int:
         print(f"note           {line}")
     if args.json:
         write_text_atomic(args.json, json.dumps(summary_of(stats), indent=2) + "\n")
+    if stats.interrupted:  # 130 as for any interrupted command: the run did not end by itself or --seconds
+        print("tofnet live: interrupted (Ctrl-C); the summary covers the run up to it", file=sys.stderr)
+        return 130
     return 0
 
 
@@ -195,4 +200,5 @@ def summary_of(stats) -> dict:
             "events_per_s": stats.events_in / stats.wall_s if stats.wall_s else 0.0, "packets": stats.packets,
             "late_packets": stats.late_packets, "max_behind_ms": stats.max_behind_us * 1e-3,
             "behind_at_end_ms": stats.behind_us * 1e-3, "dropped_events": stats.dropped_events,
-            "dropped_packets": stats.dropped_packets, "depth_out": stats.depth_out, "catch_up_batches": stats.batches}
+            "dropped_packets": stats.dropped_packets, "depth_out": stats.depth_out, "catch_up_batches": stats.batches,
+            "interrupted": stats.interrupted}
