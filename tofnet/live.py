@@ -14,9 +14,9 @@ they come, and measures for each estimate the delay from the start of the timest
 event that caused it (the estimate's stamp minus its output's latency plus one step) to
 the moment ``feed`` handed it back, on the source's clock: at most one step more than
 from the event itself. A packet is *late* when it is fed more than one packet after it
-was complete; with ``drop_when_late`` its events are dropped (and counted), otherwise the
-run falls behind and says by how much. The statistics (``LiveStats``, the delays in a fixed histogram):
-``tofnet.live_stats``. Docs: docs/live.md.
+was complete; with ``drop_when_late``, one fed more than ``late_tolerance_us`` (100 ms) after
+has its events dropped (and counted), otherwise the run falls behind and says by how much. The
+statistics (``LiveStats``, the delays in a fixed histogram): ``tofnet.live_stats``. Docs: docs/live.md.
 """
 
 from __future__ import annotations
@@ -200,34 +200,39 @@ def warm_up(compiled, metadata: Recording, backend, backend_options) -> None:
 #: Events fed at once at most while a run catches up (``catching_up``).
 CATCH_UP_EVENTS = 1 << 18
 
+#: How far behind (µs) a packet is fed before ``drop_when_late`` drops its events: above the stalls of runs
+#: that keep up on average (the replay decoding 65,536 events at once, the garbage collector, a loaded
+#: machine's scheduler: up to 47 ms behind on the real EVT3 at 1x using 20 % of a core; docs/live.md).
+LATE_TOLERANCE_US = 100_000
 
-def _counted(source: LiveSource, stats: "LiveStats", events: np.ndarray, until_us: int,
-             drop_when_late: bool) -> tuple[np.ndarray, bool]:
+
+def _counted(source: LiveSource, stats: "LiveStats", events: np.ndarray, until_us: int, drop_when_late: bool,
+             late_tolerance_us: float = LATE_TOLERANCE_US) -> tuple[np.ndarray, bool]:
     """Count a packet (late: fed more than one packet after it was complete); its events (none when it is
-    dropped late) and whether it was late."""
+    dropped: ``drop_when_late`` and fed more than ``late_tolerance_us`` after it was complete) and whether
+    it was late."""
     behind = source.now_us() - until_us
     stats.packets += 1
     stats.behind_us = max(behind, 0.0)
     stats.max_behind_us = max(stats.max_behind_us, stats.behind_us)
     late = behind > source.packet_us
-    if late:
-        stats.late_packets += 1
-        if drop_when_late and len(events):
-            stats.dropped_events += len(events)
-            stats.dropped_packets += 1
-            events = events[:0]
+    stats.late_packets += late
+    if drop_when_late and behind > late_tolerance_us and len(events):
+        stats.dropped_events += len(events)
+        stats.dropped_packets += 1
+        events = events[:0]
     return events, late
 
 
-def catching_up(source: LiveSource, stats: "LiveStats", drop_when_late: bool,
-                batch: Callable[[], bool]) -> Iterator[tuple[np.ndarray, int]]:
+def catching_up(source: LiveSource, stats: "LiveStats", drop_when_late: bool, batch: Callable[[], bool],
+                late_tolerance_us: float = LATE_TOLERANCE_US) -> Iterator[tuple[np.ndarray, int]]:
     """The source's packets, counted; while the run is behind (a packet late, not dropped) and ``batch()``
     says so (the session runs bands of rows in threads, which pay on large packets only), the packets already
     complete after it come with it as one (up to ``CATCH_UP_EVENTS`` events): the same events and promises,
     so a run that fell behind catches up on several cores (docs/live.md, "Fast sensors")."""
     packets = source.packets()
     for events, until_us in packets:
-        events, late = _counted(source, stats, events, until_us, drop_when_late)
+        events, late = _counted(source, stats, events, until_us, drop_when_late, late_tolerance_us)
         if not late or drop_when_late or not batch():
             yield events, until_us
             continue
@@ -237,7 +242,7 @@ def catching_up(source: LiveSource, stats: "LiveStats", drop_when_late: bool,
             if following is None:
                 break
             more, until_us = following[0], following[1]
-            more, _ = _counted(source, stats, more, until_us, drop_when_late)
+            more, _ = _counted(source, stats, more, until_us, drop_when_late, late_tolerance_us)
             parts.append(more)
             total += len(more)
         stats.batches += len(parts) > 1
@@ -282,12 +287,16 @@ def _until_interrupted(packets: Iterator, stats: LiveStats) -> Iterator:
 
 def run_live(source: LiveSource, network, *, backend: str = "fixed", backend_options: dict | None = None,
              compile_options: dict | None = None, drop_when_late: bool = False,
-             on_depth: Callable[[np.ndarray], None] | None = None, tick: Callable[[], None] | None = None,
+             late_tolerance_us: float = LATE_TOLERANCE_US, on_depth: Callable[[np.ndarray], None] | None = None, tick: Callable[[], None] | None = None,
              stop: Callable[[], bool] | None = None) -> tuple[LiveStats, object]:
     """Run ``network`` on ``source`` until it ends (or ``stop()`` is true, or Ctrl-C: ``_ctrl_c_stops``); the
     statistics and the run's ``RunResult`` (counts, latency; its outputs only those of the last steps, run at
     the end: the estimates are not kept). ``on_depth(records)`` sees every batch of depth estimates as it
-    comes (the last steps' too); ``tick()`` is called after every packet (to refresh a display)."""
+    comes (the last steps' too); ``tick()`` is called after every packet (to refresh a display).
+    ``drop_when_late``: drop (and count) the events of a packet fed more than ``late_tolerance_us`` after it
+    was complete."""
+    if not (isinstance(late_tolerance_us, (int, float)) and late_tolerance_us >= 0 and np.isfinite(late_tolerance_us)):
+        raise TofnetError(f"late_tolerance_us: expected a number of µs >= 0, got {late_tolerance_us!r}")
     from tofnet.compiler import compile_network
     from tofnet.session import Session
 
@@ -295,6 +304,7 @@ def run_live(source: LiveSource, network, *, backend: str = "fixed", backend_opt
     camera = live_camera(source.metadata())
     warm_up(compiled, source.metadata(), backend, backend_options)
     stats, session, wall0, cpu0 = LiveStats(), None, time.perf_counter(), time.process_time()
+    stats.late_tolerance_us = late_tolerance_us if drop_when_late else None
     primary, step_us, latency = None, source.packet_us, 0
     first = None
 
@@ -313,7 +323,8 @@ def run_live(source: LiveSource, network, *, backend: str = "fixed", backend_opt
             return session is not None and len(getattr(session.stream, "extra", {}).get("bands", ())) > 1
 
         with _ctrl_c_stops(stats):
-            packets = _until_interrupted(catching_up(source, stats, drop_when_late, runs_bands), stats)
+            packets = catching_up(source, stats, drop_when_late, runs_bands, late_tolerance_us)
+            packets = _until_interrupted(packets, stats)
             for events, until_us in packets:
                 if session is None:
                     if not len(events):

@@ -81,6 +81,7 @@ class LiveStats:
     batches: int = 0  # feeds of several late packets at once (``catching_up``)
     wall_s: float = 0.0
     cpu_s: float = 0.0  # this process's CPU time (all threads) during the run
+    late_tolerance_us: float | None = None  # with drop_when_late: how late a packet's events are dropped
     interrupted: bool = False  # ended by Ctrl-C (``live._ctrl_c_stops``): the figures cover the run up to it
 
     def percentile_ms(self, q: float) -> float:
@@ -104,6 +105,6 @@ class LiveStats:
         if self.interrupted:
             out.append("ended          by Ctrl-C: these figures cover the run up to it")
         if self.dropped_packets:
-            out.append(f"dropped        {self.dropped_events:,} events in {self.dropped_packets:,} late packets "
-                       "(--drop-when-late)")
+            out.append(f"dropped        {self.dropped_events:,} events in {self.dropped_packets:,} packets fed more "
+                       f"than {self.late_tolerance_us * 1e-3:g} ms late (--drop-when-late, --late-tolerance)")
         return out
