@@ -47,7 +47,7 @@ def test_replay_takes_the_recordings_time_and_every_delay_is_real(recording_file
         stats, result = run_live(replay, _network(source), backend="fixed")
         took = time.perf_counter() - started
     # Paced by the file's clock: never faster than the recording, not much slower on an idle machine.
-    assert stats.wall_s >= 0.95 * span_s / speed
+    assert stats.wall_s >= 0.95 * span_s / speed and stats.speed == speed  # the cpu share is of that wall time
     assert took < span_s / speed + 30  # generous: the session's warm-up and a loaded machine
     assert stats.events_in == len(open_recording(recording_file).read().events)
     assert stats.packets == int(np.ceil(stats.span_us / 1000))

@@ -67,3 +67,15 @@ def test_a_ten_times_longer_run_keeps_statistics_of_the_same_size():
         kept[packets] = (stats.depth_out, len(pickle.dumps(stats)))
     assert kept[1000][0] > 8 * kept[100][0] > 0  # ten times the estimates...
     assert abs(kept[1000][1] - kept[100][1]) < 100  # ...in the same bytes (a few digits of the counts)
+
+
+def test_the_cpu_share_is_of_the_wall_time_the_replay_takes_at_its_speed():
+    """At --speed 0.5 the line said 192 % of one core ("cannot keep up") for a run that kept up."""
+    from tofnet.live_stats import LiveStats
+    stats = LiveStats(cpu_s=0.958, span_us=500_000)
+    stats.speed = 0.5  # 0.5 s of source replayed in 1 s
+    cpu = next(line for line in stats.lines() if line.startswith("cpu"))
+    assert cpu == ("cpu            0.958 s for 0.5 s of source time replayed at 0.5x in 1 s (96 % of one core; "
+                   "above 100 % it cannot keep up)")
+    stats.speed = 1.0
+    assert "for 0.5 s of source time (192 % of one core" in next(line for line in stats.lines() if line.startswith("cpu"))

@@ -305,6 +305,7 @@ def run_live(source: LiveSource, network, *, backend: str = "fixed", backend_opt
     warm_up(compiled, source.metadata(), backend, backend_options)
     stats, session, wall0, cpu0 = LiveStats(), None, time.perf_counter(), time.process_time()
     stats.late_tolerance_us = late_tolerance_us if drop_when_late else None
+    stats.speed = float(getattr(source, "speed", 1.0))  # a replay's; a camera runs at its own
     primary, step_us, latency = None, source.packet_us, 0
     first = None
 

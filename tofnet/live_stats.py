@@ -81,12 +81,18 @@ class LiveStats:
     batches: int = 0  # feeds of several late packets at once (``catching_up``)
     wall_s: float = 0.0
     cpu_s: float = 0.0  # this process's CPU time (all threads) during the run
+    speed: float = 1.0  # the replay's, times the recorded speed (a camera: 1)
     late_tolerance_us: float | None = None  # with drop_when_late: how late a packet's events are dropped
     interrupted: bool = False  # ended by Ctrl-C (``live._ctrl_c_stops``): the figures cover the run up to it
 
     def percentile_ms(self, q: float) -> float:
         """The ``q``-th percentile of the delays (ms); NaN without any."""
         return self.delays.percentile_us(q) * 1e-3
+
+    def cpu_percent(self) -> float:
+        """The CPU time over the wall time the source's span takes at its speed (source time / speed), in %
+        of one core: above 100 % the run cannot keep up."""
+        return 100 * self.cpu_s / max(self.span_us * 1e-6 / self.speed, 1e-9)
 
     def lines(self) -> list[str]:
         rate = self.events_in / self.wall_s if self.wall_s > 0 else 0.0
@@ -95,9 +101,9 @@ class LiveStats:
                f"{self.delays.count:,} estimates)",
                f"events         {self.events_in:,} in {self.wall_s:.3g} s ({rate:,.0f} events/s) for "
                f"{self.span_us * 1e-6:.3g} s of source time",
-               f"cpu            {self.cpu_s:.3g} s for {self.span_us * 1e-6:.3g} s of source time "
-               f"({100 * self.cpu_s / max(self.span_us * 1e-6, 1e-9):.0f} % of one core; above 100 % it cannot "
-               "keep up)",
+               f"cpu            {self.cpu_s:.3g} s for {self.span_us * 1e-6:.3g} s of source time"
+               + (f" replayed at {self.speed:g}x in {self.span_us * 1e-6 / self.speed:.3g} s" if self.speed != 1 else "")
+               + f" ({self.cpu_percent():.0f} % of one core; above 100 % it cannot keep up)",
                f"packets        {self.packets:,}, late {self.late_packets:,} (fed more than one packet after "
                f"they were complete); behind at most {self.max_behind_us * 1e-3:.1f} ms, at the end "
                f"{self.behind_us * 1e-3:.1f} ms" + (f"; caught up {self.batches:,} times, several packets at once"

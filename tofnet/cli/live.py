@@ -217,6 +217,7 @@ def summary_of(stats) -> dict:
     return {"delay_p50_ms": stats.percentile_ms(50), "delay_p99_ms": stats.percentile_ms(99),
             "delay_max_ms": stats.percentile_ms(100), "estimates": stats.delays.count,
             "events_in": stats.events_in, "wall_s": stats.wall_s, "cpu_s": stats.cpu_s, "source_s": stats.span_us * 1e-6,
+            "speed": stats.speed, "cpu_percent_of_one_core": stats.cpu_percent(),
             "events_per_s": stats.events_in / stats.wall_s if stats.wall_s else 0.0, "packets": stats.packets,
             "late_packets": stats.late_packets, "max_behind_ms": stats.max_behind_us * 1e-3,
             "behind_at_end_ms": stats.behind_us * 1e-3, "dropped_events": stats.dropped_events,
