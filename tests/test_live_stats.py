@@ -78,4 +78,5 @@ def test_the_cpu_share_is_of_the_wall_time_the_replay_takes_at_its_speed():
     assert cpu == ("cpu            0.958 s for 0.5 s of source time replayed at 0.5x in 1 s (96 % of one core; "
                    "above 100 % it cannot keep up)")
     stats.speed = 1.0
-    assert "for 0.5 s of source time (192 % of one core" in next(line for line in stats.lines() if line.startswith("cpu"))
+    cpu = next(line for line in stats.lines() if line.startswith("cpu"))
+    assert "for 0.5 s of source time (192 % of one core" in cpu

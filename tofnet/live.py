@@ -287,7 +287,8 @@ def _until_interrupted(packets: Iterator, stats: LiveStats) -> Iterator:
 
 def run_live(source: LiveSource, network, *, backend: str = "fixed", backend_options: dict | None = None,
              compile_options: dict | None = None, drop_when_late: bool = False,
-             late_tolerance_us: float = LATE_TOLERANCE_US, on_depth: Callable[[np.ndarray], None] | None = None, tick: Callable[[], None] | None = None,
+             late_tolerance_us: float = LATE_TOLERANCE_US, on_depth: Callable[[np.ndarray], None] | None = None,
+             tick: Callable[[], None] | None = None,
              stop: Callable[[], bool] | None = None) -> tuple[LiveStats, object]:
     """Run ``network`` on ``source`` until it ends (or ``stop()`` is true, or Ctrl-C: ``_ctrl_c_stops``); the
     statistics and the run's ``RunResult`` (counts, latency; its outputs only those of the last steps, run at
@@ -295,7 +296,7 @@ def run_live(source: LiveSource, network, *, backend: str = "fixed", backend_opt
     comes (the last steps' too); ``tick()`` is called after every packet (to refresh a display).
     ``drop_when_late``: drop (and count) the events of a packet fed more than ``late_tolerance_us`` after it
     was complete."""
-    if not (isinstance(late_tolerance_us, (int, float)) and late_tolerance_us >= 0 and np.isfinite(late_tolerance_us)):
+    if not (isinstance(late_tolerance_us, (int, float)) and 0 <= late_tolerance_us < np.inf):
         raise TofnetError(f"late_tolerance_us: expected a number of µs >= 0, got {late_tolerance_us!r}")
     from tofnet.compiler import compile_network
     from tofnet.session import Session

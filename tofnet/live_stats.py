@@ -1,8 +1,8 @@
 """What a live run measured (``LiveStats``), in memory that does not grow with the run.
 
 The delays are counted in a fixed histogram (``DelayHistogram``), not kept one by one: a list of
-every delay grew by ~140 MB per second of a 20 M events/s source (~1 GB an hour at a real
-sensor's rate), and a camera run may go on for hours. Docs: docs/live.md.
+every delay grew by ~140 MB per second of a 20 M events/s source (~40 bytes an estimate: ~2 GB an
+hour at the real EVT3's 16,000 estimates a second), and a camera run may go on for hours. Docs: docs/live.md.
 """
 
 from __future__ import annotations
@@ -102,7 +102,8 @@ class LiveStats:
                f"events         {self.events_in:,} in {self.wall_s:.3g} s ({rate:,.0f} events/s) for "
                f"{self.span_us * 1e-6:.3g} s of source time",
                f"cpu            {self.cpu_s:.3g} s for {self.span_us * 1e-6:.3g} s of source time"
-               + (f" replayed at {self.speed:g}x in {self.span_us * 1e-6 / self.speed:.3g} s" if self.speed != 1 else "")
+               + (f" replayed at {self.speed:g}x in {self.span_us * 1e-6 / self.speed:.3g} s"
+                  if self.speed != 1 else "")
                + f" ({self.cpu_percent():.0f} % of one core; above 100 % it cannot keep up)",
                f"packets        {self.packets:,}, late {self.late_packets:,} (fed more than one packet after "
                f"they were complete); behind at most {self.max_behind_us * 1e-3:.1f} ms, at the end "
