@@ -44,7 +44,7 @@ LAYERS = (
     {"models"},
     {"backends"},
     {"session"},
-    {"api", "eval", "conformance", "testing", "testing_datasets", "live", "live_view"},
+    {"api", "eval", "conformance", "testing", "testing_datasets", "live", "live_view", "live_stats"},
     {"warmup", "batch", "fuzzing_formats", "fuzzing_storage", "fuzzing_sessions"},
     {"cli", "fuzzing_trust", "fuzzing_outputs"},
     {"fuzzing"},

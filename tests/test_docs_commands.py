@@ -18,8 +18,9 @@ there, ``test_every_docs_command_is_run_or_excluded_with_a_reason``):
   tests/test_batch_*.py run small plans; its ``--check`` line runs here. ``dask scheduler`` /
   ``dask worker`` start a cluster.
 - formats.md's datasets block: tests/test_sequences_other.py runs it on its synthetic folders.
-- live.md: replays a Prophesee ``.raw`` recording (tofnet writes none) in real time, or opens a
-  camera; tests/test_live.py replays recordings.
+- live.md's ``--camera`` line: it needs an event camera; tests/test_live.py checks the line said
+  without one and the camera's packets. Its replays run on the ``rec.raw`` they name, written
+  here as a camera writes it (``prophesee_raw``), and its Python block runs too.
 
 Marked ``slow``: about 30 s once the kernels are compiled.
 """
@@ -52,12 +53,14 @@ EXCLUDED = {
     ("batch.md", "tofnet batch plan.yaml --scheduler"): "needs a Dask cluster",
     ("batch.md", "dask "): "starts a Dask cluster",
     ("formats.md", ""): "tests/test_sequences_other.py runs the datasets block",
-    ("live.md", ""): "a Prophesee .raw recording in real time, or a camera",
+    ("live.md", "tofnet live --camera"): "needs an event camera; tests/test_live.py: no camera, its packets",
 }
 #: Lines excluded by their exact text (a prefix would also match the lines that run).
 EXCLUDED_LINES = {("backends.md", "tofnet conformance"): "all 62 cases x every backend: ~60 s"}
 #: Pages that work on the README's rec/.
 NEEDS_REC = {"time_surface.md", "spec.md"}
+#: Pages that work on a Prophesee ``rec.raw``.
+NEEDS_RAW = {"live.md"}
 
 
 def command_lines(text: str) -> list[str]:
@@ -104,7 +107,7 @@ def test_every_docs_command_is_run_or_excluded_with_a_reason():
     for line in (line for lines in every.values() for line in lines):
         words = shlex.split(line)
         assert words[0] != "tofnet" or words[1] in SUBCOMMANDS, line
-    assert RUN == ["backends.md", "batch.md", "evaluation.md", "simulator.md", "spec.md", "time_surface.md"]
+    assert RUN == ["backends.md", "batch.md", "evaluation.md", "live.md", "simulator.md", "spec.md", "time_surface.md"]
     # Every exclusion still names a line of the docs (a stale one would hide nothing).
     for (where, start) in [*EXCLUDED, *EXCLUDED_LINES]:
         hit = [line for page, lines in every.items() if where in ("*", page) for line in lines
@@ -120,6 +123,24 @@ def readme_rec(tmp_path_factory):
     return folder / "rec"
 
 
+@pytest.fixture(scope="module")
+def prophesee_raw(tmp_path_factory):
+    """live.md's ``rec.raw`` as a Prophesee camera writes it: EVT3, 1280x720, no calibration beside it;
+    2.5 s of a texture sliding across the middle of the sensor (584,000 events)."""
+    pytest.importorskip("faery", reason='needs faery: pip install "tofnet[formats]" (writes the .raw)')
+    from types import SimpleNamespace
+
+    from tofnet.io.prophesee_write import write_prophesee
+    from tofnet.testing import moving_pattern
+
+    events = moving_pattern((160, 120), (60.0, 20.0), 2_500_000, sample_us=500)
+    events["x"] += 560
+    events["y"] += 300
+    path = tmp_path_factory.mktemp("live") / "rec.raw"
+    write_prophesee(path, [events], SimpleNamespace(sensor_size=(1280, 720)), "evt3")
+    return path
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("page", RUN)
 def test_a_docs_page_s_commands_run_as_written(page, tmp_path, monkeypatch, capsys, request):
@@ -128,6 +149,10 @@ def test_a_docs_page_s_commands_run_as_written(page, tmp_path, monkeypatch, caps
     (tmp_path / "examples").symlink_to(ROOT / "examples")
     if page in NEEDS_REC:
         shutil.copytree(request.getfixturevalue("readme_rec"), tmp_path / "rec")
+    if page in NEEDS_RAW:
+        shutil.copy(request.getfixturevalue("prophesee_raw"), tmp_path / "rec.raw")
+        for name in ("DISPLAY", "WAYLAND_DISPLAY"):  # a window would wait for the reader
+            monkeypatch.delenv(name, raising=False)
     monkeypatch.chdir(tmp_path)
     printed = {}
     for line in runnable(page):
@@ -164,6 +189,23 @@ def _evaluation(folder: Path, printed: dict) -> None:
     assert len(list((folder / "figures").glob("*.png"))) >= 4 and (folder / "map.png").stat().st_size > 10_000
 
 
+def _live(folder: Path, printed: dict) -> None:
+    import contextlib
+    import io
+    import re
+
+    whole, window = (printed[line] for line in runnable("live.md"))
+    assert "replay at 1x, 1280x720 px" in whole and "events in           583,956" in whole
+    assert "note           time window 2 s .. 5 s" in window and "PNG frames -> frames" in window
+    assert sorted(folder.joinpath("frames").glob("depth-*.png"))
+    # The Python block, as written, in the same folder.
+    code = re.search(r"```python\n(.*?)```", (DOCS / "live.md").read_text(encoding="utf-8"), re.S).group(1)
+    shown = io.StringIO()
+    with contextlib.redirect_stdout(shown):
+        exec(compile(code, "docs/live.md", "exec"), {})
+    assert re.search(r"^events         583,956 in ", shown.getvalue(), re.M)
+
+
 def _simulator(folder: Path, printed: dict) -> None:
     from tofnet.io import read_recording
     assert "slider" in printed["tofnet simulate --list"]
@@ -189,5 +231,5 @@ def _spec(folder: Path, printed: dict) -> None:
     assert counts["burst"] > 0.6 * counts["events_in"] and counts["emitted"] < 0.25 * counts["events_in"]
 
 
-CHECKS = {"backends.md": _backends, "batch.md": _batch, "evaluation.md": _evaluation, "simulator.md": _simulator,
-          "spec.md": _spec, "time_surface.md": _time_surface}
+CHECKS = {"backends.md": _backends, "batch.md": _batch, "evaluation.md": _evaluation, "live.md": _live,
+          "simulator.md": _simulator, "spec.md": _spec, "time_surface.md": _time_surface}

@@ -146,8 +146,36 @@ def test_a_folder_in_place_of_a_frame_is_one_line(recording_file, tmp_path, caps
     assert "depth-000005.png" in one_line(capsys) and (frames / "depth-000005.png").is_dir()
 
 
-def test_an_interrupted_run_keeps_the_whole_frames_it_wrote(recording_file, tmp_path, capsys, monkeypatch):
-    """Ctrl-C is how a camera run ends without --seconds: the frames shown so far are kept, each whole."""
+def test_ctrl_c_ends_a_run_with_its_summary_its_json_and_its_frames(recording_file, tmp_path, capsys, monkeypatch):
+    """Ctrl-C is how a camera run ends without --seconds: it ends the run after the packet being fed, as
+    --seconds does (the summary, --json saying so, the frames in place), and exits 130 as an interrupt does."""
+    import signal
+
+    import tofnet.live
+
+    replayed = tofnet.live.ReplaySource.packets
+
+    def packets(self):
+        for i, packet in enumerate(replayed(self)):
+            if i == 20:
+                os.kill(os.getpid(), signal.SIGINT)  # a real SIGINT, as the terminal sends
+            yield packet
+    monkeypatch.setattr(tofnet.live.ReplaySource, "packets", packets)
+    frames, stats = tmp_path / "frames", tmp_path / "s.json"
+    assert live(recording_file, "--out", frames, "--json", stats) == 130
+    captured = capsys.readouterr()
+    assert captured.err.splitlines()[-1] == "tofnet live: interrupted (Ctrl-C); the summary covers the run up to it"
+    assert "delay          p50" in captured.out and "ended          by Ctrl-C" in captured.out
+    assert "PNG frames -> " + str(frames) in captured.out and (frames / MANIFEST).is_file()
+    summary = json.loads(stats.read_text())
+    assert summary["interrupted"] is True and summary["packets"] == 21  # the packet being fed, none after it
+    assert 0 < summary["events_in"] < len(pattern_recording(SPAN_US).events) and summary["depth_out"] > 0
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler and not leftovers(tmp_path)
+
+
+def test_a_second_ctrl_c_keeps_the_whole_frames_it_wrote(recording_file, tmp_path, capsys, monkeypatch):
+    """A second Ctrl-C (run_live raises KeyboardInterrupt, the first having not yet ended it) stops at once: the
+    frames shown so far are kept, each whole; no summary."""
     import tofnet.live
 
     def interrupted(source, network, *, tick=None, **options):

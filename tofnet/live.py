@@ -14,15 +14,18 @@ they come, and measures for each estimate the delay from the start of the timest
 event that caused it (the estimate's stamp minus its output's latency plus one step) to
 the moment ``feed`` handed it back, on the source's clock: at most one step more than
 from the event itself. A packet is *late* when it is fed more than one packet after it
-was complete; with ``drop_when_late`` its events are dropped (and counted), otherwise the
-run falls behind and says by how much. Docs: docs/live.md.
+was complete; with ``drop_when_late``, one fed more than ``late_tolerance_us`` (100 ms) after
+has its events dropped (and counted), otherwise the run falls behind and says by how much. The
+statistics (``LiveStats``, the delays in a fixed histogram): ``tofnet.live_stats``. Docs: docs/live.md.
 """
 
 from __future__ import annotations
 
+import contextlib
+import signal
+import threading
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
@@ -30,6 +33,7 @@ import numpy as np
 from tofnet.errors import TofnetError
 from tofnet.events import EVENT_DTYPE
 from tofnet.io.recording import Recording
+from tofnet.live_stats import LiveStats
 
 
 class LiveSource(Protocol):
@@ -167,47 +171,6 @@ class CameraSource:
             carry = events[cuts[-2]:]
 
 
-@dataclass
-class LiveStats:
-    """What a live run measured. Delays in µs on the source's clock."""
-
-    delays_us: list = field(default_factory=list)
-    events_in: int = 0
-    packets: int = 0
-    late_packets: int = 0
-    dropped_events: int = 0
-    dropped_packets: int = 0
-    max_behind_us: float = 0.0
-    behind_us: float = 0.0  # at the last packet
-    depth_out: int = 0
-    span_us: int = 0  # the source's time covered
-    batches: int = 0  # feeds of several late packets at once (``catching_up``)
-    wall_s: float = 0.0
-    cpu_s: float = 0.0  # this process's CPU time (all threads) during the run
-
-    def percentile_ms(self, q: float) -> float:
-        return float(np.percentile(self.delays_us, q)) * 1e-3 if self.delays_us else float("nan")
-
-    def lines(self) -> list[str]:
-        rate = self.events_in / self.wall_s if self.wall_s > 0 else 0.0
-        out = [f"delay          p50 {self.percentile_ms(50):.2f} ms, p99 {self.percentile_ms(99):.2f} ms, "
-               f"max {self.percentile_ms(100):.2f} ms  (event's step start -> estimate handed back, "
-               f"{len(self.delays_us):,} estimates)",
-               f"events         {self.events_in:,} in {self.wall_s:.3g} s ({rate:,.0f} events/s) for "
-               f"{self.span_us * 1e-6:.3g} s of source time",
-               f"cpu            {self.cpu_s:.3g} s for {self.span_us * 1e-6:.3g} s of source time "
-               f"({100 * self.cpu_s / max(self.span_us * 1e-6, 1e-9):.0f} % of one core; above 100 % it cannot "
-               "keep up)",
-               f"packets        {self.packets:,}, late {self.late_packets:,} (fed more than one packet after "
-               f"they were complete); behind at most {self.max_behind_us * 1e-3:.1f} ms, at the end "
-               f"{self.behind_us * 1e-3:.1f} ms" + (f"; caught up {self.batches:,} times, several packets at once"
-                                                     if self.batches else "")]
-        if self.dropped_packets:
-            out.append(f"dropped        {self.dropped_events:,} events in {self.dropped_packets:,} late packets "
-                       "(--drop-when-late)")
-        return out
-
-
 def live_camera(metadata: Recording) -> dict:
     """What a live session is told of the camera: the source's metadata (``Session(camera=...)``), so its
     processes bind to its intrinsics, poses and IMU as a run's do (given only the intrinsics and poses, a
@@ -237,34 +200,39 @@ def warm_up(compiled, metadata: Recording, backend, backend_options) -> None:
 #: Events fed at once at most while a run catches up (``catching_up``).
 CATCH_UP_EVENTS = 1 << 18
 
+#: How far behind (µs) a packet is fed before ``drop_when_late`` drops its events: above the stalls of runs
+#: that keep up on average (the replay decoding 65,536 events at once, the garbage collector, a loaded
+#: machine's scheduler: up to 47 ms behind on the real EVT3 at 1x using 20 % of a core; docs/live.md).
+LATE_TOLERANCE_US = 100_000
 
-def _counted(source: LiveSource, stats: "LiveStats", events: np.ndarray, until_us: int,
-             drop_when_late: bool) -> tuple[np.ndarray, bool]:
+
+def _counted(source: LiveSource, stats: "LiveStats", events: np.ndarray, until_us: int, drop_when_late: bool,
+             late_tolerance_us: float = LATE_TOLERANCE_US) -> tuple[np.ndarray, bool]:
     """Count a packet (late: fed more than one packet after it was complete); its events (none when it is
-    dropped late) and whether it was late."""
+    dropped: ``drop_when_late`` and fed more than ``late_tolerance_us`` after it was complete) and whether
+    it was late."""
     behind = source.now_us() - until_us
     stats.packets += 1
     stats.behind_us = max(behind, 0.0)
     stats.max_behind_us = max(stats.max_behind_us, stats.behind_us)
     late = behind > source.packet_us
-    if late:
-        stats.late_packets += 1
-        if drop_when_late and len(events):
-            stats.dropped_events += len(events)
-            stats.dropped_packets += 1
-            events = events[:0]
+    stats.late_packets += late
+    if drop_when_late and behind > late_tolerance_us and len(events):
+        stats.dropped_events += len(events)
+        stats.dropped_packets += 1
+        events = events[:0]
     return events, late
 
 
-def catching_up(source: LiveSource, stats: "LiveStats", drop_when_late: bool,
-                batch: Callable[[], bool]) -> Iterator[tuple[np.ndarray, int]]:
+def catching_up(source: LiveSource, stats: "LiveStats", drop_when_late: bool, batch: Callable[[], bool],
+                late_tolerance_us: float = LATE_TOLERANCE_US) -> Iterator[tuple[np.ndarray, int]]:
     """The source's packets, counted; while the run is behind (a packet late, not dropped) and ``batch()``
     says so (the session runs bands of rows in threads, which pay on large packets only), the packets already
     complete after it come with it as one (up to ``CATCH_UP_EVENTS`` events): the same events and promises,
     so a run that fell behind catches up on several cores (docs/live.md, "Fast sensors")."""
     packets = source.packets()
     for events, until_us in packets:
-        events, late = _counted(source, stats, events, until_us, drop_when_late)
+        events, late = _counted(source, stats, events, until_us, drop_when_late, late_tolerance_us)
         if not late or drop_when_late or not batch():
             yield events, until_us
             continue
@@ -274,21 +242,62 @@ def catching_up(source: LiveSource, stats: "LiveStats", drop_when_late: bool,
             if following is None:
                 break
             more, until_us = following[0], following[1]
-            more, _ = _counted(source, stats, more, until_us, drop_when_late)
+            more, _ = _counted(source, stats, more, until_us, drop_when_late, late_tolerance_us)
             parts.append(more)
             total += len(more)
         stats.batches += len(parts) > 1
         yield (np.concatenate(parts) if len(parts) > 1 else events), until_us
 
 
+@contextlib.contextmanager
+def _ctrl_c_stops(stats: LiveStats) -> Iterator[None]:
+    """Ctrl-C (SIGINT) ends the run as ``stop()`` does, after the packet being fed: ``stats.interrupted`` is set
+    and the session finishes, so the figures of the run up to it are whole. A second Ctrl-C raises
+    ``KeyboardInterrupt`` as usual. Only in the main thread, and only over Python's own handler."""
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
+        yield
+        return
+
+    def interrupted(signum, frame) -> None:
+        stats.interrupted = True
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    signal.signal(signal.SIGINT, interrupted)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+def _until_interrupted(packets: Iterator, stats: LiveStats) -> Iterator:
+    """``packets`` until Ctrl-C (``stats.interrupted``), or a ``KeyboardInterrupt`` raised while waiting for the
+    next one (a second Ctrl-C while a camera sends nothing), which marks it: between two packets the session
+    can finish."""
+    while not stats.interrupted:
+        try:
+            item = next(packets)
+        except StopIteration:
+            return
+        except KeyboardInterrupt:
+            stats.interrupted = True
+            return
+        yield item
+
+
 def run_live(source: LiveSource, network, *, backend: str = "fixed", backend_options: dict | None = None,
              compile_options: dict | None = None, drop_when_late: bool = False,
-             on_depth: Callable[[np.ndarray], None] | None = None, tick: Callable[[], None] | None = None,
+             late_tolerance_us: float = LATE_TOLERANCE_US, on_depth: Callable[[np.ndarray], None] | None = None,
+             tick: Callable[[], None] | None = None,
              stop: Callable[[], bool] | None = None) -> tuple[LiveStats, object]:
-    """Run ``network`` on ``source`` until it ends (or ``stop()`` is true); the statistics and the run's
-    ``RunResult`` (counts, latency; its outputs only those of the last steps, run at the end: the
-    estimates are not kept). ``on_depth(records)`` sees every batch of depth estimates as it comes
-    (the last steps' too); ``tick()`` is called after every packet (to refresh a display)."""
+    """Run ``network`` on ``source`` until it ends (or ``stop()`` is true, or Ctrl-C: ``_ctrl_c_stops``); the
+    statistics and the run's ``RunResult`` (counts, latency; its outputs only those of the last steps, run at
+    the end: the estimates are not kept). ``on_depth(records)`` sees every batch of depth estimates as it
+    comes (the last steps' too); ``tick()`` is called after every packet (to refresh a display).
+    ``drop_when_late``: drop (and count) the events of a packet fed more than ``late_tolerance_us`` after it
+    was complete."""
+    if not (isinstance(late_tolerance_us, (int, float)) and 0 <= late_tolerance_us < np.inf):
+        raise TofnetError(f"late_tolerance_us: expected a number of µs >= 0, got {late_tolerance_us!r}")
     from tofnet.compiler import compile_network
     from tofnet.session import Session
 
@@ -296,6 +305,8 @@ def run_live(source: LiveSource, network, *, backend: str = "fixed", backend_opt
     camera = live_camera(source.metadata())
     warm_up(compiled, source.metadata(), backend, backend_options)
     stats, session, wall0, cpu0 = LiveStats(), None, time.perf_counter(), time.process_time()
+    stats.late_tolerance_us = late_tolerance_us if drop_when_late else None
+    stats.speed = float(getattr(source, "speed", 1.0))  # a replay's; a camera runs at its own
     primary, step_us, latency = None, source.packet_us, 0
     first = None
 
@@ -313,27 +324,30 @@ def run_live(source: LiveSource, network, *, backend: str = "fixed", backend_opt
         def runs_bands() -> bool:  # a graph stream's bands (a fused stream keeps 1 ms packets whole: faster)
             return session is not None and len(getattr(session.stream, "extra", {}).get("bands", ())) > 1
 
-        for events, until_us in catching_up(source, stats, drop_when_late, runs_bands):
-            if session is None:
-                if not len(events):
-                    continue
-                open_session(int(events["t"][0]))
-            stats.events_in += len(events)
-            produced = session.feed(events, until_us)
-            depth = produced.get(primary) if primary else None
-            if depth is not None and len(depth):
-                now = source.now_us()
-                stats.delays_us.extend((now - (depth["t"] - (latency + 1) * step_us)).tolist())
-                stats.depth_out += len(depth)
-                if on_depth is not None:
-                    on_depth(depth)
-            stats.span_us = until_us - first
-            if tick is not None:
-                tick()
-            if stop is not None and stop():
-                break
+        with _ctrl_c_stops(stats):
+            packets = catching_up(source, stats, drop_when_late, runs_bands, late_tolerance_us)
+            packets = _until_interrupted(packets, stats)
+            for events, until_us in packets:
+                if session is None:
+                    if not len(events):
+                        continue
+                    open_session(int(events["t"][0]))
+                stats.events_in += len(events)
+                produced = session.feed(events, until_us)
+                depth = produced.get(primary) if primary else None
+                if depth is not None and len(depth):
+                    now = source.now_us()
+                    stats.delays.add(now - (depth["t"] - (latency + 1) * step_us))
+                    stats.depth_out += len(depth)
+                    if on_depth is not None:
+                        on_depth(depth)
+                stats.span_us = until_us - first
+                if tick is not None:
+                    tick()
+                if stop is not None and stop():
+                    break
         if session is None:
-            raise TofnetError("live: the source gave no events")
+            raise TofnetError("live: the source gave no events" + (" before Ctrl-C" if stats.interrupted else ""))
         result = session.finish()  # the steps still in flight (not counted in the delays: nothing waits for them)
         if primary and primary in result.outputs:
             stats.depth_out += len(result.outputs[primary])

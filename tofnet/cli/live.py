@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import sys
 from pathlib import Path
 
 from tofnet.errors import TofnetError
@@ -30,8 +31,11 @@ def register(subparsers) -> None:
                        help="read the camera connected to this computer through faery (Prophesee, iniVation)")
     g.add_argument("--speed", type=float, default=1.0, help="replay speed, times the recorded speed (default 1)")
     g.add_argument("--drop-when-late", action="store_true",
-                   help="drop the events of a packet fed more than one packet late (counted); default: fall "
-                        "behind and say by how much")
+                   help="drop the events of a packet fed more than --late-tolerance late (counted); default: "
+                        "fall behind and say by how much")
+    g.add_argument("--late-tolerance", default=None, metavar="T",
+                   help="with --drop-when-late: how late a packet is fed before its events are dropped "
+                        "(default 100ms: above the stalls of a run that keeps up on average)")
     g.add_argument("--seconds", default=None, help="stop after this much wall time, e.g. 10 or 30s")
     v = p.add_argument_group("display")
     v.add_argument("-o", "--out", metavar="DIR",
@@ -66,6 +70,7 @@ def handle(args) -> int:
     wall_limit = None if args.seconds is None else seconds(args.seconds, "--seconds")
     if wall_limit is not None and wall_limit <= 0:
         raise TofnetError(f"--seconds: expected a time longer than 0 s, got {args.seconds}")
+    late_tolerance_us = late_tolerance_option(args)
     check_live_outputs(args)  # before the source is opened: a refused output costs no run
     opened = None
     if args.replay:
@@ -111,12 +116,14 @@ def handle(args) -> int:
             try:
                 stats, result = run_live(source, network, backend=backend, backend_options=backend_options,
                                          compile_options=compile_options, drop_when_late=args.drop_when_late,
+                                         late_tolerance_us=late_tolerance_us,
                                          on_depth=depth.add if view else None, tick=view.tick if view else None,
                                          stop=stop)  # no view: no map to keep up
             except KeyboardInterrupt as err:
                 if not isinstance(view, PngFolder):
                     raise
-                # Ctrl-C ends a camera run (without --seconds): the whole frames written so far are kept.
+                # A second Ctrl-C (the first ends the run with its summary, run_live): the whole frames
+                # written so far are kept.
                 view.stop()
                 interrupted = err
             except BaseException:
@@ -153,6 +160,9 @@ def handle(args) -> int:
         print(f"note           {line}")
     if args.json:
         write_text_atomic(args.json, json.dumps(summary_of(stats), indent=2) + "\n")
+    if stats.interrupted:  # 130 as for any interrupted command: the run did not end by itself or --seconds
+        print("tofnet live: interrupted (Ctrl-C); the summary covers the run up to it", file=sys.stderr)
+        return 130
     return 0
 
 
@@ -175,6 +185,21 @@ def check_live_outputs(args, more_inputs: list | None = None) -> None:
         check_output(args.json, force=args.force, inputs=inputs, what="--json")
 
 
+def late_tolerance_option(args) -> float:
+    """``--late-tolerance`` in µs (``live.LATE_TOLERANCE_US`` when not given); only with ``--drop-when-late``."""
+    from tofnet.live import LATE_TOLERANCE_US
+    from tofnet.units import seconds
+
+    if args.late_tolerance is None:
+        return LATE_TOLERANCE_US
+    if not args.drop_when_late:
+        raise TofnetError("--late-tolerance: expected with --drop-when-late (it says when a late packet is dropped)")
+    value = seconds(args.late_tolerance, "--late-tolerance")
+    if value < 0:
+        raise TofnetError(f"--late-tolerance: expected a time of 0 s or more, got {args.late_tolerance}")
+    return value * 1e6
+
+
 def _stop_after(limit_s: float):
     """A ``stop()`` that turns true ``limit_s`` seconds after its first call (the first packet)."""
     import time
@@ -190,9 +215,12 @@ def _stop_after(limit_s: float):
 def summary_of(stats) -> dict:
     """The statistics as plain numbers (delays in ms)."""
     return {"delay_p50_ms": stats.percentile_ms(50), "delay_p99_ms": stats.percentile_ms(99),
-            "delay_max_ms": stats.percentile_ms(100), "estimates": len(stats.delays_us),
+            "delay_max_ms": stats.percentile_ms(100), "estimates": stats.delays.count,
             "events_in": stats.events_in, "wall_s": stats.wall_s, "cpu_s": stats.cpu_s, "source_s": stats.span_us * 1e-6,
+            "speed": stats.speed, "cpu_percent_of_one_core": stats.cpu_percent(),
             "events_per_s": stats.events_in / stats.wall_s if stats.wall_s else 0.0, "packets": stats.packets,
             "late_packets": stats.late_packets, "max_behind_ms": stats.max_behind_us * 1e-3,
             "behind_at_end_ms": stats.behind_us * 1e-3, "dropped_events": stats.dropped_events,
-            "dropped_packets": stats.dropped_packets, "depth_out": stats.depth_out, "catch_up_batches": stats.batches}
+            "dropped_packets": stats.dropped_packets, "depth_out": stats.depth_out, "catch_up_batches": stats.batches,
+            "late_tolerance_ms": None if stats.late_tolerance_us is None else stats.late_tolerance_us * 1e-3,
+            "interrupted": stats.interrupted}
