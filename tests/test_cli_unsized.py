@@ -1,0 +1,43 @@
+"""A file that states no sensor size (a .npy): tofnet run and live warn alike about the events outside
+the 240x180 sensor they run it as, check the camera against that sensor, and tofnet info says so."""
+
+import json
+
+import numpy as np
+import pytest
+
+from tofnet.cli import main
+from tofnet.events import make_events
+
+CAMERA = ["--velocity", "-0.5,0,0.1"]
+
+
+@pytest.fixture(scope="module")
+def big(tmp_path_factory):
+    """0.1 s of events over a 1280x720 sensor, in a .npy that does not say so."""
+    rng = np.random.default_rng(3)
+    n = 20_000
+    path = tmp_path_factory.mktemp("unsized") / "big.npy"
+    np.save(path, make_events(np.sort(rng.integers(0, 100_000, n)), rng.integers(0, 1280, n),
+                              rng.integers(0, 720, n), rng.integers(0, 2, n)))
+    events = np.load(path)
+    return path, int(np.count_nonzero((events["x"] >= 240) | (events["y"] >= 180)))
+
+
+def _warnings(text: str) -> list[str]:
+    return [line for line in text.splitlines() if line.startswith("warning")]
+
+
+def test_live_warns_of_the_events_outside_the_sensor_as_run_does(big, tmp_path, capsys):
+    """live ran such a file as 240x180 and dropped 95 % of its events as out of bounds with no warning."""
+    path, outside = big
+    intrinsics = ["--intrinsics", "200,200,120,90"]
+    assert main(["run", str(path), *intrinsics, *CAMERA, "--quiet", "--out", str(tmp_path / "d.npz")]) == 0
+    said = _warnings(capsys.readouterr().out)
+    assert said == [f"warning        {outside:,} events lay outside the 240x180 sensor (if the recording is larger, "
+                    "--sensor-size says how large)"]
+    assert main(["live", "--replay", str(path), *intrinsics, *CAMERA, "--no-view", "--speed", "8"]) == 0
+    assert _warnings(capsys.readouterr().out) == said
+    assert main(["live", "--replay", str(path), *intrinsics, *CAMERA, "--no-view", "--speed", "8",
+                 "--sensor-size", "1280x720"]) == 0
+    assert _warnings(capsys.readouterr().out) == []
