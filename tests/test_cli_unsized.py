@@ -41,3 +41,17 @@ def test_live_warns_of_the_events_outside_the_sensor_as_run_does(big, tmp_path, 
     assert main(["live", "--replay", str(path), *intrinsics, *CAMERA, "--no-view", "--speed", "8",
                  "--sensor-size", "1280x720"]) == 0
     assert _warnings(capsys.readouterr().out) == []
+
+
+@pytest.mark.parametrize("command", ["run", "live"])
+def test_a_principal_point_outside_the_sensor_the_network_runs_is_noted(big, tmp_path, command, capsys):
+    """--intrinsics with cx 640 on a file run as 240x180 was taken silently (the check at opening needs a size)."""
+    path, _ = big
+    head = ["run", str(path), "--quiet", "--force", "--out", str(tmp_path / "d.npz")] if command == "run" else \
+        ["live", "--replay", str(path), "--no-view", "--speed", "8"]
+    note = ("note           the principal point (640, 360) px is outside the 240x180 sensor: the calibration of "
+            "another camera or resolution, or a sensor size to give (--sensor-size)?")
+    assert main([*head, "--intrinsics", "200,200,640,360", *CAMERA]) == 0
+    assert note in capsys.readouterr().out.splitlines()
+    assert main([*head, "--intrinsics", "200,200,640,360", *CAMERA, "--sensor-size", "1280x720"]) == 0
+    assert "principal point" not in capsys.readouterr().out

@@ -216,6 +216,14 @@ def build_network(args, recording_sensor_size, recording=None):
     set_parameters(network, getattr(args, "set_params", None) or ())
     if args.patch:
         compile_options["patch"] = "auto" if args.patch == "auto" else parse_size(args.patch, "--patch")
+    stated = recording.sensor_size if recording is not None else None
+    if recording is not None and not (stated and any(n < s for n, s in zip(network.sensor_size, stated))):
+        # the camera against the sensor the network runs (a file that states no size was not checked when
+        # opened); not against a crop of the file's sensor, where a principal point outside is expected
+        from tofnet.io.plausible import principal_point_note
+        note = principal_point_note(run_intrinsics(network, recording), network.sensor_size)
+        if note and note not in recording.notes:
+            recording.notes.append(note)
     return network, compile_options, spec_backend, backend_options
 
 
