@@ -55,3 +55,15 @@ def test_a_principal_point_outside_the_sensor_the_network_runs_is_noted(big, tmp
     assert note in capsys.readouterr().out.splitlines()
     assert main([*head, "--intrinsics", "200,200,640,360", *CAMERA, "--sensor-size", "1280x720"]) == 0
     assert "principal point" not in capsys.readouterr().out
+
+
+def test_info_says_how_run_and_live_size_a_file_that_does_not_say(big, tmp_path, capsys):
+    path, outside = big
+    assert main(["info", str(path), "--quiet", "--json", str(tmp_path / "i.json")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert ("sensor         unknown (the file does not say); tofnet run and live take 240x180 px, the default, "
+            "unless --sensor-size WxH") in lines
+    assert any(line.startswith("pixels used") and line.endswith(f"; {outside:,} events beyond 240x180 px")
+               for line in lines)
+    facts = json.loads((tmp_path / "i.json").read_text())
+    assert facts["run_sensor_size"] == [240, 180] and facts["run_sensor_size_from"] == "default"
