@@ -59,7 +59,7 @@ def test_png16_holds_millimetres(tmp_path):
     assert saturated == 1
     done = write_depth_maps(depth_maps(_depth([(500, 1, 0, 1.5), (1500, 0, 1, 2.25)]), (2, 2), 1000, t0_us=0),
                             tmp_path)
-    assert done == {"windows": 2, "saturated_png_pixels": 0}
+    assert done == {"windows": 2, "empty_windows": 0, "saturated_png_pixels": 0}
     with Image.open(tmp_path / "depth_000001.png") as png:
         assert png.mode in ("I;16", "I") and png.size == (2, 2)
         assert np.array(png).tolist() == [[0, 0], [2250, 0]]
