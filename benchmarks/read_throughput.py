@@ -1,6 +1,6 @@
 """Reading throughput per format (events/s, one core) and memory while reading long files in chunks.
 
-    python benchmarks/read_throughput.py --real FOLDER [--repeat 3] [--long 16]
+    python benchmarks/read_throughput.py --real FOLDER [--repeat 3] [--long 16] [--also FILE ...] [--part 1]
 
 Part 1 reads each real sample (in ``--real``, not distributed with tofnet: AEDAT4, EVT3, DAT, EVT2) and the
 EVT3 recording's 1.22 M events rewritten as AEDAT4 without frames (the DAVIS sample is
@@ -8,7 +8,9 @@ mostly APS frames, so its events/s measures frame decoding), HDF5 (DSEC layout),
 bag, ``.npz`` and ``events.txt``. Each file is read whole through
 ``open_recording(...).chunks(1_000_000)`` (what ``read_recording`` does), pinned to one
 CPU; the best of ``--repeat`` runs is printed, beside faery's bare decoding for its
-formats. Target: >= 10 M events/s for AEDAT4 and EVT3.
+formats and, for EVT3, tofnet's own decoder alone (``tofnet.io.evt3.decode_file``, no
+chunks). ``--also`` reads more files the same way (e.g. a long EVT3 recording). Target:
+>= 10 M events/s for AEDAT4 and EVT3.
 
 Part 2 writes the EVT3 recording 1, 4 and ``--long`` times over (shifted in time) and
 reads each in chunks of 1 M events in a fresh process: peak traced Python/numpy memory
@@ -55,6 +57,23 @@ def _faery_decode(path: Path) -> int:
     return sum(len(packet) for packet in faery.file_decoder.Decoder(path, time_range_cache=None))
 
 
+def _evt3_decode(path: Path) -> int:
+    """tofnet's EVT3 decoder alone, block by block, at the header's geometry (what the reader gives it)."""
+    from tofnet.io.evt3 import decode_file
+    from tofnet.io.source import open_recording
+
+    with open_recording(path) as source:
+        width, height = source.sensor_size
+    return sum(len(block) for block in decode_file(path, width, height))
+
+
+def _is_evt3(path: Path) -> bool:
+    from tofnet.io.source import open_recording
+
+    with open_recording(path) as source:
+        return source.describe() == "evt (EVT3)"
+
+
 def _best(function, path: Path, repeat: int) -> tuple[float, int]:
     best, count = float("inf"), 0
     for _ in range(repeat):
@@ -83,7 +102,7 @@ def _write_bag(path: Path, events: np.ndarray, width: int, height: int, per_mess
             writer.write(connection, int(part["t"][0]) * 1000, raw)
 
 
-def throughput(real: Path, repeat: int, scratch: Path) -> None:
+def throughput(real: Path, repeat: int, scratch: Path, also: list[Path]) -> None:
     from tofnet.io import read_recording
     from tofnet.io.aedat import write_aedat4
     from tofnet.io.arrays import write_npz_recording
@@ -91,7 +110,8 @@ def throughput(real: Path, repeat: int, scratch: Path) -> None:
     from tofnet.io.hdf5 import write_hdf5
 
     print(f"Part 1: reading throughput, best of {repeat}, chunks of {CHUNK:,} events, {_pin_one_core()}")
-    print(f"{'format':<22} {'file':<26} {'events':>10} {'MB':>7} {'tofnet M ev/s':>14} {'faery alone':>12}")
+    print(f"{'format':<22} {'file':<26} {'events':>10} {'MB':>7} {'tofnet M ev/s':>14} {'faery alone':>12} "
+          f"{'tofnet EVT3 decoder':>20}")
     files = [("AEDAT4", real / "davis346.aedat4", True), ("EVT3", real / "evt3.raw", True),
              ("DAT", real / "gen4.dat", True), ("EVT2", real / "evt2.raw", True)]
     evt3 = read_recording(real / "evt3.raw")
@@ -102,15 +122,21 @@ def throughput(real: Path, repeat: int, scratch: Path) -> None:
     write_events_txt(scratch / "events.txt", evt3.events)
     files += [("AEDAT4 (events only)", scratch / "evt3.aedat4", True), ("HDF5 (DSEC layout)", scratch / "evt3.h5", False), ("ROS1 bag", scratch / "evt3.bag", False),
               (".npz", scratch / "evt3.npz", False), ("events.txt", scratch / "events.txt", False)]
+    files += [("given", path, path.suffix in (".raw", ".dat", ".aedat4", ".es")) for path in also]
     for name, path, by_faery in files:
         _read(path)  # warm up: imports, numba caches, page cache
         seconds, count = _best(_read, path, repeat)
-        bare = ""
+        bare = own = ""
         if by_faery:
             bare_seconds, _ = _best(_faery_decode, path, repeat)
             bare = f"{count / bare_seconds / 1e6:.1f}"
+        if _is_evt3(path):
+            _evt3_decode(path)
+            own_seconds, _ = _best(_evt3_decode, path, repeat)
+            own = f"{count / own_seconds / 1e6:.1f}"
         size = path.stat().st_size / 1e6
-        print(f"{name:<22} {path.name:<26} {count:>10,} {size:>7.1f} {count / seconds / 1e6:>14.1f} {bare:>12}")
+        print(f"{name:<22} {path.name:<26} {count:>10,} {size:>7.1f} {count / seconds / 1e6:>14.1f} {bare:>12} "
+              f"{own:>20}")
 
 
 def _measure_child(path: str) -> None:
@@ -161,6 +187,8 @@ def main() -> None:
     parser.add_argument("--real", type=Path, required=True, help="folder of the real samples (not distributed)")
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--long", type=int, default=16, help="copies of the EVT3 recording in the longest file")
+    parser.add_argument("--also", type=Path, nargs="*", default=[], help="more files to read in part 1")
+    parser.add_argument("--part", type=int, choices=(1, 2), help="run part 1 (throughput) or 2 (memory) only")
     parser.add_argument("--measure", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.measure:
@@ -170,8 +198,10 @@ def main() -> None:
         sys.exit(f"no real recordings at {args.real}")
     started = time.perf_counter()
     with tempfile.TemporaryDirectory() as scratch:
-        throughput(args.real, args.repeat, Path(scratch))
-        memory(args.real, args.long, Path(scratch))
+        if args.part != 2:
+            throughput(args.real, args.repeat, Path(scratch), args.also)
+        if args.part != 1:
+            memory(args.real, args.long, Path(scratch))
     print(f"\n({time.perf_counter() - started:.0f} s in all)")
 
 

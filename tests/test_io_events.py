@@ -161,3 +161,15 @@ def test_npz_without_event_arrays_and_corrupt_file(tmp_path):
     np.save(tmp_path / "shape.npy", np.zeros((3, 3)))
     with pytest.raises(DataError, match=r"shape.npy: the array has shape \(3, 3\)"):
         read_events_npy(tmp_path / "shape.npy")
+
+
+@pytest.mark.parametrize("p, got", [([-1, 1], "-1"), ([0, 2], "2"), ([1, 0.5], "0.5")])
+def test_make_events_refuses_a_polarity_other_than_0_or_1_as_the_writers_do(tmp_path, p, got):
+    """``make_events(..., p=[-1, 1])`` cast -1 to 255, which every kernel then ran as ON."""
+    with pytest.raises(DataError, match=f"^polarity must be 0 or 1, got {got}$"):
+        make_events([0, 1], [1, 1], [1, 1], p)
+    events = make_events([0, 1], [1, 1], [1, 1], [0, 1])
+    events["p"][0] = 255
+    with pytest.raises(DataError, match="^polarity must be 0 or 1, got 255$"):
+        write_events_npy(tmp_path / "e.npy", events)
+    assert make_events([0, 1], [1, 1], [1, 1], [True, False])["p"].tolist() == [1, 0]

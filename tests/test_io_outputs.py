@@ -59,7 +59,7 @@ def test_png16_holds_millimetres(tmp_path):
     assert saturated == 1
     done = write_depth_maps(depth_maps(_depth([(500, 1, 0, 1.5), (1500, 0, 1, 2.25)]), (2, 2), 1000, t0_us=0),
                             tmp_path)
-    assert done == {"windows": 2, "saturated_png_pixels": 0}
+    assert done == {"windows": 2, "empty_windows": 0, "saturated_png_pixels": 0}
     with Image.open(tmp_path / "depth_000001.png") as png:
         assert png.mode in ("I;16", "I") and png.size == (2, 2)
         assert np.array(png).tolist() == [[0, 0], [2250, 0]]
@@ -189,3 +189,43 @@ def test_a_depth_files_camera_is_checked_as_intrinsics_are(tmp_path, capsys, cam
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "its summary's camera is not one tofnet run writes" in err
     assert not (tmp_path / "c.ply").exists()
+
+
+def test_export_maps_beyond_the_free_space_are_refused_before_any_is_written(tmp_path, monkeypatch, capsys):
+    """1,078 windows of a 1280x720 run became 7.5 GB of dense maps (for 95,944 estimates), the disk unchecked."""
+    import collections
+    import shutil
+
+    from tofnet.io.depth import write_depth
+    write_depth(tmp_path / "d.npz", _depth([(k * 10_000 + 1, k, k, 2.0) for k in range(10)]), t0_us=0,
+                timestep_us=1000, latency_steps=2, summary={})
+    usage = collections.namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: usage(10**12, 0, 20_000_000))
+    common = ["export", str(tmp_path / "d.npz"), "--maps", str(tmp_path / "maps"), "--sensor-size", "640x480"]
+    assert main(common) == 2
+    each = 2 * (128 + 4 * 640 * 480) + 96 + 480 * 1281 + 480 * 1281 // 1000 + 1024
+    assert capsys.readouterr().err.strip() == (
+        f"tofnet export: error: {tmp_path / 'maps'}: --maps: 10 maps of 640x480 px need up to "
+        f"{(10 * each + (1 << 20)) / 1e6:.3g} MB ({each / 1e6:.3g} MB each: depth .npy + age .npy + PNG (counted "
+        "uncompressed)), the file system has 20 MB free; give a longer --window, --no-age, --no-png, or --ply "
+        "alone (a point cloud)")
+    assert not (tmp_path / "maps").exists()
+    assert main(common + ["--no-age", "--no-png"]) == 0  # 12.3 MB of depth maps fit
+    written = sorted(p.name for p in (tmp_path / "maps").iterdir())
+    assert written == [".tofnet-manifest.json", *(f"depth_{k:06d}.npy" for k in range(10)), "index.csv"]
+
+
+def test_the_maps_size_estimate_is_exact_for_npy_and_bounds_the_pngs(tmp_path):
+    rng = np.random.default_rng(2)
+    n = 3000  # every pixel of a 40x30 map holds depth in each of the 3 windows: the PNGs hardly compress
+    depth = _depth(sorted((int(t), int(x), int(y), float(z)) for t, x, y, z in
+                          zip(rng.integers(0, 30_000, n), rng.integers(0, 40, n), rng.integers(0, 30, n),
+                              rng.uniform(0.5, 60, n))))
+    for age, png in ((True, True), (False, False)):
+        maps = depth_maps(depth, (40, 30), 10_000, t0_us=0)
+        each = maps.map_bytes(age=age, png=png)
+        write_depth_maps(maps, tmp_path / f"m{age}{png}", png=png, age=age)
+        files = {p.name: p.stat().st_size for p in (tmp_path / f"m{age}{png}").iterdir()}
+        npy = sum(size for name, size in files.items() if name.endswith(".npy"))
+        assert npy == maps.windows * (1 + age) * (128 + 4 * 40 * 30) and maps.windows == 3
+        assert sum(files.values()) - files[".tofnet-manifest.json"] <= maps.windows * each

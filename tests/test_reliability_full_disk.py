@@ -143,20 +143,28 @@ def test_aedat4_encoder_errors_are_one_line(tmp_path, monkeypatch, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["small.npy"]
 
 
-def test_export_maps_on_a_full_file_system_is_one_line_and_no_folder(tmp_path):
+def test_export_maps_on_a_full_file_system_is_one_line_and_no_folder(tmp_path, monkeypatch, capsys):
     from tofnet.events import DEPTH_DTYPE
+    from tofnet.io import files
     from tofnet.io.depth import write_depth
 
     depth = np.zeros(200, dtype=DEPTH_DTYPE)
     depth["t"], depth["x"], depth["z"] = np.arange(200) * 1000, 1, 1.5
     write_depth(tmp_path / "d.npz", depth, t0_us=0, timestep_us=1000, latency_steps=0)
-    with tmpfs("2m") as full:  # 200 windows of 240x180 maps need ~70 MB
-        done = _tofnet("export", str(tmp_path / "d.npz"), "--maps", str(full / "maps"), "--window", "1ms",
-                       "--sensor-size", "240x180")
+    options = ["--maps", None, "--window", "1ms", "--sensor-size", "240x180"]
+    with tmpfs("2m") as full:  # 200 windows of 240x180 maps need ~70 MB: refused before the first is written
+        options[1] = str(full / "maps")
+        done = _tofnet("export", str(tmp_path / "d.npz"), *options)
         lines = done.stderr.strip().splitlines()
         assert done.returncode == 2 and len(lines) == 1, done.stderr[-2000:]
-        assert f"{full / 'maps'}/" in lines[0] and "No space left on device" in lines[0]
-        assert os.listdir(full) == []  # the partial folder is removed
+        assert f"{full / 'maps'}: --maps: 200 maps of 240x180 px need up to " in lines[0] and "MB free; " in lines[0]
+        assert os.listdir(full) == []
+        # a file system that does not say (or is filled meanwhile): the write fails, the partial folder is removed
+        monkeypatch.setattr(files, "free_bytes", lambda path: None)
+        assert main(["export", str(tmp_path / "d.npz"), *options]) == 2
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert len(lines) == 1 and f"{full / 'maps'}/" in lines[0] and "No space left on device" in lines[0]
+        assert os.listdir(full) == []
 
 
 def test_numpys_short_write_on_a_full_disk_is_named(tmp_path, monkeypatch):

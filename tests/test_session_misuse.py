@@ -64,6 +64,24 @@ def test_a_refused_packet_leaves_a_live_session_open_and_unchanged(name, workers
     assert result.counts == expected_result.counts and same(result.outputs, expected_result.outputs)
 
 
+@pytest.mark.parametrize("name", ["fixed", "fixed fused", "reference", "multiproc", "multiproc fused"])
+def test_a_live_session_refuses_a_polarity_other_than_0_or_1_and_goes_on(name, workers):
+    """Any non-zero polarity ran as ON with no message; refused as the writers refuse it, the session unchanged."""
+    backend = workers if name.startswith("multiproc") else name.split()[0]
+    half = len(EVENTS) // 2
+    with live(backend) as clean:
+        expected = [clean.feed(EVENTS[:half]), clean.feed(EVENTS[half:], until_us=200_000)]
+    bad = EVENTS[half:].copy()
+    bad["p"][bad["p"] == 0] = 255
+    with live(backend, name.endswith("fused")) as session:
+        got = [session.feed(EVENTS[:half])]
+        with pytest.raises(BackendError) as err:
+            session.feed(bad)
+        assert one_line(err) == "polarity must be 0 or 1, got 255"
+        got.append(session.feed(EVENTS[half:], until_us=200_000))
+    assert all(same(a, b) for a, b in zip(got, expected))
+
+
 @pytest.mark.parametrize("value", [-2**63, np.inf, -np.inf, np.nan, 2.0**63, 2**61, "20", 1.5, [1, 2, 3]])
 def test_set_refuses_values_a_variable_cannot_hold_naming_the_range(value):
     """-2**63 or inf in input.last_accepted wrapped int64 (6,013 events accepted instead of 23,746)."""

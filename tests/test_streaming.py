@@ -126,6 +126,31 @@ def test_a_refused_packet_leaves_the_stream_as_it_was(fuse):
 
 
 @pytest.mark.parametrize("fuse", [True, False])
+def test_a_polarity_other_than_0_or_1_is_refused_and_changes_nothing(fuse):
+    """OFF recoded as 255 (an int8 -1 cast to uint8) ran as ON, with no message (357,486 estimates
+    instead of 320,320 in the audit); refused with the writers' line, the stream going on as before."""
+    events = recording(60_000, seed=8).events
+    half = len(events) // 2
+
+    def stream_of():
+        return FixedBackend(fuse=fuse).open_stream(network(), intrinsics=INTRINSICS,
+                                                   velocity_source=ConstantVelocity(VELOCITY), t0_us=0)
+    clean = stream_of()
+    expected = [clean.feed_all(events[:half]), clean.feed_all(events[half:])]
+    stream = stream_of()
+    got = [stream.feed_all(events[:half])]
+    for value in (255, 2):
+        bad = events[half:].copy()
+        bad["p"][bad["p"] == 0] = value
+        with pytest.raises(BackendError, match=f"^polarity must be 0 or 1, got {value}$"):
+            stream.feed_all(bad)
+    got.append(stream.feed_all(events[half:]))
+    for a, b in zip(got, expected):
+        assert a.keys() == b.keys() and all(a[k].tobytes() == b[k].tobytes() for k in a)
+    assert stream.close().counts == clean.close().counts
+
+
+@pytest.mark.parametrize("fuse", [True, False])
 def test_times_beyond_the_documented_range_are_refused(fuse):
     """Issue 11: events after 2**62 µs were all dropped as 'refractory' (a sentinel collided)."""
     from tofnet.events import MAX_TIME_US

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from tofnet.errors import DataError
+
 #: The documented time range: every time tofnet reads (events, poses, ``t0``) satisfies
 #: ``|t| < MAX_TIME_US`` microseconds (2**61 µs, about 73,000 years), so differences and
 #: sums of two times never overflow int64. Readers refuse times outside it.
@@ -37,14 +39,33 @@ DIRECTION_OFFSETS = ((1, 0), (-1, 0), (0, 1), (0, -1))
 
 
 def make_events(t_us, x, y, p) -> np.ndarray:
-    """Build an event array from four sequences (``t`` in microseconds)."""
+    """Build an event array from four sequences (``t`` in microseconds, ``p`` 0 or 1: another
+    polarity, e.g. -1, is refused rather than cast to uint8)."""
     t_us = np.asarray(t_us)
+    problem = polarity_problem(p)
+    if problem:
+        raise DataError(problem)
     events = np.empty(t_us.shape[0], dtype=EVENT_DTYPE)
     events["t"] = t_us
     events["x"] = np.asarray(x)
     events["y"] = np.asarray(y)
     events["p"] = np.asarray(p)
     return events
+
+
+def polarity_problem(p) -> str | None:
+    """Why polarities ``p`` are not all 0 (OFF) or 1 (ON), naming the first other value, or None.
+
+    The one check of polarities taken as they are (the writers, ``make_events``, a stream's
+    ``feed``); an event array's ``uint8`` column costs one ``max`` (~13 µs for 20,000 events).
+    """
+    p = np.asarray(p)
+    if p.size == 0 or p.dtype.kind == "b" or (p.dtype.kind in "iu" and p.max() <= 1
+                                               and (p.dtype.kind == "u" or p.min() >= 0)):
+        return None
+    p = p.ravel()
+    bad = np.flatnonzero((p != 0) & (p != 1))
+    return f"polarity must be 0 or 1, got {p[bad[0]]}" if bad.size else None
 
 
 def sensor_size_problem(width: int, height: int) -> str | None:

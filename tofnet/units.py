@@ -86,6 +86,14 @@ def format_seconds(value: float) -> str:
     return f"{value * 1e6:g} µs"
 
 
+def format_bytes(n: int) -> str:
+    """``7_950_000_000`` -> ``"7.95 GB"`` (decimal units, three significant digits)."""
+    for unit, size in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if abs(n) >= size:
+            return f"{n / size:.3g} {unit}"
+    return f"{n} bytes"
+
+
 def format_steps(n: int) -> str:
     """``"1 step"``, ``"2 steps"``."""
     return f"{n} step" if n == 1 else f"{n} steps"

@@ -9,7 +9,7 @@ import numpy as np
 from tofnet.backends.base import ProgressCallback, RunResult
 from tofnet.backends.graph import GraphExecutor
 from tofnet.errors import BackendError
-from tofnet.events import EVENT_DTYPE, MAX_TIME_US
+from tofnet.events import EVENT_DTYPE, MAX_TIME_US, polarity_problem
 from tofnet.kernels.compilation import Stopwatch
 from tofnet.models.base import concat
 from tofnet.models.input import check_time_order
@@ -40,7 +40,9 @@ def primary_output(sinks: list[str], payloads: dict[str, str]) -> str | None:
 
 
 def check_events(events) -> tuple[int, int] | None:
-    """Refuse a packet that is not an event array, or whose times leave ``|t| < MAX_TIME_US``.
+    """Refuse a packet that is not an event array, whose times leave ``|t| < MAX_TIME_US``, or
+    with a polarity other than 0/1 (``polarity_problem``, as the writers: the kernels would take any
+    non-zero value as ON).
 
     Only the first and last times are looked at: a packet whose times are not in order is
     refused by the time-order check anyway, so in an accepted one they bound the rest.
@@ -57,6 +59,9 @@ def check_events(events) -> tuple[int, int] | None:
     first, last = int(t[0]), int(t[-1])
     if not (-MAX_TIME_US < first and last < MAX_TIME_US):
         raise BackendError(f"event times must satisfy |t| < 2**61 µs (docs/reliability.md), got {first} .. {last} µs")
+    problem = polarity_problem(events["p"])
+    if problem:
+        raise BackendError(problem)
     return first, last
 
 
@@ -89,7 +94,7 @@ class GraphStream:
     depth output) that the packet made complete; ``feed_all`` those of every sink and probe.
     A step is complete once an event of a later step arrived, or ``until_us`` says no event
     before that time will come. ``close()`` runs the steps still in flight and returns their
-    outputs with the counts. A refused packet (wrong dtype, out of time order) leaves the
+    outputs with the counts. A refused packet (wrong dtype, out of time order, a polarity not 0/1) leaves the
     stream as it was. ``t0_us`` None: step 0 starts at the first event fed.
     """
 

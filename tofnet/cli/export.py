@@ -11,7 +11,9 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("export", help="depth estimates to dense depth maps (.npy, 16-bit PNG) and .ply",
                               description="Turn the depth events of 'tofnet run' into dense H x W depth maps "
                                           "per time window (float32 metres .npy, age map .npy, 16-bit PNG in "
-                                          "millimetres) and/or a point cloud (.ply) in the camera or world frame.")
+                                          "millimetres; --no-age and --no-png leave those out) and/or a point "
+                                          "cloud (.ply) in the camera or world frame. The maps' size is checked "
+                                          "against the free space before the first is written.")
     p.add_argument("depth", help="depth file written by 'tofnet run' (.npz or .csv)")
     p.add_argument("--recording", help="the recording the depth came from (intrinsics, poses, sensor size); "
                                        "default: the one named in the depth file's summary")
@@ -20,6 +22,7 @@ def register(subparsers) -> None:
     p.add_argument("--max-age", help="keep a pixel's estimate in later windows while younger than this "
                                      "(default: the window)")
     p.add_argument("--no-png", action="store_true", help="maps as .npy only")
+    p.add_argument("--no-age", action="store_true", help="no age maps (age_<k>.npy): half the .npy bytes")
     p.add_argument("--ply", metavar="FILE", help="write the estimates as a point cloud")
     p.add_argument("--frame", choices=("camera", "world"), default="camera",
                    help="point cloud frame: camera (OpenCV axes) or world (needs poses); default camera")
@@ -95,8 +98,10 @@ def handle(args) -> int:
         if meta.get("t0_us") is None and len(depth):  # a .csv: a .npz's windows count from its run's t0
             print(f"note           {args.depth} holds no t0: the windows start at its first estimate "
                   f"({int(depth['t'][0]) * 1e-6:.6f} s); the .npz of the same run starts them at the run's t0")
-        done = write_depth_maps(depth_maps(depth, sensor, window_us, t0_us=meta.get("t0_us"),
-                                           max_age_us=max_age_us, source=args.depth), args.maps, png=not args.no_png)
+        maps = depth_maps(depth, sensor, window_us, t0_us=meta.get("t0_us"), max_age_us=max_age_us,
+                          source=args.depth)
+        check_maps_space(args, maps)
+        done = write_depth_maps(maps, args.maps, png=not args.no_png, age=not args.no_age)
         empty = done["empty_windows"]
         print(f"maps           {done['windows']:,} windows of {args.window} with depth -> {Path(args.maps)}/ (index.csv"
               + (f"; {empty:,} windows between them without any, not written)" if empty else ")"))
@@ -141,6 +146,25 @@ def check_export_outputs(args) -> None:
     if args.maps:
         check_output(args.maps, force=args.force, inputs=inputs, what="--maps", folder=True)
 
+
+
+def check_maps_space(args, maps) -> None:
+    """Refuse, before the first map is written, maps that need more than the free space of ``--maps``' file
+    system (``tofnet.io.files.free_bytes``; the folder is written whole before it replaces an earlier one)."""
+    from tofnet.errors import DataError, located
+    from tofnet.io.files import MIN_FREE_BYTES, free_bytes
+    from tofnet.units import format_bytes
+
+    each = maps.map_bytes(age=not args.no_age, png=not args.no_png)
+    needed, free = maps.windows * each + MIN_FREE_BYTES, free_bytes(args.maps)
+    if free is not None and needed > free:
+        width, height = maps.size
+        kept = " + ".join(["depth .npy"] + (["age .npy"] if not args.no_age else [])
+                          + (["PNG (counted uncompressed)"] if not args.no_png else []))
+        raise DataError(located(args.maps, None, f"--maps: {maps.windows:,} maps of {width}x{height} px need up to "
+                                                 f"{format_bytes(needed)} ({format_bytes(each)} each: {kept}), the "
+                                                 f"file system has {format_bytes(free)} free; give a longer --window, "
+                                                 "--no-age, --no-png, or --ply alone (a point cloud)"))
 
 
 def run_camera(meta: dict, depth_path: str):

@@ -38,6 +38,7 @@ def describe(path, *, sensor_size=None, progress=None, opened=None, **options) -
         pixel_counts = None
         if source.sensor_size is not None:
             pixel_counts = np.zeros(source.sensor_size[0] * source.sensor_size[1], dtype=np.int64)
+        assumed = _run_size(source)  # the file states no size: what tofnet run and live take, None: the extent
         beyond = 0
         for chunk in source.chunks(progress=progress):
             count += len(chunk)
@@ -52,17 +53,23 @@ def describe(path, *, sensor_size=None, progress=None, opened=None, **options) -
                 beyond += len(chunk) - int(np.count_nonzero(inside))
                 flat = chunk["y"][inside].astype(np.int64) * width + chunk["x"][inside]
                 pixel_counts += np.bincount(flat, minlength=len(pixel_counts))
+            elif assumed is not None:
+                beyond += int(np.count_nonzero((chunk["x"] >= assumed[0]) | (chunk["y"] >= assumed[1])))
         duration = (t_last - t_first) * 1e-6 if count else 0.0
         facts = {
             "file": str(path), "format": source.describe(),
             "sensor_size": list(source.sensor_size) if source.sensor_size else None,
+            # no size stated: the one tofnet run and live take (the default's, or the events' extent)
+            "run_sensor_size": None if source.sensor_size or not (assumed or count)
+            else list(assumed or (x_max + 1, y_max + 1)),
+            "run_sensor_size_from": None if source.sensor_size else "default" if assumed else "extent",
             "events": count,
             "t_first_us": t_first, "t_last_us": t_last, "duration_s": duration,
             "rate_events_per_s": count / duration if duration > 0 else None,
             "on_fraction": on / count if count else None,
             "extent": [x_max + 1, y_max + 1] if count else None,
             "pixels_used": {"x": [x_min, x_max], "y": [y_min, y_max]} if count else None,
-            "beyond_sensor": beyond if pixel_counts is not None else None,
+            "beyond_sensor": beyond if pixel_counts is not None or assumed is not None else None,
             "intrinsics": _intrinsics(source.intrinsics),
             "poses": _poses(source.trajectory),
             "imu_samples": int(len(source.imu)) if source.imu is not None else 0,
@@ -75,6 +82,15 @@ def describe(path, *, sensor_size=None, progress=None, opened=None, **options) -
             facts["busiest_pixel"] = {"x": busiest % source.sensor_size[0], "y": busiest // source.sensor_size[0],
                                       "events": int(pixel_counts[busiest])}
         return facts
+
+
+def _run_size(source) -> tuple[int, int] | None:
+    """For a file that states no sensor size and is read whole into memory (numpy, text, ECD), the size
+    tofnet run and live take: the default network's (``DEFAULT_SENSOR_SIZE``); None otherwise (the
+    other readers take the events' extent, ``EventSource.read``)."""
+    from tofnet.io.in_memory import RecordingSource
+    from tofnet.networks import DEFAULT_SENSOR_SIZE
+    return DEFAULT_SENSOR_SIZE if source.sensor_size is None and isinstance(source, RecordingSource) else None
 
 
 def _intrinsics(intrinsics) -> dict | None:
@@ -96,7 +112,14 @@ def format_facts(facts: dict) -> str:
     """The text ``tofnet info`` prints."""
     lines = [f"file           {facts['file']}", f"format         {facts['format']}"]
     size = facts["sensor_size"]
-    lines.append(f"sensor         {size[0]}x{size[1]} px" if size else "sensor         unknown (the file does not say)")
+    if size:
+        lines.append(f"sensor         {size[0]}x{size[1]} px")
+    else:
+        run = facts["run_sensor_size"]
+        how = "the default" if facts["run_sensor_size_from"] == "default" else "the events' extent"
+        taken = f"{run[0]}x{run[1]} px, {how}" if run else how
+        lines.append(f"sensor         unknown (the file does not say); tofnet run and live take {taken}, "
+                     "unless --sensor-size WxH")
     lines.append(f"events         {facts['events']:,}")
     if facts["events"]:
         lines.append(f"time           {facts['t_first_us'] * 1e-6:.6f} .. {facts['t_last_us'] * 1e-6:.6f} s "
@@ -108,7 +131,9 @@ def format_facts(facts: dict) -> str:
         used = facts["pixels_used"]
         beyond = facts["beyond_sensor"]
         lines.append(f"pixels used    x {used['x'][0]}..{used['x'][1]}, y {used['y'][0]}..{used['y'][1]}"
-                     + (f"; {beyond:,} events beyond the sensor" if beyond else ""))
+                     + (f"; {beyond:,} events beyond the sensor" if beyond and size else "")
+                     + (f"; {beyond:,} events beyond {facts['run_sensor_size'][0]}x{facts['run_sensor_size'][1]} px"
+                        if beyond and not size else ""))
         if "busiest_pixel" in facts:
             b = facts["busiest_pixel"]
             lines.append(f"busiest pixel  ({b['x']}, {b['y']}): {b['events']:,} events")

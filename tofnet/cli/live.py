@@ -58,7 +58,7 @@ def handle(args) -> int:
     from tofnet.cli.inputs import camera_options, input_options, sensor_size_option
     from tofnet.backends.runtime import clock_of
     from tofnet.cli.run import backend_choice, build_network
-    from tofnet.cli.run_summary import reader_lines, workers_line
+    from tofnet.cli.run_summary import reader_lines, warning_lines, workers_line
     from tofnet.io.files import atomic_path, write_text_atomic
     from tofnet.units import seconds
     from tofnet.live import CameraSource, ReplaySource, run_live
@@ -149,6 +149,8 @@ def handle(args) -> int:
                 print(line)
             print(f"depth out      {stats.depth_out:,}")
             for line in stats.lines():
+                print(line)
+            for line in warning_lines(result.summary(), result, network.sensor_size):  # as tofnet run warns
                 print(line)
             shown = view.close() if view is not None else None
     if interrupted is not None:

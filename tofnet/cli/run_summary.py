@@ -112,13 +112,23 @@ def format_summary(summary: dict, result, written: dict, network_width) -> str:
     rate = (f"{summary['events_in'] / summary['wall_time_s'] / 1e6:.2f} M events/s"
             if summary["wall_time_s"] >= 1e-4 else "too short to give a rate")
     lines += latency_lines(summary)
-    setup = summary.get("setup_time_s", 0.0)  # the kernels' state built, worker processes started
-    read = summary.get("read_time_s", 0.0)  # a file decoded between packets
+    setup = summary.get("setup_time_s", 0.0)  # the network built, the kernels' state, worker processes started
+    read = summary.get("read_time_s", 0.0)  # the file opened and loaded, and decoded between packets
+    kernels = summary.get("compile_time_s", 0.0)  # compiled, or loaded from numba's cache
     lines.append(f"wall time      {summary['wall_time_s']:.3f} s network ({rate}), "
                  + (f"{read:.3f} s reading, " if read >= 5e-4 else "")
-                 + (f"{setup:.3f} s set-up, " if setup >= 5e-4 else "") + f"{summary['total_time_s']:.3f} s in all")
+                 + (f"{setup:.3f} s set-up, " if setup >= 5e-4 else "")
+                 + (f"{kernels:.3f} s kernels, " if kernels >= 5e-4 else "") + f"{summary['total_time_s']:.3f} s in all")
     if summary.get("kernels_compiled"):
         lines.append(compile_line(summary["compile_time_s"], summary["kernels_compiled"]))
+    return "\n".join(lines + warning_lines(summary, result, network_width))
+
+
+def warning_lines(summary: dict, result, network_width) -> list[str]:
+    """A line per drop a reader declares a warning for (``Count.warning``: events outside the sensor,
+    pointing to --sensor-size), ``tofnet run``'s and ``tofnet live``'s."""
+    width, height = network_width
+    lines = []
     for reader, account in list(summary.get("readers", {}).items())[:1]:  # every reader sees the same events
         for reason, count in account["dropped"].items():
             warning = result.declared.get(reader, {}).get(reason, {}).get("warning")
@@ -126,4 +136,4 @@ def format_summary(summary: dict, result, written: dict, network_width) -> str:
                 if reason == "out_of_bounds" and summary.get("stated_sensor_size"):  # a crop the notes explain
                     warning = "events lay outside the {width}x{height} sensor (a crop of the file's, see the note)"
                 lines.append(f"warning        {count:,} {warning.format(width=width, height=height)}")
-    return "\n".join(lines)
+    return lines

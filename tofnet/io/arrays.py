@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from tofnet.errors import DataError, located, quote
-from tofnet.events import EVENT_DTYPE, MAX_TIME_US
+from tofnet.events import EVENT_DTYPE, MAX_TIME_US, polarity_problem
 from tofnet.io.calibration import check_intrinsics
 from tofnet.io.npy import load_npy, load_npz, numpy_kind, write_npy, write_npz
 
@@ -193,8 +193,9 @@ def check_writable(events: np.ndarray) -> np.ndarray:
     """``events`` when it is an ``EVENT_DTYPE`` array with polarities 0/1 (what the writers take)."""
     if not isinstance(events, np.ndarray) or events.dtype != EVENT_DTYPE:
         raise TypeError(f"events must be an array of dtype {EVENT_DTYPE}, got {getattr(events, 'dtype', type(events))}")
-    if np.any(events["p"] > 1):
-        raise DataError(f"polarity must be 0 or 1, got {int(events['p'].max())}")
+    problem = polarity_problem(events["p"])
+    if problem:
+        raise DataError(problem)
     return events
 
 

@@ -345,11 +345,7 @@ def _check_output(path: Path, force: bool, inputs: list, what: str, option: str,
 def check_folder_writable(folder: str | Path, what: str = "output") -> None:
     """The nearest existing ancestor of ``folder`` must be a writable folder."""
     folder = Path(folder) if str(folder) else Path(".")
-    probe = folder
-    while not (probe.exists() or probe.is_symlink()):
-        if probe.parent == probe:
-            break
-        probe = probe.parent
+    probe = nearest_existing(folder)
     if not probe.is_dir():
         raise DataError(located(folder, None, f"{what}: cannot create a folder under {probe}, which is a file"))
     if not os.access(probe, os.W_OK | os.X_OK):
@@ -369,14 +365,28 @@ def check_folder_writable(folder: str | Path, what: str = "output") -> None:
 MIN_FREE_BYTES = 1 << 20
 
 
+def nearest_existing(path: str | Path) -> Path:
+    """``path``, or its nearest ancestor that exists (where a new output would be made)."""
+    probe = Path(path) if str(path) else Path(".")
+    while not (probe.exists() or probe.is_symlink()) and probe.parent != probe:
+        probe = probe.parent
+    return probe
+
+
+def free_bytes(path: str | Path) -> int | None:
+    """Bytes free on the file system ``path`` (or the nearest existing ancestor) would be written to; None
+    when it does not say."""
+    try:
+        return shutil.disk_usage(nearest_existing(path)).free
+    except OSError:
+        return None
+
+
 def check_free_space(folder: str | Path, what: str = "output", needed: int = MIN_FREE_BYTES) -> None:
     """Refuse a folder on a file system with less than ``needed`` bytes free (when it says)."""
-    try:
-        usage = shutil.disk_usage(folder)
-    except OSError:
-        return
-    if usage.free < needed:
-        raise DataError(located(folder, None, f"{what}: the file system is full ({usage.free:,} bytes free, "
+    free = free_bytes(folder)
+    if free is not None and free < needed:
+        raise DataError(located(folder, None, f"{what}: the file system is full ({free:,} bytes free, "
                                               f"at least {needed:,} needed)"))
 
 

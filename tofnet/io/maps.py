@@ -24,6 +24,8 @@ from tofnet.errors import DataError
 
 #: Largest depth a 16-bit millimetre PNG holds, m.
 PNG_MAX_DEPTH = 65.535
+#: A 2-D float32 ``.npy``'s header (numpy pads it to 128 bytes); an ``index.csv`` row, at most.
+NPY_HEADER_BYTES, INDEX_ROW_BYTES = 128, 96
 
 
 @dataclass
@@ -38,8 +40,28 @@ class DepthMap:
     estimates: int  # estimates made in this window
 
 
+class DepthMaps:
+    """The maps ``depth_maps`` makes, one by one when iterated; how many (``windows``) and their ``size``
+    (W, H px) are known before the first is made."""
+
+    def __init__(self, maps: Iterator[DepthMap], windows: int, size: tuple[int, int]):
+        self._maps, self.windows, self.size = maps, windows, size
+
+    def __iter__(self) -> Iterator[DepthMap]:
+        return self._maps
+
+    def map_bytes(self, *, age: bool = True, png: bool = True) -> int:
+        """The bytes ``write_depth_maps`` writes per map, at most: its float32 ``.npy`` (and the age map's)
+        exactly, its PNG at its uncompressed size plus zlib's and PNG's overhead (it compresses, often
+        much: sparse maps are mostly 0), its ``index.csv`` row."""
+        width, height = self.size
+        raw_png = height * (2 * width + 1)  # a filter byte per row of 16-bit pixels
+        return ((1 + age) * (NPY_HEADER_BYTES + 4 * width * height) + INDEX_ROW_BYTES
+                + (raw_png + raw_png // 1000 + 1024 if png else 0))
+
+
 def depth_maps(depth: np.ndarray, sensor_size: tuple[int, int], window_us: int, *, t0_us: int | None = None,
-               max_age_us: int | None = None, source: str = "depth") -> Iterator[DepthMap]:
+               max_age_us: int | None = None, source: str = "depth") -> DepthMaps:
     """``DepthMap`` per window holding depth, from ``DEPTH_DTYPE`` estimates sorted by time (memory: two H x W
     maps). Windows without any (none made in the window, nor within ``max_age_us`` of its end) are skipped: an
     empty map says nothing, and a few estimates far apart in time would otherwise make millions of them. Checked
@@ -58,7 +80,7 @@ def depth_maps(depth: np.ndarray, sensor_size: tuple[int, int], window_us: int, 
         raise DataError(f"{source}: {int(outside.sum())} estimates lie outside the {width}x{height} map "
                         f"(first at x={int(depth['x'][outside][0])}, y={int(depth['y'][outside][0])})")
     if len(t) == 0:
-        return iter(())
+        return DepthMaps(iter(()), 0, (width, height))
     t0 = int(t[0]) if t0_us is None else int(t0_us)
     if int(t[0]) < t0:  # window 0 starts at t0: these would be in no map
         raise DataError(f"{source}: estimates before t0_us = {t0}, where the maps start: "
@@ -68,7 +90,7 @@ def depth_maps(depth: np.ndarray, sensor_size: tuple[int, int], window_us: int, 
     bounded_windows(count, window_us, f"{source}: the estimates ({format_seconds((int(t[-1]) - t0) * 1e-6)} after "
                     f"t0, each shown up to {format_seconds(max_age_us * 1e-6)})", "give a longer --window, a "
                     "shorter --max-age, or a time window (--start/--duration)", MAX_MAPS, "maps")
-    return _maps(depth, t0, (width, height), window_us, max_age_us, runs)
+    return DepthMaps(_maps(depth, t0, (width, height), window_us, max_age_us, runs), count, (width, height))
 
 
 def _windows_with_depth(rel_us: np.ndarray, window_us: int, max_age_us: int) -> list[tuple[int, int]]:
@@ -140,8 +162,8 @@ def write_png16(path: str | Path, image: np.ndarray) -> None:
         Image.fromarray(np.ascontiguousarray(image, dtype=np.uint16)).save(handle, format="PNG")
 
 
-def write_depth_maps(maps: Iterator[DepthMap], folder: str | Path, *, png: bool = True) -> dict:
-    """Write ``depth_<k>.npy``, ``age_<k>.npy`` (and ``depth_<k>.png``) per window and ``index.csv``.
+def write_depth_maps(maps: Iterator[DepthMap], folder: str | Path, *, png: bool = True, age: bool = True) -> dict:
+    """Write ``depth_<k>.npy`` (and ``age_<k>.npy``, ``depth_<k>.png``) per window and ``index.csv``.
 
     The folder is written as a whole (``tofnet.io.files.atomic_path``): it replaces an
     earlier export's folder, leaving exactly the new files, and never a folder holding
@@ -160,7 +182,8 @@ def write_depth_maps(maps: Iterator[DepthMap], folder: str | Path, *, png: bool 
             spanned = depth_map.index + 1
             stem = f"{depth_map.index:06d}"
             write_npy(partial / f"depth_{stem}.npy", depth_map.depth)
-            write_npy(partial / f"age_{stem}.npy", depth_map.age_ms)
+            if age:
+                write_npy(partial / f"age_{stem}.npy", depth_map.age_ms)
             if png:
                 image, clipped = depth_to_png16(depth_map.depth)
                 saturated += clipped

@@ -100,13 +100,20 @@ def _time_grain(times: np.ndarray, first: float, last: float | None) -> tuple[st
 
 
 def _principal_point(source) -> tuple[str, bool] | None:
-    intrinsics, size = source.intrinsics, source.sensor_size
+    note = principal_point_note(source.intrinsics, source.sensor_size)
+    return (note, True) if note else None
+
+
+def principal_point_note(intrinsics, size) -> str | None:
+    """The note on a principal point outside the ``size`` (px) sensor, or None: made when a file is opened
+    with the size it states, and by ``tofnet run``/``live`` with the size their network runs (a file that
+    states none runs the default's)."""
     if intrinsics is None or size is None:
         return None
     width, height = size
     if not (0.0 <= intrinsics.cx <= width and 0.0 <= intrinsics.cy <= height):
         return (f"the principal point ({intrinsics.cx:g}, {intrinsics.cy:g}) px is outside the {width}x{height} "
-                "sensor: the calibration of another camera or resolution?", True)
+                "sensor: the calibration of another camera or resolution, or a sensor size to give (--sensor-size)?")
     return None
 
 
