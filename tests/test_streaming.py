@@ -97,6 +97,12 @@ def test_a_packet_going_back_in_time_is_refused():
         stream.feed(events[:len(events) // 2])
 
 
+def fixed_stream(fuse: bool):
+    """A fresh stream of the fixed backend, fused or model by model, at the test's constant velocity."""
+    return FixedBackend(fuse=fuse).open_stream(network(), intrinsics=INTRINSICS,
+                                               velocity_source=ConstantVelocity(VELOCITY), t0_us=0)
+
+
 @pytest.mark.parametrize("fuse", [True, False])
 def test_a_refused_packet_leaves_the_stream_as_it_was(fuse):
     """Issue 11: after a refusal the stream goes on exactly as if it never saw the packet."""
@@ -104,8 +110,7 @@ def test_a_refused_packet_leaves_the_stream_as_it_was(fuse):
     half = len(events) // 2
 
     def stream_of():
-        return FixedBackend(fuse=fuse).open_stream(network(), intrinsics=INTRINSICS,
-                                                   velocity_source=ConstantVelocity(VELOCITY), t0_us=0)
+        return fixed_stream(fuse)
     clean = stream_of()
     expected = [clean.feed_all(events[:half]), clean.feed_all(events[half:])]
     expected_close = clean.close()
@@ -133,8 +138,7 @@ def test_a_polarity_other_than_0_or_1_is_refused_and_changes_nothing(fuse):
     half = len(events) // 2
 
     def stream_of():
-        return FixedBackend(fuse=fuse).open_stream(network(), intrinsics=INTRINSICS,
-                                                   velocity_source=ConstantVelocity(VELOCITY), t0_us=0)
+        return fixed_stream(fuse)
     clean = stream_of()
     expected = [clean.feed_all(events[:half]), clean.feed_all(events[half:])]
     stream = stream_of()
